@@ -1,0 +1,255 @@
+"""The paper's Euler–Lagrange assumed-modes model of the two-link arm (eq. 1–3, 22).
+
+M(Q) Q̈ + C(Q, Q̇) Q̇ + D Q̇ + K Q = B τ,   B = [I2; 0],
+in the horizontal plane (the paper's g(Q) becomes the elastic force K Q, plus the
+Kelvin–Voigt damping D Q̇ the paper leaves out).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.linalg
+
+from . import _kernels as kern
+from ._modes import LinkModes, gauss_legendre
+from ._parameters import ArmParameters
+
+__all__ = ["ArmModel", "validate_modes_per_link"]
+
+MAX_MODES = 4
+
+
+def validate_modes_per_link(modes_per_link, *, where: str = "modes_per_link") -> tuple[int, int]:
+    """Return ``modes_per_link`` as a tuple of two ints in 1..4, or raise ValueError."""
+    if (
+        not isinstance(modes_per_link, Sequence)
+        or isinstance(modes_per_link, str)
+        or len(modes_per_link) != 2
+        or not all(isinstance(m, (int, np.integer)) and not isinstance(m, bool)
+                   for m in modes_per_link)
+        or not all(1 <= m <= MAX_MODES for m in modes_per_link)
+    ):
+        raise ValueError(
+            f"{where} must be two integers in 1..{MAX_MODES} (modes of link 1, link 2), "
+            f"got {modes_per_link!r}"
+        )
+    return int(modes_per_link[0]), int(modes_per_link[1])
+
+
+def _gram(modes: LinkModes, tip_point_mass: float, *, with_constant: bool) -> np.ndarray:
+    """G = ∫ρ b bᵀ dx + m_tip b(L) b(L)ᵀ for the basis b = [1, x, φ_1, …, φ_n]
+    (without the leading 1 unless ``with_constant``)."""
+    x, w = gauss_legendre(0.0, modes.L)
+    end = np.array([modes.L])
+    basis = np.vstack([np.ones_like(x), x, modes.phi(x)])
+    basis_tip = np.concatenate([[1.0, modes.L], modes.phi(end)[:, 0]])
+    if not with_constant:
+        basis, basis_tip = basis[1:], basis_tip[1:]
+    return modes.rho * (basis * w) @ basis.T + tip_point_mass * np.outer(basis_tip, basis_tip)
+
+
+def _link_stiffness(modes: LinkModes, EI: float) -> np.ndarray:
+    """K_i = EI ∫ φ'' φ''ᵀ dx (diagonal, = m_i ω_j², for exact eigenfunctions)."""
+    x, w = gauss_legendre(0.0, modes.L)
+    curv = modes.ddphi(x)
+    return EI * (curv * w) @ curv.T
+
+
+class ArmModel:
+    """Reduced (assumed-modes) model of the planar two-link lightweight arm.
+
+    Coordinates ``Q = [θ1, θ2, q_11, …, q_1n1, q_21, …, q_2n2]`` (the paper's order for
+    n1 = n2 = 2: [θ1, θ2, q11, q12, q21, q22]).  θ1 is hub 1's angle from the base x
+    axis; θ2 is hub 2's angle *relative to the link-1 tip tangent* (what a motor-2
+    encoder reads), so link 2's root frame is at θ1 + θ2 + w1'(L1).  q_ij are the
+    amplitudes of the clamped-mass modes φ_ij of link i (`mode_shapes`), with
+    deflection w_i(x) = Σ_j φ_ij(x) q_ij in link i's root frame.  The state is
+    ``x = [Q, Q̇]``.
+
+    All configuration-independent integrals are computed once here; the hot functions
+    run as numba kernels (`reduced_model._kernels`) on `data` and can be called from
+    other compiled code.  The methods below allocate their outputs and are meant for
+    analysis, tests and set-up, not for inner loops.
+
+    Parameters
+    ----------
+    params : ArmParameters
+        Physical arm (defaults: the paper's Table 1).
+    modes_per_link : (int, int)
+        Assumed modes of link 1 and link 2, each 1..4 (the paper: 2, 2).
+    """
+
+    def __init__(self, params: ArmParameters | None = None,
+                 modes_per_link: tuple[int, int] = (2, 2)) -> None:
+        self.params = params if params is not None else ArmParameters()
+        n1, n2 = validate_modes_per_link(modes_per_link)
+        self.modes_per_link = (n1, n2)
+        p = self.params
+        tip1, tip2 = p.tip_load(1), p.tip_load(2)
+        self.mode_shapes = (
+            LinkModes(L=p.L1, rho=p.rho1, EI=p.EI1, tip_mass=tip1[0], tip_inertia=tip1[1], n=n1),
+            LinkModes(L=p.L2, rho=p.rho2, EI=p.EI2, tip_mass=tip2[0], tip_inertia=tip2[1], n=n2),
+        )
+        self.n = 2 + n1 + n2
+        m1, m2 = self.mode_shapes
+        phi1_tip, dphi1_tip = m1.tip_values
+        _, dphi2_tip = m2.tip_values
+
+        K = np.zeros((self.n, self.n))
+        D = np.zeros((self.n, self.n))
+        f1, f2 = slice(2, 2 + n1), slice(2 + n1, self.n)
+        K1, K2 = _link_stiffness(m1, p.EI1), _link_stiffness(m2, p.EI2)
+        K[f1, f1], K[f2, f2] = K1, K2
+        D[f1, f1], D[f2, f2] = p.bending_damping1 / p.EI1 * K1, p.bending_damping2 / p.EI2 * K2
+
+        # Rotors turning at a·Q̇: hub 1 (θ1), stator (θ1 + w1'), hub 2 (α), payload (α + w2').
+        axes = np.zeros((4, self.n))
+        axes[:, 0] = 1.0
+        axes[1:, f1] = dphi1_tip
+        axes[2:, 1] = 1.0
+        axes[3, f2] = dphi2_tip
+        #: The model packed for compiled code: pass ``packed`` to ``*_packed`` kernels or
+        #: `kern.unpack_model(*packed)` inside them.
+        self.packed = kern.pack_model(
+            n1=n1, n2=n2, L1=p.L1,
+            gram1=_gram(m1, p.mh2 + p.stator_mass, with_constant=False),
+            gram2=_gram(m2, p.Mp, with_constant=True),
+            phi1_tip=phi1_tip, dphi1_tip=dphi1_tip,
+            M_rotors=axes.T @ np.diag([p.Jh1, p.stator_inertia, p.Jh2, p.Jp]) @ axes,
+            K=K, D=D,
+        )
+        self.data = kern.unpack_model(*self.packed)
+        self._ws = self.new_workspace()[1]
+
+    def new_workspace(self) -> tuple[tuple[np.ndarray, np.ndarray], kern.Workspace]:
+        """Fresh scratch space for the kernels: (packed buffers, unpacked `Workspace`)."""
+        buffers = kern.new_workspace(self.packed[0])
+        return buffers, kern.unpack_workspace(self.packed[0], *buffers)
+
+    # --- names -------------------------------------------------------------------
+    @property
+    def coordinate_names(self) -> tuple[str, ...]:
+        n1, n2 = self.modes_per_link
+        return ("theta1", "theta2", *(f"q1{j + 1}" for j in range(n1)),
+                *(f"q2{j + 1}" for j in range(n2)))
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        names = self.coordinate_names
+        return names + tuple(f"{c}_dot" for c in names)
+
+    def _vec(self, v, length: int, name: str) -> np.ndarray:
+        arr = np.ascontiguousarray(v, dtype=float)
+        if arr.shape != (length,):
+            raise ValueError(f"{name} must have shape ({length},), got {arr.shape}")
+        return arr
+
+    # --- dynamics ------------------------------------------------------------------
+    def mass_matrix(self, Q) -> np.ndarray:
+        """Inertia matrix M(Q), symmetric positive definite (n, n)."""
+        M = np.empty((self.n, self.n))
+        kern.mass_matrix_into(self.data, self._vec(Q, self.n, "Q"), M, self._ws)
+        return M
+
+    def coriolis_matrix(self, Q, Qdot) -> np.ndarray:
+        """Coriolis/centrifugal matrix C(Q, Q̇) from Christoffel symbols (Ṁ − 2C skew)."""
+        C = np.empty((self.n, self.n))
+        kern.coriolis_matrix_into(self.data, self._vec(Q, self.n, "Q"),
+                                  self._vec(Qdot, self.n, "Qdot"), C, self._ws)
+        return C
+
+    def stiffness_matrix(self) -> np.ndarray:
+        """K = blockdiag(0, 0, K1, K2), K_i = EI_i ∫φ_i''φ_i''ᵀ (diag(m_i ω_ij²))."""
+        return self.data.K.copy()
+
+    def damping_matrix(self) -> np.ndarray:
+        """D = blockdiag(0, 0, d1/EI1 K1, d2/EI2 K2) (Kelvin–Voigt bending damping)."""
+        return self.data.D.copy()
+
+    def input_matrix(self) -> np.ndarray:
+        """B = [I2; 0] (n, 2): only the two joints are actuated."""
+        return np.eye(self.n, 2)
+
+    def acceleration(self, Q, Qdot, tau) -> np.ndarray:
+        """Q̈ from joint torques ``tau`` (2,) — or generalised forces (n,)."""
+        tau = np.ascontiguousarray(tau, dtype=float)
+        if tau.shape not in ((2,), (self.n,)):
+            raise ValueError(f"tau must have shape (2,) or ({self.n},), got {tau.shape}")
+        out = np.empty(self.n)
+        kern.acceleration_into(self.data, self._vec(Q, self.n, "Q"),
+                               self._vec(Qdot, self.n, "Qdot"), tau, out, self._ws)
+        return out
+
+    def rhs(self, x, tau) -> np.ndarray:
+        """ẋ = f(x, τ) for the state x = [Q, Q̇] (2n,)."""
+        x = self._vec(x, 2 * self.n, "x")
+        return np.concatenate([x[self.n:], self.acceleration(x[:self.n], x[self.n:], tau)])
+
+    def kinetic_energy(self, Q, Qdot) -> float:
+        Qdot = self._vec(Qdot, self.n, "Qdot")
+        return 0.5 * float(Qdot @ self.mass_matrix(Q) @ Qdot)
+
+    def potential_energy(self, Q) -> float:
+        """Elastic energy ½ QᵀKQ (horizontal plane: no gravity)."""
+        Q = self._vec(Q, self.n, "Q")
+        return 0.5 * float(Q @ self.data.K @ Q)
+
+    # --- kinematics ------------------------------------------------------------------
+    def tip_deflection(self, Q) -> np.ndarray:
+        """Tip deflections (w1(L1), w2(L2)) [m] in each link's root frame."""
+        Q = self._vec(Q, self.n, "Q")
+        n1 = self.modes_per_link[0]
+        (phi1, _), (phi2, _) = self.mode_shapes[0].tip_values, self.mode_shapes[1].tip_values
+        return np.array([phi1 @ Q[2:2 + n1], phi2 @ Q[2 + n1:]])
+
+    def tip_position(self, Q) -> np.ndarray:
+        """Planar positions [m] of the link-1 tip (joint 2) and link-2 tip (payload):
+        array (2, 2), rows = tips, columns = (x, y).  Includes deflection."""
+        Q = self._vec(Q, self.n, "Q")
+        p = self.params
+        n1 = self.modes_per_link[0]
+        w1e, w2e = self.tip_deflection(Q)
+        slope1 = self.mode_shapes[0].tip_values[1] @ Q[2:2 + n1]
+        z1 = np.exp(1j * Q[0]) * (p.L1 + 1j * w1e)
+        z2 = z1 + np.exp(1j * (Q[0] + Q[1] + slope1)) * (p.L2 + 1j * w2e)
+        return np.array([[z1.real, z1.imag], [z2.real, z2.imag]])
+
+    # --- linear analysis -------------------------------------------------------------
+    def natural_frequencies(self, Q=None, joints: str = "locked") -> np.ndarray:
+        """Undamped natural frequencies [Hz] of the model linearised at ``Q``.
+
+        ``joints="locked"``: θ held fixed, the n−2 flexible modes.  ``joints="free"``:
+        the n−2 non-zero frequencies of the free arm (the two rigid-body zeros are
+        dropped).  ``Q`` defaults to the zero configuration.
+        """
+        Q = np.zeros(self.n) if Q is None else self._vec(Q, self.n, "Q")
+        M, K = self.mass_matrix(Q), self.data.K
+        if joints == "locked":
+            w2 = scipy.linalg.eigh(K[2:, 2:], M[2:, 2:], eigvals_only=True)
+        elif joints == "free":
+            w2 = scipy.linalg.eigh(K, M, eigvals_only=True)[2:]
+        else:
+            raise ValueError(f"joints must be 'locked' or 'free', got {joints!r}")
+        return np.sqrt(np.clip(w2, 0.0, None)) / (2.0 * np.pi)
+
+    def linearize(self, Q0=None, tau0=None) -> tuple[np.ndarray, np.ndarray]:
+        """(A, B) of ẋ ≈ A δx + B δτ about the rest state x = [Q0, 0] with torque tau0.
+
+        Exact (no finite differences): ∂Q̈/∂Q_k = −M⁻¹(K e_k + ∂M/∂Q_k Q̈0), with
+        ∂M/∂Q_k = C(Q0, e_k) + C(Q0, e_k)ᵀ; Coriolis terms are quadratic in Q̇ and drop out.
+        """
+        n = self.n
+        Q0 = np.zeros(n) if Q0 is None else self._vec(Q0, n, "Q0")
+        tau0 = np.zeros(2) if tau0 is None else self._vec(tau0, 2, "tau0")
+        M = self.mass_matrix(Q0)
+        K, D, Bin = self.data.K, self.data.D, self.input_matrix()
+        Minv = np.linalg.inv(M)
+        qdd0 = Minv @ (Bin @ tau0 - K @ Q0)
+        dfdQ = np.empty((n, n))
+        for k in range(n):
+            Ck = self.coriolis_matrix(Q0, np.eye(n)[k])
+            dfdQ[:, k] = K[:, k] + (Ck + Ck.T) @ qdd0
+        A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ dfdQ, -Minv @ D]])
+        B = np.vstack([np.zeros((n, 2)), Minv @ Bin])
+        return A, B

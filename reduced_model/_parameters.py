@@ -1,0 +1,158 @@
+"""Physical parameters of the two-link lightweight arm (the paper's Table 1).
+
+One `ArmParameters` object drives both plants (reduced model and Exudyn FE model), so
+a mismatch between "true" and "nominal" arm is always an explicit choice.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+__all__ = ["ArmParameters"]
+
+# Fields that must be strictly positive (a zero length, density or stiffness is not an arm).
+_POSITIVE = ("L1", "L2", "rho1", "rho2", "EI1", "EI2")
+
+
+@dataclass(frozen=True)
+class ArmParameters:
+    """Planar two-link flexible arm, SI units, horizontal plane (no gravity).
+
+    Defaults are Table 1 of the paper.  Link i is a uniform Euler–Bernoulli beam of
+    length ``Li`` [m], mass per length ``rhoi`` [kg/m] and bending stiffness ``EIi``
+    [N m²], clamped to hub i.  Hub 1 (``mh1`` [kg], ``Jh1`` [kg m²]) turns about the fixed
+    base; hub 2 (``mh2``, ``Jh2``: the motor-2 *rotor*) turns on a revolute joint at the
+    link-1 tip; the payload (``Mp`` [kg], ``Jp`` [kg m²]) sits rigidly at the link-2 tip.
+
+    Parameters the paper leaves implicit
+    ------------------------------------
+    stator_mass, stator_inertia : float
+        Motor-2 stator, rigidly fixed to the link-1 tip [kg], [kg m²].  Default 0: Table 1
+        lumps the whole motor 2 into ``mh2``/``Jh2``, and the published reference
+        frequencies assume that.  They exist so that a scenario can move mass and inertia
+        from rotor to stator: on the FE plant the stator inertia is what the motor-2
+        reaction torque acts on (see EXUDYN_NOTES.md, joint-2 pitfall).
+    bending_damping1, bending_damping2 : float
+        Kelvin–Voigt bending damping d_i [N m² s] (bending moment EI w'' + d ẇ'').
+        Default 2e-3: a light structural damping (modal damping ratio ζ = ω d / (2 EI),
+        i.e. 0.04 % on the 0.63 Hz mode, 2 % at 34 Hz) that is twice the smallest value
+        which removes the sampled-D-term instability of high FE modes measured in
+        EXUDYN_NOTES.md.  The same number drives Exudyn's ``bendingDamping``, and the
+        reduced model uses D = (d/EI)·K per link.
+
+    Notes
+    -----
+    The paper's Table 1 lists J01 = J02 = 0.0415 kg m²; that is ρL³/3 = 0.041667
+    rounded.  Here it is derived (`J01`, `J02`), never stored, so it cannot disagree
+    with ρ and L.  ``mh1`` sits on the fixed axis and does not enter the planar dynamics.
+    """
+
+    L1: float = 0.5
+    L2: float = 0.5
+    rho1: float = 1.0
+    rho2: float = 1.0
+    EI1: float = 10.0
+    EI2: float = 10.0
+    Jh1: float = 1.0
+    Jh2: float = 1.0
+    mh1: float = 1.0
+    mh2: float = 1.0
+    Mp: float = 0.1
+    Jp: float = 0.0005
+    stator_mass: float = 0.0
+    stator_inertia: float = 0.0
+    bending_damping1: float = 2e-3
+    bending_damping2: float = 2e-3
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"ArmParameters.{f.name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"ArmParameters.{f.name} must be finite, got {value!r}")
+            if f.name in _POSITIVE and value <= 0.0:
+                raise ValueError(f"ArmParameters.{f.name} must be > 0, got {value!r}")
+            if value < 0.0:
+                raise ValueError(f"ArmParameters.{f.name} must be >= 0, got {value!r}")
+            object.__setattr__(self, f.name, float(value))
+
+    # --- derived quantities -------------------------------------------------------
+    @property
+    def m1(self) -> float:
+        """Mass of link 1 [kg]."""
+        return self.rho1 * self.L1
+
+    @property
+    def m2(self) -> float:
+        """Mass of link 2 [kg]."""
+        return self.rho2 * self.L2
+
+    @property
+    def J01(self) -> float:
+        """Inertia of link 1 about its joint, ρ1 L1³/3 [kg m²] (Table 1 rounds to 0.0415)."""
+        return self.rho1 * self.L1**3 / 3.0
+
+    @property
+    def J02(self) -> float:
+        """Inertia of link 2 about its joint, ρ2 L2³/3 [kg m²]."""
+        return self.rho2 * self.L2**3 / 3.0
+
+    def tip_load(self, link: int) -> tuple[float, float]:
+        """Tip mass M_L [kg] and tip rotary inertia J_L [kg m²] of link ``link`` (1 or 2).
+
+        These are the boundary loads of the clamped-mass eigenproblem: for link 1 the
+        whole of what it carries (hub 2, stator, link 2 and payload as a rigid body seen
+        from the joint-2 axis), for link 2 the payload.
+        """
+        if link == 1:
+            mass = self.mh2 + self.stator_mass + self.m2 + self.Mp
+            inertia = self.Jh2 + self.stator_inertia + self.J02 + self.Jp + self.Mp * self.L2**2
+            return mass, inertia
+        if link == 2:
+            return self.Mp, self.Jp
+        raise ValueError(f"link must be 1 or 2, got {link!r}")
+
+    # --- construction helpers -----------------------------------------------------
+    def replace(self, **changes: float) -> "ArmParameters":
+        """A copy with some fields changed (validated like the constructor)."""
+        unknown = set(changes) - {f.name for f in fields(self)}
+        if unknown:
+            raise ValueError(f"unknown ArmParameters field(s): {', '.join(sorted(unknown))}")
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict[str, float]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_mapping(cls, values: dict, *, where: str = "params") -> "ArmParameters":
+        """Build from a mapping; unknown keys are rejected with their full path."""
+        known = {f.name for f in fields(cls)}
+        for key in values:
+            if key not in known:
+                raise ValueError(
+                    f"{where}.{key}: unknown parameter (allowed: {', '.join(sorted(known))})"
+                )
+        try:
+            return cls(**values)
+        except ValueError as exc:
+            raise ValueError(str(exc).replace("ArmParameters.", f"{where}.")) from None
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> "ArmParameters":
+        """Read parameters from a TOML file: top-level keys, or a ``[params]`` table."""
+        path = Path(path)
+        try:
+            with path.open("rb") as fh:
+                data = tomllib.load(fh)
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"{path}: invalid TOML ({exc})") from None
+        where = "params"
+        if set(data) == {"params"} and isinstance(data["params"], dict):
+            data = data["params"]
+        return cls.from_mapping(data, where=f"{path}:{where}")
