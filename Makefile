@@ -1,0 +1,31 @@
+# Two commands matter: `make demo` and `make test`.  Both bootstrap .venv from PyPI.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+PYTEST := $(BIN)/python -m pytest
+
+.PHONY: demo test test-all bench clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[test,cluster]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/flexarm modes --theta2 0 1.5708 3.1416
+
+# pytest exits 5 when it collects nothing: say so and fail rather than pass silently.
+test: $(STAMP)
+	$(PYTEST) || { rc=$$?; [ $$rc -ne 5 ] || echo "make test: pytest collected no tests"; exit $$rc; }
+
+test-all: $(STAMP)
+	$(PYTEST) -m "slow or not slow" || { rc=$$?; [ $$rc -ne 5 ] || echo "make test-all: pytest collected no tests"; exit $$rc; }
+
+bench: $(STAMP)
+	for script in bench/bench_*.py; do $(BIN)/python $$script || exit 1; done
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache bench/results
+	find . -name __pycache__ -prune -exec rm -rf {} +

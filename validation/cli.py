@@ -1,0 +1,71 @@
+"""The ``flexarm`` command line: a thin layer over the library.
+
+Errors in user input end with one line on stderr and exit status 2, never a traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from importlib.metadata import version
+
+import numpy as np
+
+from reduced_model import ArmModel, ArmParameters, validate_modes_per_link
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, status 2 (argparse's own convention)
+        self.exit(EXIT_USAGE, f"flexarm: error: {message}\n")
+
+
+def _format_row(label: str, values) -> str:
+    return f"  {label:<22}" + "".join(f"{v:>11.4f}" for v in values)
+
+
+def cmd_modes(args: argparse.Namespace) -> int:
+    params = ArmParameters.from_toml(args.params) if args.params else ArmParameters()
+    model = ArmModel(params, validate_modes_per_link(args.modes_per_link, where="--modes-per-link"))
+    source = args.params or "Table 1 defaults"
+    n1, n2 = model.modes_per_link
+    print(f"Reduced model, {n1}+{n2} clamped-mass modes, parameters: {source}")
+    print("Clamped-mass link frequencies [Hz]")
+    for i, modes in enumerate(model.mode_shapes, start=1):
+        print(_format_row(f"link {i}", modes.frequencies_hz))
+    for theta2 in args.theta2:
+        Q = np.zeros(model.n)
+        Q[1] = theta2
+        print(f"Coupled frequencies at theta1 = 0, theta2 = {theta2:g} rad [Hz]")
+        print(_format_row("joints locked", model.natural_frequencies(Q, "locked")))
+        print(_format_row("joints free (non-zero)", model.natural_frequencies(Q, "free")))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="flexarm", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version",
+                        version=f"flexarm-validation {version('flexarm-validation')}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    modes = sub.add_parser("modes", help="natural frequencies of the reduced model")
+    modes.add_argument("--params", metavar="TOML",
+                       help="arm parameters (top-level keys or a [params] table)")
+    modes.add_argument("--modes-per-link", nargs=2, type=int, default=[2, 2],
+                       metavar=("N1", "N2"), help="assumed modes of link 1 and 2 (1..4)")
+    modes.add_argument("--theta2", nargs="+", type=float, default=[0.0], metavar="RAD",
+                       help="joint-2 angles at which to linearise (default 0)")
+    modes.set_defaults(func=cmd_modes)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ValueError as exc:
+        print(f"flexarm: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())
