@@ -3,5 +3,12 @@
 Both links are ANCF cable elements (default) or geometrically exact 2D beams, built from
 the same `reduced_model.ArmParameters` as the reduced model; the deflection field is
 projected onto the reduced model's mode shapes so that both plants report the same
-coordinates.  Implements the Plant interface of DESIGN.md.
+coordinates.  `ExudynPlant` implements the Plant interface of DESIGN.md.
 """
+from ._build import ELEMENTS, ArmSystem, Mesh, build_arm
+from ._fields import LinkField
+from ._modal import natural_frequencies
+from ._plant import ExudynPlant, simulation_settings
+
+__all__ = ["ExudynPlant", "Mesh", "ELEMENTS", "ArmSystem", "build_arm", "LinkField",
+           "natural_frequencies", "simulation_settings"]

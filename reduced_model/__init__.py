@@ -9,9 +9,11 @@ from ._model import ArmModel, validate_modes_per_link
 from ._modes import LinkModes
 from ._parameters import ArmParameters
 from ._plant import ReducedPlant
-from ._plant_interface import Measurement, Plant, TrueState, check_sample_time
+from ._plant_interface import Measurement, Plant, PlantFailure, TrueState, check_sample_time
+from ._sensors import SensorConfig, SensorModel
 
 __all__ = [
     "ArmParameters", "ArmModel", "LinkModes", "ReducedPlant", "Measurement", "TrueState",
-    "Plant", "check_sample_time", "validate_modes_per_link",
+    "Plant", "PlantFailure", "SensorConfig", "SensorModel", "check_sample_time",
+    "validate_modes_per_link",
 ]

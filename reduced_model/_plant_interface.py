@@ -11,7 +11,11 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Measurement", "TrueState", "Plant", "check_sample_time"]
+__all__ = ["Measurement", "TrueState", "Plant", "PlantFailure", "check_sample_time"]
+
+
+class PlantFailure(RuntimeError):
+    """The plant's solver could not complete a step (the message says why)."""
 
 
 class Measurement:

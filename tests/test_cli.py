@@ -15,10 +15,10 @@ def test_version(capsys):
 
 
 def test_modes_prints_table1_frequencies(capsys):
-    assert main(["modes", "--theta2", "0", "1.5708"]) == 0
+    assert main(["modes", "--table1", "--theta2", "0", "1.5708"]) == 0
     out = capsys.readouterr().out
     assert "0.6316" in out and "3.8313" in out and "2.2359" in out  # locked / free at θ2 = 0
-    assert out.count("joints locked") == 2
+    assert out.count("joints locked") == 2 and "Table 1" in out
 
 
 def test_modes_reads_params_toml(tmp_path, capsys):

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from reduced_model import ArmParameters, Plant, ReducedPlant
+from reduced_model import ArmParameters, Plant, ReducedPlant, SensorConfig
 
 
 def test_rk4_matches_tight_reference_solution():
@@ -37,7 +37,8 @@ def test_control_period_is_whole_multiple_of_internal_step():
 
 
 def test_interface_measurement_and_truth():
-    plant = ReducedPlant(ArmParameters(Mp=0.3), modes_per_link=(1, 2), measure_rates=True)
+    plant = ReducedPlant(ArmParameters(Mp=0.3), modes_per_link=(1, 2),
+                         sensors=SensorConfig(rates=True))
     assert isinstance(plant, Plant)
     x0 = np.zeros(10)
     x0[:2] = [0.2, -0.4]

@@ -25,9 +25,15 @@ def _format_row(label: str, values) -> str:
 
 
 def cmd_modes(args: argparse.Namespace) -> int:
-    params = ArmParameters.from_toml(args.params) if args.params else ArmParameters()
+    if args.params and args.table1:
+        raise ValueError("--params and --table1 exclude each other")
+    if args.table1:
+        params, source = ArmParameters.table1(), "the paper's Table 1 (no stator, no damping)"
+    elif args.params:
+        params, source = ArmParameters.from_toml(args.params), args.params
+    else:
+        params, source = ArmParameters(), "defaults (Table 1 + stator inertia + damping)"
     model = ArmModel(params, validate_modes_per_link(args.modes_per_link, where="--modes-per-link"))
-    source = args.params or "Table 1 defaults"
     n1, n2 = model.modes_per_link
     print(f"Reduced model, {n1}+{n2} clamped-mass modes, parameters: {source}")
     print("Clamped-mass link frequencies [Hz]")
@@ -50,6 +56,8 @@ def build_parser() -> argparse.ArgumentParser:
     modes = sub.add_parser("modes", help="natural frequencies of the reduced model")
     modes.add_argument("--params", metavar="TOML",
                        help="arm parameters (top-level keys or a [params] table)")
+    modes.add_argument("--table1", action="store_true",
+                       help="the paper's Table 1 exactly (no stator inertia, no damping)")
     modes.add_argument("--modes-per-link", nargs=2, type=int, default=[2, 2],
                        metavar=("N1", "N2"), help="assumed modes of link 1 and 2 (1..4)")
     modes.add_argument("--theta2", nargs="+", type=float, default=[0.0], metavar="RAD",

@@ -1,0 +1,277 @@
+"""The truth plant: the arm's Exudyn model stepped one control period at a time."""
+from __future__ import annotations
+
+import exudyn as exu
+import numpy as np
+from scipy.integrate import cumulative_trapezoid
+
+from reduced_model import (ArmModel, ArmParameters, LinkModes, Measurement, PlantFailure,
+                           SensorConfig, SensorModel, TrueState, check_sample_time)
+
+from ._build import ArmSystem, Mesh, build_arm
+from ._fields import LinkField
+from ._modal import natural_frequencies
+
+__all__ = ["ExudynPlant", "simulation_settings"]
+
+
+def simulation_settings(*, step: float, spectral_radius: float = 0.9,
+                        newton_tolerance: float = 1e-6) -> exu.SimulationSettings:
+    """Generalised-α settings measured on this model (EXUDYN_NOTES.md): Newton tolerances
+    1e-6 (the default absolute 1e-10 is below ANCF round-off), sparse linear solver,
+    no solution file, no console output, fixed step ``step`` (halved on Newton failure)."""
+    ss = exu.SimulationSettings()
+    ti = ss.timeIntegration
+    ti.endTime = step
+    ti.numberOfSteps = 1
+    ti.startTime = 0.0
+    ti.verboseMode = 0
+    ti.automaticStepSize = False
+    ti.newton.absoluteTolerance = newton_tolerance
+    ti.newton.relativeTolerance = newton_tolerance
+    ti.generalizedAlpha.spectralRadius = spectral_radius
+    ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
+    ss.solution.file.write = False
+    ss.solution.sensors.writePeriod = 1e30
+    ss.show.computationTime = False
+    ss.show.statistics = False
+    return ss
+
+
+class ExudynPlant:
+    """Two-link flexible arm as an Exudyn FE model, behind the Plant interface.
+
+    Parameters
+    ----------
+    params : ArmParameters
+        The true arm.
+    mesh : Mesh
+        Beam element type and elements per link (default: ANCF, 4 per link).
+    step : float
+        Time step [s] of the generalised-α integrator (default 1 ms; each control period
+        must be a whole number of steps).  The solver is initialised once per `reset`
+        and advanced period by period: identical to a continuous run.
+    modal_basis : (LinkModes, LinkModes), optional
+        Mode shapes the deflection is projected on for `truth` and for measurements;
+        default: the reduced model of ``params`` with 2 modes per link.
+    sensors : SensorConfig
+        What `step` returns (default: encoders θ and the projected modal q).
+    spectral_radius : float
+        Generalised-α ρ∞ (1: no numerical damping; the default 0.9 damps only modes far
+        above 1/step).
+
+    Coordinates: θ1 is hub 1's angle; θ2 is hub 2's angle relative to the tangent of
+    link 1 at its tip (what a motor-2 encoder reads).  q, q̇ are the mass-weighted
+    projections of each link's transverse deflection in its root frame (`LinkField`).
+    """
+
+    name = "exudyn"
+
+    def __init__(self, params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
+                 step: float = 1e-3, modal_basis: tuple[LinkModes, LinkModes] | None = None,
+                 sensors: SensorConfig = SensorConfig(), spectral_radius: float = 0.9) -> None:
+        if not (np.isfinite(step) and step > 0.0):
+            raise ValueError(f"step must be a positive number of seconds, got {step!r}")
+        if not 0.0 <= spectral_radius <= 1.0:
+            raise ValueError(f"spectral_radius must be in [0, 1], got {spectral_radius!r}")
+        self.params = params if params is not None else ArmParameters()
+        self.mesh = mesh
+        self.h = float(step)
+        basis = modal_basis or ArmModel(self.params, (2, 2)).mode_shapes
+        self.modal_basis = tuple(basis)
+        self.system: ArmSystem = build_arm(self.params, mesh)
+        self.fields = (LinkField(self.system, 0, basis[0]), LinkField(self.system, 1, basis[1]))
+        self.settings = simulation_settings(step=self.h, spectral_radius=spectral_radius)
+        self.solver = exu.MainSolverImplicitSecondOrder()
+        self._index_state()
+        self.sensors = SensorModel(sensors, self.modal_basis, self)
+        self._Ts_nsteps = (None, 0)
+        self._steps = 0
+        self.time = 0.0
+
+    def _index_state(self) -> None:
+        """Cache ODE2 indices and reference values of everything `truth` reads."""
+        mbs, sys_ = self.system.mbs, self.system
+        ltg = mbs.systemData.GetNodeLTGODE2
+        ref = lambda n: np.array(mbs.GetNodeParameter(n, "referenceCoordinates"), float)  # noqa
+        self._hub1_rot, self._hub2_rot = ltg(sys_.hub1)[2], ltg(sys_.hub2)[2]
+        self._hub1_ref, self._hub2_ref = ref(sys_.hub1)[2], ref(sys_.hub2)[2]
+        tip1, tip2 = sys_.links[0].nodes[-1], sys_.links[1].nodes[-1]
+        self._tip_idx = np.array([ltg(tip1)[:2], ltg(tip2)[:2]])
+        self._tip_ref = np.array([ref(tip1)[:2], ref(tip2)[:2]])
+        if sys_.element == "ancf":
+            self._tip1_slope_idx = np.array(ltg(tip1)[2:4])
+            self._tip1_slope_ref = ref(tip1)[2:4]
+        else:
+            self._tip1_rot_idx, self._tip1_rot_ref = ltg(tip1)[2], ref(tip1)[2]
+
+    # --- Plant interface ---------------------------------------------------------------
+    def reset(self, state0=None) -> Measurement:
+        """Start at t = 0 from ``state0`` = [θ, q, θ̇, q̇] (q in the modal basis, length
+        2·(2 + n1 + n2)); default: at rest, undeformed, θ = 0.  The FE nodes are placed on
+        the inextensible curve with that modal deflection."""
+        n = 2 + sum(m.n for m in self.modal_basis)
+        x0 = np.zeros(2 * n) if state0 is None else np.asarray(state0, dtype=float)
+        if x0.shape != (2 * n,) or not np.all(np.isfinite(x0)):
+            raise ValueError(f"state0 must be {2 * n} finite numbers [theta, q, theta_dot, "
+                             f"q_dot], got shape {x0.shape}")
+        u = self._node_displacements(x0[:n])
+        eps = 1e-6  # central difference along the velocity: exact for the linear part
+        v = (self._node_displacements(x0[:n] + eps * x0[n:])
+             - self._node_displacements(x0[:n] - eps * x0[n:])) / (2 * eps)
+        sd, cfg = self.system.mbs.systemData, exu.ConfigurationType.Initial
+        sd.SetODE2Coordinates(u, configuration=cfg)
+        sd.SetODE2Coordinates_t(v, configuration=cfg)
+        for load in self.system.loads:
+            self.system.mbs.SetLoadParameter(load, "loadVector", [0.0, 0.0, 0.0])
+        self.settings.timeIntegration.startTime = 0.0
+        if not self.solver.InitializeSolver(self.system.mbs, self.settings):
+            raise PlantFailure(f"Exudyn could not initialise the solver: "
+                               f"{self.solver.GetErrorString()}")
+        self._steps = 0
+        self.time = 0.0
+        return self.sensors.measure(self.time)
+
+    def step(self, tau, Ts: float) -> Measurement:
+        """Hold joint torques ``tau`` (2,) [N m] for ``Ts`` seconds; return y(t + Ts).
+        Raises `PlantFailure` with Exudyn's message if the solver fails."""
+        last_Ts, nsteps = self._Ts_nsteps
+        if Ts != last_Ts:
+            nsteps = check_sample_time(Ts, self.h)
+            self._Ts_nsteps = (Ts, nsteps)
+        tau = np.asarray(tau, dtype=float)
+        if tau.shape != (2,):
+            raise ValueError("the Exudyn plant has two actuators: tau must have shape (2,), "
+                             f"got {tau.shape}")
+        mbs = self.system.mbs
+        t1, t2 = float(tau[0]), float(tau[1])
+        l1, l2, l2r = self.system.loads
+        mbs.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])
+        mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
+        mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
+        self._steps += nsteps
+        self.solver.it.endTime = self._steps * self.h
+        if not self.solver.SolveSteps(mbs, self.settings):
+            msg = self.solver.GetErrorString() or "Newton iteration did not converge"
+            raise PlantFailure(f"Exudyn solver failed at t = {self.solver.it.currentTime:.6g} s: "
+                               f"{msg.strip()}")
+        self.time = self._steps * self.h
+        return self.sensors.measure(self.time)
+
+    def truth(self) -> TrueState:
+        u, v = self._coords()
+        theta, theta_dot = self._joints(u, v)
+        qs, qds, res, tips = [], [], [], []
+        for f in self.fields:
+            d, dd = f.local_dofs(u, v)
+            q = f.project(d)
+            qs.append(q)
+            qds.append(f.project(dd))
+            res.append(f.residual(d, q))
+            tips.append(f.tip_deflection(d))  # d is reused by the next call: read it now
+        return TrueState(time=self.time, theta=theta, theta_dot=theta_dot,
+                         q=np.concatenate(qs), q_dot=np.concatenate(qds),
+                         tip_positions=self._tip_positions(u), tip_deflections=np.array(tips),
+                         projection_residual=np.array(res))
+
+    # --- sensor primitives (see reduced_model._sensors) -------------------------------------
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._joints(*self._coords())
+
+    def modal_state(self) -> tuple[np.ndarray, np.ndarray]:
+        u, v = self._coords()
+        q, qd = [], []
+        for f in self.fields:
+            d, dd = f.local_dofs(u, v)
+            q.append(f.project(d))
+            qd.append(f.project(dd))
+        return np.concatenate(q), np.concatenate(qd)
+
+    def field_sampler(self, link: int, x, derivative: int):
+        """Callable giving the ``derivative``-th s-derivative of link ``link``'s transverse
+        deflection (root frame) at points ``x``, from the FE interpolation."""
+        f = self.fields[link]
+        H = f.interpolation(x, derivative)
+        sd = self.system.mbs.systemData
+        return lambda: H @ f.local_dofs(sd.GetODE2Coordinates())  # copy via the product
+
+    def tip_positions(self) -> np.ndarray:
+        return self._tip_positions(self._coords()[0])
+
+    # --- state reading ---------------------------------------------------------------------
+    def _coords(self) -> tuple[np.ndarray, np.ndarray]:
+        sd = self.system.mbs.systemData
+        return sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t()
+
+    def _tip_positions(self, u: np.ndarray) -> np.ndarray:
+        return self._tip_ref + u[self._tip_idx]
+
+    def _joints(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        th1 = self._hub1_ref + u[self._hub1_rot]
+        hub2 = self._hub2_ref + u[self._hub2_rot]
+        if self.system.element == "ancf":
+            sx, sy = self._tip1_slope_ref + u[self._tip1_slope_idx]
+            sxd, syd = v[self._tip1_slope_idx]
+            c, s = np.cos(th1), np.sin(th1)
+            # Tangent angle = θ1 + (small) angle of the slope in hub 1's frame: continuous.
+            tangent = th1 + np.arctan2(-s * sx + c * sy, c * sx + s * sy)
+            tangent_rate = (sx * syd - sy * sxd) / (sx * sx + sy * sy)
+        else:
+            tangent = self._tip1_rot_ref + u[self._tip1_rot_idx]
+            tangent_rate = v[self._tip1_rot_idx]
+        th1d = v[self._hub1_rot]
+        return (np.array([th1, hub2 - tangent]),
+                np.array([th1d, v[self._hub2_rot] - tangent_rate]))
+
+    # --- initial conditions ------------------------------------------------------------------
+    def _node_displacements(self, Q: np.ndarray) -> np.ndarray:
+        """ODE2 displacement vector placing every node for the configuration Q = [θ, q]."""
+        sys_, mbs = self.system, self.system.mbs
+        n1 = self.modal_basis[0].n
+        th1, th2, q1, q2 = Q[0], Q[1], Q[2:2 + n1], Q[2 + n1:]
+        u = np.zeros(mbs.systemData.ODE2Size())
+
+        def place(node, pos, angle_or_slope):
+            idx = mbs.systemData.GetNodeLTGODE2(node)
+            ref = np.array(mbs.GetNodeParameter(node, "referenceCoordinates"), float)
+            u[idx] = np.concatenate([pos, np.atleast_1d(angle_or_slope)]) - ref
+
+        def curve(modes: LinkModes, q, s):
+            """Inextensible curve with slope angle β = atan(w'): (x, y, β) at arc lengths s."""
+            fine = np.linspace(0.0, modes.L, 4001)
+            beta = np.arctan(modes.dphi(fine).T @ q)
+            x = cumulative_trapezoid(np.cos(beta), fine, initial=0.0)
+            y = cumulative_trapezoid(np.sin(beta), fine, initial=0.0)
+            return (np.interp(s, fine, x), np.interp(s, fine, y),
+                    np.arctan(modes.dphi(s).T @ q))
+
+        def place_link(link, origin, frame_angle, q):
+            nodes = sys_.links[link]
+            x, y, beta = curve(self.modal_basis[link], q, nodes.s)
+            c, s = np.cos(frame_angle), np.sin(frame_angle)
+            pos = origin + np.column_stack([c * x - s * y, s * x + c * y])
+            for k, node in enumerate(nodes.nodes):
+                ang = frame_angle + beta[k]
+                if sys_.element == "ancf":
+                    place(node, pos[k], [np.cos(ang), np.sin(ang)])
+                else:
+                    place(node, pos[k], ang)
+            return pos[-1], frame_angle + beta[-1]
+
+        place(sys_.hub1, [0.0, 0.0], th1)
+        tip1, tangent1 = place_link(0, np.zeros(2), th1, q1)
+        alpha = tangent1 + th2
+        place(sys_.hub2, tip1, alpha)
+        tip2, tangent2 = place_link(1, tip1, alpha, q2)
+        if sys_.stator is not None:
+            place(sys_.stator, tip1, tangent1)
+        if sys_.payload is not None:
+            place(sys_.payload, tip2, tangent2)
+        return u
+
+    # --- modal analysis ---------------------------------------------------------------------------
+    def natural_frequencies(self, theta=(0.0, 0.0), joints: str = "locked",
+                            n: int = 4) -> np.ndarray:
+        """First ``n`` bending frequencies [Hz] of this plant's FE model linearised at
+        ``theta`` (see `natural_frequencies`)."""
+        return natural_frequencies(self.params, self.mesh, theta=theta, joints=joints, n=n)

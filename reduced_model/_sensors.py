@@ -1,0 +1,124 @@
+"""What a plant measures: encoders, strain-gauge-derived modal coordinates, tip position.
+
+Shared by both plants so that a scenario's sensor set means the same on each.  A plant
+provides four primitives — ``joint_state()`` → (θ, θ̇), ``modal_state()`` → (q, q̇) in
+its measurement basis, ``field_sampler(link, x, derivative)`` → a callable returning the
+transverse deflection (or its s-derivatives) at points ``x`` of link ``link`` (0 or 1),
+and ``tip_positions()`` → (2, 2) — and `SensorModel` turns them into a `Measurement`.
+Noise is added by the closed loop, not here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._modes import LinkModes
+from ._plant_interface import Measurement
+
+__all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES"]
+
+STRAIN_QUANTITIES = {"deflection": 0, "curvature": 2}
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """The sensor set of a plant.
+
+    Parameters
+    ----------
+    encoder_resolution : float
+        Encoder quantisation step [rad] (0: continuous).  θ is rounded to it.
+    strain_gauges : ((float, ...), (float, ...)) or None
+        Gauge positions [m from the root] on link 1 and link 2.  None: the modal
+        coordinates are read directly (the paper's assumption); otherwise q is the least-
+        squares fit of the modes to the gauge readings (needs ≥ as many gauges as modes
+        on each link).
+    strain_quantity : {"curvature", "deflection"}
+        What a gauge reads: curvature w'' (a strain gauge; surface strain = −c w'') or
+        deflection w (e.g. an optical sensor).
+    rates : bool
+        Append θ̇ and q̇ (q̇ from the plant's modal state, not differentiated gauges).
+    tip_position : bool
+        Append the payload's (x, y) [m].
+    """
+
+    encoder_resolution: float = 0.0
+    strain_gauges: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    strain_quantity: str = "curvature"
+    rates: bool = False
+    tip_position: bool = False
+
+    def __post_init__(self) -> None:
+        res = self.encoder_resolution
+        if isinstance(res, bool) or not isinstance(res, (int, float)) or not np.isfinite(res) \
+                or res < 0:
+            raise ValueError(f"sensors.encoder_resolution must be a number >= 0, got {res!r}")
+        if self.strain_quantity not in STRAIN_QUANTITIES:
+            raise ValueError(f"sensors.strain_quantity must be one of "
+                             f"{sorted(STRAIN_QUANTITIES)}, got {self.strain_quantity!r}")
+        if self.strain_gauges is not None:
+            gauges = self.strain_gauges
+            if not isinstance(gauges, (tuple, list)) or len(gauges) != 2:
+                raise ValueError("sensors.strain_gauges must be two lists of positions "
+                                 f"(link 1, link 2), got {gauges!r}")
+            object.__setattr__(self, "strain_gauges",
+                               tuple(tuple(float(x) for x in g) for g in gauges))
+
+
+class SensorModel:
+    """Builds the `Measurement` of a plant from a `SensorConfig`.
+
+    Parameters
+    ----------
+    config : SensorConfig
+    modes : (LinkModes, LinkModes)
+        The basis the modal coordinates are expressed in (the plant's measurement basis).
+    plant
+        Provides the primitives listed in the module docstring.
+    """
+
+    def __init__(self, config: SensorConfig, modes: tuple[LinkModes, LinkModes], plant) -> None:
+        self.config = config
+        self._plant = plant
+        q_names = tuple(f"q{i + 1}{j + 1}" for i, m in enumerate(modes) for j in range(m.n))
+        names = ("theta1", "theta2") + q_names
+        if config.rates:
+            names += tuple(f"{n}_dot" for n in names)
+        if config.tip_position:
+            names += ("tip_x", "tip_y")
+        self.names = names
+        self._samplers, self._fits = [], []
+        if config.strain_gauges is not None:
+            k = STRAIN_QUANTITIES[config.strain_quantity]
+            for link, (x, m) in enumerate(zip(config.strain_gauges, modes)):
+                x = np.asarray(x, dtype=float)
+                if len(x) < m.n:
+                    raise ValueError(f"sensors.strain_gauges: link {link + 1} has {len(x)} "
+                                     f"gauge(s) for {m.n} modes; need at least {m.n}")
+                if np.any(x < 0) or np.any(x > m.L):
+                    raise ValueError(f"sensors.strain_gauges: link {link + 1} positions must "
+                                     f"lie in [0, {m.L}] m, got {x.tolist()}")
+                basis = m.evaluate(x, k).T  # (gauges, modes)
+                if np.linalg.matrix_rank(basis) < m.n:
+                    raise ValueError(f"sensors.strain_gauges: link {link + 1} gauges at "
+                                     f"{x.tolist()} cannot distinguish its {m.n} modes")
+                self._fits.append(np.linalg.pinv(basis))
+                self._samplers.append(plant.field_sampler(link, x, k))
+
+    def modal_positions(self) -> np.ndarray:
+        """q from the gauges (least squares), or the plant's modal state without gauges."""
+        if not self._fits:
+            return self._plant.modal_state()[0]
+        return np.concatenate([fit @ sample() for fit, sample in zip(self._fits, self._samplers)])
+
+    def measure(self, time: float) -> Measurement:
+        cfg = self.config
+        theta, theta_dot = self._plant.joint_state()
+        res = cfg.encoder_resolution
+        parts = [np.round(theta / res) * res if res > 0 else theta, self.modal_positions()]
+        if cfg.rates:
+            parts += [theta_dot, self._plant.modal_state()[1]]
+        if cfg.tip_position:
+            parts.append(self._plant.tip_positions()[1])
+        return Measurement(time, self.names, np.concatenate(parts))
