@@ -20,7 +20,7 @@ from exudyn.itemInterface import (
 
 from reduced_model import ArmParameters
 
-__all__ = ["Mesh", "ArmSystem", "build_arm", "ELEMENTS"]
+__all__ = ["Mesh", "ArmSystem", "build_arm", "beam_template", "ELEMENTS"]
 
 ELEMENTS = ("ancf", "geometrically_exact")
 _CLAMP = [1, 1, 0, 0, 0, 1]  # x, y and the in-plane rotation
@@ -103,6 +103,17 @@ def _rot3(a: float) -> list[list[float]]:
     return [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
 
 
+def beam_template(mesh: Mesh, *, rho: float, EI: float, damping: float):
+    """The Exudyn beam element (template for `GenerateBeamElementsAlongLine`) of a link."""
+    ea = mesh.axial_stiffness
+    if mesh.element == "ancf":
+        return ObjectANCFCable2D(massPerLength=rho, bendingStiffness=EI, axialStiffness=ea,
+                                 bendingDamping=damping)
+    return ObjectBeamGeometricallyExact2D(
+        massPerLength=rho, crossSectionInertia=rho * EI / ea, bendingStiffness=EI,
+        axialStiffness=ea, shearStiffness=0.4 * ea, bendingDamping=damping)
+
+
 def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
               lock_joints: bool = False) -> ArmSystem:
     """Create and assemble the arm with links laid out straight at joint angles ``theta``.
@@ -126,15 +137,17 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
         if mass > 0.0 or inertia > 0.0:
             mbs.AddObject(ObjectRigidBody2D(nodeNumber=node, mass=mass, inertia=inertia))
 
-    def clamp(marker0, marker1, relative_angle=0.0) -> None:
-        mbs.AddObject(ObjectJointGeneric(markerNumbers=[marker0, marker1], constrainedAxes=_CLAMP,
-                                         rotationMarker1=_rot3(-relative_angle)))
+    def clamp(marker0, node1, relative_angle=0.0) -> None:
+        """Fix node ``node1`` to ``marker0`` in position and in-plane rotation, keeping
+        the relative angle ``relative_angle`` that node 1 has in the reference layout."""
+        frame = exu.HT(rotation=_rot3(-relative_angle), translation=[0.0, 0.0, 0.0])
+        marker1 = mbs.AddMarker(MarkerNodeRigid(nodeNumber=node1, localHT=frame))
+        mbs.AddObject(ObjectJointGeneric(markerNumbers=[marker0, marker1], constrainedAxes=_CLAMP))
 
     e1 = np.array([np.cos(th1), np.sin(th1)])
     e2 = np.array([np.cos(th1 + th2), np.sin(th1 + th2)])
     tip1 = p.L1 * e1
     tip2 = tip1 + p.L2 * e2
-    ea = mesh.axial_stiffness
     n_el1, n_el2 = mesh.elements_per_link
 
     # Hub 1 turning on the base.
@@ -142,29 +155,21 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
     m_hub1 = mbs.AddMarker(MarkerNodeRigid(nodeNumber=hub1))
     m_ground_rigid = mbs.AddMarker(MarkerBodyRigid(bodyNumber=ground, localPosition=[0, 0, 0]))
     if lock_joints:
-        clamp(m_ground_rigid, m_hub1, th1)
+        clamp(m_ground_rigid, hub1, th1)
     else:
         m_ground = mbs.AddMarker(MarkerBodyPosition(bodyNumber=ground, localPosition=[0, 0, 0]))
         mbs.AddObject(ObjectJointRevolute2D(
             markerNumbers=[m_ground, mbs.AddMarker(MarkerNodePosition(nodeNumber=hub1))]))
 
-    if mesh.element == "ancf":
-        def template(rho, EI, d):
-            return ObjectANCFCable2D(massPerLength=rho, bendingStiffness=EI, axialStiffness=ea,
-                                     bendingDamping=d)
-    else:
-        def template(rho, EI, d):
-            return ObjectBeamGeometricallyExact2D(
-                physicsMassPerLength=rho, physicsCrossSectionInertia=rho * EI / ea,
-                physicsBendingStiffness=EI, physicsAxialStiffness=ea,
-                physicsShearStiffness=0.4 * ea, physicsBendingDamping=d)
+    def template(rho, EI, d):
+        return beam_template(mesh, rho=rho, EI=EI, damping=d)
 
     # Link 1 (+ stator at its tip).
     if mesh.element == "ancf":
         gen1 = exudyn.beams.GenerateBeamElementsAlongLine(
             mbs, [0, 0, 0], [*tip1, 0], n_el1, template(p.rho1, p.EI1, p.bending_damping1))
         nodes1 = gen1["nodes"]
-        clamp(m_hub1, mbs.AddMarker(MarkerNodeRigid(nodeNumber=nodes1[0])))
+        clamp(m_hub1, nodes1[0])
     else:  # the beam's rigid nodes are the hub's: hub 1 shares link 1's root node
         gen1 = exudyn.beams.GenerateBeamElementsAlongLine(
             mbs, [0, 0, 0], [*tip1, 0], n_el1, template(p.rho1, p.EI1, p.bending_damping1),
@@ -176,7 +181,7 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
     if p.stator_inertia > 0.0:
         stator = rigid_node(tip1, th1)
         body_on(stator, p.stator_mass, p.stator_inertia)
-        clamp(m_tip1, mbs.AddMarker(MarkerNodeRigid(nodeNumber=stator)))
+        clamp(m_tip1, stator)
         stator_mass_on_hub2 = 0.0
     else:  # a point mass at the joint moves with hub 2's centre: lump it there
         stator, stator_mass_on_hub2 = None, p.stator_mass
@@ -185,7 +190,7 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
     hub2 = rigid_node(tip1, th1 + th2)
     m_hub2 = mbs.AddMarker(MarkerNodeRigid(nodeNumber=hub2))
     if lock_joints:
-        clamp(m_tip1, m_hub2, th2)
+        clamp(m_tip1, hub2, th2)
     else:
         mbs.AddObject(ObjectJointRevolute2D(markerNumbers=[
             mbs.AddMarker(MarkerNodePosition(nodeNumber=nodes1[-1])),
@@ -197,13 +202,12 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
         gen2 = exudyn.beams.GenerateBeamElementsAlongLine(
             mbs, [*tip1, 0], [*tip2, 0], n_el2, template(p.rho2, p.EI2, p.bending_damping2))
         nodes2 = gen2["nodes"]
-        clamp(m_hub2, mbs.AddMarker(MarkerNodeRigid(nodeNumber=nodes2[0])))
+        clamp(m_hub2, nodes2[0])
         payload = None
         if p.Mp > 0.0 or p.Jp > 0.0:
             payload = rigid_node(tip2, th1 + th2)
             body_on(payload, p.Mp, p.Jp)
-            clamp(mbs.AddMarker(MarkerNodeRigid(nodeNumber=nodes2[-1])),
-                  mbs.AddMarker(MarkerNodeRigid(nodeNumber=payload)))
+            clamp(mbs.AddMarker(MarkerNodeRigid(nodeNumber=nodes2[-1])), payload)
     else:
         gen2 = exudyn.beams.GenerateBeamElementsAlongLine(
             mbs, [*tip1, 0], [*tip2, 0], n_el2, template(p.rho2, p.EI2, p.bending_damping2),

@@ -13,12 +13,14 @@ __all__ = ["natural_frequencies"]
 
 
 def natural_frequencies(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
-                        joints: str = "locked", n: int = 4) -> np.ndarray:
+                        joints: str = "locked", n: int = 4,
+                        include_rigid: bool = False) -> np.ndarray:
     """First ``n`` bending frequencies [Hz] of the undamped FE arm at joint angles ``theta``.
 
     ``joints="locked"`` clamps both joints at ``theta``; ``joints="free"`` leaves them free
-    and drops the two rigid-body (zero) modes.  Exudyn linearises about the reference
-    configuration and projects onto the nullspace of the constraint Jacobian (dense SVD).
+    and drops the two rigid-body (zero) modes unless ``include_rigid``.  Exudyn linearises
+    about the reference configuration and projects onto the nullspace of the constraint
+    Jacobian (dense SVD; the rigid modes come out at ~1e-4 Hz rather than 0).
     """
     if joints not in ("locked", "free"):
         raise ValueError(f"joints must be 'locked' or 'free', got {joints!r}")
@@ -27,5 +29,5 @@ def natural_frequencies(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.
         exu.SimulationSettings(), useSparseSolver=False, convert2Frequencies=True,
         useAbsoluteValues=True, ignoreAlgebraicEquations=False)
     freqs = np.sort(np.asarray(freqs))
-    skip = 0 if joints == "locked" else 2
+    skip = 2 if joints == "free" and not include_rigid else 0
     return freqs[skip:skip + n]
