@@ -84,10 +84,13 @@ class ExudynPlant:
         self.settings = simulation_settings(step=self.h, spectral_radius=spectral_radius)
         self.solver = exu.MainSolverImplicitSecondOrder()
         self._index_state()
+        n1 = basis[0].n
+        self._q_slices = (slice(0, n1), slice(n1, n1 + basis[1].n))
         self.sensors = SensorModel(sensors, self.modal_basis, self)
         self._Ts_nsteps = (None, 0)
         self._steps = 0
         self.time = 0.0
+        self._cache = None  # state readout of the current step (see _read)
 
     def _index_state(self) -> None:
         """Cache ODE2 indices and reference values of everything `truth` reads."""
@@ -130,6 +133,7 @@ class ExudynPlant:
                                f"{self.solver.GetErrorString()}")
         self._steps = 0
         self.time = 0.0
+        self._cache = None
         return self.sensors.measure(self.time)
 
     def step(self, tau, Ts: float) -> Measurement:
@@ -150,6 +154,7 @@ class ExudynPlant:
         mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
         mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
         self._steps += nsteps
+        self._cache = None
         self.solver.it.endTime = self._steps * self.h
         if not self.solver.SolveSteps(mbs, self.settings):
             msg = self.solver.GetErrorString() or "Newton iteration did not converge"
@@ -159,49 +164,48 @@ class ExudynPlant:
         return self.sensors.measure(self.time)
 
     def truth(self) -> TrueState:
-        u, v = self._coords()
-        theta, theta_dot = self._joints(u, v)
-        qs, qds, res, tips = [], [], [], []
-        for f in self.fields:
-            d, dd = f.local_dofs(u, v)
-            q = f.project(d)
-            qs.append(q)
-            qds.append(f.project(dd))
-            res.append(f.residual(d, q))
-            tips.append(f.tip_deflection(d))  # d is reused by the next call: read it now
-        return TrueState(time=self.time, theta=theta, theta_dot=theta_dot,
-                         q=np.concatenate(qs), q_dot=np.concatenate(qds),
-                         tip_positions=self._tip_positions(u), tip_deflections=np.array(tips),
-                         projection_residual=np.array(res))
+        u, theta, theta_dot, q, q_dot, dofs = self._read()
+        return TrueState(
+            time=self.time, theta=theta.copy(), theta_dot=theta_dot.copy(),
+            q=q.copy(), q_dot=q_dot.copy(), tip_positions=self._tip_positions(u),
+            tip_deflections=np.array([f.tip_deflection(d) for f, d in zip(self.fields, dofs)]),
+            projection_residual=np.array([f.residual(d, q[sl]) for f, d, sl
+                                          in zip(self.fields, dofs, self._q_slices)]))
 
     # --- sensor primitives (see reduced_model._sensors) -------------------------------------
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
-        return self._joints(*self._coords())
+        _, theta, theta_dot, *_ = self._read()
+        return theta.copy(), theta_dot.copy()
 
     def modal_state(self) -> tuple[np.ndarray, np.ndarray]:
-        u, v = self._coords()
-        q, qd = [], []
-        for f in self.fields:
-            d, dd = f.local_dofs(u, v)
-            q.append(f.project(d))
-            qd.append(f.project(dd))
-        return np.concatenate(q), np.concatenate(qd)
+        *_, q, q_dot, _ = self._read()
+        return q.copy(), q_dot.copy()
 
     def field_sampler(self, link: int, x, derivative: int):
         """Callable giving the ``derivative``-th s-derivative of link ``link``'s transverse
         deflection (root frame) at points ``x``, from the FE interpolation."""
-        f = self.fields[link]
-        H = f.interpolation(x, derivative)
-        sd = self.system.mbs.systemData
-        return lambda: H @ f.local_dofs(sd.GetODE2Coordinates())  # copy via the product
+        H = self.fields[link].interpolation(x, derivative)
+        return lambda: H @ self._read()[5][link]
 
     def tip_positions(self) -> np.ndarray:
-        return self._tip_positions(self._coords()[0])
+        return self._tip_positions(self._read()[0])
 
     # --- state reading ---------------------------------------------------------------------
-    def _coords(self) -> tuple[np.ndarray, np.ndarray]:
-        sd = self.system.mbs.systemData
-        return sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t()
+    def _read(self):
+        """(u, θ, θ̇, q, q̇, local dofs per link) of the current state, computed once per
+        step and shared by the measurement and `truth` (treat as read-only)."""
+        if self._cache is None:
+            sd = self.system.mbs.systemData
+            u, v = sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t()
+            theta, theta_dot = self._joints(u, v)
+            q, q_dot, dofs = [], [], []
+            for f in self.fields:
+                d, dd = f.local_dofs(u, v)
+                dofs.append(d.copy())  # the field reuses its buffers on the next call
+                q.append(f.project(d))
+                q_dot.append(f.project(dd))
+            self._cache = (u, theta, theta_dot, np.concatenate(q), np.concatenate(q_dot), dofs)
+        return self._cache
 
     def _tip_positions(self, u: np.ndarray) -> np.ndarray:
         return self._tip_ref + u[self._tip_idx]

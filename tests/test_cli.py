@@ -28,7 +28,16 @@ def test_modes_reads_params_toml(tmp_path, capsys):
     assert str(path) in capsys.readouterr().out
 
 
+def test_modes_compare_prints_fe_next_to_reduced(capsys):
+    assert main(["modes", "--table1", "--compare", "--theta2", "0"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("FE  ") == 2 and out.count("gap [%]") == 2
+    assert "31.4327" in out  # FE free 3rd mode (the reduced model's truncation gap)
+
+
 @pytest.mark.parametrize("args, text", [
+    (["modes", "--compare", "--elements", "0"], "--elements: must be in 1..64"),
+    (["modes", "--table1", "--params", "x.toml"], "exclude each other"),
     (["modes", "--modes-per-link", "5", "2"], "--modes-per-link must be two integers"),
     (["modes", "--params", "/nonexistent/arm.toml"], "cannot read"),
     (["modes", "--params", "{bad_field}"], "params.Lx: unknown parameter"),

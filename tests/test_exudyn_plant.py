@@ -5,6 +5,7 @@ import os
 import numpy as np
 import pytest
 
+from controllers import JointPD, PaperReference
 from plant_exudyn import ExudynPlant, LinkField, Mesh
 from reduced_model import ArmModel, ArmParameters, Plant, PlantFailure, ReducedPlant, SensorConfig
 
@@ -88,22 +89,19 @@ def test_agrees_with_reduced_plant_on_a_gentle_move():
 
 
 def pd_tracking(plant, kd2, seconds=3.0):
-    """Joint PD at 1 kHz on the paper's reference from rest; returns the final joint
-    error [rad], or inf if |q| left 0.5 (divergence) or the solver failed."""
+    """Joint PD at 1 kHz on the paper's reference from rest (true state fed back);
+    returns the final joint error [rad], or inf if |q| left 0.5 or the solver failed."""
     plant.reset()
-    kp, kd = np.array([40.0, 20.0]), np.array([8.0, kd2])
-    w = np.array([0.1, 0.2]) * np.pi
+    pd, ref = JointPD(kd=(8.0, kd2)), PaperReference()
     try:
         for k in range(int(round(seconds / 1e-3))):
-            t = k * 1e-3
             truth = plant.truth()
-            error = 2 * np.sin(w * t) - truth.theta
-            plant.step(kp * error + kd * (2 * w * np.cos(w * t) - truth.theta_dot), 1e-3)
+            plant.step(pd(k * 1e-3, truth.x, ref), 1e-3)
             if not np.abs(plant.truth().q).max() < 0.5:
                 return np.inf
     except PlantFailure:
         return np.inf
-    return np.abs(error).max()
+    return np.abs(ref(seconds - 1e-3)[0] - truth.theta).max()
 
 
 @pytest.mark.parametrize("make", [ExudynPlant, ReducedPlant], ids=["exudyn", "reduced"])

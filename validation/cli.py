@@ -10,6 +10,7 @@ from importlib.metadata import version
 
 import numpy as np
 
+from plant_exudyn import ELEMENTS, Mesh, natural_frequencies
 from reduced_model import ArmModel, ArmParameters, validate_modes_per_link
 
 EXIT_USAGE = 2
@@ -20,8 +21,21 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"flexarm: error: {message}\n")
 
 
+def _int_in(lo: int, hi: int):
+    """argparse type: an integer in [lo, hi]."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be in {lo}..{hi}, got {value}")
+        return value
+    return parse
+
+
 def _format_row(label: str, values) -> str:
-    return f"  {label:<22}" + "".join(f"{v:>11.4f}" for v in values)
+    return f"  {label:<30}" + "".join(f"{v:>11.4f}" for v in values)
 
 
 def cmd_modes(args: argparse.Namespace) -> int:
@@ -34,6 +48,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
     else:
         params, source = ArmParameters(), "defaults (Table 1 + stator inertia + damping)"
     model = ArmModel(params, validate_modes_per_link(args.modes_per_link, where="--modes-per-link"))
+    mesh = Mesh(element=args.element, elements_per_link=args.elements) if args.compare else None
     n1, n2 = model.modes_per_link
     print(f"Reduced model, {n1}+{n2} clamped-mass modes, parameters: {source}")
     print("Clamped-mass link frequencies [Hz]")
@@ -43,8 +58,18 @@ def cmd_modes(args: argparse.Namespace) -> int:
         Q = np.zeros(model.n)
         Q[1] = theta2
         print(f"Coupled frequencies at theta1 = 0, theta2 = {theta2:g} rad [Hz]")
-        print(_format_row("joints locked", model.natural_frequencies(Q, "locked")))
-        print(_format_row("joints free (non-zero)", model.natural_frequencies(Q, "free")))
+        for joints in ("locked", "free"):
+            reduced = model.natural_frequencies(Q, joints)
+            label = "joints locked" if joints == "locked" else "joints free (non-zero)"
+            print(_format_row(label + (" reduced" if mesh else ""), reduced))
+            if mesh:
+                fe = natural_frequencies(params, mesh, theta=(0.0, theta2), joints=joints,
+                                         n=len(reduced))
+                print(_format_row(f"{'':<14}FE", fe))
+                print(_format_row(f"{'':<10}gap [%]", 100 * (reduced - fe) / fe))
+    if mesh:
+        print(f"FE: {mesh.element}, {mesh.elements_per_link[0]}+{mesh.elements_per_link[1]} "
+              "elements; gap = (reduced - FE) / FE")
     return 0
 
 
@@ -62,6 +87,12 @@ def build_parser() -> argparse.ArgumentParser:
                        metavar=("N1", "N2"), help="assumed modes of link 1 and 2 (1..4)")
     modes.add_argument("--theta2", nargs="+", type=float, default=[0.0], metavar="RAD",
                        help="joint-2 angles at which to linearise (default 0)")
+    modes.add_argument("--compare", action="store_true",
+                       help="also print the Exudyn FE model's frequencies and the gap")
+    modes.add_argument("--element", choices=ELEMENTS, default="ancf",
+                       help="FE beam element for --compare (default ancf)")
+    modes.add_argument("--elements", type=_int_in(1, 64), default=4, metavar="N",
+                       help="FE elements per link for --compare (default 4)")
     modes.set_defaults(func=cmd_modes)
     return parser
 

@@ -1,0 +1,54 @@
+"""Baseline controllers to compare the PBC against: joint PD (optionally with the rigid
+arm's feedforward).  They use only the joint part of the state estimate."""
+from __future__ import annotations
+
+import numpy as np
+
+from reduced_model import ArmModel
+
+__all__ = ["JointPD"]
+
+
+def _positive_pair(name: str, value) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != (2,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ValueError(f"{name} must be two finite numbers >= 0, got {value!r}")
+    return arr
+
+
+class JointPD:
+    """τ = τ_ff + Kp (θd − θ̂) + Kd (θ̇d − θ̂̇).
+
+    Parameters
+    ----------
+    kp, kd : (float, float)
+        Joint gains [N m/rad], [N m s/rad].  Defaults (40, 20) and (8, 4): roughly a
+        4–6 rad/s, well-damped loop on each joint of the Table 1 arm (joint inertias
+        ≈ 2.7 and 1.1 kg m² at θ2 = 0).
+    feedforward : ArmModel, optional
+        If given, τ_ff = M_θθ(θd) θ̈d + C_θθ(θd, θ̇d) θ̇d of the rigid arm (the model
+        with q = 0): the "PD with rigid feedforward" baseline.  Otherwise τ_ff = 0.
+    """
+
+    name = "pd"
+
+    def __init__(self, kp=(40.0, 20.0), kd=(8.0, 4.0), feedforward: ArmModel | None = None):
+        self.kp, self.kd = _positive_pair("kp", kp), _positive_pair("kd", kd)
+        self.model = feedforward
+        if feedforward is not None:
+            self.name = "pd_ff"
+
+    def __call__(self, t: float, x_hat: np.ndarray, ref) -> np.ndarray:
+        n = x_hat.shape[0] // 2
+        theta_d, dtheta_d, ddtheta_d = ref(t)
+        tau = self.kp * (theta_d - x_hat[:2]) + self.kd * (dtheta_d - x_hat[n:n + 2])
+        if self.model is not None:
+            m = self.model.n
+            Q = np.zeros(m)
+            Q[:2] = theta_d
+            Qd = np.zeros(m)
+            Qd[:2] = dtheta_d
+            M = self.model.mass_matrix(Q)
+            C = self.model.coriolis_matrix(Q, Qd)
+            tau = tau + M[:2, :2] @ ddtheta_d + C[:2, :2] @ dtheta_d
+        return tau
