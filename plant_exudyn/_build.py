@@ -13,7 +13,7 @@ import exudyn as exu
 import exudyn.beams
 import numpy as np
 from exudyn.itemInterface import (
-    LoadTorqueVector, MarkerBodyPosition, MarkerBodyRigid, MarkerNodePosition, MarkerNodeRigid,
+    LoadForceVector, LoadTorqueVector, MarkerBodyPosition, MarkerBodyRigid, MarkerNodePosition, MarkerNodeRigid,
     NodeRigidBody2D, ObjectANCFCable2D, ObjectBeamGeometricallyExact2D, ObjectGround,
     ObjectJointGeneric, ObjectJointRevolute2D, ObjectRigidBody2D,
 )
@@ -91,6 +91,7 @@ class ArmSystem:
     payload: int | None  # rigid body at the link-2 tip (the last beam node for GE beams)
     loads: tuple[int, int, int]  # τ1 on hub 1, τ2 on hub 2, −τ2 on the link-1 tip
     load_markers: tuple[int, int, int]
+    tip_load: int  # force on the payload (the link-2 tip), base frame
     rigid_nodes: list[int]  # every NodeRigidBody2D, for initial conditions
 
 
@@ -221,6 +222,9 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
     load_markers = (m_hub1, m_hub2, m_tip1)
     loads = tuple(mbs.AddLoad(LoadTorqueVector(markerNumber=m, loadVector=[0, 0, 0]))
                   for m in load_markers)
+    tip_node = payload if payload is not None else nodes2[-1]
+    tip_load = mbs.AddLoad(LoadForceVector(
+        markerNumber=mbs.AddMarker(MarkerNodePosition(nodeNumber=tip_node)), loadVector=[0, 0, 0]))
     mbs.Assemble()
 
     links = (LinkNodes(list(nodes1), np.linspace(0.0, p.L1, n_el1 + 1)),
@@ -228,4 +232,4 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
     for link in links:
         link.coords = np.array([mbs.systemData.GetNodeLTGODE2(n) for n in link.nodes])
     return ArmSystem(SC, mbs, mesh.element, links, hub1, hub2, stator, payload, loads,
-                     load_markers, rigid_nodes)
+                     load_markers, tip_load, rigid_nodes)

@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from reduced_model import LinkModes
-from reduced_model._modes import gauss_legendre
+from reduced_model._modes import gauss_legendre, weighted_projector
 
 from ._build import ArmSystem
 
@@ -93,19 +93,16 @@ class LinkField:
         self.x_quad, self.w_quad = np.concatenate(xs), np.concatenate(ws)
         H = self.interpolation(self.x_quad)
         self.nodal_modes = np.vstack([modes.phi(self.s).T, modes.dphi(self.s).T])  # (2n, modes)
-        phi = (H @ self.nodal_modes).T  # interpolated mode shapes (n_modes, n_quad)
-        tip_phi, tip_dphi = modes.tip_values
+        phi_quad = H @ self.nodal_modes  # interpolated mode shapes (n_quad, n_modes)
         n = self.n_nodes
-        weighted = modes.rho * phi * self.w_quad  # ρ w_g φ_j(x_g)
-        # Normal equations of the weighted least squares, rows = modes, columns = local dofs.
-        rhs = weighted @ H
-        rhs[:, n - 1] += modes.tip_mass * tip_phi
-        rhs[:, 2 * n - 1] += modes.tip_inertia * tip_dphi
-        gram = (weighted @ phi.T + modes.tip_mass * np.outer(tip_phi, tip_phi)
-                + modes.tip_inertia * np.outer(tip_dphi, tip_dphi))
-        self._projector = np.linalg.solve(gram, rhs)
+        # The tip value and slope of the local dofs are the last node's y and y'.
+        tip_rows = np.zeros((2, 2 * n))
+        tip_rows[0, n - 1] = tip_rows[1, 2 * n - 1] = 1.0
+        self._projector = weighted_projector(
+            modes, w_quad=self.w_quad, basis_quad=phi_quad, basis_tip=np.vstack(modes.tip_values),
+            target_quad=H, target_tip=tip_rows)
         self._H_quad = H
-        self._phi_quad_T = phi.T
+        self._phi_quad_T = phi_quad
         self._rho_w = modes.rho * self.w_quad
 
     # --- interpolation --------------------------------------------------------------

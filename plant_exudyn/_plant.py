@@ -91,6 +91,7 @@ class ExudynPlant:
         self._steps = 0
         self.time = 0.0
         self._cache = None  # state readout of the current step (see _read)
+        self._tip_force = (0.0, 0.0)
 
     def _index_state(self) -> None:
         """Cache ODE2 indices and reference values of everything `truth` reads."""
@@ -125,8 +126,9 @@ class ExudynPlant:
         sd, cfg = self.system.mbs.systemData, exu.ConfigurationType.Initial
         sd.SetODE2Coordinates(u, configuration=cfg)
         sd.SetODE2Coordinates_t(v, configuration=cfg)
-        for load in self.system.loads:
+        for load in (*self.system.loads, self.system.tip_load):
             self.system.mbs.SetLoadParameter(load, "loadVector", [0.0, 0.0, 0.0])
+        self._tip_force = (0.0, 0.0)
         self.settings.timeIntegration.startTime = 0.0
         if not self.solver.InitializeSolver(self.system.mbs, self.settings):
             raise PlantFailure(f"Exudyn could not initialise the solver: "
@@ -136,9 +138,10 @@ class ExudynPlant:
         self._cache = None
         return self.sensors.measure(self.time)
 
-    def step(self, tau, Ts: float) -> Measurement:
-        """Hold joint torques ``tau`` (2,) [N m] for ``Ts`` seconds; return y(t + Ts).
-        Raises `PlantFailure` with Exudyn's message if the solver fails."""
+    def step(self, tau, Ts: float, tip_force=None) -> Measurement:
+        """Hold joint torques ``tau`` (2,) [N m] and the payload force ``tip_force``
+        (Fx, Fy) [N, base frame] for ``Ts`` seconds; return y(t + Ts).  Raises
+        `PlantFailure` with Exudyn's message if the solver fails."""
         last_Ts, nsteps = self._Ts_nsteps
         if Ts != last_Ts:
             nsteps = check_sample_time(Ts, self.h)
@@ -153,6 +156,10 @@ class ExudynPlant:
         mbs.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])
         mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
         mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
+        force = (0.0, 0.0) if tip_force is None else (float(tip_force[0]), float(tip_force[1]))
+        if force != self._tip_force:
+            mbs.SetLoadParameter(self.system.tip_load, "loadVector", [force[0], force[1], 0.0])
+            self._tip_force = force
         self._steps += nsteps
         self._cache = None
         self.solver.it.endTime = self._steps * self.h

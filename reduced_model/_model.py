@@ -215,6 +215,22 @@ class ArmModel:
         z2 = z1 + np.exp(1j * (Q[0] + Q[1] + slope1)) * (p.L2 + 1j * w2e)
         return np.array([[z1.real, z1.imag], [z2.real, z2.imag]])
 
+    def tip_jacobian(self, Q) -> np.ndarray:
+        """∂(payload position)/∂Q, shape (2, n): maps a tip force F to generalised forces
+        Jᵀ F.  With z = payload position as a complex number:
+        ∂z/∂θ1 = i z, ∂z/∂θ2 = i r, ∂z/∂q_1k = i e^{iθ1} φ_1k(L1) + i φ_1k'(L1) r,
+        ∂z/∂q_2k = i e^{iα} φ_2k(L2), where r = e^{iα}(L2 + i w2(L2))."""
+        Q = self._vec(Q, self.n, "Q")
+        p, n1 = self.params, self.modes_per_link[0]
+        (phi1, dphi1), (phi2, _) = self.mode_shapes[0].tip_values, self.mode_shapes[1].tip_values
+        w1e, w2e = self.tip_deflection(Q)
+        alpha = Q[0] + Q[1] + dphi1 @ Q[2:2 + n1]
+        e1, ea = np.exp(1j * Q[0]), np.exp(1j * alpha)
+        r = ea * (p.L2 + 1j * w2e)
+        z = e1 * (p.L1 + 1j * w1e) + r
+        dz = np.concatenate([[1j * z, 1j * r], 1j * e1 * phi1 + 1j * dphi1 * r, 1j * ea * phi2])
+        return np.vstack([dz.real, dz.imag])
+
     # --- linear analysis -------------------------------------------------------------
     def natural_frequencies(self, Q=None, joints: str = "locked") -> np.ndarray:
         """Undamped natural frequencies [Hz] of the model linearised at ``Q``.

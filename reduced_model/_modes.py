@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import brentq, minimize_scalar
 
-__all__ = ["LinkModes", "clamped_mass_roots"]
+__all__ = ["LinkModes", "clamped_mass_roots", "weighted_projector", "gauss_legendre"]
 
 _SCAN_STEP = 2e-3  # in λ; roots are ≈ π apart, so two roots are never within one step
 
@@ -170,3 +170,22 @@ def gauss_legendre(a: float, b: float, n: int = 96) -> tuple[np.ndarray, np.ndar
     t, w = np.polynomial.legendre.leggauss(n)
     half = 0.5 * (b - a)
     return a + half * (t + 1.0), half * w
+
+
+def weighted_projector(basis: LinkModes, *, w_quad, basis_quad, basis_tip, target_quad,
+                       target_tip) -> np.ndarray:
+    """Least-squares projector onto ``basis`` in the inner product the clamped-mass modes
+    are orthonormal in, ⟨f, g⟩ = Σ ρ w_g f(x_g) g(x_g) + M_L f(L) g(L) + J_L f'(L) g'(L).
+
+    ``basis_quad`` (n_quad, m) and ``basis_tip`` (2, m) are the basis functions at the
+    quadrature points and their (value, slope) at the tip, as the caller represents them;
+    ``target_quad`` (n_quad, k) and ``target_tip`` (2, k) the same for k functions to be
+    projected.  Returns P (m, k): the coefficients of the best fit of target column j are
+    P[:, j].  The Gram matrix uses the same quadrature, so a target in the span of the
+    basis is recovered to round-off.
+    """
+    loads = np.array([basis.tip_mass, basis.tip_inertia])
+    weighted = basis.rho * basis_quad.T * w_quad  # (m, n_quad)
+    gram = weighted @ basis_quad + (basis_tip.T * loads) @ basis_tip
+    rhs = weighted @ target_quad + (basis_tip.T * loads) @ target_tip
+    return np.linalg.solve(gram, rhs)

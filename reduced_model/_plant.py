@@ -5,6 +5,7 @@ import numpy as np
 
 from . import _kernels as kern
 from ._model import ArmModel
+from ._modes import LinkModes, gauss_legendre, weighted_projector
 from ._parameters import ArmParameters
 from ._plant_interface import Measurement, TrueState, check_sample_time
 from ._sensors import SensorConfig, SensorModel
@@ -29,6 +30,11 @@ class ReducedPlant:
         Internal RK4 step [s], default 1 ms.  At 1 ms RK4 resolves the default arm's
         highest mode with 2+2 modes (34 Hz, ω h = 0.21) to ~1e-5 amplitude error
         per period; use 0.25 ms or less with 4 modes per link (up to ~250 Hz).
+    modal_basis : (LinkModes, LinkModes), optional
+        Mode shapes in which `truth` and the measurement express q (e.g. those of the
+        controller's nominal model).  Default: the plant's own.  Otherwise each link's
+        modal deflection is projected onto the basis by weighted least squares (the same
+        projection as the FE plant's); the link lengths must agree.
     sensors : SensorConfig
         What is measured (see `SensorConfig`).
     """
@@ -37,6 +43,7 @@ class ReducedPlant:
 
     def __init__(self, params: ArmParameters | None = None, *,
                  modes_per_link: tuple[int, int] = (2, 2), step: float = 1e-3,
+                 modal_basis: tuple[LinkModes, LinkModes] | None = None,
                  sensors: SensorConfig = SensorConfig()) -> None:
         if not (np.isfinite(step) and step > 0.0):
             raise ValueError(f"step must be a positive number of seconds, got {step!r}")
@@ -44,17 +51,37 @@ class ReducedPlant:
         self.h = float(step)
         n = self.model.n
         self._x = np.zeros(2 * n)
-        self.sensors = SensorModel(sensors, self.model.mode_shapes, self)
-        # Without gauges, quantisation or tip position the measurement is the head of the
-        # state vector [θ, q, θ̇, q̇]: read it directly (a third of the per-step cost).
+        self._f = np.zeros(n)  # generalised forces when a tip force acts
+        self.modal_basis = tuple(modal_basis) if modal_basis is not None else self.model.mode_shapes
+        self._basis_map = None if modal_basis is None else self._projection(self.modal_basis)
+        self.sensors = SensorModel(sensors, self.modal_basis, self)
+        # Without gauges, quantisation, tip position or a foreign basis the measurement is
+        # the head of the state vector [θ, q, θ̇, q̇]: read it directly (a third of the
+        # per-step cost).
         direct = (sensors.strain_gauges is None and sensors.encoder_resolution == 0
-                  and not sensors.tip_position)
+                  and not sensors.tip_position and self._basis_map is None)
         self._direct = (2 * n if sensors.rates else n) if direct else 0
         self._tau = np.zeros(2)
         self._Ts_nsteps = (None, 0)  # (last Ts, its number of internal steps)
         self._steps = 0  # internal steps since reset: time = steps · h without round-off drift
         self._work = self.model.new_workspace()[0]
         self.time = 0.0
+
+    def _projection(self, basis) -> np.ndarray:
+        """Block matrix mapping the plant's modal coordinates to ``basis``'s."""
+        blocks = []
+        for link, (b, own) in enumerate(zip(basis, self.model.mode_shapes)):
+            if abs(b.L - own.L) > 1e-12 * own.L:
+                raise ValueError(f"modal_basis: link {link + 1} has L = {b.L}, the plant "
+                                 f"L = {own.L}; the deflection cannot be projected")
+            x, w = gauss_legendre(0.0, own.L)
+            blocks.append(weighted_projector(
+                b, w_quad=w, basis_quad=b.phi(x).T, basis_tip=np.vstack(b.tip_values),
+                target_quad=own.phi(x).T, target_tip=np.vstack(own.tip_values)))
+        out = np.zeros((sum(p.shape[0] for p in blocks), sum(p.shape[1] for p in blocks)))
+        out[:blocks[0].shape[0], :blocks[0].shape[1]] = blocks[0]
+        out[blocks[0].shape[0]:, blocks[0].shape[1]:] = blocks[1]
+        return out
 
     def _measure(self) -> Measurement:
         if self._direct:
@@ -67,8 +94,12 @@ class ReducedPlant:
         return self._x[0:2].copy(), self._x[n:n + 2].copy()
 
     def modal_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """(q, q̇) in the modal basis."""
         n = self.model.n
-        return self._x[2:n].copy(), self._x[n + 2:].copy()
+        q, qd = self._x[2:n], self._x[n + 2:]
+        if self._basis_map is None:
+            return q.copy(), qd.copy()
+        return self._basis_map @ q, self._basis_map @ qd
 
     def field_sampler(self, link: int, x, derivative: int):
         """Callable giving w_link^(derivative)(x) = Σ φ^(derivative)(x) q (modal field)."""
@@ -95,11 +126,13 @@ class ReducedPlant:
         self.time = 0.0
         return self._measure()
 
-    def step(self, tau, Ts: float) -> Measurement:
+    def step(self, tau, Ts: float, tip_force=None) -> Measurement:
         """Hold joint torques ``tau`` (2,) [N m] for ``Ts`` seconds; return y(t + Ts).
 
         ``tau`` of length n applies generalised forces to every coordinate (the paper's
-        idealised, unrealisable input); only the reduced plant accepts it.
+        idealised, unrealisable input); only the reduced plant accepts it.  ``tip_force``
+        (Fx, Fy) [N] in the base frame acts on the payload as generalised forces Jᵀ F,
+        with the tip Jacobian J taken at the start of the period.
         """
         last_Ts, nsteps = self._Ts_nsteps
         if Ts != last_Ts:
@@ -113,6 +146,11 @@ class ReducedPlant:
             tau_in = np.ascontiguousarray(tau)
         else:
             raise ValueError(f"tau must have shape (2,) or ({self.model.n},), got {tau.shape}")
+        if tip_force is not None and np.any(tip_force):
+            f = self._f
+            f[:] = self.model.tip_jacobian(self._x[:self.model.n]).T @ np.asarray(tip_force, float)
+            f[:tau_in.shape[0]] += tau_in
+            tau_in = f
         ints, reals = self.model.packed
         wc, wr = self._work
         kern.rk4_advance_packed(ints, reals, wc, wr, self._x, tau_in, self.h, nsteps)
@@ -128,10 +166,10 @@ class ReducedPlant:
     def truth(self) -> TrueState:
         n, x = self.model.n, self._x
         Q = x[:n]
+        q, q_dot = self.modal_state()
         return TrueState(
             time=self.time,
-            theta=x[0:2].copy(), theta_dot=x[n:n + 2].copy(),
-            q=x[2:n].copy(), q_dot=x[n + 2:].copy(),
+            theta=x[0:2].copy(), theta_dot=x[n:n + 2].copy(), q=q, q_dot=q_dot,
             tip_positions=self.model.tip_position(Q),
             tip_deflections=self.model.tip_deflection(Q),
             projection_residual=np.zeros(2),

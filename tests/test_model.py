@@ -238,3 +238,13 @@ def test_bad_modes_per_link(modes):
 def test_bad_natural_frequency_request():
     with pytest.raises(ValueError, match="joints"):
         ArmModel().natural_frequencies(joints="clamped")
+
+
+def test_tip_jacobian_matches_finite_differences():
+    model, rng = ArmModel(GENERAL, (2, 3)), np.random.default_rng(7)
+    Q = random_state(model, rng, q_scale=0.05)[0]
+    eps = 1e-7
+    fd = np.column_stack([(model.tip_position(Q + eps * e)[1] - model.tip_position(Q - eps * e)[1])
+                          / (2 * eps) for e in np.eye(model.n)])
+    # Central differences with eps = 1e-7: ~1e-9 truncation/round-off.
+    np.testing.assert_allclose(model.tip_jacobian(Q), fd, atol=1e-8)
