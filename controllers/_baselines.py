@@ -1,12 +1,13 @@
 """Baseline controllers to compare the PBC against: joint PD (optionally with the rigid
-arm's feedforward).  They use only the joint part of the state estimate."""
+arm's feedforward) and rigid-body computed torque.  They use only the joint part of the
+state estimate and ignore the flexible coordinates."""
 from __future__ import annotations
 
 import numpy as np
 
 from reduced_model import ArmModel
 
-__all__ = ["JointPD"]
+__all__ = ["JointPD", "RigidComputedTorque"]
 
 
 def _positive_pair(name: str, value) -> np.ndarray:
@@ -52,3 +53,29 @@ class JointPD:
             C = self.model.coriolis_matrix(Q, Qd)
             tau = tau + M[:2, :2] @ ddtheta_d + C[:2, :2] @ dtheta_d
         return tau
+
+
+class RigidComputedTorque:
+    """Rigid-body computed torque: flexibility ignored.
+
+    τ = M_θθ(θ̂) (θ̈_d + K_d (θ̇_d − θ̂̇) + K_p (θ_d − θ̂)) + C_θθ(θ̂, θ̂̇) θ̂̇, with M and C of
+    the model at q = q̇ = 0 (the rigid arm with the same masses).  Defaults K_p = 16,
+    K_d = 8 [1/s², 1/s]: a critically damped 4 rad/s error dynamics on each joint.
+    """
+
+    name = "ct"
+
+    def __init__(self, model: ArmModel, kp=(16.0, 16.0), kd=(8.0, 8.0)) -> None:
+        self.model = model
+        self.kp, self.kd = _positive_pair("kp", kp), _positive_pair("kd", kd)
+
+    def __call__(self, t: float, x_hat: np.ndarray, ref) -> np.ndarray:
+        n, m = x_hat.shape[0] // 2, self.model.n
+        theta, dtheta = x_hat[:2], x_hat[n:n + 2]
+        theta_d, dtheta_d, ddtheta_d = ref(t)
+        Q, Qd = np.zeros(m), np.zeros(m)
+        Q[:2], Qd[:2] = theta, dtheta
+        M = self.model.mass_matrix(Q)[:2, :2]
+        C = self.model.coriolis_matrix(Q, Qd)[:2, :2]
+        accel = ddtheta_d + self.kd * (dtheta_d - dtheta) + self.kp * (theta_d - theta)
+        return M @ accel + C @ dtheta

@@ -6,6 +6,7 @@ q_d = 0, eq. 4).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,9 +22,12 @@ class PaperReference:
     omega: tuple[float, float] = (0.1 * np.pi, 0.2 * np.pi)
 
     def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        a, w = np.asarray(self.amplitude), np.asarray(self.omega)
-        s, c = np.sin(w * t), np.cos(w * t)
-        return a * s, a * w * c, -a * w * w * s
+        # Scalar math: six numpy ufuncs on 2-element arrays cost 4 µs, this 1.5 µs, and the
+        # closed loop evaluates the reference at every sample.
+        (a1, a2), (w1, w2) = self.amplitude, self.omega
+        s1, c1, s2, c2 = math.sin(w1 * t), math.cos(w1 * t), math.sin(w2 * t), math.cos(w2 * t)
+        return (np.array((a1 * s1, a2 * s2)), np.array((a1 * w1 * c1, a2 * w2 * c2)),
+                np.array((-a1 * w1 * w1 * s1, -a2 * w2 * w2 * s2)))
 
 
 @dataclass(frozen=True)

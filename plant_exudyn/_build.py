@@ -18,7 +18,7 @@ from exudyn.itemInterface import (
     ObjectJointGeneric, ObjectJointRevolute2D, ObjectRigidBody2D,
 )
 
-from reduced_model import ArmParameters
+from reduced_model import ArmParameters, FieldError
 
 __all__ = ["Mesh", "ArmSystem", "build_arm", "beam_template", "ELEMENTS"]
 
@@ -51,20 +51,20 @@ class Mesh:
 
     def __post_init__(self) -> None:
         if self.element not in ELEMENTS:
-            raise ValueError(f"mesh.element must be one of {ELEMENTS}, got {self.element!r}")
+            raise FieldError("mesh", "element", f"must be one of {ELEMENTS}, got {self.element!r}")
         epl = self.elements_per_link
         if (isinstance(epl, (int, np.integer)) and not isinstance(epl, bool)):
             epl = (int(epl), int(epl))
         if (not isinstance(epl, (tuple, list)) or len(epl) != 2
                 or not all(isinstance(n, (int, np.integer)) and not isinstance(n, bool)
                            and 1 <= n <= 64 for n in epl)):
-            raise ValueError("mesh.elements_per_link must be an integer 1..64 or two of them, "
-                             f"got {self.elements_per_link!r}")
+            raise FieldError("mesh", "elements_per_link", "must be an integer 1..64 or two of "
+                             f"them, got {self.elements_per_link!r}")
         object.__setattr__(self, "elements_per_link", (int(epl[0]), int(epl[1])))
         ea = self.axial_stiffness
         if isinstance(ea, bool) or not isinstance(ea, (int, float)) or not np.isfinite(ea) \
                 or ea <= 0:
-            raise ValueError(f"mesh.axial_stiffness must be a finite number > 0, got {ea!r}")
+            raise FieldError("mesh", "axial_stiffness", f"must be a finite number > 0, got {ea!r}")
         object.__setattr__(self, "axial_stiffness", float(ea))
 
 

@@ -7,6 +7,7 @@ from scipy.integrate import cumulative_trapezoid
 
 from reduced_model import (ArmModel, ArmParameters, LinkModes, Measurement, PlantFailure,
                            SensorConfig, SensorModel, TrueState, check_sample_time)
+from reduced_model._plant_interface import TRUTH_EXTRAS, true_state_from_vector
 
 from ._build import ArmSystem, Mesh, build_arm
 from ._fields import LinkField
@@ -110,11 +111,16 @@ class ExudynPlant:
             self._tip1_rot_idx, self._tip1_rot_ref = ltg(tip1)[2], ref(tip1)[2]
 
     # --- Plant interface ---------------------------------------------------------------
+    @property
+    def state_size(self) -> int:
+        """Length of [θ, q, θ̇, q̇] with q in the modal basis (what `reset` takes)."""
+        return 2 * (2 + sum(m.n for m in self.modal_basis))
+
     def reset(self, state0=None) -> Measurement:
         """Start at t = 0 from ``state0`` = [θ, q, θ̇, q̇] (q in the modal basis, length
         2·(2 + n1 + n2)); default: at rest, undeformed, θ = 0.  The FE nodes are placed on
         the inextensible curve with that modal deflection."""
-        n = 2 + sum(m.n for m in self.modal_basis)
+        n = self.state_size // 2
         x0 = np.zeros(2 * n) if state0 is None else np.asarray(state0, dtype=float)
         if x0.shape != (2 * n,) or not np.all(np.isfinite(x0)):
             raise ValueError(f"state0 must be {2 * n} finite numbers [theta, q, theta_dot, "
@@ -171,13 +177,20 @@ class ExudynPlant:
         return self.sensors.measure(self.time)
 
     def truth(self) -> TrueState:
+        return true_state_from_vector(self.time, self.truth_vector())
+
+    def truth_vector(self) -> np.ndarray:
+        """[θ, q, θ̇, q̇ (projected), tip positions, tip deflections, projection residuals]."""
         u, theta, theta_dot, q, q_dot, dofs = self._read()
-        return TrueState(
-            time=self.time, theta=theta.copy(), theta_dot=theta_dot.copy(),
-            q=q.copy(), q_dot=q_dot.copy(), tip_positions=self._tip_positions(u),
-            tip_deflections=np.array([f.tip_deflection(d) for f, d in zip(self.fields, dofs)]),
-            projection_residual=np.array([f.residual(d, q[sl]) for f, d, sl
-                                          in zip(self.fields, dofs, self._q_slices)]))
+        m = 2 + len(q)
+        out = np.empty(2 * m + len(TRUTH_EXTRAS))
+        out[:2], out[2:m], out[m:m + 2], out[m + 2:2 * m] = theta, q, theta_dot, q_dot
+        extras = out[2 * m:]
+        extras[:4] = self._tip_positions(u).ravel()
+        for i, (f, d, sl) in enumerate(zip(self.fields, dofs, self._q_slices)):
+            extras[4 + i] = f.tip_deflection(d)
+            extras[6 + i] = f.residual(d, q[sl])
+        return out
 
     # --- sensor primitives (see reduced_model._sensors) -------------------------------------
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:

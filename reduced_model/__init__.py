@@ -3,17 +3,24 @@
 Euler–Lagrange, clamped-mass assumed modes (De Luca & Siciliano, IEEE Trans. SMC 21(4),
 1991), as used by the paper's eq. (1)–(3) and (22).  Public surface: `ArmParameters`
 (Table 1), `LinkModes` (mode shapes), `ArmModel` (M, C, K, D, rhs, kinematics, linear
-analysis) and `ReducedPlant` (the model used as a plant).
+analysis), `ReducedPlant` (the model used as a plant), and the Plant interface and
+sensors shared with the Exudyn plant.
 """
-from ._model import ArmModel, validate_modes_per_link
-from ._modes import LinkModes
-from ._parameters import ArmParameters
-from ._plant import ReducedPlant
-from ._plant_interface import Measurement, Plant, PlantFailure, TrueState, check_sample_time
-from ._sensors import SensorConfig, SensorModel
+from ._cache_guard import invalidate_stale_kernel_caches
+
+invalidate_stale_kernel_caches()  # before any kernel is loaded from numba's cache
+
+# The imports below load the kernels, so they must follow the cache check.
+from ._model import ArmModel, validate_modes_per_link  # noqa: E402
+from ._modes import LinkModes  # noqa: E402
+from ._parameters import ArmParameters, FieldError  # noqa: E402
+from ._plant import ReducedPlant  # noqa: E402
+from ._plant_interface import (Measurement, Plant, PlantFailure, TrueState,  # noqa: E402
+                               check_sample_time)
+from ._sensors import STRAIN_QUANTITIES, SensorConfig, SensorModel  # noqa: E402
 
 __all__ = [
-    "ArmParameters", "ArmModel", "LinkModes", "ReducedPlant", "Measurement", "TrueState",
-    "Plant", "PlantFailure", "SensorConfig", "SensorModel", "check_sample_time",
-    "validate_modes_per_link",
+    "ArmParameters", "FieldError", "ArmModel", "LinkModes", "ReducedPlant", "Measurement",
+    "TrueState", "Plant", "PlantFailure", "SensorConfig", "SensorModel", "STRAIN_QUANTITIES",
+    "check_sample_time", "validate_modes_per_link",
 ]

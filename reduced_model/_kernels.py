@@ -52,6 +52,7 @@ __all__ = [
     "mass_matrix_into", "coriolis_matrix_into", "mass_bias_into", "bias_forces_into",
     "acceleration_into",
     "rhs_into", "rk4_advance", "rk4_advance_packed", "cholesky_solve_inplace",
+    "tip_kinematics_packed",
 ]
 
 
@@ -67,6 +68,8 @@ class ModelData(NamedTuple):
     gram2: np.ndarray  # (2+n2, 2+n2) basis [1, x, φ_2*]
     phi1_tip: np.ndarray  # (n1,) φ_1j(L1)
     dphi1_tip: np.ndarray  # (n1,) φ_1j'(L1)
+    phi2_tip: np.ndarray  # (n2,) φ_2j(L2)
+    L2: float
     M_rotors: np.ndarray  # (n, n) Σ J a aᵀ of hub 1, stator, hub 2, payload (constant)
     K: np.ndarray  # (n, n) stiffness
     D: np.ndarray  # (n, n) Kelvin–Voigt damping
@@ -92,14 +95,15 @@ class Workspace(NamedTuple):
 
 
 # --- packing -------------------------------------------------------------------------
-def pack_model(*, n1, n2, L1, gram1, gram2, phi1_tip, dphi1_tip, M_rotors,
+def pack_model(*, n1, n2, L1, L2, gram1, gram2, phi1_tip, dphi1_tip, phi2_tip, M_rotors,
                K, D) -> tuple[np.ndarray, np.ndarray]:
     """(ints, reals) buffers holding a model, in the order `unpack_model` reads them."""
     n = 2 + n1 + n2
     rows1 = [0, *range(2, 2 + n1)]
     ints = np.array([n1, n2, *rows1, *range(n)], dtype=np.int64)
-    parts = [[L1], gram1, gram2, phi1_tip, dphi1_tip, M_rotors, K, D]
-    shapes = [(1,), (1 + n1, 1 + n1), (2 + n2, 2 + n2), (n1,), (n1,), (n, n), (n, n), (n, n)]
+    parts = [[L1, L2], gram1, gram2, phi1_tip, dphi1_tip, phi2_tip, M_rotors, K, D]
+    shapes = [(2,), (1 + n1, 1 + n1), (2 + n2, 2 + n2), (n1,), (n1,), (n2,), (n, n), (n, n),
+              (n, n)]
     for part, shape in zip(parts, shapes):
         if np.shape(part) != shape:
             raise ValueError(f"model part has shape {np.shape(part)}, expected {shape}")
@@ -112,7 +116,7 @@ def unpack_model(ints, reals):
     """`ModelData` of views into the packed buffers (no copy)."""
     n1, n2 = ints[0], ints[1]
     n, nb1, nb2 = 2 + n1 + n2, 1 + n1, 2 + n2
-    o = 1
+    o = 2
     gram1 = reals[o:o + nb1 * nb1].reshape((nb1, nb1))
     o += nb1 * nb1
     gram2 = reals[o:o + nb2 * nb2].reshape((nb2, nb2))
@@ -121,13 +125,15 @@ def unpack_model(ints, reals):
     o += n1
     dphi1_tip = reals[o:o + n1]
     o += n1
+    phi2_tip = reals[o:o + n2]
+    o += n2
     M_rotors = reals[o:o + n * n].reshape((n, n))
     o += n * n
     K = reals[o:o + n * n].reshape((n, n))
     o += n * n
     D = reals[o:o + n * n].reshape((n, n))
     return ModelData(n1, n2, ints[2:2 + nb1], ints[2 + nb1:2 + nb1 + n], reals[0], gram1, gram2,
-                     phi1_tip, dphi1_tip, M_rotors, K, D)
+                     phi1_tip, dphi1_tip, phi2_tip, reals[1], M_rotors, K, D)
 
 
 def new_workspace(ints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -448,3 +454,28 @@ def rk4_advance(d, x, tau, h, nsteps, ws):
 def rk4_advance_packed(ints, reals, wc, wr, x, tau, h, nsteps):
     """`rk4_advance` on packed buffers (the fast entry point from Python)."""
     rk4_advance(unpack_model(ints, reals), x, tau, h, nsteps, unpack_workspace(ints, wc, wr))
+
+
+@njit(cache=True)
+def tip_kinematics_packed(ints, reals, Q, out):
+    """Planar kinematics with deflection: ``out`` = [x1, y1, x2, y2, w1(L1), w2(L2)],
+    the link-1 tip, the payload, and both tip deflections in their root frames."""
+    d = unpack_model(ints, reals)
+    n1, n2 = d.n1, d.n2
+    w1e = 0.0
+    s1e = 0.0
+    for k in range(n1):
+        w1e += d.phi1_tip[k] * Q[2 + k]
+        s1e += d.dphi1_tip[k] * Q[2 + k]
+    w2e = 0.0
+    for k in range(n2):
+        w2e += d.phi2_tip[k] * Q[2 + n1 + k]
+    c1, s1 = np.cos(Q[0]), np.sin(Q[0])
+    alpha = Q[0] + Q[1] + s1e
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    out[0] = c1 * d.L1 - s1 * w1e
+    out[1] = s1 * d.L1 + c1 * w1e
+    out[2] = out[0] + ca * d.L2 - sa * w2e
+    out[3] = out[1] + sa * d.L2 + ca * w2e
+    out[4] = w1e
+    out[5] = w2e

@@ -94,7 +94,7 @@ class ArmModel:
         self.n = 2 + n1 + n2
         m1, m2 = self.mode_shapes
         phi1_tip, dphi1_tip = m1.tip_values
-        _, dphi2_tip = m2.tip_values
+        phi2_tip, dphi2_tip = m2.tip_values
 
         K = np.zeros((self.n, self.n))
         D = np.zeros((self.n, self.n))
@@ -112,10 +112,10 @@ class ArmModel:
         #: The model packed for compiled code: pass ``packed`` to ``*_packed`` kernels or
         #: `kern.unpack_model(*packed)` inside them.
         self.packed = kern.pack_model(
-            n1=n1, n2=n2, L1=p.L1,
+            n1=n1, n2=n2, L1=p.L1, L2=p.L2,
             gram1=_gram(m1, p.mh2 + p.stator_mass, with_constant=False),
             gram2=_gram(m2, p.Mp, with_constant=True),
-            phi1_tip=phi1_tip, dphi1_tip=dphi1_tip,
+            phi1_tip=phi1_tip, dphi1_tip=dphi1_tip, phi2_tip=phi2_tip,
             M_rotors=axes.T @ np.diag([p.Jh1, p.stator_inertia, p.Jh2, p.Jp]) @ axes,
             K=K, D=D,
         )
@@ -198,22 +198,17 @@ class ArmModel:
     # --- kinematics ------------------------------------------------------------------
     def tip_deflection(self, Q) -> np.ndarray:
         """Tip deflections (w1(L1), w2(L2)) [m] in each link's root frame."""
-        Q = self._vec(Q, self.n, "Q")
-        n1 = self.modes_per_link[0]
-        (phi1, _), (phi2, _) = self.mode_shapes[0].tip_values, self.mode_shapes[1].tip_values
-        return np.array([phi1 @ Q[2:2 + n1], phi2 @ Q[2 + n1:]])
+        return self._tips(Q)[4:]
 
     def tip_position(self, Q) -> np.ndarray:
         """Planar positions [m] of the link-1 tip (joint 2) and link-2 tip (payload):
         array (2, 2), rows = tips, columns = (x, y).  Includes deflection."""
-        Q = self._vec(Q, self.n, "Q")
-        p = self.params
-        n1 = self.modes_per_link[0]
-        w1e, w2e = self.tip_deflection(Q)
-        slope1 = self.mode_shapes[0].tip_values[1] @ Q[2:2 + n1]
-        z1 = np.exp(1j * Q[0]) * (p.L1 + 1j * w1e)
-        z2 = z1 + np.exp(1j * (Q[0] + Q[1] + slope1)) * (p.L2 + 1j * w2e)
-        return np.array([[z1.real, z1.imag], [z2.real, z2.imag]])
+        return self._tips(Q)[:4].reshape(2, 2)
+
+    def _tips(self, Q) -> np.ndarray:
+        out = np.empty(6)
+        kern.tip_kinematics_packed(*self.packed, self._vec(Q, self.n, "Q"), out)
+        return out
 
     def tip_jacobian(self, Q) -> np.ndarray:
         """∂(payload position)/∂Q, shape (2, n): maps a tip force F to generalised forces

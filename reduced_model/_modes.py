@@ -107,6 +107,8 @@ class LinkModes:
             row = max(row_moment, row_shear, key=lambda r: np.hypot(*r))
             self._coef[j] = (row[1] / ch, -row[0] / ch)
         self._normalise(mu, eta)
+        end = np.array([self.L])
+        self._tip = (self.evaluate(end)[:, 0], self.evaluate(end, 1)[:, 0])
 
     def _normalise(self, mu: float, eta: float) -> None:
         x, w = gauss_legendre(0.0, self.L)
@@ -152,9 +154,8 @@ class LinkModes:
 
     @property
     def tip_values(self) -> tuple[np.ndarray, np.ndarray]:
-        """(φ_j(L), φ_j'(L)) for all modes."""
-        end = np.array([self.L])
-        return self.evaluate(end)[:, 0], self.evaluate(end, 1)[:, 0]
+        """(φ_j(L), φ_j'(L)) for all modes (computed once; do not modify)."""
+        return self._tip
 
     @property
     def frequencies_hz(self) -> np.ndarray:

@@ -11,7 +11,16 @@ import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-__all__ = ["ArmParameters"]
+__all__ = ["ArmParameters", "FieldError"]
+
+
+class FieldError(ValueError):
+    """A bad value of one field of a parameter object; ``field`` names it, ``reason`` says
+    what is wrong (configuration loaders prefix the field with its full path)."""
+
+    def __init__(self, owner: str, field: str, reason: str) -> None:
+        self.field, self.reason = field, reason
+        super().__init__(f"{owner}.{field} {reason}")
 
 # Fields that must be strictly positive (a zero length, density or stiffness is not an arm).
 _POSITIVE = ("L1", "L2", "rho1", "rho2", "EI1", "EI2")
@@ -81,13 +90,13 @@ class ArmParameters:
         for f in fields(self):
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ValueError(f"ArmParameters.{f.name} must be a number, got {value!r}")
+                raise FieldError("ArmParameters", f.name, f"must be a number, got {value!r}")
             if not math.isfinite(value):
-                raise ValueError(f"ArmParameters.{f.name} must be finite, got {value!r}")
+                raise FieldError("ArmParameters", f.name, f"must be finite, got {value!r}")
             if f.name in _POSITIVE and value <= 0.0:
-                raise ValueError(f"ArmParameters.{f.name} must be > 0, got {value!r}")
+                raise FieldError("ArmParameters", f.name, f"must be > 0, got {value!r}")
             if value < 0.0:
-                raise ValueError(f"ArmParameters.{f.name} must be >= 0, got {value!r}")
+                raise FieldError("ArmParameters", f.name, f"must be >= 0, got {value!r}")
             object.__setattr__(self, f.name, float(value))
 
     # --- derived quantities -------------------------------------------------------

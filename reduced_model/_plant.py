@@ -7,7 +7,8 @@ from . import _kernels as kern
 from ._model import ArmModel
 from ._modes import LinkModes, gauss_legendre, weighted_projector
 from ._parameters import ArmParameters
-from ._plant_interface import Measurement, TrueState, check_sample_time
+from ._plant_interface import (TRUTH_EXTRAS, Measurement, TrueState, check_sample_time,
+                               true_state_from_vector)
 from ._sensors import SensorConfig, SensorModel
 
 __all__ = ["ReducedPlant"]
@@ -58,8 +59,9 @@ class ReducedPlant:
         # Without gauges, quantisation, tip position or a foreign basis the measurement is
         # the head of the state vector [θ, q, θ̇, q̇]: read it directly (a third of the
         # per-step cost).
-        direct = (sensors.strain_gauges is None and sensors.encoder_resolution == 0
-                  and not sensors.tip_position and self._basis_map is None)
+        direct = (sensors.modal and sensors.strain_gauges is None
+                  and sensors.encoder_resolution == 0 and not sensors.tip_position
+                  and self._basis_map is None)
         self._direct = (2 * n if sensors.rates else n) if direct else 0
         self._tau = np.zeros(2)
         self._Ts_nsteps = (None, 0)  # (last Ts, its number of internal steps)
@@ -159,18 +161,29 @@ class ReducedPlant:
         return self._measure()
 
     @property
+    def state_size(self) -> int:
+        """Length of the state [Q, Q̇] in the plant's own coordinates."""
+        return 2 * self.model.n
+
+    @property
     def state(self) -> np.ndarray:
         """Copy of the state [Q, Q̇]."""
         return self._x.copy()
 
     def truth(self) -> TrueState:
+        return true_state_from_vector(self.time, self.truth_vector())
+
+    def truth_vector(self) -> np.ndarray:
+        """[θ, q, θ̇, q̇ (q in the modal basis), tips, tip deflections, 0, 0]."""
         n, x = self.model.n, self._x
-        Q = x[:n]
-        q, q_dot = self.modal_state()
-        return TrueState(
-            time=self.time,
-            theta=x[0:2].copy(), theta_dot=x[n:n + 2].copy(), q=q, q_dot=q_dot,
-            tip_positions=self.model.tip_position(Q),
-            tip_deflections=self.model.tip_deflection(Q),
-            projection_residual=np.zeros(2),
-        )
+        if self._basis_map is None:
+            out = np.empty(2 * n + len(TRUTH_EXTRAS))
+            out[:2 * n] = x
+        else:
+            q, q_dot = self.modal_state()
+            m = 2 + len(q)
+            out = np.empty(2 * m + len(TRUTH_EXTRAS))
+            out[:2], out[2:m], out[m:m + 2], out[m + 2:2 * m] = x[:2], q, x[n:n + 2], q_dot
+        kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-8:-2])
+        out[-2:] = 0.0  # a modal field is represented exactly by its own modes
+        return out

@@ -1,17 +1,23 @@
 """The Plant interface of DESIGN.md, shared by the reduced and the Exudyn plant.
 
-A plant is anything with ``name``, ``reset(state0) -> Measurement``,
-``step(tau, Ts) -> Measurement`` and ``truth() -> TrueState``.  The closed loop in
+A plant is anything with ``name``, ``state_size`` (length of the state ``reset`` takes),
+``reset(state0) -> Measurement``, ``step(tau, Ts, tip_force=None) -> Measurement``,
+``truth() -> TrueState`` and ``truth_vector()`` (the same numbers as one flat array
+[x, *TRUTH_EXTRAS], for the closed loop's per-sample recording).  The closed loop in
 `validation` talks to plants only through this interface.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Measurement", "TrueState", "Plant", "PlantFailure", "check_sample_time"]
+__all__ = ["Measurement", "TrueState", "Plant", "PlantFailure", "check_sample_time",
+           "TRUTH_EXTRAS", "true_state_from_vector"]
+
+#: After the state [θ, q, θ̇, q̇], `truth_vector()` holds these, in this order.
+TRUTH_EXTRAS = ("tip1_x", "tip1_y", "tip2_x", "tip2_y", "tip_defl1", "tip_defl2",
+                "proj_res1", "proj_res2")
 
 
 class PlantFailure(RuntimeError):
@@ -43,9 +49,9 @@ class Measurement:
             raise KeyError(f"no signal {name!r} in measurement {self.names}") from None
 
 
-@dataclass(frozen=True)
 class TrueState:
-    """What the plant really does, in the reduced model's coordinates.
+    """What the plant really does, in the reduced model's coordinates (read-only by
+    convention; a slotted class because the closed loop reads one per sample).
 
     Attributes
     ----------
@@ -53,41 +59,55 @@ class TrueState:
     theta, theta_dot : ndarray (2,)
         Joint angles [rad] and rates [rad/s]; θ2 relative to the link-1 tip tangent.
     q, q_dot : ndarray (n1 + n2,)
-        Modal coordinates of the plant's assumed modes [m] and their rates.
+        Modal coordinates of the plant's modal basis [m] and their rates.
     tip_positions : ndarray (2, 2)
         (x, y) [m] of the link-1 tip and the link-2 tip (payload).
     tip_deflections : ndarray (2,)
         w_i(L_i) [m] in each link's clamped root frame.
     projection_residual : ndarray (2,)
         Per link, RMS over the link of the deflection the modes cannot represent,
-        divided by the RMS deflection (0 for the reduced plant, whose deflection is
-        modal by construction).
+        divided by the RMS deflection (0 for the reduced plant in its own basis).
+    x : ndarray
+        The reduced model's state vector [θ, q, θ̇, q̇].
     """
 
-    time: float
-    theta: np.ndarray
-    theta_dot: np.ndarray
-    q: np.ndarray
-    q_dot: np.ndarray
-    tip_positions: np.ndarray
-    tip_deflections: np.ndarray
-    projection_residual: np.ndarray
+    __slots__ = ("time", "theta", "theta_dot", "q", "q_dot", "tip_positions",
+                 "tip_deflections", "projection_residual", "x")
 
-    @property
-    def x(self) -> np.ndarray:
-        """The reduced model's state vector [θ, q, θ̇, q̇]."""
-        return np.concatenate([self.theta, self.q, self.theta_dot, self.q_dot])
+    def __init__(self, *, time, theta, theta_dot, q, q_dot, tip_positions, tip_deflections,
+                 projection_residual, x=None) -> None:
+        self.time, self.theta, self.theta_dot = time, theta, theta_dot
+        self.q, self.q_dot = q, q_dot
+        self.tip_positions, self.tip_deflections = tip_positions, tip_deflections
+        self.projection_residual = projection_residual
+        self.x = np.concatenate([theta, q, theta_dot, q_dot]) if x is None else x
+
+    def __repr__(self) -> str:
+        return (f"TrueState(t={self.time:.6g}, theta={self.theta}, q={self.q}, "
+                f"tip_deflections={self.tip_deflections})")
 
 
 @runtime_checkable
 class Plant(Protocol):
     name: str
+    state_size: int
 
     def reset(self, state0=None) -> Measurement: ...
 
-    def step(self, tau, Ts: float) -> Measurement: ...
+    def step(self, tau, Ts: float, tip_force=None) -> Measurement: ...
 
     def truth(self) -> TrueState: ...
+
+    def truth_vector(self) -> np.ndarray: ...
+
+
+def true_state_from_vector(time: float, v: np.ndarray) -> TrueState:
+    """`TrueState` of a `truth_vector` (the state x then TRUTH_EXTRAS)."""
+    m = (len(v) - len(TRUTH_EXTRAS)) // 2  # number of coordinates n
+    x, extras = v[:2 * m], v[2 * m:]
+    return TrueState(time=time, theta=x[:2], theta_dot=x[m:m + 2], q=x[2:m], q_dot=x[m + 2:],
+                     tip_positions=extras[:4].reshape(2, 2), tip_deflections=extras[4:6],
+                     projection_residual=extras[6:8], x=x)
 
 
 def check_sample_time(Ts: float, h: float) -> int:

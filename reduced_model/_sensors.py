@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._modes import LinkModes
+from ._parameters import FieldError
 from ._plant_interface import Measurement
 
 __all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES"]
@@ -37,6 +38,8 @@ class SensorConfig:
     strain_quantity : {"curvature", "deflection"}
         What a gauge reads: curvature w'' (a strain gauge; surface strain = −c w'') or
         deflection w (e.g. an optical sensor).
+    modal : bool
+        Measure the modal coordinates at all (False: encoders only).
     rates : bool
         Append θ̇ and q̇ (q̇ from the plant's modal state, not differentiated gauges).
     tip_position : bool
@@ -46,6 +49,7 @@ class SensorConfig:
     encoder_resolution: float = 0.0
     strain_gauges: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     strain_quantity: str = "curvature"
+    modal: bool = True
     rates: bool = False
     tip_position: bool = False
 
@@ -53,14 +57,14 @@ class SensorConfig:
         res = self.encoder_resolution
         if isinstance(res, bool) or not isinstance(res, (int, float)) or not np.isfinite(res) \
                 or res < 0:
-            raise ValueError(f"sensors.encoder_resolution must be a number >= 0, got {res!r}")
+            raise FieldError("sensors", "encoder_resolution", f"must be a number >= 0, got {res!r}")
         if self.strain_quantity not in STRAIN_QUANTITIES:
-            raise ValueError(f"sensors.strain_quantity must be one of "
+            raise FieldError("sensors", "strain_quantity", f"must be one of "
                              f"{sorted(STRAIN_QUANTITIES)}, got {self.strain_quantity!r}")
         if self.strain_gauges is not None:
             gauges = self.strain_gauges
             if not isinstance(gauges, (tuple, list)) or len(gauges) != 2:
-                raise ValueError("sensors.strain_gauges must be two lists of positions "
+                raise FieldError("sensors", "strain_gauges", "must be two lists of positions "
                                  f"(link 1, link 2), got {gauges!r}")
             object.__setattr__(self, "strain_gauges",
                                tuple(tuple(float(x) for x in g) for g in gauges))
@@ -82,14 +86,14 @@ class SensorModel:
         self.config = config
         self._plant = plant
         q_names = tuple(f"q{i + 1}{j + 1}" for i, m in enumerate(modes) for j in range(m.n))
-        names = ("theta1", "theta2") + q_names
+        names = ("theta1", "theta2") + (q_names if config.modal else ())
         if config.rates:
             names += tuple(f"{n}_dot" for n in names)
         if config.tip_position:
             names += ("tip_x", "tip_y")
         self.names = names
         self._samplers, self._fits = [], []
-        if config.strain_gauges is not None:
+        if config.modal and config.strain_gauges is not None:
             k = STRAIN_QUANTITIES[config.strain_quantity]
             for link, (x, m) in enumerate(zip(config.strain_gauges, modes)):
                 x = np.asarray(x, dtype=float)
@@ -116,9 +120,13 @@ class SensorModel:
         cfg = self.config
         theta, theta_dot = self._plant.joint_state()
         res = cfg.encoder_resolution
-        parts = [np.round(theta / res) * res if res > 0 else theta, self.modal_positions()]
+        parts = [np.round(theta / res) * res if res > 0 else theta]
+        if cfg.modal:
+            parts.append(self.modal_positions())
         if cfg.rates:
-            parts += [theta_dot, self._plant.modal_state()[1]]
+            parts.append(theta_dot)
+            if cfg.modal:
+                parts.append(self._plant.modal_state()[1])
         if cfg.tip_position:
             parts.append(self._plant.tip_positions()[1])
         return Measurement(time, self.names, np.concatenate(parts))

@@ -5,15 +5,25 @@ Errors in user input end with one line on stderr and exit status 2, never a trac
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+import tomllib
 from importlib.metadata import version
+from pathlib import Path
 
 import numpy as np
 
 from plant_exudyn import ELEMENTS, Mesh, natural_frequencies
 from reduced_model import ArmModel, ArmParameters, validate_modes_per_link
 
+from ._config import ConfigError
+from .loop import run_scenario
+from .metrics import all_metrics
+from .scenario import CONTROLLERS, OBSERVERS, PLANTS, Scenario, scenario_from_mapping
+from .store import ResultStore, run_id
+
 EXIT_USAGE = 2
+EXIT_FAILED = 1
 
 
 class _Parser(argparse.ArgumentParser):
@@ -73,6 +83,117 @@ def cmd_modes(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- flexarm run ----------------------------------------------------------------------
+def _parse_value(text: str):
+    """A TOML literal ("0.5", "[8, 8]", "true", '"ancf"'), or the text itself."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def set_dotted(data: dict, key: str, value) -> None:
+    """data[a][b][c] = value for key "a.b.c" (creating tables on the way)."""
+    parts = key.split(".")
+    for i, part in enumerate(parts[:-1]):
+        node = data.setdefault(part, {})
+        if not isinstance(node, dict):
+            raise ConfigError(".".join(parts[:i + 1]), "is a value, not a table")
+        data = node
+    data[parts[-1]] = value
+
+
+def read_toml(path: str | Path) -> dict:
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: invalid TOML ({exc})") from None
+
+
+_RUN_FLAGS = {"plant": "plant.kind", "controller": "controller.kind",
+              "observer": "observer.kind", "duration": "duration", "seed": "seed", "Ts": "Ts",
+              "feedback": "feedback", "initial_state": "initial_state", "name": "name"}
+
+
+def scenario_from_args(args: argparse.Namespace) -> Scenario:
+    data = read_toml(args.config) if args.config else {}
+    for attr, key in _RUN_FLAGS.items():
+        value = getattr(args, attr)
+        if value is not None:
+            set_dotted(data, key, value)
+    if args.idealised:
+        set_dotted(data, "controller.pbc.idealised", True)
+    for item in args.set or []:
+        key, sep, text = item.partition("=")
+        if not sep or not key:
+            raise ConfigError("--set", f"expected KEY=VALUE, got {item!r}")
+        set_dotted(data, key.strip(), _parse_value(text.strip()))
+    return scenario_from_mapping(data)
+
+
+def prepare_output(out: str | Path) -> ResultStore:
+    store = ResultStore(out)
+    try:
+        store.prepare()
+        probe = store.out / ".write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ValueError(f"--out {out}: not writable ({exc.strerror or exc})") from None
+    return store
+
+
+_TABLE = [("status", "status", "{}"), ("track_max_1", "max |e1| after transient [rad]", "{:.4g}"),
+          ("track_max_2", "max |e2| after transient [rad]", "{:.4g}"),
+          ("track_rms_1", "rms e1 [rad]", "{:.3g}"), ("track_rms_2", "rms e2 [rad]", "{:.3g}"),
+          ("tip_err_max", "max tip error vs rigid [m]", "{:.3g}"),
+          ("defl_max_1", "max tip deflection 1 [m]", "{:.3g}"),
+          ("defl_max_2", "max tip deflection 2 [m]", "{:.3g}"),
+          ("tau_max_1", "max |tau1| [N m]", "{:.3g}"), ("tau_max_2", "max |tau2| [N m]", "{:.3g}"),
+          ("tau_tv_1", "tau1 variation [N m/s]", "{:.3g}"),
+          ("tau_tv_2", "tau2 variation [N m/s]", "{:.3g}"),
+          ("wall_s", "wall time [s]", "{:.3g}"), ("realtime_factor", "real-time factor", "{:.3g}")]
+
+
+def format_metrics(metrics: dict) -> str:
+    lines = [f"  {label:<44} {fmt.format(metrics[key])}" for key, label, fmt in _TABLE
+             if key in metrics and not (isinstance(metrics[key], float) and math.isnan(metrics[key]))]
+    est = {k: v for k, v in metrics.items() if k.startswith("est_max_")}
+    if est:
+        for kind, label in (("theta", "positions θ [rad]"), ("q", "modal q [m]"),
+                            ("theta_dot", "rates θ̇ [rad/s]"), ("q_dot", "modal rates q̇ [m/s]")):
+            vals = [v for k, v in est.items() if _state_kind(k.removeprefix("est_max_")) == kind]
+            if vals:
+                lines.append(f"  {'max estimation error, ' + label:<44} {max(vals):.3g}")
+    return "\n".join(lines)
+
+
+def _state_kind(state: str) -> str:
+    return ("theta" if state.startswith("theta") else "q") + ("_dot" if state.endswith("_dot") else "")
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    scenario = scenario_from_args(args)
+    store = prepare_output(args.out or Path("results") / scenario.name)
+    result = run_scenario(scenario)
+    metrics = all_metrics(result)
+    rid = run_id(result.config)
+    path = store.add(rid, result, metrics)
+    s = scenario
+    print(f"{s.name}: plant {s.plant.kind}, controller {s.controller.kind}"
+          f"{' (idealised)' if s.controller.pbc.idealised and s.controller.kind == 'pbc' else ''},"
+          f" observer {s.observer.kind}, {s.duration:g} s at Ts = {s.Ts:g} s")
+    if result.message:
+        print(f"  stopped: {result.message}")
+    print(format_metrics(metrics))
+    print(f"results: {path} (metrics.csv, manifest.json in {store.out})")
+    return 0 if result.status != "failed" else EXIT_FAILED
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="flexarm", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version",
@@ -94,6 +215,25 @@ def build_parser() -> argparse.ArgumentParser:
     modes.add_argument("--elements", type=_int_in(1, 64), default=4, metavar="N",
                        help="FE elements per link for --compare (default 4)")
     modes.set_defaults(func=cmd_modes)
+
+    run = sub.add_parser("run", help="simulate one closed-loop scenario")
+    run.add_argument("--config", metavar="TOML", help="scenario file (flags override it)")
+    run.add_argument("--plant", choices=PLANTS)
+    run.add_argument("--controller", choices=CONTROLLERS)
+    run.add_argument("--observer", choices=OBSERVERS)
+    run.add_argument("--idealised", action="store_true",
+                     help="PBC applies all n components of eq. 20 (reduced plant only)")
+    run.add_argument("--feedback", choices=("auto", "true", "estimate"))
+    run.add_argument("--initial-state", dest="initial_state", choices=("rest", "reference"))
+    run.add_argument("--duration", type=float, metavar="S")
+    run.add_argument("--Ts", type=float, metavar="S", help="control period")
+    run.add_argument("--seed", type=int)
+    run.add_argument("--name")
+    run.add_argument("--set", action="append", metavar="KEY=VALUE",
+                     help="any scenario field by dotted key, value in TOML syntax, e.g. "
+                          "--set true_params.Mp=0.5 --set plant.mesh.elements_per_link=[8,8]")
+    run.add_argument("--out", metavar="DIR", help="results folder (default results/NAME)")
+    run.set_defaults(func=cmd_run)
     return parser
 
 

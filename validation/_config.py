@@ -1,0 +1,109 @@
+"""Mappings (TOML, JSON) ⇄ frozen dataclasses, with errors that name the dotted path.
+
+Types are read from the dataclass annotations: bool, int, float, str, tuples of those
+(fixed length ``tuple[float, float]`` or variable ``tuple[float, ...]``), nested
+dataclasses, tuples of dataclasses, and ``X | None``.  Unknown keys and values of the
+wrong type are rejected; the dataclasses' own ``__post_init__`` checks ranges.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+from typing import Any, Union, get_args, get_origin, get_type_hints
+
+from reduced_model import FieldError
+
+__all__ = ["ConfigError", "from_mapping", "to_mapping", "check"]
+
+
+class ConfigError(ValueError):
+    """A bad configuration value; ``path`` is the dotted key (e.g. ``plant.mesh.element``)."""
+
+    def __init__(self, path: str, message: str) -> None:
+        self.path, self.message = path, message
+        super().__init__(f"{path}: {message}" if path else message)
+
+    def under(self, prefix: str) -> "ConfigError":
+        """The same error with ``prefix`` in front of its path."""
+        return ConfigError(f"{prefix}.{self.path}" if self.path else prefix, self.message)
+
+
+def check(condition: bool, path: str, message: str) -> None:
+    """Raise `ConfigError(path, message)` unless ``condition``."""
+    if not condition:
+        raise ConfigError(path, message)
+
+
+def _describe(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _convert(tp: Any, value: Any, path: str) -> Any:
+    origin, args = get_origin(tp), get_args(tp)
+    if origin in (Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _convert(inner, value, path)
+    if dataclasses.is_dataclass(tp):
+        if dataclasses.is_dataclass(value) and isinstance(value, tp):
+            return value
+        if not isinstance(value, dict):
+            raise ConfigError(path, f"expected a table, got {_describe(value)}")
+        return from_mapping(tp, value, path)
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(path, f"expected a list, got {_describe(value)}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_convert(args[0], v, f"{path}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(path, f"expected {len(args)} values, got {len(value)}")
+        return tuple(_convert(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(path, f"expected true or false, got {_describe(value)}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(path, f"expected an integer, got {_describe(value)}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(path, f"expected a number, got {_describe(value)}")
+        if math.isnan(value):
+            raise ConfigError(path, "must be a number, got nan")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(path, f"expected a string, got {_describe(value)}")
+        return value
+    raise TypeError(f"unsupported configuration type {tp!r} at {path}")
+
+
+def from_mapping(cls, data: dict, path: str = ""):
+    """Build dataclass ``cls`` from ``data``; missing keys take the defaults."""
+    hints = get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    kwargs = {}
+    for key, value in data.items():
+        sub = f"{path}.{key}" if path else key
+        if key not in fields:
+            raise ConfigError(sub, f"unknown key (allowed: {', '.join(sorted(fields))})")
+        kwargs[key] = _convert(hints[key], value, sub)
+    try:
+        return cls(**kwargs)
+    except ConfigError as exc:
+        raise (exc.under(path) if path else exc) from None
+    except FieldError as exc:  # ArmParameters, Mesh, SensorConfig name their field
+        raise ConfigError(f"{path}.{exc.field}" if path else exc.field, exc.reason) from None
+
+
+def to_mapping(obj) -> Any:
+    """Plain JSON/TOML-able data (dicts, lists, numbers, strings) of a dataclass tree."""
+    if dataclasses.is_dataclass(obj):
+        return {f.name: to_mapping(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, (tuple, list)):
+        return [to_mapping(v) for v in obj]
+    return obj
