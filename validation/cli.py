@@ -7,7 +7,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import tomllib
 from importlib.metadata import version
 from pathlib import Path
 
@@ -17,10 +16,14 @@ from plant_exudyn import ELEMENTS, Mesh, natural_frequencies
 from reduced_model import ArmModel, ArmParameters, validate_modes_per_link
 
 from ._config import ConfigError
+from .campaign import expand, load_campaign, make_executor, run_campaign
+from .claims import write_claims
+from .report import write_report
 from .loop import run_scenario
 from .metrics import all_metrics
 from .scenario import CONTROLLERS, OBSERVERS, PLANTS, Scenario, scenario_from_mapping
 from .store import ResultStore, run_id
+from .tomlfiles import load_toml, parse_value, set_dotted
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
@@ -84,43 +87,13 @@ def cmd_modes(args: argparse.Namespace) -> int:
 
 
 # --- flexarm run ----------------------------------------------------------------------
-def _parse_value(text: str):
-    """A TOML literal ("0.5", "[8, 8]", "true", '"ancf"'), or the text itself."""
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text
-
-
-def set_dotted(data: dict, key: str, value) -> None:
-    """data[a][b][c] = value for key "a.b.c" (creating tables on the way)."""
-    parts = key.split(".")
-    for i, part in enumerate(parts[:-1]):
-        node = data.setdefault(part, {})
-        if not isinstance(node, dict):
-            raise ConfigError(".".join(parts[:i + 1]), "is a value, not a table")
-        data = node
-    data[parts[-1]] = value
-
-
-def read_toml(path: str | Path) -> dict:
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            return tomllib.load(fh)
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: invalid TOML ({exc})") from None
-
-
 _RUN_FLAGS = {"plant": "plant.kind", "controller": "controller.kind",
               "observer": "observer.kind", "duration": "duration", "seed": "seed", "Ts": "Ts",
               "feedback": "feedback", "initial_state": "initial_state", "name": "name"}
 
 
 def scenario_from_args(args: argparse.Namespace) -> Scenario:
-    data = read_toml(args.config) if args.config else {}
+    data = load_toml(args.config) if args.config else {}
     for attr, key in _RUN_FLAGS.items():
         value = getattr(args, attr)
         if value is not None:
@@ -131,7 +104,7 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
         key, sep, text = item.partition("=")
         if not sep or not key:
             raise ConfigError("--set", f"expected KEY=VALUE, got {item!r}")
-        set_dotted(data, key.strip(), _parse_value(text.strip()))
+        set_dotted(data, key.strip(), parse_value(text.strip()))
     return scenario_from_mapping(data)
 
 
@@ -194,6 +167,77 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0 if result.status != "failed" else EXIT_FAILED
 
 
+# --- flexarm campaign --------------------------------------------------------------------
+EXIT_INTERRUPTED = 130
+
+
+def cmd_campaign(args: argparse.Namespace) -> int:
+    campaign = load_campaign(args.file)
+    runs = expand(campaign)  # every scenario checked before anything runs
+    out = Path(args.out or Path("results") / campaign.name)
+    if args.dry_run:
+        for r in runs:
+            axes = ", ".join(f"{k}={v}" for k, v in r.axes.items())
+            print(f"{r.run_id}  {r.sweep:<16} {axes}")
+        print(f"{len(runs)} runs would be written to {out}")
+        return 0
+    prepare_output(out)
+    executor, close = make_executor(args.executor, args.workers, args.scheduler)
+    try:
+        summary = run_campaign(campaign, out, executor=executor, retry_failed=args.retry_failed,
+                               progress=not args.no_progress, only=runs)
+    finally:
+        close()
+    print(f"{campaign.name}: {summary.planned} runs planned, {summary.skipped} already done, "
+          f"{summary.ok} ok, {summary.diverged} diverged, {summary.failed} failed -> {out}")
+    if summary.interrupted:
+        print(f"interrupted: rerun the same command to resume ({summary.done} runs stored)",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return EXIT_FAILED if summary.failed else 0
+
+
+# --- flexarm report / reproduce-paper ----------------------------------------------------
+def cmd_report(args: argparse.Namespace) -> int:
+    html_path, md_path = write_report(args.results, animate=not args.no_animation)
+    print(f"report: {html_path} (self-contained) and {md_path}")
+    return 0
+
+
+def campaigns_dir() -> Path:
+    """The shipped campaigns/ folder of this checkout."""
+    here = Path(__file__).resolve().parent.parent / "campaigns"
+    if not (here / "paper.toml").exists():
+        raise ValueError(f"shipped campaigns not found in {here}; run from the repository "
+                         "(pip install -e .)")
+    return here
+
+
+def cmd_reproduce_paper(args: argparse.Namespace) -> int:
+    campaign = load_campaign(campaigns_dir() / "paper.toml")
+    runs = expand(campaign)
+    out = Path(args.out or Path("results") / "paper")
+    prepare_output(out)
+    executor, close = make_executor("local", args.workers)
+    try:
+        summary = run_campaign(campaign, out, executor=executor, progress=not args.no_progress,
+                               only=runs)
+    finally:
+        close()
+    if summary.interrupted:
+        print("interrupted: rerun the same command to resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    table = write_claims(out)
+    print(f"paper: {summary.planned} runs ({summary.skipped} already done), {summary.ok} ok, "
+          f"{summary.diverged} diverged, {summary.failed} failed\n")
+    print(table)
+    print(f"\nclaims: {out / 'claims.md'}")
+    if not args.no_report:
+        html_path, _ = write_report(out, animate=not args.no_animation)
+        print(f"report: {html_path}")
+    return EXIT_FAILED if summary.failed else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="flexarm", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version",
@@ -234,6 +278,33 @@ def build_parser() -> argparse.ArgumentParser:
                           "--set true_params.Mp=0.5 --set plant.mesh.elements_per_link=[8,8]")
     run.add_argument("--out", metavar="DIR", help="results folder (default results/NAME)")
     run.set_defaults(func=cmd_run)
+
+    camp = sub.add_parser("campaign", help="run a campaign of scenarios (resumable)")
+    camp.add_argument("file", metavar="CAMPAIGN.toml")
+    camp.add_argument("--out", metavar="DIR", help="results folder (default results/NAME)")
+    camp.add_argument("--workers", type=_int_in(1, 1024), default=None, metavar="N",
+                      help="parallel runs (default: the number of cores; 1 = serial)")
+    camp.add_argument("--executor", choices=("local", "dask"), default="local")
+    camp.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                      help="Dask scheduler (default $DASK_SCHEDULER_ADDRESS)")
+    camp.add_argument("--retry-failed", action="store_true", help="redo runs that failed")
+    camp.add_argument("--no-progress", action="store_true", help="no progress bar")
+    camp.add_argument("--dry-run", action="store_true", help="list the runs, run nothing")
+    camp.set_defaults(func=cmd_campaign)
+
+    rep = sub.add_parser("report", help="write report.html and report.md of a results folder")
+    rep.add_argument("results", metavar="RESULTS_DIR")
+    rep.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    rep.set_defaults(func=cmd_report)
+
+    paper = sub.add_parser("reproduce-paper",
+                           help="run campaigns/paper.toml, write the claims table and report")
+    paper.add_argument("--out", metavar="DIR", help="results folder (default results/paper)")
+    paper.add_argument("--workers", type=_int_in(1, 1024), default=None, metavar="N")
+    paper.add_argument("--no-progress", action="store_true")
+    paper.add_argument("--no-report", action="store_true")
+    paper.add_argument("--no-animation", action="store_true")
+    paper.set_defaults(func=cmd_reproduce_paper)
     return parser
 
 

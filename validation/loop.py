@@ -193,8 +193,7 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
         if missing:
             raise ValueError(f"the observer needs {missing} but the plant measures {names_y}")
         obs_index = np.array([names_y.index(m) for m in observer.measured])
-        err0 = np.asarray(s.observer.initial_error or np.zeros(2 * n), float)
-        observer.reset(x0 + err0)
+        observer.reset(x0 + s.initial_estimate_error())
     use_estimate = s.uses_estimate
     residual = getattr(controller, "residual", None)  # the PBC's unrealisable forces
     names, sl = _signal_layout(model, names_y, observer is not None, residual is not None)

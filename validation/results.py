@@ -2,8 +2,8 @@
 
 Arrays of time series are ``(n_signals, n_samples)`` with a tuple of names (SI units,
 radians).  A result unpacks like python-control's responses: ``t, y = result``.
-Stored as one ``.npz`` per run (no pickle; metadata as a JSON string), written
-atomically.
+Stored as one uncompressed ``.npz`` per run (no pickle; metadata as a JSON string),
+written atomically.
 """
 from __future__ import annotations
 
@@ -18,6 +18,8 @@ import numpy as np
 __all__ = ["RunResult", "STATUSES", "write_atomic"]
 
 STATUSES = ("ok", "diverged", "failed")
+_UMASK = os.umask(0)
+os.umask(_UMASK)
 
 
 @dataclass
@@ -90,7 +92,7 @@ class RunResult:
                 "config": self.config, "timings": self.timings}
 
         def write(fh):
-            np.savez_compressed(fh, time=self.time, signals=self.signals,
+            np.savez(fh, time=self.time, signals=self.signals,
                                 names=np.array(self.names, dtype=str),
                                 meta=np.array(json.dumps(meta)))
         write_atomic(path, write, binary=True)
@@ -115,6 +117,7 @@ def write_atomic(path: Path, write, *, binary: bool = False) -> None:
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; results are for sharing
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

@@ -148,7 +148,10 @@ class ControllerSpec:
 class ObserverSpec:
     """``kind``: "none", "smo-paper" (sign, full state measured), "smo-bl" (boundary
     layer), "smo-pos" (positions measured, Barbot's step-by-step injection).  Gains as
-    (joint, flexible) pairs; ``initial_error`` = x̂(0) − x(0) (empty: exact start)."""
+    (joint, flexible) pairs.  ``initial_error`` = x̂(0) − x(0): empty (exact start), the
+    full 2n-vector, or four values (angles, modal positions, angle rates, modal rates)
+    applied to every state of their group with alternating signs — valid for any model
+    order."""
 
     kind: str = "none"
     l_position: tuple[float, float] = (1.0, 0.5)
@@ -292,6 +295,19 @@ class Scenario:
         _positive(self.transient, "transient", allow_zero=True)
         check(self.seed >= 0, "seed", f"must be >= 0, got {self.seed!r}")
 
+    def initial_estimate_error(self) -> "np.ndarray":
+        """x̂(0) − x(0) as a model-state vector (see ObserverSpec.initial_error)."""
+        n = 2 + sum(self.model.modes_per_link)
+        err = self.observer.initial_error
+        if len(err) == 2 * n:
+            return np.asarray(err, dtype=float)
+        out = np.zeros(2 * n)
+        if len(err) == 4:
+            signs = lambda k: (-1.0) ** np.arange(k)  # noqa: E731
+            out[:2], out[2:n] = err[0] * signs(2), err[1] * signs(n - 2)
+            out[n:n + 2], out[n + 2:] = err[2] * signs(2), err[3] * signs(n - 2)
+        return out
+
     @property
     def uses_estimate(self) -> bool:
         return self.feedback == "estimate" or (self.feedback == "auto"
@@ -326,8 +342,9 @@ def check_scenario(s: Scenario) -> None:
               f"{obs} measures the full state (the paper's y = x): needs sensors.rates = "
               "true and sensors.modal 'direct' or 'gauges'")
     n = 2 + sum(s.model.modes_per_link)
-    check(len(s.observer.initial_error) in (0, 2 * n), "observer.initial_error",
-          f"needs {2 * n} values (the model state) or none, got {len(s.observer.initial_error)}")
+    check(len(s.observer.initial_error) in (0, 4, 2 * n), "observer.initial_error",
+          f"needs {2 * n} values (the model state), 4 (per group) or none, got "
+          f"{len(s.observer.initial_error)}")
     if s.sensors.modal == "gauges":
         for link, gauges in enumerate((s.sensors.gauges_link1, s.sensors.gauges_link2)):
             key = f"sensors.gauges_link{link + 1}"

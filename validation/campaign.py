@@ -1,0 +1,371 @@
+"""Campaigns: a base scenario plus sweeps, expanded into runs and executed in parallel.
+
+A campaign file (TOML)::
+
+    name = "mismatch"
+    include = "base.toml"              # optional: files merged under this one, in order
+    [scenario]                         # the base scenario (any scenario keys)
+    duration = 10.0
+    [[sweep]]                          # sweeps expand independently; the runs are their union
+    name = "payload"
+    grid.plant.kind = ["reduced", "exudyn"]           # cartesian product of all grid axes
+    grid.true_params.Mp = [0.0, 0.1, 0.5, 1.0]
+    grid.true_params.EI1 = {scale = [0.7, 1.0, 1.3]}  # factors of the base value
+    zip.controller.kind = ["pbc", "pd"]               # zip axes: paired, same length
+    zip.name = ["pbc", "pd"]
+    random.samples = 8                                # random axes: N seeded draws
+    random.seed = 1
+    random.true_params.Mp = {uniform = [0.0, 1.0]}    # also loguniform, choices
+
+Within a sweep the grid, zip and random parts combine by product.  Each run's scenario is
+resolved and checked before anything runs; its id is a hash of the resolved scenario, so
+rerunning a campaign into the same folder skips what is done (resume).
+"""
+from __future__ import annotations
+
+import itertools
+import math
+import os
+from concurrent.futures import Executor, Future, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ._config import ConfigError, check
+from .loop import run_scenario
+from .metrics import all_metrics
+from .results import RunResult
+from .scenario import Scenario, scenario_from_mapping, scenario_to_mapping
+from .store import ResultStore, environment, run_id
+from .tomlfiles import deep_merge, load_toml
+
+__all__ = ["Campaign", "PlannedRun", "load_campaign", "campaign_from_mapping", "expand",
+           "execute_run", "run_campaign", "CampaignSummary", "make_executor", "SerialExecutor"]
+
+_TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report"}
+_SWEEP_KEYS = {"name", "grid", "zip", "random"}
+_SPEC_KEYS = {"scale", "uniform", "loguniform", "choices"}
+
+
+@dataclass(frozen=True)
+class PlannedRun:
+    """One expanded run: its id, resolved scenario and the axis values that made it."""
+
+    run_id: str
+    scenario: Scenario
+    sweep: str
+    axes: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Campaign:
+    name: str
+    base: dict
+    sweeps: tuple[dict, ...]
+    report: dict = field(default_factory=dict)
+    description: str = ""
+
+
+# --- loading ------------------------------------------------------------------------------
+def load_campaign(path: str | Path) -> Campaign:
+    """Read a campaign TOML (with includes) and check its structure."""
+    return campaign_from_mapping(load_toml(path), source=str(path))
+
+
+def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
+    for key in data:
+        check(key in _TOP_KEYS, key, f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})")
+    name = data.get("name", Path(source).stem)
+    check(isinstance(name, str) and name != "", "name", "must be a non-empty string")
+    base = data.get("scenario", {})
+    check(isinstance(base, dict), "scenario", "must be a table")
+    sweeps = data.get("sweep", [])
+    if isinstance(sweeps, dict):
+        sweeps = [sweeps]
+    check(isinstance(sweeps, list), "sweep", "must be an array of tables ([[sweep]])")
+    for i, sweep in enumerate(sweeps):
+        where = f"sweep[{i}]"
+        check(isinstance(sweep, dict), where, "must be a table")
+        for key in sweep:
+            check(key in _SWEEP_KEYS, f"{where}.{key}",
+                  f"unknown key (allowed: {', '.join(sorted(_SWEEP_KEYS))})")
+    report = data.get("report", {})
+    check(isinstance(report, dict), "report", "must be a table")
+    return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
+                    description=str(data.get("description", "")))
+
+
+# --- expansion --------------------------------------------------------------------------------
+def _flatten(table: dict, prefix: str = "") -> dict[str, object]:
+    """{"a": {"b": [..]}} → {"a.b": [..]}; a table whose keys are a value spec (scale,
+    uniform, ...) is a leaf."""
+    out = {}
+    for key, value in table.items():
+        path = f"{prefix}.{key}" if prefix else key
+        if isinstance(value, dict) and not (set(value) & _SPEC_KEYS):
+            out.update(_flatten(value, path))
+        else:
+            out[path] = value
+    return out
+
+
+def _get(data: dict, path: str):
+    node = data
+    for part in path.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise KeyError(path)
+        node = node[part]
+    return node
+
+
+def _set(data: dict, path: str, value) -> None:
+    parts = path.split(".")
+    for part in parts[:-1]:
+        data = data.setdefault(part, {})
+    data[parts[-1]] = value
+
+
+def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
+    """The list of values of a grid or zip axis."""
+    if isinstance(spec, dict):
+        check(set(spec) == {"scale"}, where, "a grid/zip axis is a list or {scale = [...]}")
+        try:
+            base_value = _get(resolved_base, path)
+        except KeyError:
+            raise ConfigError(where, f"{path} is not a scenario field") from None
+        check(isinstance(base_value, (int, float)) and not isinstance(base_value, bool), where,
+              f"scale needs a numeric field, {path} is {base_value!r}")
+        factors = spec["scale"]
+        check(isinstance(factors, list) and factors and all(
+            isinstance(f, (int, float)) and not isinstance(f, bool) for f in factors), where,
+            "scale must be a non-empty list of numbers")
+        return [base_value * f for f in factors]
+    check(isinstance(spec, list), where, f"must be a list of values, got {spec!r}")
+    check(len(spec) > 0, where, "must not be empty")
+    return list(spec)
+
+
+def _random_values(path: str, spec, n: int, rng: np.random.Generator, where: str) -> list:
+    check(isinstance(spec, dict) and len(spec) == 1 and set(spec) <= {"uniform", "loguniform",
+                                                                       "choices"}, where,
+          "a random axis is {uniform = [lo, hi]}, {loguniform = [lo, hi]} or {choices = [...]}")
+    (kind, arg), = spec.items()
+    if kind == "choices":
+        check(isinstance(arg, list) and arg, where, "choices must be a non-empty list")
+        return [arg[i] for i in rng.integers(0, len(arg), n)]
+    check(isinstance(arg, list) and len(arg) == 2 and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in arg) and arg[0] <= arg[1],
+        where, f"{kind} needs [low, high] with low <= high")
+    lo, hi = arg
+    if kind == "uniform":
+        return [float(v) for v in rng.uniform(lo, hi, n)]
+    check(lo > 0, where, "loguniform needs low > 0")
+    return [float(v) for v in np.exp(rng.uniform(math.log(lo), math.log(hi), n))]
+
+
+def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
+    """Every combination of one sweep's axes: list of {path: value}."""
+    grid = _flatten(sweep.get("grid", {}))
+    zipped = _flatten(sweep.get("zip", {}))
+    random = dict(sweep.get("random", {}))
+    grid_axes = [(p, _axis_values(p, v, resolved_base, f"{where}.grid.{p}"))
+                 for p, v in grid.items()]
+    parts = [[dict(zip([p for p, _ in grid_axes], combo))
+              for combo in itertools.product(*[vals for _, vals in grid_axes])]]
+    if zipped:
+        cols = {p: _axis_values(p, v, resolved_base, f"{where}.zip.{p}") for p, v in zipped.items()}
+        lengths = {len(v) for v in cols.values()}
+        check(len(lengths) == 1, f"{where}.zip", f"zip axes need equal lengths, got "
+                                                 f"{ {p: len(v) for p, v in cols.items()} }")
+        n = lengths.pop()
+        parts.append([{p: v[i] for p, v in cols.items()} for i in range(n)])
+    if random:
+        samples, seed = random.pop("samples", None), random.pop("seed", 0)
+        check(isinstance(samples, int) and not isinstance(samples, bool) and samples > 0,
+              f"{where}.random.samples", f"must be a positive integer, got {samples!r}")
+        check(isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
+              f"{where}.random.seed", f"must be an integer >= 0, got {seed!r}")
+        axes = _flatten(random)
+        check(len(axes) > 0, f"{where}.random", "needs at least one axis besides samples/seed")
+        rng = np.random.default_rng(seed)
+        cols = {p: _random_values(p, v, samples, rng, f"{where}.random.{p}")
+                for p, v in sorted(axes.items())}
+        parts.append([{p: v[i] for p, v in cols.items()} for i in range(samples)])
+    return [dict(itertools.chain.from_iterable(d.items() for d in combo))
+            for combo in itertools.product(*parts)]
+
+
+def expand(campaign: Campaign) -> list[PlannedRun]:
+    """All runs of a campaign, each scenario resolved and checked; duplicates (the same
+    resolved scenario reached twice) are kept once."""
+    try:
+        base_scenario = scenario_from_mapping(campaign.base)
+    except ConfigError as exc:
+        raise exc.under("scenario") from None
+    resolved_base = scenario_to_mapping(base_scenario)
+    sweeps = campaign.sweeps or ({},)
+    runs: dict[str, PlannedRun] = {}
+    for i, sweep in enumerate(sweeps):
+        where = f"sweep[{i}]"
+        sweep_name = sweep.get("name", f"sweep{i}" if campaign.sweeps else campaign.name)
+        check(isinstance(sweep_name, str), f"{where}.name", "must be a string")
+        for point in _sweep_points(sweep, resolved_base, where):
+            data = deep_merge({}, campaign.base)
+            for path, value in point.items():
+                _set(data, path, value)
+            # Every run is named within its campaign: "campaign/<name axis or sweep name>".
+            _set(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
+            try:
+                scenario = scenario_from_mapping(data)
+            except ConfigError as exc:
+                label = ", ".join(f"{p}={v!r}" for p, v in point.items())
+                raise ConfigError(exc.path, f"{exc.message} (in {where}"
+                                            f"{': ' + label if label else ''})") from None
+            rid = run_id(scenario_to_mapping(scenario))
+            runs.setdefault(rid, PlannedRun(rid, scenario, sweep_name, point))
+    return list(runs.values())
+
+
+# --- execution ----------------------------------------------------------------------------------
+def execute_run(scenario_data: dict) -> tuple[RunResult, dict]:
+    """Run one scenario (in a worker): the result, with signals as float32 (what the
+    store keeps; half the bytes to send back), and its metrics computed from the float64
+    signals.  An unexpected exception becomes a
+    "failed" result carrying its message, so that one bad run never stops a campaign."""
+    try:
+        result = run_scenario(scenario_from_mapping(scenario_data))
+        metrics = all_metrics(result)
+    except Exception as exc:  # noqa: BLE001 - reported as the run's failure
+        result = RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)),
+                           status="failed", message=f"{type(exc).__name__}: {exc}",
+                           config=scenario_data)
+        metrics = {"status": "failed", "end_time": 0.0}
+    result.signals = result.signals.astype(np.float32)
+    return result, metrics
+
+
+class SerialExecutor(Executor):
+    """Runs each task when it is submitted, in this process (``--workers 1``)."""
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # noqa: BLE001 - delivered through the future
+            future.set_exception(exc)
+        return future
+
+
+def make_executor(kind: str = "local", workers: int | None = None,
+                  scheduler: str | None = None) -> tuple[Executor, object]:
+    """(executor, close) for ``kind`` "local" (process pool, or serial with one worker)
+    or "dask" (a Dask cluster at ``scheduler`` or $DASK_SCHEDULER_ADDRESS); call
+    ``close()`` when done."""
+    if kind == "local":
+        workers = workers or os.cpu_count() or 1
+        check(workers >= 1, "--workers", f"must be >= 1, got {workers}")
+        if workers == 1:
+            ex = SerialExecutor()
+            return ex, ex.shutdown
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        # spawn: each worker imports and builds its own Exudyn systems (fork is unsafe
+        # with the threads numba and exudyn may have started in the parent).
+        ex = ProcessPoolExecutor(max_workers=workers,
+                                 mp_context=multiprocessing.get_context("spawn"))
+        return ex, ex.shutdown
+    if kind == "dask":
+        address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
+        check(bool(address), "--scheduler", "the dask executor needs --scheduler "
+                                            "tcp://HOST:PORT or DASK_SCHEDULER_ADDRESS")
+        try:
+            from distributed import Client
+        except ImportError:
+            raise ConfigError("--executor", "dask needs the cluster extra: "
+                                            "pip install 'flexarm-validation[cluster]'") from None
+        try:
+            client = Client(address, timeout="20s")
+        except OSError as exc:
+            raise ConfigError("--scheduler", f"cannot reach {address}: {exc}") from None
+        executor = client.get_executor(pure=False)
+
+        def close():
+            executor.shutdown()
+            client.close()
+        return executor, close
+    raise ConfigError("--executor", f"must be 'local' or 'dask', got {kind!r}")
+
+
+@dataclass
+class CampaignSummary:
+    planned: int = 0
+    skipped: int = 0
+    ok: int = 0
+    diverged: int = 0
+    failed: int = 0
+    interrupted: bool = False
+
+    @property
+    def done(self) -> int:
+        return self.ok + self.diverged + self.failed
+
+
+def run_campaign(campaign: Campaign, out: str | Path, *, executor: Executor | None = None,
+                 retry_failed: bool = False, progress: bool = True,
+                 only: list[PlannedRun] | None = None) -> CampaignSummary:
+    """Expand ``campaign`` and run what is not yet in ``out``; results are written by this
+    process as they arrive.  Completed (ok/diverged) runs are skipped; failed ones are
+    redone only with ``retry_failed``."""
+    planned = only if only is not None else expand(campaign)
+    store = ResultStore(out)
+    store.set_campaign({"name": campaign.name, "description": campaign.description,
+                        "report": campaign.report})
+    done = store.completed()
+    todo = [r for r in planned
+            if r.run_id not in done or (done[r.run_id] == "failed" and retry_failed)]
+    summary = CampaignSummary(planned=len(planned), skipped=len(planned) - len(todo))
+    if not todo:
+        return summary
+    own = executor is None
+    if own:
+        executor, close = make_executor("local", 1)
+    env = environment()
+    bar = _progress(len(todo), campaign.name, enabled=progress)
+    futures = {}
+    try:
+        for run in todo:
+            futures[executor.submit(execute_run, scenario_to_mapping(run.scenario))] = run
+        for future in as_completed(futures):
+            run = futures[future]
+            try:
+                result, metrics = future.result()
+            except Exception as exc:  # the worker itself died (e.g. killed): a failure
+                result = RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)),
+                                   status="failed", message=f"{type(exc).__name__}: {exc}",
+                                   config=scenario_to_mapping(run.scenario))
+                metrics = {"status": "failed", "end_time": 0.0}
+            store.add(run.run_id, result, metrics, env=env,
+                      extra={"campaign": campaign.name, "sweep": run.sweep,
+                             "axes": {k: _jsonable(v) for k, v in run.axes.items()}})
+            setattr(summary, result.status, getattr(summary, result.status) + 1)
+            bar.update(1)
+            bar.set_postfix(ok=summary.ok, diverged=summary.diverged, failed=summary.failed)
+    except KeyboardInterrupt:
+        summary.interrupted = True
+        for future in futures:
+            future.cancel()
+    finally:
+        bar.close()
+        if own:
+            close()
+    return summary
+
+
+def _jsonable(value):
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def _progress(total: int, name: str, *, enabled: bool):
+    from tqdm import tqdm
+    return tqdm(total=total, desc=name, unit="run", disable=not enabled, dynamic_ncols=True)
