@@ -63,6 +63,9 @@ class ExudynPlant:
     spectral_radius : float
         Generalised-α ρ∞ (1: no numerical damping; the default 0.9 damps only modes far
         above 1/step).
+    newton_tolerance : float
+        Absolute and relative Newton tolerance (default 1e-6; ANCF round-off makes much
+        smaller absolute tolerances unreachable: the solver then fails).
 
     Coordinates: θ1 is hub 1's angle; θ2 is hub 2's angle relative to the tangent of
     link 1 at its tip (what a motor-2 encoder reads).  q, q̇ are the mass-weighted
@@ -73,7 +76,8 @@ class ExudynPlant:
 
     def __init__(self, params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
                  step: float = 1e-3, modal_basis: tuple[LinkModes, LinkModes] | None = None,
-                 sensors: SensorConfig = SensorConfig(), spectral_radius: float = 0.9) -> None:
+                 sensors: SensorConfig = SensorConfig(), spectral_radius: float = 0.9,
+                 newton_tolerance: float = 1e-6) -> None:
         if not (np.isfinite(step) and step > 0.0):
             raise ValueError(f"step must be a positive number of seconds, got {step!r}")
         if not 0.0 <= spectral_radius <= 1.0:
@@ -85,7 +89,10 @@ class ExudynPlant:
         self.modal_basis = tuple(basis)
         self.system: ArmSystem = build_arm(self.params, mesh)
         self.fields = (LinkField(self.system, 0, basis[0]), LinkField(self.system, 1, basis[1]))
-        self.settings = simulation_settings(step=self.h, spectral_radius=spectral_radius)
+        if not (np.isfinite(newton_tolerance) and newton_tolerance > 0):
+            raise ValueError(f"newton_tolerance must be > 0, got {newton_tolerance!r}")
+        self.settings = simulation_settings(step=self.h, spectral_radius=spectral_radius,
+                                            newton_tolerance=newton_tolerance)
         self.solver = exu.MainSolverImplicitSecondOrder()
         self._index_state()
         n1 = basis[0].n

@@ -5,6 +5,7 @@ Errors in user input end with one line on stderr and exit status 2, never a trac
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 from importlib.metadata import version
@@ -16,6 +17,7 @@ from plant_exudyn import ELEMENTS, Mesh, natural_frequencies
 from reduced_model import ArmModel, ArmParameters, validate_modes_per_link
 
 from ._config import ConfigError
+from .baselines import DEFAULT_FILE, evaluate, load_baselines, updated_bound, write_baselines
 from .campaign import expand, load_campaign, make_executor, run_campaign
 from .claims import write_claims
 from .report import write_report
@@ -238,6 +240,70 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     return EXIT_FAILED if summary.failed else 0
 
 
+# --- flexarm baseline -----------------------------------------------------------------------
+def _baseline_rows(args) -> tuple:
+    baselines = load_baselines(args.file)
+    rows = evaluate(baselines, out=args.out or Path("results") / "baselines", tier=args.tier,
+                    only=args.only, campaign=args.campaign,
+                    results=getattr(args, "results", None))
+    if not rows:
+        raise ValueError("no check matches the selection (--tier/--only/--campaign)")
+    return baselines, rows
+
+
+def _print_checks(rows, extra=None) -> None:
+    print(f"  {'check':<40} {'metric':<28} {'bound':>12} {'value':>12}  status")
+    for i, row in enumerate(rows):
+        c = row["check"]
+        metric = c.metric[0] if len(c.metric) == 1 else f"max({', '.join(c.metric)})"
+        if len(metric) > 28:
+            metric = metric[:25] + "..."
+        status = "ok" if row["ok"] else "FAIL"
+        print(f"  {c.name:<40} {metric:<28} {c.op}{c.bound:>10.4g} {row['value']:>12.4g}  "
+              f"{status}{extra[i] if extra else ''}")
+
+
+def cmd_baseline_check(args: argparse.Namespace) -> int:
+    _, rows = _baseline_rows(args)
+    _print_checks(rows)
+    failed = [r for r in rows if not r["ok"]]
+    for r in failed:
+        c = r["check"]
+        print(f"FAIL {c.name}: {'/'.join(c.metric)} = {r['value']:.6g}, bound {c.op} {c.bound:.6g}"
+              f" (measured {c.measured} when set); result: {r['path'] or 'no simulation'}",
+              file=sys.stderr)
+    print(f"{len(rows) - len(failed)} of {len(rows)} checks hold")
+    return EXIT_FAILED if failed else 0
+
+
+def cmd_baseline_update(args: argparse.Namespace) -> int:
+    baselines, rows = _baseline_rows(args)
+    new = {r["check"].name: (r["value"], updated_bound(r["check"], r["value"], baselines))
+           for r in rows if math.isfinite(r["value"])}
+    loosened, notes = [], []
+    for r in rows:
+        c = r["check"]
+        if c.name not in new:
+            notes.append("  (not measurable: run did not complete)")
+            continue
+        value, bound = new[c.name]
+        looser = bound > c.bound if c.op == "<=" else bound < c.bound
+        if looser:
+            loosened.append(c.name)
+        notes.append(f"  -> {c.op}{bound:.4g}{'  LOOSER' if looser else ''}")
+    _print_checks(rows, notes)
+    if loosened and not args.allow_loosen:
+        print(f"refusing to loosen {len(loosened)} bound(s): {', '.join(loosened)} "
+              "(pass --allow-loosen if that is intended)", file=sys.stderr)
+        return EXIT_FAILED
+    checks = [dataclasses.replace(c, bound=float(f"{new[c.name][1]:.4g}"),
+                                  measured=float(f"{new[c.name][0]:.4g}"))
+              if c.name in new else c for c in baselines.checks]
+    write_baselines(baselines, checks)
+    print(f"updated {len(new)} bound(s) in {baselines.path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="flexarm", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version",
@@ -305,6 +371,26 @@ def build_parser() -> argparse.ArgumentParser:
     paper.add_argument("--no-report", action="store_true")
     paper.add_argument("--no-animation", action="store_true")
     paper.set_defaults(func=cmd_reproduce_paper)
+
+    base = sub.add_parser("baseline", help="error-bound regression checks (baselines.toml)")
+    bsub = base.add_subparsers(dest="action", required=True, parser_class=_Parser)
+    for action, helptext in (("check", "measure and compare with the bounds"),
+                             ("update", "re-measure and rewrite the bounds")):
+        b = bsub.add_parser(action, help=helptext)
+        b.add_argument("--file", default=str(DEFAULT_FILE), metavar="TOML")
+        b.add_argument("--tier", choices=("short", "full", "all"), default="short",
+                       help="short: <= 5 s scenarios (make test); full: the 20 s campaign runs")
+        b.add_argument("--only", metavar="GLOB", help="checks whose name matches")
+        b.add_argument("--campaign", metavar="NAME", help="checks on runs of this campaign")
+        b.add_argument("--out", metavar="DIR", help="where runs are stored "
+                                                    "(default results/baselines)")
+        if action == "check":
+            b.add_argument("--results", metavar="DIR",
+                           help="reuse completed runs of this results folder")
+            b.set_defaults(func=cmd_baseline_check)
+        else:
+            b.add_argument("--allow-loosen", action="store_true")
+            b.set_defaults(func=cmd_baseline_update)
     return parser
 
 

@@ -77,7 +77,8 @@ def build(scenario: Scenario) -> Setup:
     else:
         plant = ExudynPlant(s.true_params, s.plant.mesh, step=s.plant.step,
                             modal_basis=model.mode_shapes, sensors=sensor_config,
-                            spectral_radius=s.plant.spectral_radius)
+                            spectral_radius=s.plant.spectral_radius,
+                            newton_tolerance=s.plant.newton_tolerance)
     c = s.controller
     if c.kind == "pbc":
         g = c.pbc

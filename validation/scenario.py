@@ -54,17 +54,20 @@ def _nonnegative_all(values, name) -> None:
 @dataclass(frozen=True)
 class PlantSpec:
     """``kind``: "reduced" (the model as plant, RK4) or "exudyn" (the FE truth plant).
-    ``modes_per_link`` is the reduced plant's own model order; ``mesh`` and
-    ``spectral_radius`` apply to the Exudyn plant; ``step`` [s] is either's internal step."""
+    ``modes_per_link`` is the reduced plant's own model order; ``mesh``,
+    ``spectral_radius`` and ``newton_tolerance`` apply to the Exudyn plant; ``step`` [s] is
+    either's internal step."""
 
     kind: str = "reduced"
     modes_per_link: tuple[int, int] = (2, 2)
     step: float = 1e-3
     mesh: Mesh = Mesh()
     spectral_radius: float = 0.9
+    newton_tolerance: float = 1e-6
 
     def __post_init__(self):
         _one_of(self.kind, PLANTS, "kind")
+        _positive(self.newton_tolerance, "newton_tolerance")
         try:
             validate_modes_per_link(self.modes_per_link)
         except ValueError:

@@ -1,0 +1,85 @@
+"""Error-bound regression: one test per check of baselines.toml (the full tier is `slow`),
+and proof that the bounds bite."""
+import dataclasses
+import subprocess
+import sys
+
+import pytest
+
+from validation.baselines import DEFAULT_FILE, _Runner, load_baselines, measure, write_baselines
+
+BASELINES = load_baselines(DEFAULT_FILE)
+
+
+@pytest.fixture(scope="session")
+def runner(tmp_path_factory):
+    """One run per distinct scenario for the whole session, stored for the messages."""
+    return _Runner(BASELINES, tmp_path_factory.mktemp("baselines"), None)
+
+
+def _param(check):
+    marks = [pytest.mark.slow] if check.tier == "full" else []
+    return pytest.param(check, id=check.name, marks=marks)
+
+
+@pytest.mark.parametrize("check", [_param(c) for c in BASELINES.checks])
+def test_error_bound(check, runner):
+    value, path = measure(check, runner)
+    assert check.passes(value), (
+        f"check {check.name}: {' / '.join(check.metric)} = {value:.6g} violates bound "
+        f"{check.op} {check.bound:.6g} (measured {check.measured} when the bound was set); "
+        f"result: {path or 'no simulation (frequency check)'}")
+
+
+def test_every_required_family_is_covered():
+    names = " ".join(c.name for c in BASELINES.checks)
+    for plant in ("reduced", "exudyn"):
+        for family in ("pbc-tracking", "pbc-deflection", "robust-tracking",
+                       *(f"{o}-angle-estimate" for o in ("smo-paper", "smo-bl", "smo-pos")),
+                       *(f"{o}-modal-rate-estimate" for o in ("smo-paper", "smo-bl", "smo-pos"))):
+            assert f"{family}-{plant}" in names
+    assert sum(c.kind == "frequency" for c in BASELINES.checks) >= 5
+
+
+def test_tightened_bounds_fail(runner, tmp_path):
+    """A bound tightened below the measured value must make the check fail, in pytest's
+    check and in `flexarm baseline check` (exit 1, message naming check and path)."""
+    check = next(c for c in BASELINES.checks if c.name == "pbc-tracking-reduced")
+    value, _ = measure(check, runner)
+    assert check.passes(value)
+    tight = dataclasses.replace(check, bound=0.5 * value)
+    assert not tight.passes(value)
+    ge = dataclasses.replace(check, op=">=", bound=2.0 * value)
+    assert not ge.passes(value)
+
+    file = tmp_path / "baselines.toml"
+    file.write_text(DEFAULT_FILE.read_text())
+    local = load_baselines(file)
+    write_baselines(local, [dataclasses.replace(c, bound=0.5 * value) if c.name == check.name
+                            else c for c in local.checks])
+    proc = subprocess.run([sys.executable, "-m", "validation.cli", "baseline", "check",
+                           "--file", str(file), "--only", check.name, "--out",
+                           str(tmp_path / "runs")], capture_output=True, text=True)
+    assert proc.returncode == 1
+    assert f"FAIL {check.name}" in proc.stderr and str(tmp_path / "runs") in proc.stderr
+    assert "0 of 1 checks hold" in proc.stdout
+
+
+def test_update_refuses_to_loosen(tmp_path):
+    file = tmp_path / "baselines.toml"
+    file.write_text(DEFAULT_FILE.read_text())
+    local = load_baselines(file)
+    name = "frequency-gap-locked-mode1-theta2-0.00"
+    write_baselines(local, [dataclasses.replace(c, bound=1e-9) if c.name == name else c
+                            for c in local.checks])
+    cmd = [sys.executable, "-m", "validation.cli", "baseline", "update", "--file", str(file),
+           "--only", name, "--out", str(tmp_path / "runs")]
+    refused = subprocess.run(cmd, capture_output=True, text=True)
+    assert refused.returncode == 1 and "refusing to loosen" in refused.stderr
+    assert load_baselines(file).checks[[c.name for c in local.checks].index(name)].bound == 1e-9
+    allowed = subprocess.run(cmd + ["--allow-loosen"], capture_output=True, text=True)
+    assert allowed.returncode == 0, allowed.stderr
+    updated = {c.name: c for c in load_baselines(file).checks}
+    assert updated[name].bound > 1e-9 and updated[name].measured is not None
+    # The other checks are untouched.
+    assert updated["pbc-tracking-reduced"] == {c.name: c for c in local.checks}["pbc-tracking-reduced"]

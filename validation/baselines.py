@@ -1,0 +1,266 @@
+"""Error-bound regression: named checks of metrics against bounds kept in the repository.
+
+``baselines.toml`` (repository root) holds a margin policy, short named scenarios, and
+checks::
+
+    [policy]
+    relative = 0.25            # new bound = measured·(1 + relative) + absolute  (for "<=")
+    absolute = 1e-4            #            measured·(1 − relative) − absolute  (for ">=")
+
+    [scenarios.pbc-exudyn]     # any scenario keys; ≤ 5 s keeps `make test` short
+    duration = 5.0
+    plant.kind = "exudyn"
+
+    [[check]]
+    name = "pbc-tracking-exudyn"
+    scenario = "pbc-exudyn"            # or: campaign = "paper", run = "pbc", plant = "exudyn"
+    metric = ["track_max_1", "track_max_2"]   # one key, or several: their maximum
+    op = "<="
+    bound = 0.02
+    measured = 0.0158                  # when the bound was set
+
+A "frequency" check needs no simulation: ``kind = "frequency"`` compares the reduced
+model's and the FE model's natural frequencies (``joints``, ``theta2``, ``mode``) and its
+metric is the relative gap |f_reduced − f_FE| / f_FE.  Checks that name a shipped
+campaign's run are the "full" tier (20 s, `make test-all`); the rest are "short".
+"""
+from __future__ import annotations
+
+import fnmatch
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ._config import ConfigError, check
+from .campaign import execute_run, expand, load_campaign
+from .results import write_atomic
+from .scenario import scenario_from_mapping, scenario_to_mapping
+from .store import ResultStore, run_id
+from .tomlfiles import load_toml
+
+__all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",
+           "write_baselines", "DEFAULT_FILE"]
+
+DEFAULT_FILE = Path(__file__).resolve().parent.parent / "baselines.toml"
+_CHECK_KEYS = {"name", "kind", "scenario", "campaign", "run", "plant", "metric", "op", "bound",
+               "measured", "joints", "theta2", "mode", "margin", "note"}
+
+
+@dataclass(frozen=True)
+class Check:
+    name: str
+    metric: tuple[str, ...]
+    op: str
+    bound: float
+    measured: float | None = None
+    kind: str = "run"  # "run" | "frequency"
+    scenario: str | None = None
+    campaign: str | None = None
+    run: str | None = None
+    plant: str | None = None
+    joints: str = "locked"
+    theta2: float = 0.0
+    mode: int = 1
+    margin: float | None = None  # overrides the policy's relative margin
+    note: str = ""
+
+    @property
+    def tier(self) -> str:
+        return "full" if self.campaign else "short"
+
+    def passes(self, value: float) -> bool:
+        if not math.isfinite(value):
+            return False
+        return value <= self.bound if self.op == "<=" else value >= self.bound
+
+
+@dataclass
+class Baselines:
+    path: Path
+    relative: float
+    absolute: float
+    scenarios: dict
+    checks: list[Check]
+    header: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+def load_baselines(path: str | Path = DEFAULT_FILE) -> Baselines:
+    path = Path(path)
+    data = load_toml(path)
+    for key in data:
+        check(key in {"policy", "scenarios", "check"}, key,
+              "unknown key (allowed: check, policy, scenarios)")
+    policy = data.get("policy", {})
+    rel, absolute = policy.get("relative", 0.25), policy.get("absolute", 0.0)
+    check(isinstance(rel, (int, float)) and rel >= 0, "policy.relative", "must be >= 0")
+    check(isinstance(absolute, (int, float)) and absolute >= 0, "policy.absolute", "must be >= 0")
+    scenarios = data.get("scenarios", {})
+    for name, spec in scenarios.items():
+        try:
+            scenario_from_mapping(spec)
+        except ConfigError as exc:
+            raise exc.under(f"scenarios.{name}") from None
+    checks, names = [], set()
+    for i, raw in enumerate(data.get("check", [])):
+        where = f"check[{i}]"
+        for key in raw:
+            check(key in _CHECK_KEYS, f"{where}.{key}",
+                  f"unknown key (allowed: {', '.join(sorted(_CHECK_KEYS))})")
+        metric = raw.get("metric", "gap")
+        metric = (metric,) if isinstance(metric, str) else tuple(metric)
+        c = Check(**{**raw, "metric": metric, "bound": float(raw.get("bound", math.nan))})
+        check(c.name not in names, f"{where}.name", f"duplicate check name {c.name!r}")
+        names.add(c.name)
+        check(c.op in ("<=", ">="), f"{where}.op", f"must be '<=' or '>=', got {c.op!r}")
+        check(math.isfinite(c.bound), f"{where}.bound", "must be a finite number")
+        check(c.kind in ("run", "frequency"), f"{where}.kind", "must be 'run' or 'frequency'")
+        if c.kind == "run":
+            check(bool(c.scenario) != bool(c.campaign), where,
+                  "needs either scenario = NAME or campaign + run + plant")
+            if c.scenario:
+                check(c.scenario in scenarios, f"{where}.scenario",
+                      f"no scenario {c.scenario!r} in [scenarios]")
+            else:
+                check(bool(c.run) and c.plant in ("reduced", "exudyn"), where,
+                      "a campaign check needs run = NAME and plant = 'reduced' | 'exudyn'")
+        checks.append(c)
+    header = "".join(line + "\n" for line in path.read_text().splitlines()
+                     if line.startswith("#")) if path.exists() else ""
+    return Baselines(path, float(rel), float(absolute), scenarios, checks, header)
+
+
+# --- measuring ---------------------------------------------------------------------------------
+class _Runner:
+    """Runs each distinct scenario once and stores it (the failure message names the file)."""
+
+    def __init__(self, baselines: Baselines, out: str | Path, results: str | Path | None) -> None:
+        self.b, self.store = baselines, ResultStore(out)
+        self.reuse = ResultStore(results) if results else None
+        self.cache: dict[str, tuple[dict, Path | None]] = {}
+
+    def scenario_data(self, c: Check) -> dict:
+        if c.scenario:
+            return scenario_to_mapping(scenario_from_mapping(self.b.scenarios[c.scenario]))
+        campaign = load_campaign(self.b.path.parent / "campaigns" / f"{c.campaign}.toml")
+        wanted = f"{campaign.name}/{c.run}"
+        for planned in expand(campaign):
+            if planned.scenario.name == wanted and planned.scenario.plant.kind == c.plant:
+                return scenario_to_mapping(planned.scenario)
+        raise ConfigError(f"check {c.name}", f"campaign {c.campaign!r} has no run {wanted!r} "
+                                             f"on the {c.plant} plant")
+
+    def metrics(self, c: Check) -> tuple[dict, Path | None]:
+        data = self.scenario_data(c)
+        rid = run_id(data)
+        if rid not in self.cache:
+            if self.reuse and rid in self.reuse.completed():
+                row = next(r for r in self.reuse.metrics() if r["run_id"] == rid)
+                self.cache[rid] = (row, self.reuse.runs / f"{rid}.npz")
+            else:
+                result, metrics = execute_run(data)
+                path = self.store.add(rid, result, metrics)
+                self.cache[rid] = (metrics, path)
+        return self.cache[rid]
+
+
+def _frequency_gap(c: Check, params) -> float:
+    from plant_exudyn import Mesh, natural_frequencies
+    from reduced_model import ArmModel
+    model = ArmModel(params)
+    Q = np.zeros(model.n)
+    Q[1] = c.theta2
+    reduced = model.natural_frequencies(Q, c.joints)[c.mode - 1]
+    fe = natural_frequencies(params, Mesh(), theta=(0.0, c.theta2), joints=c.joints,
+                             n=c.mode)[c.mode - 1]
+    return abs(reduced - fe) / fe
+
+
+def measure(c: Check, runner: _Runner) -> tuple[float, Path | None]:
+    """The check's current value and the stored result it came from (if any)."""
+    if c.kind == "frequency":
+        from reduced_model import ArmParameters
+        return _frequency_gap(c, ArmParameters()), None
+    metrics, path = runner.metrics(c)
+    if metrics.get("status") != "ok":
+        return math.nan, path
+    values = [metrics.get(k) for k in c.metric]
+    missing = [k for k, v in zip(c.metric, values) if v is None]
+    if missing:
+        raise ConfigError(f"check {c.name}", f"the run has no metric {missing}")
+    return float(max(values)), path
+
+
+def evaluate(baselines: Baselines, *, out: str | Path, tier: str = "short",
+             only: str | None = None, campaign: str | None = None,
+             results: str | Path | None = None) -> list[dict]:
+    """Measure the selected checks: rows of name, metric, op, bound, value, ok, path."""
+    runner = _Runner(baselines, out, results)
+    rows = []
+    for c in baselines.checks:
+        if tier != "all" and c.tier != tier and not (tier == "full" and c.kind == "frequency"):
+            continue
+        if only and not fnmatch.fnmatch(c.name, only):
+            continue
+        if campaign and c.campaign != campaign:
+            continue
+        value, path = measure(c, runner)
+        rows.append({"check": c, "value": value, "ok": c.passes(value), "path": path})
+    return rows
+
+
+def updated_bound(c: Check, value: float, baselines: Baselines) -> float:
+    """The margin policy: headroom relative to the measured value plus an absolute floor."""
+    rel = baselines.relative if c.margin is None else c.margin
+    if c.op == "<=":
+        return value * (1 + rel) + baselines.absolute
+    return value * (1 - rel) - baselines.absolute
+
+
+# --- writing --------------------------------------------------------------------------------
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(float(v)) if isinstance(v, float) else str(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def _flat(table: dict, prefix: str = "") -> list[tuple[str, object]]:
+    out = []
+    for k, v in table.items():
+        key = f"{prefix}.{k}" if prefix else k
+        out += _flat(v, key) if isinstance(v, dict) else [(key, v)]
+    return out
+
+
+def write_baselines(b: Baselines, checks: list[Check]) -> None:
+    """Rewrite the baselines file (atomically) with ``checks``."""
+    lines = [b.header.rstrip("\n"), "", "[policy]", f"relative = {b.relative!r}",
+             f"absolute = {b.absolute!r}", ""]
+    for name, spec in b.scenarios.items():
+        lines.append(f"[scenarios.{name}]")
+        lines += [f"{k} = {_toml_value(v)}" for k, v in _flat(spec)]
+        lines.append("")
+    for c in checks:
+        lines.append("[[check]]")
+        for key in ("name", "kind", "scenario", "campaign", "run", "plant", "metric", "op",
+                    "bound", "measured", "joints", "theta2", "mode", "margin", "note"):
+            value = getattr(c, key)
+            default = Check.__dataclass_fields__[key].default
+            if value is None or (key not in ("name", "metric", "op", "bound") and value == default):
+                continue
+            if key == "metric":
+                value = value[0] if len(value) == 1 else list(value)
+            lines.append(f"{key} = {_toml_value(value)}")
+        lines.append("")
+    text = "\n".join(lines).lstrip("\n")
+    write_atomic(b.path, lambda fh: fh.write(text))
