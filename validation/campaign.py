@@ -321,6 +321,7 @@ def run_campaign(campaign: Campaign, out: str | Path, *, executor: Executor | No
     store = ResultStore(out)
     store.set_campaign({"name": campaign.name, "description": campaign.description,
                         "report": campaign.report})
+    store.remove_stale_temporaries()
     done = store.completed()
     todo = [r for r in planned
             if r.run_id not in done or (done[r.run_id] == "failed" and retry_failed)]

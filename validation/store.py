@@ -5,7 +5,9 @@
     OUT/manifest.json       per run: scenario name, status, message, timings, versions
 
 Every file is replaced atomically (temporary file + rename), so an interrupted process
-leaves either the previous or the new version, never a truncated one.  The run id is a
+leaves either the previous or the new version, never a truncated one; a killed process
+may leave a hidden ``.<name>.*.tmp`` file, which the next campaign in the folder removes
+(one campaign writes a folder at a time).  The run id is a
 hash of the resolved scenario: the same scenario always maps to the same files.
 """
 from __future__ import annotations
@@ -86,6 +88,13 @@ class ResultStore:
     def prepare(self) -> None:
         """Create the folder (raises OSError with the reason if it cannot)."""
         self.runs.mkdir(parents=True, exist_ok=True)
+
+    def remove_stale_temporaries(self) -> int:
+        """Delete temporary files a killed writer left behind; returns how many."""
+        stale = [*self.out.glob(".*.tmp"), *self.runs.glob(".*.tmp")]
+        for path in stale:
+            path.unlink(missing_ok=True)
+        return len(stale)
 
     def add(self, rid: str, result: RunResult, metrics: dict, *, extra: dict | None = None,
             env: dict | None = None) -> Path:

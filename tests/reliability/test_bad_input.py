@@ -1,0 +1,121 @@
+"""Bad input: one line naming the offending key, exit status 2, no traceback, no files.
+
+Each case runs the CLI in-process (``main(argv)``); a few also run as a real subprocess
+to check the exit status and the absence of a traceback end to end."""
+import subprocess
+import sys
+
+import pytest
+
+from validation.cli import main
+
+BROKEN_TOML = "duration = = 5\n"
+CAMPAIGN_EMPTY_AXIS = 'name = "x"\n[[sweep]]\ngrid.seed = []\n'
+CAMPAIGN_ZIP = 'name = "x"\n[[sweep]]\nzip.seed = [1, 2]\nzip.name = ["a"]\n'
+CAMPAIGN_UNKNOWN = 'name = "x"\nsweeps = 3\n'
+CAMPAIGN_BAD_SCENARIO = 'name = "x"\n[scenario]\nplant.kind = "fem"\n'
+CAMPAIGN_BAD_RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 0\nrandom.seed = 1\n' \
+                      'random.true_params.Mp = {uniform = [0.0, 1.0]}\n'
+
+# (argv, text the single error line must contain); {tmp} is a scratch folder, {out} the
+# output folder that must not be created.
+CASES = [
+    (["run", "--set", "foo=1"], "foo: unknown key"),
+    (["run", "--set", "plant.foo=1"], "plant.foo: unknown key"),
+    (["run", "--set", 'duration="long"'], "duration: expected a number"),
+    (["run", "--set", "true_params.EI1=nan"], "true_params.EI1"),
+    (["run", "--set", "true_params.L2=inf"], "true_params.L2: must be finite"),
+    (["run", "--set", "true_params.rho1=-1.0"], "true_params.rho1: must be > 0"),
+    (["run", "--set", "true_params.L1=0.0"], "true_params.L1: must be > 0"),
+    (["run", "--set", "true_params.Mp=true"], "true_params.Mp"),
+    (["run", "--set", "nominal_params.Jh1=-0.5"], "nominal_params.Jh1: must be >= 0"),
+    (["run", "--plant", "fem"], "--plant: invalid choice"),
+    (["run", "--set", 'plant.kind="fem"'], "plant.kind: must be one of"),
+    (["run", "--set", 'controller.kind="lqr"'], "controller.kind: must be one of"),
+    (["run", "--set", 'observer.kind="ekf"'], "observer.kind: must be one of"),
+    (["run", "--Ts", "0"], "Ts: must be > 0"),
+    (["run", "--Ts", "-0.001"], "Ts: must be > 0"),
+    (["run", "--Ts", "0.0015"], "Ts: 0.0015 s is not a whole multiple"),
+    (["run", "--duration", "0"], "duration: must be > 0"),
+    (["run", "--duration", "-5"], "duration: must be > 0"),
+    (["run", "--set", "model.modes_per_link=[5, 2]"], "model.modes_per_link"),
+    (["run", "--set", "plant.modes_per_link=[0, 2]"], "plant.modes_per_link"),
+    (["run", "--set", "model.modes_per_link=[2]"], "model.modes_per_link: expected 2 values"),
+    (["run", "--set", "controller.pbc.kv_joint=[10.0, -5.0]"], "controller.pbc.kv_joint"),
+    (["run", "--plant", "exudyn", "--idealised"], "controller.pbc.idealised"),
+    (["run", "--observer", "smo-pos", "--set", 'sensors.modal="none"'], "observer.kind"),
+    (["run", "--observer", "smo-paper", "--set", "sensors.rates=false"], "observer.kind"),
+    (["run", "--set", "sensors.delay=-1"], "sensors.delay"),
+    (["run", "--set", 'disturbances=[{kind = "gust"}]'], "disturbances[0].kind"),
+    (["run", "--set", "seed=-3"], "seed: must be >= 0"),
+    (["run", "--set", "plant.mesh.elements_per_link=[0, 4]"], "plant.mesh.elements_per_link"),
+    (["run", "--set", "=3"], "--set: expected KEY=VALUE"),
+    (["run", "--config", "{tmp}/missing.toml"], "cannot read"),
+    (["run", "--config", "{tmp}/broken.toml"], "invalid TOML"),
+    (["run", "--config", "{tmp}"], "cannot read"),
+    (["run", "--duration", "0.1", "--out", "{tmp}/a-file/sub"], "--out"),
+    (["campaign", "{tmp}/empty-axis.toml"], "sweep[0].grid.seed: must not be empty"),
+    (["campaign", "{tmp}/zip.toml"], "sweep[0].zip: zip axes need equal lengths"),
+    (["campaign", "{tmp}/unknown.toml"], "sweeps: unknown key"),
+    (["campaign", "{tmp}/bad-scenario.toml"], "scenario.plant.kind"),
+    (["campaign", "{tmp}/bad-random.toml"], "sweep[0].random.samples"),
+    (["campaign", "{tmp}/missing.toml"], "cannot read"),
+    (["campaign", "{tmp}/empty-axis.toml", "--workers", "0"], "--workers: must be in 1..1024"),
+    (["report", "{tmp}"], "not a results folder"),
+    (["baseline", "check", "--only", "no-such-check"], "no check matches"),
+    (["modes", "--params", "{tmp}/broken.toml"], "invalid TOML"),
+]
+
+
+@pytest.fixture
+def scratch(tmp_path):
+    files = {"broken.toml": BROKEN_TOML, "empty-axis.toml": CAMPAIGN_EMPTY_AXIS,
+             "zip.toml": CAMPAIGN_ZIP, "unknown.toml": CAMPAIGN_UNKNOWN,
+             "bad-scenario.toml": CAMPAIGN_BAD_SCENARIO, "bad-random.toml": CAMPAIGN_BAD_RANDOM,
+             "a-file": "not a folder"}
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    return tmp_path
+
+
+def run_main(argv, capsys):
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse reports usage errors by exiting
+        code = exc.code
+    return code, capsys.readouterr()
+
+
+@pytest.mark.parametrize("argv, text", CASES, ids=[f"{i:02d}-{c[0][0]}" for i, c in
+                                                   enumerate(CASES)])
+def test_bad_input(argv, text, scratch, capsys, monkeypatch):
+    monkeypatch.chdir(scratch)
+    out = scratch / "out"
+    argv = [a.replace("{tmp}", str(scratch)) for a in argv]
+    if argv[0] in ("run", "campaign") and "--out" not in argv:
+        argv += ["--out", str(out)]
+    before = sorted(p.name for p in scratch.iterdir())
+    code, captured = run_main(argv, capsys)
+    lines = captured.err.strip().splitlines()
+    assert code == 2, captured
+    assert len(lines) == 1 and lines[0].startswith("flexarm: error:"), captured.err
+    assert text in lines[0], lines[0]
+    assert "Traceback" not in captured.err + captured.out
+    assert not out.exists(), "an output folder was created for bad input"
+    assert sorted(p.name for p in scratch.iterdir()) == before  # nothing else either
+
+
+def test_enough_cases():
+    assert len(CASES) >= 25
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["run", "--set", "true_params.EI1=-1.0"], "true_params.EI1"),
+    (["campaign", "/nonexistent/c.toml"], "cannot read"),
+])
+def test_bad_input_as_a_real_process(argv, text, tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "validation.cli", *argv, "--out",
+                           str(tmp_path / "out")], capture_output=True, text=True, cwd=tmp_path)
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1 and text in proc.stderr
+    assert "Traceback" not in proc.stderr and not (tmp_path / "out").exists()

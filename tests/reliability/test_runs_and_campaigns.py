@@ -1,0 +1,139 @@
+"""Reliability of runs and campaigns: divergence as a result, crash safety under SIGKILL,
+determinism, and solver failures."""
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from validation.campaign import SerialExecutor, campaign_from_mapping, run_campaign
+from validation.loop import run_scenario
+from validation.results import RunResult
+from validation.scenario import scenario_from_mapping
+from validation.store import ResultStore
+
+UNSTABLE = {"controller": {"kind": "pd", "pd": {"kd": [8.0, 500.0]}}}
+
+
+@pytest.mark.parametrize("plant", ["reduced", "exudyn"])
+def test_divergence_is_recorded_when_the_bounds_are_left(plant):
+    """Unstable gains end the run as "diverged" at the first sample beyond the bounds."""
+    s = scenario_from_mapping({"plant": {"kind": plant}, "duration": 1.0, **UNSTABLE})
+    result = run_scenario(s)
+    assert result.status == "diverged" and "exceeds" in result.message
+    # The same run with bounds too wide to trigger shows when the default ones are left.
+    wide = scenario_from_mapping({"plant": {"kind": plant}, "duration": result.end_time + 0.05,
+                                  "divergence": {"max_angle": 1e9, "max_rate": 1e9,
+                                                 "max_deflection": 1e9}, **UNSTABLE})
+    free = run_scenario(wide)
+    b = s.divergence
+    defl = np.abs(free.select(["tip_defl1", "tip_defl2"])) / np.array([[0.5], [0.5]])
+    beyond = ((np.abs(free.select(["theta1", "theta2"])) > b.max_angle).any(0)
+              | (np.abs(free.select(["theta1_dot", "theta2_dot"])) > b.max_rate).any(0)
+              | (defl > b.max_deflection).any(0) | ~np.isfinite(free.signals).all(0))
+    first = free.time[np.flatnonzero(beyond)[0]] if beyond.any() else free.end_time
+    # Stopped exactly at the sample where the state left its bounds (within one sample).
+    assert abs(result.end_time - first) <= s.Ts + 1e-12
+    assert np.isfinite(result.signals).all()  # nothing after the divergence is recorded
+
+
+def test_a_diverging_run_does_not_stop_the_campaign(tmp_path):
+    spec = {"name": "mixed", "scenario": {"duration": 1.0},
+            "sweep": [{"zip": {"name": ["stable", "unstable", "stable-2"],
+                               "controller.kind": ["pbc", "pd", "pd"],
+                               "controller.pd.kd": [[8.0, 4.0], [8.0, 500.0], [8.0, 4.0]]}}]}
+    summary = run_campaign(campaign_from_mapping(spec), tmp_path, progress=False)
+    assert (summary.ok, summary.diverged, summary.failed) == (2, 1, 0)
+    store = ResultStore(tmp_path)
+    assert len(store.metrics()) == 3
+    for rid, status in store.completed().items():
+        result = store.load(rid)
+        assert result.status == status and result.signals.shape[1] == len(result.time)
+
+
+def _spec(n_runs: int) -> dict:
+    return {"name": "crash", "scenario": {"duration": 2.0, "sensors": {"encoder_noise": 1e-4}},
+            "sweep": [{"grid": {"seed": list(range(n_runs))}}]}
+
+
+def _toml(spec: dict) -> str:
+    return (f'name = "{spec["name"]}"\n[scenario]\nduration = {spec["scenario"]["duration"]}\n'
+            f'sensors.encoder_noise = 1e-4\n[[sweep]]\ngrid.seed = {spec["sweep"][0]["grid"]["seed"]}\n')
+
+
+def _table(out) -> dict:
+    rows = ResultStore(out).metrics()
+    assert len({r["run_id"] for r in rows}) == len(rows), "duplicate rows"
+    return {r["run_id"]: {k: ("nan" if isinstance(v, float) and np.isnan(v) else v)
+                          for k, v in r.items() if k not in ("wall_s", "realtime_factor")}
+            for r in rows}
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_sigkill_at_random_moments_then_resume(seed, tmp_path):
+    spec = _spec(16)
+    cfg = tmp_path / "crash.toml"
+    cfg.write_text(_toml(spec))
+    reference = tmp_path / "reference"
+    run_campaign(campaign_from_mapping(spec), reference, executor=SerialExecutor(),
+                 progress=False)
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "validation.cli", "campaign", str(cfg), "--out", str(out),
+           "--workers", "1", "--no-progress"]
+    rng = random.Random(seed)
+    for _ in range(3):  # kill it three times, at a random moment after it has started
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        start = time.time()
+        while time.time() - start < 60 and not (out / "manifest.json").exists():
+            time.sleep(0.01)
+        time.sleep(rng.uniform(0.0, 0.8))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        manifest = json.loads((out / "manifest.json").read_text())  # always valid JSON
+        # Written in the order .npz, metrics row, manifest entry: whatever the moment of
+        # the kill, every manifest entry has its row and a complete file.
+        assert set(manifest["runs"]) <= set(_table(out))
+        for rid in manifest["runs"]:
+            RunResult.load(out / "runs" / f"{rid}.npz")  # never a truncated .npz
+    final = subprocess.run(cmd, capture_output=True, text=True)
+    assert final.returncode == 0, final.stderr
+    assert _table(out) == _table(reference)  # same numbers, no duplicate or missing rows
+    assert not list(out.rglob(".*.tmp"))
+
+
+def test_two_invocations_are_bit_identical(tmp_path):
+    spec = _spec(3)
+    cfg = tmp_path / "det.toml"
+    cfg.write_text(_toml(spec))
+    for name in ("a", "b"):
+        subprocess.run([sys.executable, "-m", "validation.cli", "campaign", str(cfg), "--out",
+                        str(tmp_path / name), "--workers", "1", "--no-progress"], check=True,
+                       capture_output=True)
+    assert _table(tmp_path / "a") == _table(tmp_path / "b")
+    for rid in _table(tmp_path / "a"):
+        a, b = (RunResult.load(tmp_path / n / "runs" / f"{rid}.npz") for n in ("a", "b"))
+        np.testing.assert_array_equal(a.signals, b.signals)
+
+
+def test_exudyn_solver_failure_is_recorded_and_nothing_stray_is_written(tmp_path):
+    # A Newton tolerance below ANCF round-off cannot be met: Exudyn gives up.
+    cfg = tmp_path / "health.toml"
+    cfg.write_text('name = "health"\n[scenario]\nduration = 0.5\nplant.kind = "exudyn"\n'
+                   '[[sweep]]\nzip.name = ["fails", "runs"]\n'
+                   'zip.plant.newton_tolerance = [1e-16, 1e-6]\n')
+    work = tmp_path / "cwd"
+    work.mkdir()
+    proc = subprocess.run([sys.executable, "-m", "validation.cli", "campaign", str(cfg),
+                           "--out", str(tmp_path / "out"), "--workers", "1", "--no-progress"],
+                          capture_output=True, text=True, cwd=work)
+    assert proc.returncode == 1  # a run failed to execute
+    assert "1 ok, 0 diverged, 1 failed" in proc.stdout
+    entries = json.loads((tmp_path / "out" / "manifest.json").read_text())["runs"].values()
+    failed = [e for e in entries if e["status"] == "failed"]
+    assert len(failed) == 1 and "Exudyn solver failed" in failed[0]["message"]
+    assert os.listdir(work) == []  # no solution/ or other Exudyn files in the working dir
