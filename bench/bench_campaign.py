@@ -15,7 +15,6 @@ from pathlib import Path
 
 from _report import report
 from validation.campaign import campaign_from_mapping, make_executor, run_campaign
-from validation.store import ResultStore
 
 SWEEPS = {
     "reduced, 24 runs x 5 s": {

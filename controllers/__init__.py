@@ -7,8 +7,8 @@ A controller is called as ``tau = controller(t, x_hat, ref)``; an observer has
 """
 from ._baselines import JointPD, RigidComputedTorque
 from ._pbc import PassivityBasedController
-from ._reference import REFERENCES, PaperReference, QuinticMove
+from ._reference import PaperReference, QuinticMove
 from ._smo import OBSERVER_VARIANTS, SlidingModeObserver
 
 __all__ = ["PassivityBasedController", "SlidingModeObserver", "OBSERVER_VARIANTS", "JointPD",
-           "RigidComputedTorque", "PaperReference", "QuinticMove", "REFERENCES"]
+           "RigidComputedTorque", "PaperReference", "QuinticMove"]

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PaperReference", "QuinticMove", "REFERENCES"]
+__all__ = ["PaperReference", "QuinticMove"]
 
 
 @dataclass(frozen=True)
@@ -52,5 +52,3 @@ class QuinticMove:
         d = np.asarray(self.goal, float) - np.asarray(self.start, float)
         return np.asarray(self.start, float) + s * d, ds * d, dds * d
 
-
-REFERENCES = {"paper": PaperReference, "quintic": QuinticMove}

@@ -95,10 +95,6 @@ class ArmSystem:
     rigid_nodes: list[int]  # every NodeRigidBody2D, for initial conditions
 
 
-def _rot(a: float) -> np.ndarray:
-    return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
-
-
 def _rot3(a: float) -> list[list[float]]:
     c, s = np.cos(a), np.sin(a)
     return [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]

@@ -143,9 +143,6 @@ class ArmParameters:
             raise ValueError(f"unknown ArmParameters field(s): {', '.join(sorted(unknown))}")
         return dataclasses.replace(self, **changes)
 
-    def as_dict(self) -> dict[str, float]:
-        return dataclasses.asdict(self)
-
     @classmethod
     def from_mapping(cls, values: dict, *, where: str = "params") -> "ArmParameters":
         """Build from a mapping; unknown keys are rejected with their full path."""

@@ -278,3 +278,15 @@ def test_readme_campaign_example_is_valid(tmp_path):
     assert len(runs) == 2 * 4 * 3 * 2 + 8
     assert {r.scenario.plant.kind for r in runs} == {"reduced", "exudyn"}
     assert runs[0].scenario.disturbances[0].kind == "pulse"
+
+
+def test_metrics_table_keeps_identifiers_as_text(tmp_path):
+    from validation.results import RunResult
+    store = ResultStore(tmp_path)
+    empty = RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)), status="ok",
+                      config={"name": "1e5"})
+    for rid in ("1234567e8901", "000000000042", "abcdefabcdef"):
+        store.add(rid, empty, {"status": "ok", "track_max_1": 0.5})
+    rows = store.metrics()
+    assert sorted(r["run_id"] for r in rows) == ["000000000042", "1234567e8901", "abcdefabcdef"]
+    assert all(r["name"] == "1e5" and r["track_max_1"] == 0.5 for r in rows)

@@ -83,7 +83,7 @@ def point_mass_mass_matrix(model, Q):
     """Independent M: links as Gauss-point masses, explicit forward kinematics in real
     2D vectors, Jacobians by complex-step differentiation (exact to round-off)."""
     p, (m1, m2) = model.params, model.mode_shapes
-    n, (n1, n2) = model.n, model.modes_per_link
+    n, n1 = model.n, model.modes_per_link[0]
     x1, w1 = gauss_legendre(0.0, p.L1, 40)
     x2, w2 = gauss_legendre(0.0, p.L2, 40)
     phi1 = m1.phi(np.append(x1, p.L1))

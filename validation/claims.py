@@ -86,7 +86,7 @@ def evaluate_claims(results_dir) -> list[dict]:
     metrics = {row["run_id"]: row for row in store.metrics()}
     rows = []
     for claim in CLAIMS:
-        row = {"claim": claim.text, "criterion": claim.criterion}
+        row = {"claim": claim.text, "criterion": claim.criterion, "unit": claim.unit}
         for plant, label in (("reduced", "reduced"), ("exudyn", "truth")):
             rid = next((rid for rid, e in manifest.items()
                         if e.get("name", "").split("/")[-1] == claim.run
@@ -112,7 +112,7 @@ def write_claims(results_dir) -> str:
     lines = ["| claim (paper, Section 5) | criterion | reduced plant | truth plant (Exudyn) |",
              "|---|---|---|---|"]
     for r in rows:
-        cells = [f"{r[p]:.3g} — {r[p + '_verdict']}" if isinstance(r[p], float)
+        cells = [f"{r[p]:.3g} {r['unit']} — {r[p + '_verdict']}" if isinstance(r[p], float)
                  and not math.isnan(r[p]) else r[p + "_verdict"] for p in ("reduced", "truth")]
         lines.append(f"| {r['claim']} | {r['criterion']} | {cells[0]} | {cells[1]} |")
     table = "\n".join(lines)

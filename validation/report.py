@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 from plant_exudyn import Mesh, natural_frequencies  # noqa: E402
 from reduced_model import ArmModel, ArmParameters  # noqa: E402
 
-from .results import RunResult, write_atomic  # noqa: E402
+from .results import write_atomic  # noqa: E402
 from .store import ResultStore  # noqa: E402
 
 __all__ = ["write_report", "SECTIONS"]

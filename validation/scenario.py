@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from plant_exudyn import ELEMENTS, Mesh
+from plant_exudyn import Mesh
 from reduced_model import STRAIN_QUANTITIES, ArmParameters, validate_modes_per_link
 
 from ._config import ConfigError, check, from_mapping, to_mapping
@@ -357,8 +357,6 @@ def check_scenario(s: Scenario) -> None:
             L = s.true_params.L1 if link == 0 else s.true_params.L2
             check(all(x <= L for x in gauges), key, f"positions must lie on the link "
                                                     f"(0..{L} m), got {list(gauges)}")
-    if s.plant.kind == "exudyn":
-        check(s.plant.mesh.element in ELEMENTS, "plant.mesh.element", "unknown element")
 
 
 def scenario_from_mapping(data: dict) -> Scenario:

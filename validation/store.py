@@ -74,7 +74,8 @@ class ResultStore:
         if not self.metrics_path.exists():
             return []
         with self.metrics_path.open(newline="") as fh:
-            return [{k: _parse(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+            return [{k: v if k in _TEXT_COLUMNS else _parse(v) for k, v in row.items()}
+                    for row in csv.DictReader(fh)]
 
     def load(self, rid: str) -> RunResult:
         return RunResult.load(self.runs / f"{rid}.npz")
@@ -135,6 +136,10 @@ class ResultStore:
         for row in sorted(rows, key=lambda r: (str(r.get("name", "")), r["run_id"])):
             writer.writerow({k: _format(v) for k, v in row.items()})
         write_atomic(self.metrics_path, lambda fh: fh.write(buf.getvalue()))
+
+
+# Identifiers stay text: a hex run id such as "1234567e8901" would otherwise read as a float.
+_TEXT_COLUMNS = frozenset({"run_id", "name", "status"})
 
 
 def _format(value) -> str:
