@@ -7,14 +7,18 @@ import numpy as np
 
 from reduced_model import ArmModel
 
+from ._gains import gain_vector
+
 __all__ = ["JointPD", "RigidComputedTorque"]
 
 
-def _positive_pair(name: str, value) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
-    if arr.shape != (2,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise ValueError(f"{name} must be two finite numbers >= 0, got {value!r}")
-    return arr
+def rigid_inverse_dynamics(model: ArmModel, theta, dtheta, ddtheta) -> np.ndarray:
+    """M_θθ(θ) θ̈ + C_θθ(θ, θ̇) θ̇ of the rigid arm: the model at q = q̇ = 0."""
+    Q, Qd = np.zeros(model.n), np.zeros(model.n)
+    Q[:2], Qd[:2] = theta, dtheta
+    M = model.mass_matrix(Q)[:2, :2]
+    C = model.coriolis_matrix(Q, Qd)[:2, :2]
+    return M @ ddtheta + C @ dtheta
 
 
 class JointPD:
@@ -34,7 +38,7 @@ class JointPD:
     name = "pd"
 
     def __init__(self, kp=(40.0, 20.0), kd=(8.0, 4.0), feedforward: ArmModel | None = None):
-        self.kp, self.kd = _positive_pair("kp", kp), _positive_pair("kd", kd)
+        self.kp, self.kd = gain_vector("kp", kp), gain_vector("kd", kd)
         self.model = feedforward
         if feedforward is not None:
             self.name = "pd_ff"
@@ -44,14 +48,7 @@ class JointPD:
         theta_d, dtheta_d, ddtheta_d = ref(t)
         tau = self.kp * (theta_d - x_hat[:2]) + self.kd * (dtheta_d - x_hat[n:n + 2])
         if self.model is not None:
-            m = self.model.n
-            Q = np.zeros(m)
-            Q[:2] = theta_d
-            Qd = np.zeros(m)
-            Qd[:2] = dtheta_d
-            M = self.model.mass_matrix(Q)
-            C = self.model.coriolis_matrix(Q, Qd)
-            tau = tau + M[:2, :2] @ ddtheta_d + C[:2, :2] @ dtheta_d
+            tau = tau + rigid_inverse_dynamics(self.model, theta_d, dtheta_d, ddtheta_d)
         return tau
 
 
@@ -67,15 +64,11 @@ class RigidComputedTorque:
 
     def __init__(self, model: ArmModel, kp=(16.0, 16.0), kd=(8.0, 8.0)) -> None:
         self.model = model
-        self.kp, self.kd = _positive_pair("kp", kp), _positive_pair("kd", kd)
+        self.kp, self.kd = gain_vector("kp", kp), gain_vector("kd", kd)
 
     def __call__(self, t: float, x_hat: np.ndarray, ref) -> np.ndarray:
-        n, m = x_hat.shape[0] // 2, self.model.n
+        n = x_hat.shape[0] // 2
         theta, dtheta = x_hat[:2], x_hat[n:n + 2]
         theta_d, dtheta_d, ddtheta_d = ref(t)
-        Q, Qd = np.zeros(m), np.zeros(m)
-        Q[:2], Qd[:2] = theta, dtheta
-        M = self.model.mass_matrix(Q)[:2, :2]
-        C = self.model.coriolis_matrix(Q, Qd)[:2, :2]
         accel = ddtheta_d + self.kd * (dtheta_d - dtheta) + self.kp * (theta_d - theta)
-        return M @ accel + C @ dtheta
+        return rigid_inverse_dynamics(self.model, theta, dtheta, accel)

@@ -19,19 +19,9 @@ from reduced_model import ArmModel
 from reduced_model._kernels import (coriolis_matrix_into, mass_matrix_into, unpack_model,
                                     unpack_workspace)
 
+from ._gains import gain_vector
+
 __all__ = ["PassivityBasedController"]
-
-
-def _gain_vector(name: str, joint, flex, n_flex: int) -> np.ndarray:
-    joint = np.asarray(joint, dtype=float)
-    flex = np.broadcast_to(np.asarray(flex, dtype=float), (n_flex,)) if np.ndim(flex) == 0 \
-        else np.asarray(flex, dtype=float)
-    if joint.shape != (2,) or flex.shape != (n_flex,):
-        raise ValueError(f"{name}: need 2 joint gains and 1 or {n_flex} flexible gains")
-    gains = np.concatenate([joint, flex])
-    if not np.all(np.isfinite(gains)) or np.any(gains < 0):
-        raise ValueError(f"{name} must be finite and >= 0, got {gains.tolist()}")
-    return gains
 
 
 class PassivityBasedController:
@@ -66,8 +56,8 @@ class PassivityBasedController:
                  compensate_damping: bool = True) -> None:
         self.model = model
         n = model.n
-        self.lam = _gain_vector("pbc.lambda", lambda_joint, lambda_flex, n - 2)
-        self.kv = _gain_vector("pbc.kv", kv_joint, kv_flex, n - 2)
+        self.lam = gain_vector("pbc.lambda", lambda_joint, lambda_flex, n - 2)
+        self.kv = gain_vector("pbc.kv", kv_joint, kv_flex, n - 2)
         self.idealised = bool(idealised)
         if self.idealised:
             self.name = "pbc_idealised"

@@ -44,19 +44,18 @@ from numba import njit
 from reduced_model import ArmModel
 from reduced_model._kernels import rk4_advance, unpack_model, unpack_workspace
 
+from ._gains import gain_vector
+
 __all__ = ["SlidingModeObserver", "OBSERVER_VARIANTS"]
 
 OBSERVER_VARIANTS = ("paper", "boundary_layer", "position_only")
 _MAX_SUBSTEP = 1e-3
 
 
-def _pair(name: str, value, n_flex: int) -> np.ndarray:
+def _joint_flex(name: str, value, n_flex: int) -> np.ndarray:
+    """A (joint, flexible) pair, or one number for both, as a gain vector."""
     joint, flex = (value, value) if np.ndim(value) == 0 else value
-    out = np.concatenate([np.broadcast_to(np.asarray(joint, float), (2,)),
-                          np.broadcast_to(np.asarray(flex, float), (n_flex,))])
-    if not np.all(np.isfinite(out)) or np.any(out < 0):
-        raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
-    return out
+    return gain_vector(name, joint, flex, n_flex)
 
 
 class SlidingModeObserver:
@@ -101,8 +100,8 @@ class SlidingModeObserver:
         self.name = "smo-" + {"paper": "paper", "boundary_layer": "bl",
                               "position_only": "pos"}[variant]
         n = model.n
-        self.lp = _pair("l_position", l_position, n - 2)
-        self.lv = _pair("l_velocity", l_velocity, n - 2)
+        self.lp = _joint_flex("l_position", l_position, n - 2)
+        self.lv = _joint_flex("l_velocity", l_velocity, n - 2)
         self.boundary_layer = float(boundary_layer)
         self.filter_time = float(filter_time)
         self._code = OBSERVER_VARIANTS.index(variant)

@@ -7,9 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass, fields
-from pathlib import Path
 
 __all__ = ["ArmParameters", "FieldError"]
 
@@ -156,19 +154,3 @@ class ArmParameters:
             return cls(**values)
         except ValueError as exc:
             raise ValueError(str(exc).replace("ArmParameters.", f"{where}.")) from None
-
-    @classmethod
-    def from_toml(cls, path: str | Path) -> "ArmParameters":
-        """Read parameters from a TOML file: top-level keys, or a ``[params]`` table."""
-        path = Path(path)
-        try:
-            with path.open("rb") as fh:
-                data = tomllib.load(fh)
-        except OSError as exc:
-            raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ValueError(f"{path}: invalid TOML ({exc})") from None
-        where = "params"
-        if set(data) == {"params"} and isinstance(data["params"], dict):
-            data = data["params"]
-        return cls.from_mapping(data, where=f"{path}:{where}")

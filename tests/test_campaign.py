@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from campaign_testing import campaign_toml, metrics_table
 from validation._config import ConfigError
 from validation.campaign import (SerialExecutor, campaign_from_mapping, expand, load_campaign,
                                  make_executor, run_campaign)
@@ -25,18 +26,6 @@ SMALL = {"name": "small", "scenario": {"duration": 0.3, "sensors": {"encoder_noi
                                                 "seed": [1, 2]}},
                    {"name": "observer", "zip": {"observer.kind": ["smo-bl", "smo-pos"],
                                                 "name": ["bl", "pos"]}}]}
-
-
-def metrics_by_id(out) -> dict:
-    """metrics.csv as {run id: {metric: value}}, without wall-clock columns; NaN (a metric
-    that does not apply, e.g. tracking after a transient longer than the run) becomes the
-    string "nan" so that equal tables compare equal."""
-    rows = ResultStore(out).metrics()
-    ids = [r["run_id"] for r in rows]
-    assert len(ids) == len(set(ids)), "duplicate rows in metrics.csv"
-    clean = lambda v: "nan" if isinstance(v, float) and np.isnan(v) else v  # noqa: E731
-    return {r["run_id"]: {k: clean(v) for k, v in r.items()
-                          if k not in ("wall_s", "realtime_factor")} for r in rows}
 
 
 # --- configuration ------------------------------------------------------------------------
@@ -137,13 +126,13 @@ def test_executors_give_identical_metrics(tmp_path):
     serial, close = make_executor("local", 1)
     run_campaign(c, tmp_path / "serial", executor=serial, progress=False)
     close()
-    results["serial"] = metrics_by_id(tmp_path / "serial")
+    results["serial"] = metrics_table(tmp_path / "serial")
     pool, close = make_executor("local", 2)
     try:
         run_campaign(c, tmp_path / "pool", executor=pool, progress=False)
     finally:
         close()
-    results["pool"] = metrics_by_id(tmp_path / "pool")
+    results["pool"] = metrics_table(tmp_path / "pool")
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None, host="127.0.0.1") as cluster:
@@ -152,7 +141,7 @@ def test_executors_give_identical_metrics(tmp_path):
             run_campaign(c, tmp_path / "dask", executor=executor, progress=False)
         finally:
             close()
-    results["dask"] = metrics_by_id(tmp_path / "dask")
+    results["dask"] = metrics_table(tmp_path / "dask")
     assert len(results["serial"]) == 6
     # Same seeds, same arithmetic: bit-identical metrics (wall time excluded).
     assert results["serial"] == results["pool"] == results["dask"]
@@ -164,7 +153,7 @@ def test_resume_after_a_kill(tmp_path):
             "sweep": [{"grid": {"seed": list(range(20)),
                                 "sensors.encoder_noise": [1e-4]}}]}
     cfg = tmp_path / "resume.toml"
-    cfg.write_text(_toml(spec))
+    cfg.write_text(campaign_toml(spec))
     reference = tmp_path / "reference"
     run_campaign(campaign_from_mapping(spec), reference, executor=SerialExecutor(),
                  progress=False)
@@ -183,7 +172,7 @@ def test_resume_after_a_kill(tmp_path):
     summary = subprocess.run(cmd, capture_output=True, text=True)
     assert summary.returncode == 0, summary.stderr
     assert f"{len(partial)} already done" in summary.stdout
-    assert metrics_by_id(out) == metrics_by_id(reference)  # no duplicates, same numbers
+    assert metrics_table(out) == metrics_table(reference)  # no duplicates, same numbers
     again = subprocess.run(cmd, capture_output=True, text=True)
     assert "20 already done" in again.stdout
 
@@ -237,34 +226,6 @@ def test_shipped_campaigns_expand():
     counts = {name: len(expand(load_campaign(ROOT / "campaigns" / f"{name}.toml")))
               for name in ("paper", "mismatch", "robustness")}
     assert counts == {"paper": 15, "mismatch": 29, "robustness": 26}
-
-
-def _toml(data: dict, prefix: str = "") -> str:
-    """Minimal TOML writer for the test specs (scalars, lists, tables, arrays of tables)."""
-    lines, tables = [], []
-    for key, value in data.items():
-        if isinstance(value, dict):
-            tables.append((f"{prefix}{key}", value, False))
-        elif isinstance(value, list) and value and isinstance(value[0], dict):
-            tables += [(f"{prefix}{key}", v, True) for v in value]
-        else:
-            lines.append(f"{json.dumps(key) if '.' in key else key} = {json.dumps(value)}")
-    out = "\n".join(lines) + "\n"
-    for name, table, array in tables:
-        out += f"\n[[{name}]]\n" if array else f"\n[{name}]\n"
-        out += _toml_inline(table)
-    return out
-
-
-def _toml_inline(table: dict) -> str:
-    out = ""
-    for key, value in table.items():
-        if isinstance(value, dict):
-            for sub, v in value.items():
-                out += f"{key}.{json.dumps(sub)} = {json.dumps(v)}\n"
-        else:
-            out += f"{key} = {json.dumps(value)}\n"
-    return out
 
 
 def test_readme_campaign_example_is_valid(tmp_path):

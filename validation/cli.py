@@ -59,7 +59,11 @@ def cmd_modes(args: argparse.Namespace) -> int:
     if args.table1:
         params, source = ArmParameters.table1(), "the paper's Table 1 (no stator, no damping)"
     elif args.params:
-        params, source = ArmParameters.from_toml(args.params), args.params
+        data = load_toml(args.params)
+        if set(data) == {"params"} and isinstance(data["params"], dict):
+            data = data["params"]
+        params = ArmParameters.from_mapping(data, where=f"{args.params}:params")
+        source = args.params
     else:
         params, source = ArmParameters(), "defaults (Table 1 + stator inertia + damping)"
     model = ArmModel(params, validate_modes_per_link(args.modes_per_link, where="--modes-per-link"))

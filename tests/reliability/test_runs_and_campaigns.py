@@ -11,6 +11,7 @@ import time
 import numpy as np
 import pytest
 
+from campaign_testing import campaign_toml, metrics_table
 from validation.campaign import SerialExecutor, campaign_from_mapping, run_campaign
 from validation.loop import run_scenario
 from validation.results import RunResult
@@ -61,24 +62,11 @@ def _spec(n_runs: int) -> dict:
             "sweep": [{"grid": {"seed": list(range(n_runs))}}]}
 
 
-def _toml(spec: dict) -> str:
-    return (f'name = "{spec["name"]}"\n[scenario]\nduration = {spec["scenario"]["duration"]}\n'
-            f'sensors.encoder_noise = 1e-4\n[[sweep]]\ngrid.seed = {spec["sweep"][0]["grid"]["seed"]}\n')
-
-
-def _table(out) -> dict:
-    rows = ResultStore(out).metrics()
-    assert len({r["run_id"] for r in rows}) == len(rows), "duplicate rows"
-    return {r["run_id"]: {k: ("nan" if isinstance(v, float) and np.isnan(v) else v)
-                          for k, v in r.items() if k not in ("wall_s", "realtime_factor")}
-            for r in rows}
-
-
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_sigkill_at_random_moments_then_resume(seed, tmp_path):
     spec = _spec(16)
     cfg = tmp_path / "crash.toml"
-    cfg.write_text(_toml(spec))
+    cfg.write_text(campaign_toml(spec))
     reference = tmp_path / "reference"
     run_campaign(campaign_from_mapping(spec), reference, executor=SerialExecutor(),
                  progress=False)
@@ -97,25 +85,25 @@ def test_sigkill_at_random_moments_then_resume(seed, tmp_path):
         manifest = json.loads((out / "manifest.json").read_text())  # always valid JSON
         # Written in the order .npz, metrics row, manifest entry: whatever the moment of
         # the kill, every manifest entry has its row and a complete file.
-        assert set(manifest["runs"]) <= set(_table(out))
+        assert set(manifest["runs"]) <= set(metrics_table(out))
         for rid in manifest["runs"]:
             RunResult.load(out / "runs" / f"{rid}.npz")  # never a truncated .npz
     final = subprocess.run(cmd, capture_output=True, text=True)
     assert final.returncode == 0, final.stderr
-    assert _table(out) == _table(reference)  # same numbers, no duplicate or missing rows
+    assert metrics_table(out) == metrics_table(reference)  # same numbers, no duplicate or missing rows
     assert not list(out.rglob(".*.tmp"))
 
 
 def test_two_invocations_are_bit_identical(tmp_path):
     spec = _spec(3)
     cfg = tmp_path / "det.toml"
-    cfg.write_text(_toml(spec))
+    cfg.write_text(campaign_toml(spec))
     for name in ("a", "b"):
         subprocess.run([sys.executable, "-m", "validation.cli", "campaign", str(cfg), "--out",
                         str(tmp_path / name), "--workers", "1", "--no-progress"], check=True,
                        capture_output=True)
-    assert _table(tmp_path / "a") == _table(tmp_path / "b")
-    for rid in _table(tmp_path / "a"):
+    assert metrics_table(tmp_path / "a") == metrics_table(tmp_path / "b")
+    for rid in metrics_table(tmp_path / "a"):
         a, b = (RunResult.load(tmp_path / n / "runs" / f"{rid}.npz") for n in ("a", "b"))
         np.testing.assert_array_equal(a.signals, b.signals)
 
