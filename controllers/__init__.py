@@ -1,14 +1,18 @@
 """Controllers and observers: the paper's passivity-based controller (eq. 14–20), its
 sliding-mode observer (eq. 21–36) with practical variants, baselines, and reference
-trajectories (eq. 37).  All of them use a `reduced_model.ArmModel` as their model.
-
-A controller is called as ``tau = controller(t, x_hat, ref)``; an observer has
-``reset(x_hat0)`` and ``update(t, y, tau, Ts) -> x_hat``.
+trajectories (eq. 37).  All are plug-ins of one interface (`controllers._interface`):
+``Cls(model, **options)`` on a `reduced_model.ArmModel`; a controller is called as
+``tau = controller(t, x, ref)``; an observer has ``measured``, ``reset(x_hat0)`` and
+``update(t, y, tau, Ts) -> x_hat``.
 """
 from ._baselines import JointPD, RigidComputedTorque
-from ._pbc import PassivityBasedController
+from ._interface import Controller, Observer
+from ._pbc import IdealisedPBC, PassivityBasedController
 from ._reference import PaperReference, QuinticMove
-from ._smo import OBSERVER_VARIANTS, SlidingModeObserver
+from ._registry import CONTROLLERS, OBSERVERS, PluginError, accepted_options, resolve
+from ._smo import BoundaryLayerSMO, PaperSMO, PositionOnlySMO
 
-__all__ = ["PassivityBasedController", "SlidingModeObserver", "OBSERVER_VARIANTS", "JointPD",
-           "RigidComputedTorque", "PaperReference", "QuinticMove"]
+__all__ = ["Controller", "Observer", "PassivityBasedController", "IdealisedPBC", "PaperSMO",
+           "BoundaryLayerSMO", "PositionOnlySMO", "JointPD", "RigidComputedTorque",
+           "PaperReference", "QuinticMove", "CONTROLLERS", "OBSERVERS", "PluginError",
+           "resolve", "accepted_options"]

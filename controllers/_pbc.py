@@ -4,11 +4,17 @@
     τ = M(Q) v̇ + C(Q, Q̇) v + K Q + D Q̇ − K_v s                    (20)
 
 with Q_d = [θ_d, 0] (the paper's q_d = 0), K Q in place of the paper's g(Q) (horizontal
-plane) and the model's Kelvin–Voigt D Q̇ (optional).  Eq. (20) asks for n generalised
-forces; the arm has two actuators.  The realisable controller applies τ[0:2] and reports
-τ[2:] — forces on the flexible coordinates that no actuator can produce — as the
-*unrealisable residual*.  The paper's idealisation (all n applied) exists only for the
-reduced plant, and is named so.
+plane) and the model's Kelvin–Voigt D Q̇.  Eq. (20) asks for n generalised forces; the
+arm has two actuators.  Two laws, two names:
+
+- `PassivityBasedController` (``"pbc"``) applies rows 0–1 of eq. (20) — what two motors
+  can do — and reports rows 2… (forces on the flexible coordinates no actuator can
+  produce) as the *unrealisable residual*.  K and D have no joint rows and K_v, Λ are
+  diagonal, so the flexible gain K_v,f and the damping compensation cannot change the
+  applied torque: this law does not take them.  Λ_f still matters (it enters the joint
+  rows through M_θq v̇_q and C_θq v_q).
+- `IdealisedPBC` (``"pbc-idealised"``) applies all n rows: the paper's idealisation, which
+  only the reduced plant can take (generalised forces on the modal coordinates).
 """
 from __future__ import annotations
 
@@ -21,64 +27,83 @@ from reduced_model._kernels import (coriolis_matrix_into, mass_matrix_into, unpa
 
 from ._gains import gain_vector
 
-__all__ = ["PassivityBasedController"]
+__all__ = ["PassivityBasedController", "IdealisedPBC"]
 
 
 class PassivityBasedController:
-    """Eq. (20) with diagonal Λ and K_v.
+    """Eq. (20), rows 0–1 applied (the realisable law), with diagonal Λ and K_v.
 
     Parameters
     ----------
     model : ArmModel
         The nominal model (its M, Christoffel C, K, D).
-    lambda_joint, lambda_flex : gains of Λ [1/s] on θ and on q (scalar or one per mode).
-    kv_joint, kv_flex : gains of K_v [N m s/rad on θ; N s/m on q].
-    idealised : bool
-        Apply all n components of eq. (20) (the paper's assumption); only a plant with
-        generalised-force inputs (the reduced plant) can take it.
-    compensate_damping : bool
-        Include the model's D Q̇ (it only enters the flexible rows).
+    lambda_joint, lambda_flex : gains of Λ [1/s] on θ (one or two numbers) and on q (one
+        number, or one per mode).
+    kv_joint : gains of K_v on θ [N m s/rad].
 
-    Defaults (Λ = 3, 3 | 1; K_v = 10, 5 | 5), chosen on the paper's scenario from rest:
-    the realisable law keeps max |θ − θ_d| after 2 s at 0.005/0.009 rad on the reduced
-    plant and the same on the FE plant.  Larger joint gains (Λ = 5, K_v = 20, 10) bend
-    link 1 by 10 cm at the start (the reference starts at 0.6/1.3 rad/s while the arm is
-    at rest) and track worse after 2 s; Λ_f > 0 adds vibration damping through the
-    inertial coupling M_θq v̇_q.  The idealised law needs K_v,f > 0: it cancels the
-    elastic force K q with a sampled (ZOH) force, which destabilises the 34 Hz mode
-    without damping.
+    Defaults (Λ = 3, 3 | 1; K_v = 10, 5), chosen on the paper's scenario from rest: the
+    joint error dynamics of the rigid arm at θ2 = 0 have poles at Λ = 3 and
+    K_v/M_jj = 3.7, 4.7 rad/s.  Larger joint gains (Λ = 5, K_v = 20, 10) bend link 1 by
+    10 cm at the start (the reference starts at 0.6/1.3 rad/s while the arm is at rest)
+    and track worse after 2 s; Λ_f > 0 couples into the joint rows through M_θq v̇_q.
     """
 
     name = "pbc"
+    _rows = 2  # rows of eq. (20) applied
 
     def __init__(self, model: ArmModel, *, lambda_joint=(3.0, 3.0), lambda_flex=1.0,
-                 kv_joint=(10.0, 5.0), kv_flex=5.0, idealised: bool = False,
-                 compensate_damping: bool = True) -> None:
+                 kv_joint=(10.0, 5.0)) -> None:
+        self._setup(model, lambda_joint, lambda_flex, kv_joint, 0.0, False)
+        #: Unrealisable flexible-coordinate forces of the last call (rows 2… of eq. 20).
+        self.residual = np.zeros(model.n - 2)
+
+    def _setup(self, model, lambda_joint, lambda_flex, kv_joint, kv_flex, damping) -> None:
         self.model = model
         n = model.n
-        self.lam = gain_vector("pbc.lambda", lambda_joint, lambda_flex, n - 2)
-        self.kv = gain_vector("pbc.kv", kv_joint, kv_flex, n - 2)
-        self.idealised = bool(idealised)
-        if self.idealised:
-            self.name = "pbc_idealised"
-        self.compensate_damping = bool(compensate_damping)
+        self.lam = np.concatenate([gain_vector("lambda_joint", lambda_joint, 2),
+                                   gain_vector("lambda_flex", lambda_flex, n - 2)])
+        self.kv = np.concatenate([gain_vector("kv_joint", kv_joint, 2),
+                                  gain_vector("kv_flex", kv_flex, n - 2)])
+        self.compensate_damping = bool(damping)
         self._work = model.new_workspace()[0]
         self._M, self._C = np.zeros((n, n)), np.zeros((n, n))
         self._scratch = np.zeros(4 * n)
         self._tau = np.zeros(n)
-        #: Unrealisable flexible-coordinate forces of the last call (zeros if idealised).
-        self.residual = np.zeros(n - 2)
 
-    def __call__(self, t: float, x_hat: np.ndarray, ref) -> np.ndarray:
+    def _eq20(self, t: float, x: np.ndarray, ref) -> np.ndarray:
         theta_d, dtheta_d, ddtheta_d = ref(t)
         ints, reals = self.model.packed
         wc, wr = self._work
-        _pbc_torque(ints, reals, wc, wr, self._M, self._C, self._scratch, x_hat, theta_d,
+        _pbc_torque(ints, reals, wc, wr, self._M, self._C, self._scratch, x, theta_d,
                     dtheta_d, ddtheta_d, self.lam, self.kv, self.compensate_damping, self._tau)
-        if self.idealised:
-            return self._tau.copy()
-        self.residual[:] = self._tau[2:]
-        return self._tau[:2].copy()
+        return self._tau
+
+    def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
+        tau = self._eq20(t, x, ref)
+        self.residual[:] = tau[2:]
+        return tau[:2].copy()
+
+
+class IdealisedPBC(PassivityBasedController):
+    """Eq. (20) with all n rows applied: the paper's idealisation (reduced plant only).
+
+    Parameters as `PassivityBasedController`, plus ``kv_flex`` (K_v on q [N s/m], one
+    number or one per mode; default 5) and ``compensate_damping`` (include D Q̇; default
+    true).  K_v,f > 0 is needed: the law cancels the elastic force K q with a sampled (ZOH)
+    force, which destabilises the 34 Hz mode without damping.  Nothing is unrealisable
+    here, so there is no ``residual``.
+    """
+
+    name = "pbc-idealised"
+
+    def __init__(self, model: ArmModel, *, lambda_joint=(3.0, 3.0), lambda_flex=1.0,
+                 kv_joint=(10.0, 5.0), kv_flex=5.0, compensate_damping: bool = True) -> None:
+        if not isinstance(compensate_damping, (bool, np.bool_)):
+            raise ValueError(f"compensate_damping must be true or false, got {compensate_damping!r}")
+        self._setup(model, lambda_joint, lambda_flex, kv_joint, kv_flex, compensate_damping)
+
+    def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
+        return self._eq20(t, x, ref).copy()
 
 
 @njit(cache=True)

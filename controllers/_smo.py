@@ -5,20 +5,23 @@
 with f(x, τ) = [Q̇; M⁻¹(B τ − C Q̇ − D Q̇ − K Q)] from the reduced model (not the paper's
 row-by-row triangular form, which is the same function).  x = [Q, Q̇] = [P, V].
 
-Variants (``variant``):
+Variants (one class each, named by their ``kind`` in a scenario):
 
-- ``"paper"``: y = the full state (the paper's y = h(x) = x), sign injection on every
+- ``"smo-paper"``: y = the full state (the paper's y = h(x) = x), sign injection on every
   component.  Each error reaches its sliding band in finite time and then chatters in
   ±Ts·L (discrete sign).
-- ``"boundary_layer"``: sat((y − ŷ)/ε) instead of sign, with ε = ``boundary_layer``·Ts·L
+- ``"smo-bl"``: sat((y − ŷ)/ε) instead of sign, with ε = ``boundary_layer``·Ts·L
   per component; inside the layer the discrete correction removes 1/``boundary_layer``
   of the error per step, so the estimate follows y without chattering.
-- ``"position_only"``: y = positions P only (encoders θ and strain-derived q).  Step by
-  step as in the paper's ref. [12] (Barbot, Boukhobza & Djemai 1996): the position
-  injection ν_P = L_P sign(y − P̂); once P̂ slides on y, its equivalent (low-pass filtered)
-  value ν̄ equals the velocity error V − V̂, so z = V̂ + ν̄ is a pseudo-measurement of V
-  and the velocity injection is L_V sign(z − V̂) = L_V sign(ν̄).  ν̄ is a first-order
-  filter of ν_P with time constant ``filter_time``.
+- ``"smo-pos"``: y = positions P only (encoders θ and strain-derived q).  Step by
+  step as in the paper's ref. [12] (Barbot, Boukhobza & Djemai 1996): step 1, the
+  position injection ν_P = L_P sign(y − P̂) drives P̂ onto y; step 2, once P̂ slides on y,
+  the equivalent (low-pass filtered) value ν̄ of ν_P equals the velocity error V − V̂, so
+  z = V̂ + ν̄ is a pseudo-measurement of V and the velocity injection is
+  L_V sign(z − V̂) = L_V sign(ν̄).  ν̄ is a first-order filter of ν_P with time constant
+  ``filter_time``.  Step 2 is gated per coordinate: the velocity injection of coordinate i
+  acts only while its position error is on the sliding surface, |y_i − P̂_i| ≤
+  ``gate``·Ts·L_P,i (off it, ν_P = ±L_P says nothing about the velocity error).
 
 Gains follow the paper's conditions: (31) L_P > max |V − V̂| (the position errors reach
 their sliding surface), (36) L_V > ρ, the bound of the model error |f(x) − f(x̂)| + δ.
@@ -44,67 +47,57 @@ from numba import njit
 from reduced_model import ArmModel
 from reduced_model._kernels import rk4_advance, unpack_model, unpack_workspace
 
-from ._gains import gain_vector
+from ._gains import joint_flex_gains
 
-__all__ = ["SlidingModeObserver", "OBSERVER_VARIANTS"]
+__all__ = ["PaperSMO", "BoundaryLayerSMO", "PositionOnlySMO"]
 
-OBSERVER_VARIANTS = ("paper", "boundary_layer", "position_only")
 _MAX_SUBSTEP = 1e-3
 
 
 def _joint_flex(name: str, value, n_flex: int) -> np.ndarray:
     """A (joint, flexible) pair, or one number for both, as a gain vector."""
-    joint, flex = (value, value) if np.ndim(value) == 0 else value
-    return gain_vector(name, joint, flex, n_flex)
+    if np.ndim(value) == 0:
+        value = (value, value)
+    if len(value) != 2:
+        raise ValueError(f"{name}: need (joint, flexible) or one number, got {list(value)!r}")
+    return joint_flex_gains(name, value[0], value[1], n_flex)
 
 
-class SlidingModeObserver:
-    """Eq. (23)–(24) with gains L = diag(L_P, L_V).
+def _positive(name: str, value) -> float:
+    if isinstance(value, bool) or not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be > 0, got {value!r}")
+    return float(value)
 
-    Parameters
-    ----------
-    model : ArmModel
-        The nominal model providing f(x, τ).
-    variant : {"paper", "boundary_layer", "position_only"}
+
+class _SlidingModeObserver:
+    """Eq. (23)–(24) with gains L = diag(L_P, L_V); the variants below fix the injection.
+
+    Gains (every variant's defaults):
     l_position : (joint, flexible)
         L_P [rad/s on θ, m/s on q].  Default (1.0, 0.5): above the largest velocity
         estimation errors after the initial transient (condition 31); position band
         ±Ts·L_P = 1e-3 rad and 5e-4 m at 1 kHz.
     l_velocity : (joint, flexible)
         L_V [rad/s², m/s²].  Default (5, 2): velocity bands ±5e-3 rad/s and ±2e-3 m/s at
-        1 kHz (the flexible one is the paper's 2e-3).  Measured on the paper's scenario
-        with noise: L_V = 20 gives a band as large as the flexible rates themselves
-        (q̇12 error/signal RMS 0.9 on both plants); (5, 2) gives 0.05–0.14; below it
-        condition (36) fails on the FE plant — with L_V,flex = 0.5 the reduced model's
-        error ρ exceeds the gain and the q̇11 error grows to the size of the signal.
-    boundary_layer : float
-        Layer width in units of Ts·L for ``"boundary_layer"`` (default 2).
-    filter_time : float
-        Time constant [s] of the equivalent-injection filter for ``"position_only"``
-        (default 5 ms: averages the sign chatter over 5 samples, fast against the 34 Hz
-        mode's 30 ms period).
+        1 kHz.  Measured on the paper's scenario with noise: L_V = 20 gives a band as
+        large as the flexible rates themselves (q̇12 error/signal RMS 0.9 on both plants);
+        (5, 2) gives 0.05–0.14; below it condition (36) fails on the FE plant — with
+        L_V,flex = 0.5 the reduced model's error ρ exceeds the gain and the q̇11 error grows
+        to the size of the signal.
     """
 
-    def __init__(self, model: ArmModel, variant: str = "paper", *, l_position=(1.0, 0.5),
-                 l_velocity=(5.0, 2.0), boundary_layer: float = 2.0,
-                 filter_time: float = 5e-3) -> None:
-        if variant not in OBSERVER_VARIANTS:
-            raise ValueError(f"observer variant must be one of {OBSERVER_VARIANTS}, "
-                             f"got {variant!r}")
-        if not (np.isfinite(boundary_layer) and boundary_layer > 0):
-            raise ValueError(f"boundary_layer must be > 0, got {boundary_layer!r}")
-        if not (np.isfinite(filter_time) and filter_time > 0):
-            raise ValueError(f"filter_time must be > 0, got {filter_time!r}")
+    _variant = 0
+    _positions_only = False
+
+    def _setup(self, model: ArmModel, l_position, l_velocity, boundary_layer=1.0,
+               filter_time=1.0, gate=1.0) -> None:
         self.model = model
-        self.variant = variant
-        self.name = "smo-" + {"paper": "paper", "boundary_layer": "bl",
-                              "position_only": "pos"}[variant]
         n = model.n
         self.lp = _joint_flex("l_position", l_position, n - 2)
         self.lv = _joint_flex("l_velocity", l_velocity, n - 2)
-        self.boundary_layer = float(boundary_layer)
-        self.filter_time = float(filter_time)
-        self._code = OBSERVER_VARIANTS.index(variant)
+        self.boundary_layer = _positive("boundary_layer", boundary_layer)
+        self.filter_time = _positive("filter_time", filter_time)
+        self.gate = _positive("gate", gate)
         self._work = model.new_workspace()[0]
         self._x = np.zeros(2 * n)
         self._nu = np.zeros(n)
@@ -115,7 +108,7 @@ class SlidingModeObserver:
     def measured(self) -> tuple[str, ...]:
         """Names of the measurement signals the observer needs, in the order of y."""
         names = self.model.state_names
-        return names[:self.model.n] if self.variant == "position_only" else names
+        return names[:self.model.n] if self._positions_only else names
 
     def reset(self, x_hat0) -> np.ndarray:
         x0 = np.asarray(x_hat0, dtype=float)
@@ -135,25 +128,67 @@ class SlidingModeObserver:
         ints, reals = self.model.packed
         wc, wr = self._work
         _smo_update(ints, reals, wc, wr, self._x, tau, Ts, self._nsub, not self._fresh, y,
-                    self.lp, self.lv, self._code, self.boundary_layer,
-                    min(1.0, Ts / self.filter_time), self._nu)
+                    self.lp, self.lv, self._variant, self.boundary_layer,
+                    min(1.0, Ts / self.filter_time), self.gate, self._nu)
         self._fresh = False
         return self._x.copy()
 
 
+class PaperSMO(_SlidingModeObserver):
+    """``"smo-paper"``: the paper's observer, sign injection on the full measured state
+    (y = x).  Options ``l_position``, ``l_velocity`` (see the module docstring)."""
+
+    name = "smo-paper"
+
+    def __init__(self, model: ArmModel, *, l_position=(1.0, 0.5), l_velocity=(5.0, 2.0)):
+        self._setup(model, l_position, l_velocity)
+
+
+class BoundaryLayerSMO(_SlidingModeObserver):
+    """``"smo-bl"``: sat((y − ŷ)/ε) instead of sign, ε = ``boundary_layer``·Ts·L per
+    component (default 2: inside the layer half the error is removed per step)."""
+
+    name = "smo-bl"
+    _variant = 1
+
+    def __init__(self, model: ArmModel, *, l_position=(1.0, 0.5), l_velocity=(5.0, 2.0),
+                 boundary_layer: float = 2.0):
+        self._setup(model, l_position, l_velocity, boundary_layer=boundary_layer)
+
+
+class PositionOnlySMO(_SlidingModeObserver):
+    """``"smo-pos"``: positions measured only; Barbot's step-by-step equivalent injection.
+
+    ``filter_time`` [s] (default 5 ms: averages the sign chatter over 5 samples, fast
+    against the 34 Hz mode's 30 ms period); ``gate`` (default 2): the velocity injection
+    of a coordinate acts while its position error is within ``gate``·Ts·L_P (twice the
+    discrete sliding band, so the chatter and a 1e-4 rad / 1e-5 m noise keep it on).
+    """
+
+    name = "smo-pos"
+    _variant = 2
+    _positions_only = True
+
+    def __init__(self, model: ArmModel, *, l_position=(1.0, 0.5), l_velocity=(5.0, 2.0),
+                 filter_time: float = 5e-3, gate: float = 2.0):
+        self._setup(model, l_position, l_velocity, filter_time=filter_time, gate=gate)
+
+
 @njit(cache=True)
 def _smo_update(ints, reals, wc, wr, x, tau, Ts, nsub, predict, y, lp, lv, variant, layer,
-                alpha, nu):
+                alpha, gate, nu):
     if predict:
         rk4_advance(unpack_model(ints, reals), x, tau, Ts / nsub, nsub,
                     unpack_workspace(ints, wc, wr))
     n = x.shape[0] // 2
     if variant == 2:  # position_only: step-by-step equivalent output injection
         for i in range(n):
-            inj = lp[i] * np.sign(y[i] - x[i])
+            err = y[i] - x[i]
+            inj = lp[i] * np.sign(err)
             x[i] += Ts * inj
             nu[i] += alpha * (inj - nu[i])
-            x[n + i] += Ts * lv[i] * np.sign(nu[i])
+            if abs(err) <= gate * Ts * lp[i]:  # step 2 only on the sliding surface
+                x[n + i] += Ts * lv[i] * np.sign(nu[i])
         return
     for i in range(2 * n):
         gain = lp[i] if i < n else lv[i - n]

@@ -2,7 +2,8 @@
 
 Types are read from the dataclass annotations: bool, int, float, str, tuples of those
 (fixed length ``tuple[float, float]`` or variable ``tuple[float, ...]``), nested
-dataclasses, tuples of dataclasses, and ``X | None``.  Unknown keys and values of the
+dataclasses, tuples of dataclasses, ``X | None``, and ``dict`` (a free table of plain
+values — numbers, strings, booleans, lists and tables — checked by whoever consumes it).  Unknown keys and values of the
 wrong type are rejected; the dataclasses' own ``__post_init__`` checks ranges.
 """
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Any, Union, get_args, get_origin, get_type_hints
 
 from reduced_model import FieldError
 
-__all__ = ["ConfigError", "from_mapping", "to_mapping", "check"]
+__all__ = ["ConfigError", "from_mapping", "to_mapping", "check", "check_label"]
 
 
 class ConfigError(ValueError):
@@ -33,6 +34,15 @@ def check(condition: bool, path: str, message: str) -> None:
     """Raise `ConfigError(path, message)` unless ``condition``."""
     if not condition:
         raise ConfigError(path, message)
+
+
+def check_label(name: Any, path: str) -> None:
+    """A name that also names a folder: letters, digits and ``. _ - +``, not starting with
+    a dot — never a path (no ``/``, no ``..``), never empty, no control characters."""
+    ok = (isinstance(name, str) and 0 < len(name) <= 100 and not name.startswith(".")
+          and all(c.isalnum() or c in "._-+" for c in name) and name.isascii())
+    check(ok, path, f"must be a plain name (letters, digits, '.', '_', '-', '+'; not a path), "
+                    f"got {name!r}")
 
 
 def _describe(value: Any) -> str:
@@ -79,7 +89,25 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
         if not isinstance(value, str):
             raise ConfigError(path, f"expected a string, got {_describe(value)}")
         return value
+    if tp is dict or origin is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(path, f"expected a table, got {_describe(value)}")
+        return {k: _plain(v, f"{path}.{k}") for k, v in value.items()}
     raise TypeError(f"unsupported configuration type {tp!r} at {path}")
+
+
+def _plain(value: Any, path: str) -> Any:
+    """A copy of a plain TOML/JSON value (lists as lists), rejecting anything else."""
+    if isinstance(value, dict):
+        return {k: _plain(v, f"{path}.{k}") for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v, f"{path}[{i}]") for i, v in enumerate(value)]
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ConfigError(path, f"must be a finite number, got {value!r}")
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    raise ConfigError(path, f"expected a number, string, boolean, list or table, got "
+                            f"{_describe(value)}")
 
 
 def from_mapping(cls, data: dict, path: str = ""):
@@ -106,4 +134,6 @@ def to_mapping(obj) -> Any:
         return {f.name: to_mapping(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     if isinstance(obj, (tuple, list)):
         return [to_mapping(v) for v in obj]
+    if isinstance(obj, dict):
+        return {k: to_mapping(v) for k, v in obj.items()}
     return obj

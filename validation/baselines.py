@@ -34,14 +34,16 @@ from pathlib import Path
 import numpy as np
 
 from ._config import ConfigError, check
-from .campaign import execute_run, expand, load_campaign
+from .campaign import expand, load_campaign
+from .executor import execute_run
+from .fingerprint import run_fingerprint
 from .results import write_atomic
 from .scenario import scenario_from_mapping, scenario_to_mapping
 from .store import ResultStore, run_id
 from .tomlfiles import load_toml
 
 __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",
-           "write_baselines", "DEFAULT_FILE"]
+           "proposed_bounds", "write_baselines", "DEFAULT_FILE"]
 
 DEFAULT_FILE = Path(__file__).resolve().parent.parent / "baselines.toml"
 _CHECK_KEYS = {"name", "kind", "scenario", "campaign", "run", "plant", "metric", "op", "bound",
@@ -152,13 +154,22 @@ class _Runner:
         raise ConfigError(f"check {c.name}", f"campaign {c.campaign!r} has no run {wanted!r} "
                                              f"on the {c.plant} plant")
 
+    def _reusable(self, rid: str):
+        """The stored row of ``rid`` in the --results folder if it can be trusted: present,
+        its file verified, made by this code."""
+        row = self.reuse.row(rid) if self.reuse else None
+        if row is None or row.fingerprint != run_fingerprint(row.config):
+            return None
+        return None if self.reuse.verify([row]) else row
+
     def metrics(self, c: Check) -> tuple[dict, Path | None]:
         data = self.scenario_data(c)
         rid = run_id(data)
         if rid not in self.cache:
-            if self.reuse and rid in self.reuse.completed():
-                row = next(r for r in self.reuse.metrics() if r["run_id"] == rid)
-                self.cache[rid] = (row, self.reuse.runs / f"{rid}.npz")
+            row = self._reusable(rid)
+            if row is not None:
+                self.cache[rid] = (row.metrics | {"status": row.status},
+                                   self.reuse.out / row.file)
             else:
                 result, metrics = execute_run(data)
                 path = self.store.add(rid, result, metrics)
@@ -212,11 +223,33 @@ def evaluate(baselines: Baselines, *, out: str | Path, tier: str = "short",
 
 
 def updated_bound(c: Check, value: float, baselines: Baselines) -> float:
-    """The margin policy: headroom relative to the measured value plus an absolute floor."""
+    """The margin policy: headroom relative to the measured value plus an absolute floor,
+    rounded to the 4 significant digits the file stores."""
     rel = baselines.relative if c.margin is None else c.margin
     if c.op == "<=":
-        return value * (1 + rel) + baselines.absolute
-    return value * (1 - rel) - baselines.absolute
+        return _stored(value * (1 + rel) + baselines.absolute)
+    return _stored(value * (1 - rel) - baselines.absolute)
+
+
+def _stored(value: float) -> float:
+    """``value`` at the precision written to baselines.toml (4 significant digits)."""
+    return float(f"{value:.4g}")
+
+
+def proposed_bounds(rows: list[dict], baselines: Baselines) -> dict[str, dict]:
+    """Per measurable check: the policy's bound and measured value at stored precision,
+    whether it differs from the stored bound and whether it is looser.  Comparing at
+    stored precision makes `update` idempotent: a second update changes nothing."""
+    out = {}
+    for r in rows:
+        c, value = r["check"], r["value"]
+        if not math.isfinite(value):
+            continue
+        bound = updated_bound(c, value, baselines)
+        looser = bound > c.bound if c.op == "<=" else bound < c.bound
+        out[c.name] = {"bound": bound, "measured": _stored(value), "looser": looser,
+                       "changed": bound != c.bound}
+    return out
 
 
 # --- writing --------------------------------------------------------------------------------

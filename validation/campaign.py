@@ -25,23 +25,24 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
-from concurrent.futures import Executor, Future, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ._config import ConfigError, check
-from .loop import run_scenario
-from .metrics import all_metrics
-from .results import RunResult
+from ._config import ConfigError, check, check_label
+from .executor import Interrupted, Runner, SerialRunner
+from .fingerprint import run_fingerprint
 from .scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .store import ResultStore, environment, run_id
 from .tomlfiles import deep_merge, load_toml
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "campaign_from_mapping", "expand",
-           "execute_run", "run_campaign", "CampaignSummary", "make_executor", "SerialExecutor"]
+           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS"]
+
+#: The most runs one campaign may expand to (a typo in a random sweep should not hang the
+#: machine listing a million runs).
+MAX_RUNS = 100_000
 
 _TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
@@ -77,7 +78,7 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     for key in data:
         check(key in _TOP_KEYS, key, f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})")
     name = data.get("name", Path(source).stem)
-    check(isinstance(name, str) and name != "", "name", "must be a non-empty string")
+    check_label(name, "name")
     base = data.get("scenario", {})
     check(isinstance(base, dict), "scenario", "must be a table")
     sweeps = data.get("sweep", [])
@@ -171,6 +172,8 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
     random = dict(sweep.get("random", {}))
     grid_axes = [(p, _axis_values(p, v, resolved_base, f"{where}.grid.{p}"))
                  for p, v in grid.items()]
+    size = math.prod(len(vals) for _, vals in grid_axes)
+    check(size <= MAX_RUNS, f"{where}.grid", f"expands to {size} runs (at most {MAX_RUNS})")
     parts = [[dict(zip([p for p, _ in grid_axes], combo))
               for combo in itertools.product(*[vals for _, vals in grid_axes])]]
     if zipped:
@@ -182,8 +185,9 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
         parts.append([{p: v[i] for p, v in cols.items()} for i in range(n)])
     if random:
         samples, seed = random.pop("samples", None), random.pop("seed", 0)
-        check(isinstance(samples, int) and not isinstance(samples, bool) and samples > 0,
-              f"{where}.random.samples", f"must be a positive integer, got {samples!r}")
+        check(isinstance(samples, int) and not isinstance(samples, bool)
+              and 0 < samples <= MAX_RUNS, f"{where}.random.samples",
+              f"must be an integer in 1..{MAX_RUNS}, got {samples!r}")
         check(isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
               f"{where}.random.seed", f"must be an integer >= 0, got {seed!r}")
         axes = _flatten(random)
@@ -192,6 +196,8 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
         cols = {p: _random_values(p, v, samples, rng, f"{where}.random.{p}")
                 for p, v in sorted(axes.items())}
         parts.append([{p: v[i] for p, v in cols.items()} for i in range(samples)])
+    size = math.prod(len(p) for p in parts)
+    check(size <= MAX_RUNS, where, f"expands to {size} runs (at most {MAX_RUNS})")
     return [dict(itertools.chain.from_iterable(d.items() for d in combo))
             for combo in itertools.product(*parts)]
 
@@ -224,142 +230,118 @@ def expand(campaign: Campaign) -> list[PlannedRun]:
                                             f"{': ' + label if label else ''})") from None
             rid = run_id(scenario_to_mapping(scenario))
             runs.setdefault(rid, PlannedRun(rid, scenario, sweep_name, point))
+            check(len(runs) <= MAX_RUNS, "sweep", f"the campaign expands to more than "
+                                                  f"{MAX_RUNS} runs")
     return list(runs.values())
 
 
 # --- execution ----------------------------------------------------------------------------------
-def execute_run(scenario_data: dict) -> tuple[RunResult, dict]:
-    """Run one scenario (in a worker): the result, with signals as float32 (what the
-    store keeps; half the bytes to send back), and its metrics computed from the float64
-    signals.  An unexpected exception becomes a
-    "failed" result carrying its message, so that one bad run never stops a campaign."""
-    try:
-        result = run_scenario(scenario_from_mapping(scenario_data))
-        metrics = all_metrics(result)
-    except Exception as exc:  # noqa: BLE001 - reported as the run's failure
-        result = RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)),
-                           status="failed", message=f"{type(exc).__name__}: {exc}",
-                           config=scenario_data)
-        metrics = {"status": "failed", "end_time": 0.0}
-    result.signals = result.signals.astype(np.float32)
-    return result, metrics
-
-
-class SerialExecutor(Executor):
-    """Runs each task when it is submitted, in this process (``--workers 1``)."""
-
-    def submit(self, fn, /, *args, **kwargs) -> Future:
-        future: Future = Future()
-        try:
-            future.set_result(fn(*args, **kwargs))
-        except BaseException as exc:  # noqa: BLE001 - delivered through the future
-            future.set_exception(exc)
-        return future
-
-
-def make_executor(kind: str = "local", workers: int | None = None,
-                  scheduler: str | None = None) -> tuple[Executor, object]:
-    """(executor, close) for ``kind`` "local" (process pool, or serial with one worker)
-    or "dask" (a Dask cluster at ``scheduler`` or $DASK_SCHEDULER_ADDRESS); call
-    ``close()`` when done."""
-    if kind == "local":
-        workers = workers or os.cpu_count() or 1
-        check(workers >= 1, "--workers", f"must be >= 1, got {workers}")
-        if workers == 1:
-            ex = SerialExecutor()
-            return ex, ex.shutdown
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-        # spawn: each worker imports and builds its own Exudyn systems (fork is unsafe
-        # with the threads numba and exudyn may have started in the parent).
-        ex = ProcessPoolExecutor(max_workers=workers,
-                                 mp_context=multiprocessing.get_context("spawn"))
-        return ex, ex.shutdown
-    if kind == "dask":
-        address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
-        check(bool(address), "--scheduler", "the dask executor needs --scheduler "
-                                            "tcp://HOST:PORT or DASK_SCHEDULER_ADDRESS")
-        try:
-            from distributed import Client
-        except ImportError:
-            raise ConfigError("--executor", "dask needs the cluster extra: "
-                                            "pip install 'flexarm-validation[cluster]'") from None
-        try:
-            client = Client(address, timeout="20s")
-        except OSError as exc:
-            raise ConfigError("--scheduler", f"cannot reach {address}: {exc}") from None
-        executor = client.get_executor(pure=False)
-
-        def close():
-            executor.shutdown()
-            client.close()
-        return executor, close
-    raise ConfigError("--executor", f"must be 'local' or 'dask', got {kind!r}")
-
-
 @dataclass
 class CampaignSummary:
+    """What a campaign invocation did.  ``skipped`` runs were already stored (by the same
+    code, verified); ``stale`` were stored by other code and ``damaged`` had a bad file —
+    both rerun; ``failed_before`` failed earlier and were not retried."""
+
     planned: int = 0
     skipped: int = 0
     ok: int = 0
     diverged: int = 0
     failed: int = 0
-    interrupted: bool = False
+    stale: list = field(default_factory=list)
+    damaged: dict = field(default_factory=dict)
+    failed_before: list = field(default_factory=list)
+    interrupted: int = 0  # the signal number, 0 if not interrupted
 
     @property
     def done(self) -> int:
         return self.ok + self.diverged + self.failed
 
+    @property
+    def any_failed(self) -> bool:
+        return bool(self.failed or self.failed_before)
 
-def run_campaign(campaign: Campaign, out: str | Path, *, executor: Executor | None = None,
-                 retry_failed: bool = False, progress: bool = True,
-                 only: list[PlannedRun] | None = None) -> CampaignSummary:
-    """Expand ``campaign`` and run what is not yet in ``out``; results are written by this
-    process as they arrive.  Completed (ok/diverged) runs are skipped; failed ones are
-    redone only with ``retry_failed``."""
+    def line(self, name: str, out) -> str:
+        parts = [f"{name}: {self.planned} runs"]
+        if self.skipped:
+            parts.append(f"{self.skipped} already stored")
+        parts.append(f"ran {self.done}: {self.ok} ok, {self.diverged} diverged, "
+                     f"{self.failed} failed")
+        if self.failed_before:
+            parts.append(f"{len(self.failed_before)} failed earlier (not retried: "
+                         "--retry-failed)")
+        if self.stale:
+            parts.append(f"{len(self.stale)} made by other code, rerun")
+        if self.damaged:
+            parts.append(f"{len(self.damaged)} damaged, rerun ({', '.join(self.damaged)})")
+        return "; ".join(parts) + f" -> {out}"
+
+
+def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: bool,
+             reuse_stale: bool) -> tuple[list[PlannedRun], CampaignSummary]:
+    """Which planned runs to execute, after verifying what ``store`` holds: a run is
+    skipped only if its row exists, its file verifies (size and SHA-256), and it was made
+    by the same code (or ``reuse_stale``); failed runs are redone with ``retry_failed``."""
+    summary = CampaignSummary(planned=len(planned))
+    wanted = {r.run_id for r in planned}
+    rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
+    damaged = store.verify(list(rows.values()))
+    todo = []
+    for run in planned:
+        row = rows.get(run.run_id)
+        if row is None:
+            todo.append(run)
+        elif run.run_id in damaged:
+            summary.damaged[run.run_id] = damaged[run.run_id]
+            todo.append(run)
+        elif row.fingerprint != run_fingerprint(row.config) and not reuse_stale:
+            summary.stale.append(run.run_id)
+            todo.append(run)
+        elif row.status == "failed" and retry_failed:
+            todo.append(run)
+        else:
+            summary.skipped += 1
+            if row.status == "failed":
+                summary.failed_before.append(run.run_id)
+    return todo, summary
+
+
+def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
+                 retry_failed: bool = False, reuse_stale: bool = False,
+                 progress: bool = True, only: list[PlannedRun] | None = None) -> CampaignSummary:
+    """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
+    stored as soon as it finishes.  On SIGINT/SIGTERM, what finished is kept and
+    ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json are
+    exported at the end."""
     planned = only if only is not None else expand(campaign)
     store = ResultStore(out)
-    store.set_campaign({"name": campaign.name, "description": campaign.description,
-                        "report": campaign.report})
+    store.prepare()
+    store.set_campaign(campaign.name, {"description": campaign.description,
+                                       "report": campaign.report})
     store.remove_stale_temporaries()
-    done = store.completed()
-    todo = [r for r in planned
-            if r.run_id not in done or (done[r.run_id] == "failed" and retry_failed)]
-    summary = CampaignSummary(planned=len(planned), skipped=len(planned) - len(todo))
-    if not todo:
-        return summary
-    own = executor is None
-    if own:
-        executor, close = make_executor("local", 1)
-    env = environment()
-    bar = _progress(len(todo), campaign.name, enabled=progress)
-    futures = {}
-    try:
-        for run in todo:
-            futures[executor.submit(execute_run, scenario_to_mapping(run.scenario))] = run
-        for future in as_completed(futures):
-            run = futures[future]
-            try:
-                result, metrics = future.result()
-            except Exception as exc:  # the worker itself died (e.g. killed): a failure
-                result = RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)),
-                                   status="failed", message=f"{type(exc).__name__}: {exc}",
-                                   config=scenario_to_mapping(run.scenario))
-                metrics = {"status": "failed", "end_time": 0.0}
-            store.add(run.run_id, result, metrics, env=env,
-                      extra={"campaign": campaign.name, "sweep": run.sweep,
-                             "axes": {k: _jsonable(v) for k, v in run.axes.items()}})
-            setattr(summary, result.status, getattr(summary, result.status) + 1)
-            bar.update(1)
-            bar.set_postfix(ok=summary.ok, diverged=summary.diverged, failed=summary.failed)
-    except KeyboardInterrupt:
-        summary.interrupted = True
-        for future in futures:
-            future.cancel()
-    finally:
-        bar.close()
-        if own:
-            close()
+    todo, summary = classify(planned, store, retry_failed=retry_failed,
+                             reuse_stale=reuse_stale)
+    if todo:
+        own = runner is None
+        runner = runner or SerialRunner()
+        env = environment()
+        by_id = {r.run_id: r for r in todo}
+        bar = _progress(len(todo), campaign.name, enabled=progress)
+        try:
+            tasks = ((r.run_id, scenario_to_mapping(r.scenario)) for r in todo)
+            for rid, result, metrics in runner.results(tasks):
+                run = by_id[rid]
+                store.add(rid, result, metrics, campaign=campaign.name, sweep=run.sweep,
+                          axes={k: _jsonable(v) for k, v in run.axes.items()}, env=env)
+                setattr(summary, result.status, getattr(summary, result.status) + 1)
+                bar.update(1)
+                bar.set_postfix(ok=summary.ok, diverged=summary.diverged, failed=summary.failed)
+        except Interrupted as exc:
+            summary.interrupted = exc.signum
+        finally:
+            bar.close()
+            if own:
+                runner.close()
+    store.export()
     return summary
 
 

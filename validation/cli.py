@@ -1,30 +1,28 @@
 """The ``flexarm`` command line: a thin layer over the library.
 
-Errors in user input end with one line on stderr and exit status 2, never a traceback.
+Bad input ends with one line on stderr and exit status 2, before anything is written;
+a run or campaign with failed runs exits 1; SIGINT/SIGTERM exit 130/143 after keeping
+what finished; a full disk is one line naming the folder, exit 1.  Never a traceback.
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import errno
 import math
+import os
 import sys
 from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
 
-from plant_exudyn import ELEMENTS, Mesh, natural_frequencies
-from reduced_model import ArmModel, ArmParameters, validate_modes_per_link
+from controllers import CONTROLLERS, OBSERVERS
 
 from ._config import ConfigError
-from .baselines import DEFAULT_FILE, evaluate, load_baselines, updated_bound, write_baselines
-from .campaign import expand, load_campaign, make_executor, run_campaign
-from .claims import write_claims
-from .report import write_report
-from .loop import run_scenario
-from .metrics import all_metrics
-from .scenario import CONTROLLERS, OBSERVERS, PLANTS, Scenario, scenario_from_mapping
-from .store import ResultStore, run_id
+from .executor import Interrupted, available_cores, exit_status, make_runner
+from .scenario import ARMS, PLANTS, Scenario, scenario_from_mapping
+from .store import ResultStore, StoreError, run_id
 from .tomlfiles import load_toml, parse_value, set_dotted
 
 EXIT_USAGE = 2
@@ -49,15 +47,32 @@ def _int_in(lo: int, hi: int):
     return parse
 
 
-def _format_row(label: str, values) -> str:
-    return f"  {label:<30}" + "".join(f"{v:>11.4f}" for v in values)
+def _finite(text: str) -> float:
+    """argparse type: a finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
 
 
+def _positive(text: str) -> float:
+    value = _finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return value
+
+
+# --- flexarm modes ------------------------------------------------------------------------
 def cmd_modes(args: argparse.Namespace) -> int:
+    from plant_exudyn import Mesh, natural_frequencies
+    from reduced_model import ArmModel, ArmParameters, validate_modes_per_link
     if args.params and args.table1:
         raise ValueError("--params and --table1 exclude each other")
     if args.table1:
-        params, source = ArmParameters.table1(), "the paper's Table 1 (no stator, no damping)"
+        params, source = ArmParameters.table1(), ARMS["table1"]
     elif args.params:
         data = load_toml(args.params)
         if set(data) == {"params"} and isinstance(data["params"], dict):
@@ -65,14 +80,15 @@ def cmd_modes(args: argparse.Namespace) -> int:
         params = ArmParameters.from_mapping(data, where=f"{args.params}:params")
         source = args.params
     else:
-        params, source = ArmParameters(), "defaults (Table 1 + stator inertia + damping)"
+        params, source = ArmParameters(), ARMS["default"]
     model = ArmModel(params, validate_modes_per_link(args.modes_per_link, where="--modes-per-link"))
     mesh = Mesh(element=args.element, elements_per_link=args.elements) if args.compare else None
     n1, n2 = model.modes_per_link
-    print(f"Reduced model, {n1}+{n2} clamped-mass modes, parameters: {source}")
+    row = lambda label, values: f"  {label:<30}" + "".join(f"{v:>11.4f}" for v in values)  # noqa: E731
+    print(f"Reduced model, {n1}+{n2} clamped-mass modes, arm: {source}")
     print("Clamped-mass link frequencies [Hz]")
     for i, modes in enumerate(model.mode_shapes, start=1):
-        print(_format_row(f"link {i}", modes.frequencies_hz))
+        print(row(f"link {i}", modes.frequencies_hz))
     for theta2 in args.theta2:
         Q = np.zeros(model.n)
         Q[1] = theta2
@@ -80,12 +96,12 @@ def cmd_modes(args: argparse.Namespace) -> int:
         for joints in ("locked", "free"):
             reduced = model.natural_frequencies(Q, joints)
             label = "joints locked" if joints == "locked" else "joints free (non-zero)"
-            print(_format_row(label + (" reduced" if mesh else ""), reduced))
+            print(row(label + (" reduced" if mesh else ""), reduced))
             if mesh:
                 fe = natural_frequencies(params, mesh, theta=(0.0, theta2), joints=joints,
                                          n=len(reduced))
-                print(_format_row(f"{'':<14}FE", fe))
-                print(_format_row(f"{'':<10}gap [%]", 100 * (reduced - fe) / fe))
+                print(row(f"{'':<14}FE", fe))
+                print(row(f"{'':<10}gap [%]", 100 * (reduced - fe) / fe))
     if mesh:
         print(f"FE: {mesh.element}, {mesh.elements_per_link[0]}+{mesh.elements_per_link[1]} "
               "elements; gap = (reduced - FE) / FE")
@@ -93,7 +109,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
 
 
 # --- flexarm run ----------------------------------------------------------------------
-_RUN_FLAGS = {"plant": "plant.kind", "controller": "controller.kind",
+_RUN_FLAGS = {"plant": "plant.kind", "controller": "controller.kind", "arm": "arm",
               "observer": "observer.kind", "duration": "duration", "seed": "seed", "Ts": "Ts",
               "feedback": "feedback", "initial_state": "initial_state", "name": "name"}
 
@@ -104,25 +120,24 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
         value = getattr(args, attr)
         if value is not None:
             set_dotted(data, key, value)
-    if args.idealised:
-        set_dotted(data, "controller.pbc.idealised", True)
     for item in args.set or []:
         key, sep, text = item.partition("=")
-        if not sep or not key:
+        if not sep or not key.strip():
             raise ConfigError("--set", f"expected KEY=VALUE, got {item!r}")
         set_dotted(data, key.strip(), parse_value(text.strip()))
     return scenario_from_mapping(data)
 
 
-def prepare_output(out: str | Path) -> ResultStore:
+def open_output(out: str | Path) -> ResultStore:
+    """Create (or open) a results folder; one line naming it if that is impossible."""
     store = ResultStore(out)
+    store.prepare()
+    probe = store.out / ".write-test"
     try:
-        store.prepare()
-        probe = store.out / ".write-test"
         probe.write_text("")
         probe.unlink()
     except OSError as exc:
-        raise ValueError(f"--out {out}: not writable ({exc.strerror or exc})") from None
+        raise StoreError(f"--out {out}: not writable ({exc.strerror or exc})") from None
     return store
 
 
@@ -132,6 +147,8 @@ _TABLE = [("status", "status", "{}"), ("track_max_1", "max |e1| after transient 
           ("tip_err_max", "max tip error vs rigid [m]", "{:.3g}"),
           ("defl_max_1", "max tip deflection 1 [m]", "{:.3g}"),
           ("defl_max_2", "max tip deflection 2 [m]", "{:.3g}"),
+          ("vib_rms_1", "vibration rms 1 after transient [m]", "{:.3g}"),
+          ("vib_rms_2", "vibration rms 2 after transient [m]", "{:.3g}"),
           ("tau_max_1", "max |tau1| [N m]", "{:.3g}"), ("tau_max_2", "max |tau2| [N m]", "{:.3g}"),
           ("tau_tv_1", "tau1 variation [N m/s]", "{:.3g}"),
           ("tau_tv_2", "tau2 variation [N m/s]", "{:.3g}"),
@@ -141,71 +158,82 @@ _TABLE = [("status", "status", "{}"), ("track_max_1", "max |e1| after transient 
 def format_metrics(metrics: dict) -> str:
     lines = [f"  {label:<44} {fmt.format(metrics[key])}" for key, label, fmt in _TABLE
              if key in metrics and not (isinstance(metrics[key], float) and math.isnan(metrics[key]))]
-    est = {k: v for k, v in metrics.items() if k.startswith("est_max_")}
-    if est:
-        for kind, label in (("theta", "positions θ [rad]"), ("q", "modal q [m]"),
-                            ("theta_dot", "rates θ̇ [rad/s]"), ("q_dot", "modal rates q̇ [m/s]")):
-            vals = [v for k, v in est.items() if _state_kind(k.removeprefix("est_max_")) == kind]
-            if vals:
-                lines.append(f"  {'max estimation error, ' + label:<44} {max(vals):.3g}")
+    ratios = {k.removeprefix("est_to_noise_"): v for k, v in metrics.items()
+              if k.startswith("est_to_noise_") and isinstance(v, float) and math.isfinite(v)}
+    if ratios:
+        worst = max(ratios, key=ratios.get)
+        lines.append(f"  {'estimate / measurement error, worst':<44} {ratios[worst]:.3g} ({worst})")
+    if metrics.get("est_worse"):
+        lines.append(f"  {'estimate worse than the measurement':<44} {metrics['est_worse']}")
     return "\n".join(lines)
 
 
-def _state_kind(state: str) -> str:
-    return ("theta" if state.startswith("theta") else "q") + ("_dot" if state.endswith("_dot") else "")
-
-
 def cmd_run(args: argparse.Namespace) -> int:
+    from .executor import execute_run
+    from .scenario import scenario_to_mapping
     scenario = scenario_from_args(args)
-    store = prepare_output(args.out or Path("results") / scenario.name)
-    result = run_scenario(scenario)
-    metrics = all_metrics(result)
-    rid = run_id(result.config)
+    data = scenario_to_mapping(scenario)
+    rid = run_id(data)
+    store = open_output(args.out or Path("results") / f"run-{rid}")
+    result, metrics = execute_run(data)
     path = store.add(rid, result, metrics)
+    store.export()
     s = scenario
-    print(f"{s.name}: plant {s.plant.kind}, controller {s.controller.kind}"
-          f"{' (idealised)' if s.controller.pbc.idealised and s.controller.kind == 'pbc' else ''},"
-          f" observer {s.observer.kind}, {s.duration:g} s at Ts = {s.Ts:g} s")
+    obs = "" if s.observer.kind == "none" else f" + {s.observer.kind}"
+    print(f"{s.name}: {s.controller.kind}{obs} on the {s.plant.kind} plant, {s.arm} arm, "
+          f"{s.duration:g} s at Ts = {s.Ts:g} s, from {s.initial_state}")
     if result.message:
-        print(f"  stopped: {result.message}")
+        print(f"  {result.status}: {result.message}")
     print(format_metrics(metrics))
-    print(f"results: {path} (metrics.csv, manifest.json in {store.out})")
+    print(f"results: {path} (index and metrics.csv in {store.out})")
     return 0 if result.status != "failed" else EXIT_FAILED
 
 
-# --- flexarm campaign --------------------------------------------------------------------
-EXIT_INTERRUPTED = 130
+# --- campaigns ----------------------------------------------------------------------------
+def _runner(args):
+    return make_runner(args.executor, args.workers, args.scheduler,
+                       force=getattr(args, "force_workers", False))
+
+
+def _finish(summary, name: str, out) -> int:
+    print(summary.line(name, out))
+    if summary.interrupted:
+        print(f"interrupted ({summary.done} finished runs kept): rerun the same command to "
+              "resume", file=sys.stderr)
+        return exit_status(summary.interrupted)
+    return EXIT_FAILED if summary.any_failed else 0
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
+    from .campaign import classify, expand, load_campaign, run_campaign
     campaign = load_campaign(args.file)
     runs = expand(campaign)  # every scenario checked before anything runs
     out = Path(args.out or Path("results") / campaign.name)
     if args.dry_run:
+        store = ResultStore(out)
+        todo = classify(runs, store, retry_failed=args.retry_failed,
+                        reuse_stale=args.reuse_stale)[0] if store.exists() else runs
+        todo_ids = {r.run_id for r in todo}
         for r in runs:
             axes = ", ".join(f"{k}={v}" for k, v in r.axes.items())
-            print(f"{r.run_id}  {r.sweep:<16} {axes}")
-        print(f"{len(runs)} runs would be written to {out}")
+            mark = "run " if r.run_id in todo_ids else "done"
+            print(f"{mark} {r.run_id}  {r.sweep:<16} {axes}")
+        print(f"{len(runs)} runs planned: {len(todo)} to run, {len(runs) - len(todo)} already "
+              f"stored in {out}")
         return 0
-    prepare_output(out)
-    executor, close = make_executor(args.executor, args.workers, args.scheduler)
-    try:
-        summary = run_campaign(campaign, out, executor=executor, retry_failed=args.retry_failed,
-                               progress=not args.no_progress, only=runs)
-    finally:
-        close()
-    print(f"{campaign.name}: {summary.planned} runs planned, {summary.skipped} already done, "
-          f"{summary.ok} ok, {summary.diverged} diverged, {summary.failed} failed -> {out}")
-    if summary.interrupted:
-        print(f"interrupted: rerun the same command to resume ({summary.done} runs stored)",
-              file=sys.stderr)
-        return EXIT_INTERRUPTED
-    return EXIT_FAILED if summary.failed else 0
+    runner = _runner(args)
+    with runner:
+        open_output(out)
+        summary = run_campaign(campaign, out, runner=runner, retry_failed=args.retry_failed,
+                               reuse_stale=args.reuse_stale, progress=not args.no_progress,
+                               only=runs)
+    return _finish(summary, campaign.name, out)
 
 
-# --- flexarm report / reproduce-paper ----------------------------------------------------
 def cmd_report(args: argparse.Namespace) -> int:
-    html_path, md_path = write_report(args.results, animate=not args.no_animation)
+    from .report import write_report
+    html_path, md_path = write_report(args.results, animate=not args.no_animation,
+                                      progress=not args.no_progress)
     print(f"report: {html_path} (self-contained) and {md_path}")
     return 0
 
@@ -220,38 +248,102 @@ def campaigns_dir() -> Path:
 
 
 def cmd_reproduce_paper(args: argparse.Namespace) -> int:
+    from .campaign import expand, load_campaign, run_campaign
+    from .claims import write_claims
     campaign = load_campaign(campaigns_dir() / "paper.toml")
     runs = expand(campaign)
     out = Path(args.out or Path("results") / "paper")
-    prepare_output(out)
-    executor, close = make_executor("local", args.workers)
-    try:
-        summary = run_campaign(campaign, out, executor=executor, progress=not args.no_progress,
+    runner = make_runner("local", args.workers, force=args.force_workers)
+    with runner:
+        open_output(out)
+        summary = run_campaign(campaign, out, runner=runner, progress=not args.no_progress,
                                only=runs)
-    finally:
-        close()
-    if summary.interrupted:
-        print("interrupted: rerun the same command to resume", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    table = write_claims(out)
-    print(f"paper: {summary.planned} runs ({summary.skipped} already done), {summary.ok} ok, "
-          f"{summary.diverged} diverged, {summary.failed} failed\n")
-    print(table)
-    print(f"\nclaims: {out / 'claims.md'}")
+        if summary.interrupted:
+            return _finish(summary, campaign.name, out)
+        print(summary.line(campaign.name, out))
+        if not args.no_stability:
+            stability = _stability(runner, [r.scenario for r in runs if not
+                                            r.scenario.disturbances], out / "stability",
+                                   progress=not args.no_progress)
+            if stability:
+                return stability
+    print()
+    print(write_claims(out))
+    print(f"claims: {out / 'claims.md'} and claims.csv")
     if not args.no_report:
-        html_path, _ = write_report(out, animate=not args.no_animation)
+        from .report import write_report
+        html_path, _ = write_report(out, animate=not args.no_animation,
+                                    progress=not args.no_progress)
         print(f"report: {html_path}")
-    return EXIT_FAILED if summary.failed else 0
+    return EXIT_FAILED if summary.any_failed else 0
+
+
+def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arms=None) -> int:
+    """Run the stability map into ``out`` and print it; a non-zero exit status if it was
+    interrupted."""
+    from .stability import cases_from_scenarios, stability_map, write_stability
+    cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
+    open_output(out)
+    results, summary = stability_map(cases, out, runner=runner, progress=progress)
+    if summary.interrupted:
+        return _finish(summary, "stability", out)
+    print(write_stability(results, out))
+    print(f"stability map: {out / 'stability.md'} and stability.csv")
+    return 0
+
+
+def cmd_stability(args: argparse.Namespace) -> int:
+    from .campaign import campaign_from_mapping, expand
+    data = load_toml(args.file)
+    if "scenario" in data or "sweep" in data:
+        scenarios = [r.scenario for r in expand(campaign_from_mapping(data, source=args.file))]
+        plants, arms = args.plant, args.arm
+    else:
+        scenarios = [scenario_from_mapping(data)]
+        plants, arms = args.plant or list(PLANTS), args.arm or list(ARMS)
+    out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
+    runner = _runner(args)
+    with runner:
+        return _stability(runner, scenarios, out, progress=not args.no_progress,
+                          plants=plants, arms=arms)
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    store = ResultStore(args.results)
+    csv_path, json_path = store.export()
+    print(f"exported {len(store.rows())} runs: {csv_path if args.format == 'csv' else json_path}")
+    return 0
+
+
+def cmd_repair(args: argparse.Namespace) -> int:
+    store = ResultStore(args.results)
+    if not store.runs_dir.is_dir():
+        raise StoreError(f"{args.results}: no runs/ folder (not a results folder)")
+    report = store.repair()
+    store.remove_stale_temporaries(older_than=0.0)
+    store.export()
+    for action, ids in report.items():
+        print(f"{action}: {len(ids)}" + (f" ({', '.join(ids)})" if ids else ""))
+    print(f"{store.out}: {len(store.rows())} runs indexed")
+    return 0
 
 
 # --- flexarm baseline -----------------------------------------------------------------------
 def _baseline_rows(args) -> tuple:
+    from .baselines import evaluate, load_baselines
+    if args.only is not None and not args.only.strip():
+        raise ConfigError("--only", "must be a non-empty pattern")
     baselines = load_baselines(args.file)
     rows = evaluate(baselines, out=args.out or Path("results") / "baselines", tier=args.tier,
                     only=args.only, campaign=args.campaign,
                     results=getattr(args, "results", None))
     if not rows:
-        raise ValueError("no check matches the selection (--tier/--only/--campaign)")
+        tiers = sorted({c.tier for c in baselines.checks
+                        if not args.campaign or c.campaign == args.campaign})
+        raise ValueError(f"no check matches the selection (--tier {args.tier}"
+                         + (f", --campaign {args.campaign}" if args.campaign else "")
+                         + (f", --only {args.only}" if args.only else "")
+                         + f"); matching tiers: {', '.join(tiers) or 'none'}")
     return baselines, rows
 
 
@@ -281,46 +373,68 @@ def cmd_baseline_check(args: argparse.Namespace) -> int:
 
 
 def cmd_baseline_update(args: argparse.Namespace) -> int:
+    from .baselines import proposed_bounds, write_baselines
     baselines, rows = _baseline_rows(args)
-    new = {r["check"].name: (r["value"], updated_bound(r["check"], r["value"], baselines))
-           for r in rows if math.isfinite(r["value"])}
-    loosened, notes = [], []
+    proposals = proposed_bounds(rows, baselines)
+    notes, loosened, changed = [], [], {}
     for r in rows:
-        c = r["check"]
-        if c.name not in new:
-            notes.append("  (not measurable: run did not complete)")
+        p = proposals.get(r["check"].name)
+        if p is None:
+            notes.append("  (not measurable: the run did not complete)")
             continue
-        value, bound = new[c.name]
-        looser = bound > c.bound if c.op == "<=" else bound < c.bound
-        if looser:
-            loosened.append(c.name)
-        notes.append(f"  -> {c.op}{bound:.4g}{'  LOOSER' if looser else ''}")
+        notes.append(f"  -> {r['check'].op}{p['bound']:.4g}" + ("  LOOSER" if p["looser"] else
+                                                                 "" if p["changed"] else "  (same)"))
+        if p["looser"]:
+            loosened.append(r["check"].name)
+        if p["changed"]:
+            changed[r["check"].name] = p
     _print_checks(rows, notes)
     if loosened and not args.allow_loosen:
         print(f"refusing to loosen {len(loosened)} bound(s): {', '.join(loosened)} "
               "(pass --allow-loosen if that is intended)", file=sys.stderr)
         return EXIT_FAILED
-    checks = [dataclasses.replace(c, bound=float(f"{new[c.name][1]:.4g}"),
-                                  measured=float(f"{new[c.name][0]:.4g}"))
-              if c.name in new else c for c in baselines.checks]
+    if not changed:
+        print(f"no change: every bound in {baselines.path} already matches the policy")
+        return 0
+    checks = [dataclasses.replace(c, bound=changed[c.name]["bound"],
+                                  measured=changed[c.name]["measured"])
+              if c.name in changed else c for c in baselines.checks]
     write_baselines(baselines, checks)
-    print(f"updated {len(new)} bound(s) in {baselines.path}")
+    print(f"updated {len(changed)} bound(s) in {baselines.path}")
     return 0
 
 
+# --- the parser ---------------------------------------------------------------------------------
+def _add_execution(p, *, dask: bool = True) -> None:
+    p.add_argument("--workers", type=_int_in(1, 4096), default=None, metavar="N",
+                   help=f"parallel runs (default: the {available_cores()} cores; 1 = serial, "
+                        "in this process)")
+    p.add_argument("--force-workers", action="store_true",
+                   help="allow more workers than cores")
+    if dask:
+        p.add_argument("--executor", choices=("local", "dask"), default="local",
+                       help="local processes (default) or a Dask cluster")
+        p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                       help="Dask scheduler (with --executor dask; default "
+                            "$DASK_SCHEDULER_ADDRESS)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from plant_exudyn import ELEMENTS
     parser = _Parser(prog="flexarm", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version",
                         version=f"flexarm-validation {version('flexarm-validation')}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    modes = sub.add_parser("modes", help="natural frequencies of the reduced model")
+
+    modes = sub.add_parser("modes", help="natural frequencies of the reduced model (and FE)")
     modes.add_argument("--params", metavar="TOML",
                        help="arm parameters (top-level keys or a [params] table)")
     modes.add_argument("--table1", action="store_true",
                        help="the paper's Table 1 exactly (no stator inertia, no damping)")
     modes.add_argument("--modes-per-link", nargs=2, type=int, default=[2, 2],
                        metavar=("N1", "N2"), help="assumed modes of link 1 and 2 (1..4)")
-    modes.add_argument("--theta2", nargs="+", type=float, default=[0.0], metavar="RAD",
+    modes.add_argument("--theta2", nargs="+", type=_finite, default=[0.0], metavar="RAD",
                        help="joint-2 angles at which to linearise (default 0)")
     modes.add_argument("--compare", action="store_true",
                        help="also print the Exudyn FE model's frequencies and the gap")
@@ -332,79 +446,123 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="simulate one closed-loop scenario")
     run.add_argument("--config", metavar="TOML", help="scenario file (flags override it)")
-    run.add_argument("--plant", choices=PLANTS)
-    run.add_argument("--controller", choices=CONTROLLERS)
-    run.add_argument("--observer", choices=OBSERVERS)
-    run.add_argument("--idealised", action="store_true",
-                     help="PBC applies all n components of eq. 20 (reduced plant only)")
-    run.add_argument("--feedback", choices=("auto", "true", "estimate"))
-    run.add_argument("--initial-state", dest="initial_state", choices=("rest", "reference"))
-    run.add_argument("--duration", type=float, metavar="S")
-    run.add_argument("--Ts", type=float, metavar="S", help="control period")
-    run.add_argument("--seed", type=int)
-    run.add_argument("--name")
+    run.add_argument("--arm", choices=tuple(ARMS), help="default arm or the paper's table1")
+    run.add_argument("--plant", choices=PLANTS, help="reduced model or Exudyn truth plant")
+    run.add_argument("--controller", metavar="KIND",
+                     help=f"{', '.join(CONTROLLERS)} or package.module:Class")
+    run.add_argument("--observer", metavar="KIND",
+                     help=f"none, {', '.join(OBSERVERS)} or package.module:Class")
+    run.add_argument("--feedback", choices=("auto", "true", "estimate"),
+                     help="state the controller sees (auto: the estimate if there is an observer)")
+    run.add_argument("--initial-state", dest="initial_state", choices=("rest", "reference"),
+                     help="start at rest or moving with the reference")
+    run.add_argument("--duration", type=_positive, metavar="S", help="simulated time [s]")
+    run.add_argument("--Ts", type=_positive, metavar="S", help="control period [s]")
+    run.add_argument("--seed", type=_int_in(0, 2**63 - 1), help="noise seed")
+    run.add_argument("--name", help="a label for the run (default paper)")
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="any scenario field by dotted key, value in TOML syntax, e.g. "
                           "--set true_params.Mp=0.5 --set plant.mesh.elements_per_link=[8,8]")
-    run.add_argument("--out", metavar="DIR", help="results folder (default results/NAME)")
+    run.add_argument("--out", metavar="DIR", help="results folder (default results/run-<id>)")
     run.set_defaults(func=cmd_run)
 
     camp = sub.add_parser("campaign", help="run a campaign of scenarios (resumable)")
     camp.add_argument("file", metavar="CAMPAIGN.toml")
     camp.add_argument("--out", metavar="DIR", help="results folder (default results/NAME)")
-    camp.add_argument("--workers", type=_int_in(1, 1024), default=None, metavar="N",
-                      help="parallel runs (default: the number of cores; 1 = serial)")
-    camp.add_argument("--executor", choices=("local", "dask"), default="local")
-    camp.add_argument("--scheduler", metavar="tcp://HOST:PORT",
-                      help="Dask scheduler (default $DASK_SCHEDULER_ADDRESS)")
+    _add_execution(camp)
     camp.add_argument("--retry-failed", action="store_true", help="redo runs that failed")
-    camp.add_argument("--no-progress", action="store_true", help="no progress bar")
-    camp.add_argument("--dry-run", action="store_true", help="list the runs, run nothing")
+    camp.add_argument("--reuse-stale", action="store_true",
+                      help="keep stored runs made by other code instead of rerunning them")
+    camp.add_argument("--dry-run", action="store_true",
+                      help="list the runs and which are already stored; run nothing")
     camp.set_defaults(func=cmd_campaign)
 
     rep = sub.add_parser("report", help="write report.html and report.md of a results folder")
     rep.add_argument("results", metavar="RESULTS_DIR")
     rep.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    rep.add_argument("--no-progress", action="store_true", help="no progress bar")
     rep.set_defaults(func=cmd_report)
 
     paper = sub.add_parser("reproduce-paper",
-                           help="run campaigns/paper.toml, write the claims table and report")
+                           help="run campaigns/paper.toml, the stability map, the claims "
+                                "table and the report")
     paper.add_argument("--out", metavar="DIR", help="results folder (default results/paper)")
-    paper.add_argument("--workers", type=_int_in(1, 1024), default=None, metavar="N")
-    paper.add_argument("--no-progress", action="store_true")
-    paper.add_argument("--no-report", action="store_true")
-    paper.add_argument("--no-animation", action="store_true")
+    _add_execution(paper, dask=False)
+    paper.add_argument("--no-stability", action="store_true", help="skip the stability map")
+    paper.add_argument("--no-report", action="store_true", help="skip the report")
+    paper.add_argument("--no-animation", action="store_true", help="skip the GIF")
     paper.set_defaults(func=cmd_reproduce_paper)
+
+    stab = sub.add_parser("stability", help="largest stable control period per controller, "
+                                            "plant and arm")
+    stab.add_argument("file", metavar="SCENARIO_OR_CAMPAIGN.toml")
+    stab.add_argument("--out", metavar="DIR",
+                      help="results folder (default results/stability-<file name>)")
+    stab.add_argument("--plant", action="append", choices=PLANTS,
+                      help="plant(s) to test (default: both for a scenario, the campaign's own)")
+    stab.add_argument("--arm", action="append", choices=tuple(ARMS),
+                      help="arm(s) to test (default: both for a scenario, the campaign's own)")
+    _add_execution(stab)
+    stab.set_defaults(func=cmd_stability)
+
+    exp = sub.add_parser("export", help="write metrics.csv and manifest.json from the index")
+    exp.add_argument("results", metavar="RESULTS_DIR")
+    exp.add_argument("--format", choices=("csv", "json"), default="csv",
+                     help="the file to name in the output (both are written)")
+    exp.set_defaults(func=cmd_export)
+
+    rep = sub.add_parser("repair", help="rebuild a results folder's index from its run files")
+    rep.add_argument("results", metavar="RESULTS_DIR")
+    rep.set_defaults(func=cmd_repair)
 
     base = sub.add_parser("baseline", help="error-bound regression checks (baselines.toml)")
     bsub = base.add_subparsers(dest="action", required=True, parser_class=_Parser)
+    from .baselines import DEFAULT_FILE
     for action, helptext in (("check", "measure and compare with the bounds"),
                              ("update", "re-measure and rewrite the bounds")):
         b = bsub.add_parser(action, help=helptext)
-        b.add_argument("--file", default=str(DEFAULT_FILE), metavar="TOML")
-        b.add_argument("--tier", choices=("short", "full", "all"), default="short",
-                       help="short: <= 5 s scenarios (make test); full: the 20 s campaign runs")
+        b.add_argument("--file", default=str(DEFAULT_FILE), metavar="TOML",
+                       help="the checks (default: the repository's baselines.toml)")
+        b.add_argument("--tier", choices=("short", "full", "all"), default=None,
+                       help="short: <= 5 s scenarios (make test); full: the 20 s campaign "
+                            "runs (default: short, or full with --campaign)")
         b.add_argument("--only", metavar="GLOB", help="checks whose name matches")
         b.add_argument("--campaign", metavar="NAME", help="checks on runs of this campaign")
         b.add_argument("--out", metavar="DIR", help="where runs are stored "
                                                     "(default results/baselines)")
         if action == "check":
             b.add_argument("--results", metavar="DIR",
-                           help="reuse completed runs of this results folder")
+                           help="reuse verified runs of this results folder (made by this code)")
             b.set_defaults(func=cmd_baseline_check)
         else:
-            b.add_argument("--allow-loosen", action="store_true")
+            b.add_argument("--allow-loosen", action="store_true",
+                           help="accept bounds looser than the stored ones")
             b.set_defaults(func=cmd_baseline_update)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if getattr(args, "tier", "") is None:
+        args.tier = "full" if args.campaign else "short"
+    # Plug-ins named "package.module:Class" are found like `python -m` finds modules: the
+    # current directory first (spawned workers inherit this path).
+    if os.getcwd() not in sys.path:
+        sys.path.insert(0, os.getcwd())
     try:
         return args.func(args)
-    except ValueError as exc:
+    except (ValueError, StoreError) as exc:  # ConfigError, StoreError: bad input
         print(f"flexarm: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except Interrupted as exc:
+        print("flexarm: interrupted", file=sys.stderr)
+        return exit_status(exc.signum)
+    except OSError as exc:
+        where = exc.filename or getattr(args, "out", None) or "the results folder"
+        reason = "no space left on the device" if exc.errno == errno.ENOSPC else \
+            (exc.strerror or str(exc))
+        print(f"flexarm: error: {where}: {reason}", file=sys.stderr)
+        return EXIT_FAILED
 
 
 if __name__ == "__main__":

@@ -13,19 +13,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers import (JointPD, PaperReference, PassivityBasedController, QuinticMove,
-                         RigidComputedTorque, SlidingModeObserver)
+from controllers import PaperReference, QuinticMove
 from plant_exudyn import ExudynPlant
 from reduced_model import ArmModel, PlantFailure, ReducedPlant, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
+from .laws import build_controller, build_observer, nominal_model
 from .results import RunResult
 from .scenario import Scenario, check_scenario, scenario_to_mapping
 
 __all__ = ["Setup", "build", "simulate", "run_scenario", "make_reference"]
-
-_OBSERVER_VARIANTS = {"smo-paper": "paper", "smo-bl": "boundary_layer",
-                      "smo-pos": "position_only"}
 
 
 @dataclass
@@ -35,7 +32,7 @@ class Setup:
     model: ArmModel
     plant: object
     controller: object
-    observer: SlidingModeObserver | None
+    observer: object | None
     reference: object
 
 
@@ -62,7 +59,7 @@ def build(scenario: Scenario) -> Setup:
     """Plant from ``true_params``, controller and observer from ``nominal_params``."""
     check_scenario(scenario)
     s = scenario
-    model = ArmModel(s.nominal_params, s.model.modes_per_link)
+    model = nominal_model(s.nominal_params, s.model.modes_per_link)
     sens = s.sensors
     sensor_config = SensorConfig(
         encoder_resolution=sens.encoder_resolution,
@@ -79,20 +76,7 @@ def build(scenario: Scenario) -> Setup:
                             modal_basis=model.mode_shapes, sensors=sensor_config,
                             spectral_radius=s.plant.spectral_radius,
                             newton_tolerance=s.plant.newton_tolerance)
-    c = s.controller
-    if c.kind == "pbc":
-        g = c.pbc
-        controller = PassivityBasedController(
-            model, lambda_joint=g.lambda_joint, lambda_flex=g.lambda_flex, kv_joint=g.kv_joint,
-            kv_flex=g.kv_flex, idealised=g.idealised, compensate_damping=g.compensate_damping)
-    elif c.kind == "pd":
-        controller = JointPD(c.pd.kp, c.pd.kd, feedforward=model if c.pd.feedforward else None)
-    else:
-        controller = RigidComputedTorque(model, c.ct.kp, c.ct.kd)
-    o = s.observer
-    observer = None if o.kind == "none" else SlidingModeObserver(
-        model, _OBSERVER_VARIANTS[o.kind], l_position=o.l_position, l_velocity=o.l_velocity,
-        boundary_layer=o.boundary_layer, filter_time=o.filter_time)
+    controller, observer = build_controller(s, model), build_observer(s, model)
     return Setup(model, plant, controller, observer, make_reference(s.reference))
 
 
@@ -138,19 +122,21 @@ class _Disturbances:
 
 
 def _signal_layout(model: ArmModel, measured: tuple[str, ...], has_observer: bool,
-                   has_residual: bool):
+                   n_residual: int):
     states = model.state_names
     groups = {  # "truth" then "tips" is exactly a plant's truth_vector
         "truth": states,
         "tips": TRUTH_EXTRAS,
         "ref": ("theta1_ref", "theta2_ref"),
+        "ref_rate": ("theta1_dot_ref", "theta2_dot_ref"),
         "tip_ref": ("tip_ref_x", "tip_ref_y"),
         "xhat": tuple(f"xhat_{s}" for s in states) if has_observer else (),
         "y": tuple(f"y_{m}" for m in measured),
         "tau_cmd": ("tau1_cmd", "tau2_cmd"),
         "tau": ("tau1", "tau2"),
         "residual": (tuple(f"residual_{c}" for c in model.coordinate_names[2:])
-                     if has_residual else ()),
+                     if n_residual == model.n - 2 else
+                     tuple(f"residual_{i + 1}" for i in range(n_residual))),
         "dist": ("dist_tau1", "dist_tau2", "dist_tip_x", "dist_tip_y"),
     }
     names, slices, start = [], {}, 0
@@ -166,7 +152,7 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
     """Run the closed loop of ``scenario`` on ``plant``; never raises for divergence or
     a plant solver failure — those end the run with the corresponding status."""
     s = scenario
-    model = model or ArmModel(s.nominal_params, s.model.modes_per_link)
+    model = model or nominal_model(s.nominal_params, s.model.modes_per_link)
     ref = _SampledReference(reference or make_reference(s.reference))
     n, Ts = model.n, s.Ts
     N = int(round(s.duration / Ts))
@@ -197,20 +183,24 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
         observer.reset(x0 + s.initial_estimate_error())
     use_estimate = s.uses_estimate
     residual = getattr(controller, "residual", None)  # the PBC's unrealisable forces
-    names, sl = _signal_layout(model, names_y, observer is not None, residual is not None)
+    names, sl = _signal_layout(model, names_y, observer is not None,
+                               0 if residual is None else len(residual))
     rows = np.full((N, len(names)), np.nan)
     limit = s.torque_limit
     last_tau = np.zeros(2)
     status, message, k_done = "ok", "", N
     t_plant = t_ctrl = t_obs = 0.0
     wall0 = _time.perf_counter()
+    first_sample = 0.0
     truth = plant.truth_vector()  # [x, *TRUTH_EXTRAS]: one copy per sample
-    s_truth, s_state, s_ref, s_tip_ref = (slice(sl["truth"].start, sl["tips"].stop),
-                                          sl["truth"], sl["ref"], sl["tip_ref"])
+    s_truth, s_state, s_ref, s_ref_rate, s_tip_ref = (
+        slice(sl["truth"].start, sl["tips"].stop), sl["truth"], sl["ref"], sl["ref_rate"],
+        sl["tip_ref"])
     s_xhat, s_y, s_cmd, s_tau = sl["xhat"], sl["y"], sl["tau_cmd"], sl["tau"]
     s_res, s_dist = sl["residual"], sl["dist"]
     no_disturbance = np.zeros(4)
     bounds = _Bounds(n, s.divergence, lengths)
+    tau_shapes = ((2,), (n,))  # joint torques, or the idealised law's n generalised forces
 
     for k in range(N):
         t = k * Ts
@@ -221,21 +211,36 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
             row[:] = np.nan
             status, message, k_done = "diverged", f"{reason} at t = {t:.4g} s", k
             break
-        theta_d = ref(t)[0]
+        theta_d, dtheta_d, _ = ref(t)
         row[s_ref] = theta_d
+        row[s_ref_rate] = dtheta_d
         row[s_tip_ref] = _rigid_tip(theta_d, lengths)
 
         y_k = y.values + std * noise_rng.standard_normal(std.shape) if noisy else y.values
+        if not math.isfinite(y_k.sum()):
+            status, message, k_done = "diverged", f"measurement not finite at t = {t:.4g} s", k
+            break
         delayed.append(y_k)
         y_used = delayed[0]
         row[s_y] = y_used
 
-        a = _time.perf_counter()
-        if observer is not None:
-            x_hat = observer.update(t, y_used[obs_index], last_tau, Ts)
-            row[s_xhat] = x_hat
-        b = _time.perf_counter()
-        tau = controller(t, x_hat if use_estimate else row[s_state], ref)
+        a = b = _time.perf_counter()
+        calling = observer
+        try:  # a law (a plug-in above all) may raise: the run fails, the campaign goes on
+            if observer is not None:
+                x_hat = observer.update(t, y_used[obs_index], last_tau, Ts)
+                row[s_xhat] = x_hat
+            b = _time.perf_counter()
+            calling = controller
+            tau = np.asarray(controller(t, x_hat if use_estimate else row[s_state], ref),
+                             dtype=float)
+            if tau.shape not in tau_shapes:
+                raise ValueError(f"returned torques of shape {tau.shape}, expected (2,)")
+        except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
+            label = getattr(calling, "name", type(calling).__name__)
+            status, message, k_done = "failed", (f"{label} raised {type(exc).__name__}: "
+                                                 f"{_one_line(exc)} at t = {t:.4g} s"), k
+            break
         c = _time.perf_counter()
         t_obs += b - a
         t_ctrl += c - b
@@ -248,7 +253,7 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
             np.clip(tau[:2], -limit, limit, out=tau[:2])
         row[s_tau] = tau[:2]
         if residual is not None:
-            row[s_res] = residual
+            row[s_res] = controller.residual  # read each sample: a law may rebind it
         last_tau = tau
         if s.disturbances:
             d = dist(t)
@@ -266,6 +271,8 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
             break
         truth = plant.truth_vector()
         t_plant += _time.perf_counter() - c
+        if k == 0:  # the first sample pays for loading or compiling the kernels
+            first_sample = _time.perf_counter() - wall0
     else:
         reason = bounds.violated(truth)
         if reason:
@@ -274,12 +281,21 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
     wall = _time.perf_counter() - wall0
     simulated = k_done * Ts
     rows = rows[:k_done]
+    steady = wall - first_sample
     return RunResult(
         time=np.arange(k_done) * Ts, names=names, signals=np.ascontiguousarray(rows.T),
         status=status, message=message, end_time=simulated, config=scenario_to_mapping(s),
-        timings={"wall_s": wall, "plant_s": t_plant, "controller_s": t_ctrl,
-                 "observer_s": t_obs, "loop_s": wall - t_plant - t_ctrl - t_obs,
-                 "realtime_factor": simulated / wall if wall > 0 else float("inf")})
+        timings={"wall_s": wall, "startup_s": first_sample, "plant_s": t_plant,
+                 "controller_s": t_ctrl, "observer_s": t_obs,
+                 "loop_s": wall - t_plant - t_ctrl - t_obs,
+                 # simulated time per wall second, without the first sample (kernel
+                 # loading or compilation is not simulation speed)
+                 "realtime_factor": (simulated - Ts) / steady if steady > 0 else float("nan")})
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else "(no message)"
 
 
 def _to_plant_state(x0: np.ndarray, plant, model: ArmModel) -> np.ndarray:
@@ -313,10 +329,10 @@ class _Bounds:
         n, spec = self.n, self.spec
         angle = max(abs(truth.item(0)), abs(truth.item(1)))
         if angle > spec.max_angle:
-            return f"|theta| = {angle:.3g} rad exceeds {spec.max_angle:g}"
+            return f"|θ| = {angle:.3g} rad exceeds {spec.max_angle:g} rad"
         rate = max(abs(truth.item(n)), abs(truth.item(n + 1)))
         if rate > spec.max_rate:
-            return f"|theta_dot| = {rate:.3g} rad/s exceeds {spec.max_rate:g}"
+            return f"|θ̇| = {rate:.3g} rad/s exceeds {spec.max_rate:g} rad/s"
         for i in range(2):
             w = truth.item(2 * n + 4 + i)
             if abs(w) > self.max_deflection[i]:

@@ -3,13 +3,15 @@
 Arrays of time series are ``(n_signals, n_samples)`` with a tuple of names (SI units,
 radians).  A result unpacks like python-control's responses: ``t, y = result``.
 Stored as one uncompressed ``.npz`` per run (no pickle; metadata as a JSON string),
-written atomically.
+written atomically (see `validation.store`).
 """
 from __future__ import annotations
 
+import io
 import json
 import os
 import tempfile
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -85,38 +87,56 @@ class RunResult:
         return self.status == "ok"
 
     # --- storage --------------------------------------------------------------------
+    def to_bytes(self, extra: dict | None = None) -> bytes:
+        """The result as an uncompressed ``.npz`` (no pickle): arrays ``time``,
+        ``signals``, ``names`` and ``meta`` (JSON: status, message, end time, scenario,
+        timings, plus ``extra`` — the store adds the metrics and its bookkeeping, so a
+        file alone is enough to rebuild its index row)."""
+        meta = {"status": self.status, "message": self.message, "end_time": self.end_time,
+                "config": self.config, "timings": self.timings, **(extra or {})}
+        buf = io.BytesIO()
+        np.savez(buf, time=self.time, signals=self.signals, names=np.array(self.names, dtype=str),
+                 meta=np.array(json.dumps(meta)))
+        return buf.getvalue()
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> tuple["RunResult", dict]:
+        """(result, meta) from `to_bytes` output; ValueError if it is not one."""
+        try:
+            with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+                meta = json.loads(str(npz["meta"]))
+                result = cls(time=npz["time"], names=tuple(str(n) for n in npz["names"]),
+                             signals=npz["signals"], status=meta["status"],
+                             message=meta["message"], end_time=meta["end_time"],
+                             config=meta["config"], timings=meta["timings"])
+        except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"not a stored run ({type(exc).__name__}: {exc})") from None
+        return result, meta
+
     def save(self, path: str | Path) -> Path:
         """Write ``path`` (.npz) atomically: a reader never sees a partial file."""
         path = Path(path)
-        meta = {"status": self.status, "message": self.message, "end_time": self.end_time,
-                "config": self.config, "timings": self.timings}
-
-        def write(fh):
-            np.savez(fh, time=self.time, signals=self.signals,
-                                names=np.array(self.names, dtype=str),
-                                meta=np.array(json.dumps(meta)))
-        write_atomic(path, write, binary=True)
+        data = self.to_bytes()
+        write_atomic(path, lambda fh: fh.write(data), binary=True)
         return path
 
     @classmethod
     def load(cls, path: str | Path) -> "RunResult":
-        with np.load(path, allow_pickle=False) as data:
-            meta = json.loads(str(data["meta"]))
-            return cls(time=data["time"], names=tuple(str(n) for n in data["names"]),
-                       signals=data["signals"], status=meta["status"], message=meta["message"],
-                       end_time=meta["end_time"], config=meta["config"], timings=meta["timings"])
+        return cls.from_bytes(Path(path).read_bytes())[0]
 
 
-def write_atomic(path: Path, write, *, binary: bool = False) -> None:
-    """Call ``write(file)`` on a temporary file next to ``path``, fsync it, and rename it
-    over ``path`` (atomic on POSIX): the file is either the old or the new one, whole."""
+def write_atomic(path: Path, write, *, binary: bool = False, sync: bool = True) -> None:
+    """Call ``write(file)`` on a temporary file next to ``path``, fsync it (unless
+    ``sync`` is false: the caller verifies a checksum instead), and rename it over
+    ``path`` (atomic on POSIX): the file is either the old or the new one, whole."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, "wb" if binary else "w") as fh:
+        with os.fdopen(fd, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8"})) as fh:
             write(fh)
             fh.flush()
-            os.fsync(fh.fileno())
+            if sync:
+                os.fsync(fh.fileno())
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; results are for sharing
         os.replace(tmp, path)
     except BaseException:

@@ -9,7 +9,7 @@ combinations before anything is simulated.  Every error names the dotted key.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -17,22 +17,32 @@ from plant_exudyn import Mesh
 from reduced_model import STRAIN_QUANTITIES, ArmParameters, validate_modes_per_link
 
 from ._config import ConfigError, check, from_mapping, to_mapping
+from .laws import check_laws, nominal_model
 
 __all__ = [
-    "Scenario", "PlantSpec", "ModelSpec", "ControllerSpec", "PBCGains", "PDGains", "CTGains",
-    "ObserverSpec", "ReferenceSpec", "SensorSpec", "DisturbanceSpec", "DivergenceSpec",
-    "check_scenario", "scenario_from_mapping", "scenario_to_mapping",
-    "PLANTS", "CONTROLLERS", "OBSERVERS",
+    "Scenario", "PlantSpec", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
+    "SensorSpec", "DisturbanceSpec", "DivergenceSpec", "check_scenario",
+    "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "PLANTS", "ARMS",
 ]
 
 PLANTS = ("reduced", "exudyn")
-CONTROLLERS = ("pbc", "pd", "ct")
-OBSERVERS = ("none", "smo-paper", "smo-bl", "smo-pos")
+#: The arms a scenario can start from: the practical default (Table 1 + a motor-2 stator
+#: inertia of 0.01 kg m² + bending damping 2e-3 N m² s) and the paper's Table 1 exactly.
+ARMS = {"default": "practical default arm (Table 1 + stator inertia 0.01 kg m² + damping "
+                   "2e-3 N m² s)",
+        "table1": "the paper's Table 1 exactly (no stator inertia, no damping)"}
 REFERENCE_KINDS = ("paper", "quintic")
 MODAL_SENSORS = ("direct", "gauges", "none")
 DISTURBANCE_KINDS = ("step", "pulse", "sine", "noise")
 DISTURBANCE_TARGETS = ("tau1", "tau2", "tip_x", "tip_y")
 FEEDBACK = ("auto", "true", "estimate")
+#: Caps that keep a typo from exhausting memory or hanging a run: samples held in memory
+#: (5e6 = 83 min at 1 kHz, ~3 GB of signals) and internal plant steps per run.
+MAX_SAMPLES = 5e6
+MAX_PLANT_STEPS = 2e8
+#: Largest noise standard deviation accepted (rad, m, rad/s or m/s): beyond it nothing is
+#: measured at all.
+MAX_NOISE = 1e3
 INITIAL_STATES = ("rest", "reference")
 
 
@@ -44,11 +54,6 @@ def _one_of(value, allowed, name) -> None:
 def _positive(value, name, *, allow_zero=False) -> None:
     ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
     check(ok, name, f"must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
-
-
-def _nonnegative_all(values, name) -> None:
-    check(all(math.isfinite(v) and v >= 0 for v in values), name,
-          f"must be finite and >= 0, got {list(values)!r}")
 
 
 @dataclass(frozen=True)
@@ -92,83 +97,40 @@ class ModelSpec:
                                                 f"{list(self.modes_per_link)!r}") from None
 
 
-@dataclass(frozen=True)
-class PBCGains:
-    """Eq. (20): Λ and K_v on the joints and on every flexible coordinate; ``idealised``
-    applies all n components (reduced plant only)."""
-
-    lambda_joint: tuple[float, float] = (3.0, 3.0)
-    lambda_flex: float = 1.0
-    kv_joint: tuple[float, float] = (10.0, 5.0)
-    kv_flex: float = 5.0
-    idealised: bool = False
-    compensate_damping: bool = True
-
-    def __post_init__(self):
-        _nonnegative_all(self.lambda_joint, "lambda_joint")
-        _positive(self.lambda_flex, "lambda_flex", allow_zero=True)
-        _nonnegative_all(self.kv_joint, "kv_joint")
-        _positive(self.kv_flex, "kv_flex", allow_zero=True)
-
-
-@dataclass(frozen=True)
-class PDGains:
-    """Joint PD [N m/rad, N m s/rad], with the rigid arm's feedforward if ``feedforward``."""
-
-    kp: tuple[float, float] = (40.0, 20.0)
-    kd: tuple[float, float] = (8.0, 4.0)
-    feedforward: bool = True
-
-    def __post_init__(self):
-        _nonnegative_all(self.kp, "kp")
-        _nonnegative_all(self.kd, "kd")
-
-
-@dataclass(frozen=True)
-class CTGains:
-    """Rigid computed torque: error dynamics ë + K_d ė + K_p e = 0 [1/s², 1/s]."""
-
-    kp: tuple[float, float] = (16.0, 16.0)
-    kd: tuple[float, float] = (8.0, 8.0)
-
-    def __post_init__(self):
-        _nonnegative_all(self.kp, "kp")
-        _nonnegative_all(self.kd, "kd")
+def _law_kind(value) -> None:
+    check(isinstance(value, str) and value.strip() == value and value != "", "kind",
+          f"must be a law's name or \"package.module:Class\", got {value!r}")
 
 
 @dataclass(frozen=True)
 class ControllerSpec:
+    """``kind``: a built-in controller ("pbc", "pbc-idealised", "pd", "ct", "lqr") or a
+    plug-in ``"package.module:Class"``; ``options``: its keyword options (the class's own
+    defaults for the rest; unknown options are refused)."""
+
     kind: str = "pbc"
-    pbc: PBCGains = PBCGains()
-    pd: PDGains = PDGains()
-    ct: CTGains = CTGains()
+    options: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        _one_of(self.kind, CONTROLLERS, "kind")
+        _law_kind(self.kind)
 
 
 @dataclass(frozen=True)
 class ObserverSpec:
-    """``kind``: "none", "smo-paper" (sign, full state measured), "smo-bl" (boundary
-    layer), "smo-pos" (positions measured, Barbot's step-by-step injection).  Gains as
-    (joint, flexible) pairs.  ``initial_error`` = x̂(0) − x(0): empty (exact start), the
-    full 2n-vector, or four values (angles, modal positions, angle rates, modal rates)
-    applied to every state of their group with alternating signs — valid for any model
-    order."""
+    """``kind``: "none", a built-in observer ("smo-paper": sign, full state measured;
+    "smo-bl": boundary layer; "smo-pos": positions measured, Barbot's step-by-step
+    injection; "ekf", "ekf-pos": extended Kalman filter) or a plug-in
+    ``"package.module:Class"``; ``options``: its keyword options.  ``initial_error`` =
+    x̂(0) − x(0): empty (exact start), the full 2n-vector, or four values (angles, modal
+    positions, angle rates, modal rates) applied to every state of their group with
+    alternating signs — valid for any model order."""
 
     kind: str = "none"
-    l_position: tuple[float, float] = (1.0, 0.5)
-    l_velocity: tuple[float, float] = (5.0, 2.0)
-    boundary_layer: float = 2.0
-    filter_time: float = 5e-3
+    options: dict = field(default_factory=dict)
     initial_error: tuple[float, ...] = ()
 
     def __post_init__(self):
-        _one_of(self.kind, OBSERVERS, "kind")
-        _nonnegative_all(self.l_position, "l_position")
-        _nonnegative_all(self.l_velocity, "l_velocity")
-        _positive(self.boundary_layer, "boundary_layer")
-        _positive(self.filter_time, "filter_time")
+        _law_kind(self.kind)
         check(all(math.isfinite(v) for v in self.initial_error), "initial_error",
               "must be finite numbers")
 
@@ -216,6 +178,8 @@ class SensorSpec:
         _one_of(self.strain_quantity, tuple(STRAIN_QUANTITIES), "strain_quantity")
         for name in ("encoder_resolution", "encoder_noise", "modal_noise", "rate_noise"):
             _positive(getattr(self, name), name, allow_zero=True)
+            check(getattr(self, name) <= MAX_NOISE, name,
+                  f"must be <= {MAX_NOISE:g}, got {getattr(self, name)!r}")
         check(self.delay >= 0, "delay", f"must be >= 0 samples, got {self.delay!r}")
         for name in ("gauges_link1", "gauges_link2"):
             check(all(math.isfinite(v) and v >= 0 for v in getattr(self, name)), name,
@@ -264,13 +228,15 @@ class DivergenceSpec:
 
 @dataclass(frozen=True)
 class Scenario:
-    """One closed-loop run.  ``true_params`` builds the plant, ``nominal_params`` the
+    """One closed-loop run.  ``arm`` ("default" or "table1", see `ARMS`) is the arm both
+    parameter tables start from; ``true_params`` builds the plant, ``nominal_params`` the
     controller's and observer's model (they differ only if a scenario says so).
     ``feedback``: the state the controller sees — "true", "estimate" (the observer's),
     or "auto" (the estimate when there is an observer).  ``torque_limit`` [N m] saturates
     each joint (0: none).  ``transient`` [s]: metrics of tracking start after it."""
 
     name: str = "paper"
+    arm: str = "default"
     plant: PlantSpec = PlantSpec()
     true_params: ArmParameters = ArmParameters()
     nominal_params: ArmParameters = ArmParameters()
@@ -290,6 +256,9 @@ class Scenario:
     transient: float = 2.0
 
     def __post_init__(self):
+        check(isinstance(self.name, str) and self.name.strip() != "" and self.name.isprintable(),
+              "name", f"must be a non-empty printable string, got {self.name!r}")
+        _one_of(self.arm, tuple(ARMS), "arm")
         _one_of(self.feedback, FEEDBACK, "feedback")
         _one_of(self.initial_state, INITIAL_STATES, "initial_state")
         _positive(self.Ts, "Ts")
@@ -319,15 +288,23 @@ class Scenario:
 
 def check_scenario(s: Scenario) -> None:
     """Reject combinations that cannot run, before anything is simulated."""
+    samples = s.duration / s.Ts
+    check(samples <= MAX_SAMPLES, "duration", f"{s.duration!r} s at Ts = {s.Ts!r} s is "
+                                              f"{samples:.3g} samples (at most {MAX_SAMPLES:.0e}: "
+                                              "they are held in memory)")
+    check(s.duration / s.plant.step <= MAX_PLANT_STEPS, "plant.step",
+          f"{s.plant.step!r} s over {s.duration!r} s is {s.duration / s.plant.step:.3g} "
+          f"internal steps (at most {MAX_PLANT_STEPS:.0e})")
     n_steps = round(s.Ts / s.plant.step)
     check(n_steps >= 1 and abs(n_steps * s.plant.step - s.Ts) <= 1e-9 * s.Ts, "Ts",
           f"{s.Ts!r} s is not a whole multiple of plant.step = {s.plant.step!r} s")
     check(s.duration >= s.Ts, "duration", f"must be at least one sample (Ts = {s.Ts}), "
                                           f"got {s.duration!r}")
-    check(not (s.controller.kind == "pbc" and s.controller.pbc.idealised
-               and s.plant.kind == "exudyn"), "controller.pbc.idealised",
-          "the Exudyn plant has two actuators; the idealised PBC (all n components of "
-          "eq. 20 applied) runs only on the reduced plant")
+    check(s.transient < s.duration, "transient", f"{s.transient!r} s leaves nothing of the "
+                                                 f"{s.duration!r} s run to measure")
+    check(not (s.controller.kind == "pbc-idealised" and s.plant.kind == "exudyn"),
+          "controller.kind", "the Exudyn plant has two actuators; the idealised PBC (all n "
+          "rows of eq. 20 applied) runs only on the reduced plant")
     check(not (s.feedback == "estimate" and s.observer.kind == "none"), "feedback",
           "'estimate' needs an observer (observer.kind is 'none')")
     for link, name in ((1, "L1"), (2, "L2")):
@@ -335,20 +312,16 @@ def check_scenario(s: Scenario) -> None:
               f"nominal_params.{name}", f"must equal true_params.{name}: the modal "
                                         "coordinates of links of different lengths "
                                         "cannot be compared")
-    obs = s.observer.kind
-    if obs == "smo-pos":
-        check(s.sensors.modal != "none", "observer.kind",
-              "smo-pos needs the modal positions: set sensors.modal to 'direct' or "
-              "'gauges' (strain sensors)")
-    if obs in ("smo-paper", "smo-bl"):
-        check(s.sensors.modal != "none" and s.sensors.rates, "observer.kind",
-              f"{obs} measures the full state (the paper's y = x): needs sensors.rates = "
-              "true and sensors.modal 'direct' or 'gauges'")
+    for key in ("true_params", "nominal_params"):
+        _check_modelable(getattr(s, key), s.model.modes_per_link, key)
+    check_laws(s)
     n = 2 + sum(s.model.modes_per_link)
     check(len(s.observer.initial_error) in (0, 4, 2 * n), "observer.initial_error",
           f"needs {2 * n} values (the model state), 4 (per group) or none, got "
           f"{len(s.observer.initial_error)}")
     if s.sensors.modal == "gauges":
+        model = nominal_model(s.nominal_params, s.model.modes_per_link)
+        quantity = STRAIN_QUANTITIES[s.sensors.strain_quantity]
         for link, gauges in enumerate((s.sensors.gauges_link1, s.sensors.gauges_link2)):
             key = f"sensors.gauges_link{link + 1}"
             modes = s.model.modes_per_link[link]
@@ -357,11 +330,40 @@ def check_scenario(s: Scenario) -> None:
             L = s.true_params.L1 if link == 0 else s.true_params.L2
             check(all(x <= L for x in gauges), key, f"positions must lie on the link "
                                                     f"(0..{L} m), got {list(gauges)}")
+            basis = model.mode_shapes[link].evaluate(np.asarray(gauges, float), quantity).T
+            check(np.linalg.matrix_rank(basis) >= modes, key,
+                  f"gauges at {list(gauges)} cannot tell the link's {modes} modes apart "
+                  "(coincident, or at nodes of a mode)")
+
+
+def arm_parameters(arm: str) -> ArmParameters:
+    """The parameters of a named arm (`ARMS`)."""
+    _one_of(arm, tuple(ARMS), "arm")
+    return ArmParameters.table1() if arm == "table1" else ArmParameters()
+
+
+def _check_modelable(params: ArmParameters, modes, key: str) -> None:
+    """The assumed-modes model of ``params`` must exist and have finite, positive
+    frequencies (absurd but finite values — L = 1e300, ρ = 5e-324 — overflow in it)."""
+    try:
+        with np.errstate(all="raise"):
+            f = nominal_model(params, modes).natural_frequencies()
+        ok = bool(np.all(np.isfinite(f)) and np.all(f > 0))
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+        raise ConfigError(key, f"the arm cannot be modelled with these values "
+                               f"({type(exc).__name__}: {exc})") from None
+    check(ok, key, "the arm's natural frequencies are not finite and positive with these values")
 
 
 def scenario_from_mapping(data: dict) -> Scenario:
     """Build and check a scenario from a mapping (unknown keys and bad values raise
-    `ConfigError` naming the dotted key)."""
+    `ConfigError` naming the dotted key).  ``true_params`` and ``nominal_params`` start
+    from the parameters of ``arm`` and override them key by key."""
+    base = to_mapping(arm_parameters(data.get("arm", "default")))
+    data = dict(data)
+    for key in ("true_params", "nominal_params"):
+        given = data.get(key, {})
+        data[key] = {**base, **given} if isinstance(given, dict) else given
     scenario = from_mapping(Scenario, data)
     check_scenario(scenario)
     return scenario

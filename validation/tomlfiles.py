@@ -26,29 +26,62 @@ def deep_merge(base: dict, override: dict) -> dict:
     return out
 
 
-def load_toml(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict:
-    """Read ``path`` and its includes; errors name the file."""
-    path = Path(path)
-    resolved = path.resolve()
-    if resolved in _seen:
-        raise ConfigError("include", f"{path} includes itself (cycle: "
-                                     f"{' -> '.join(p.name for p in (*_seen, resolved))})")
+#: Caps on what an include chain may load: depth, number of files, bytes per file.
+MAX_INCLUDE_DEPTH = 16
+MAX_INCLUDED_FILES = 64
+MAX_FILE_BYTES = 1 << 20
+
+
+def load_toml(path: str | Path) -> dict:
+    """Read ``path`` and its includes; errors name the file.  Each file is parsed once
+    however often it is included; chains deeper than `MAX_INCLUDE_DEPTH`, more than
+    `MAX_INCLUDED_FILES` files or files over 1 MiB are refused."""
+    cache: dict[Path, dict] = {}
+    try:
+        return _load(Path(path), (), cache)
+    except RecursionError:
+        raise ConfigError("", f"{path}: nested too deeply") from None
+
+
+def _read(path: Path) -> dict:
+    if path.exists() and not path.is_file():
+        raise ConfigError("", f"{path}: not a regular file")
     try:
         with path.open("rb") as fh:
-            data = tomllib.load(fh)
+            raw = fh.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise ConfigError("", f"{path}: cannot read ({exc.strerror or exc})") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise ConfigError("", f"{path}: larger than {MAX_FILE_BYTES >> 20} MiB")
+    try:
+        return tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ConfigError("", f"{path}: not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError("", f"{path}: invalid TOML ({exc})") from None
-    includes = data.pop("include", [])
-    if isinstance(includes, str):
-        includes = [includes]
-    if not isinstance(includes, list) or not all(isinstance(i, str) for i in includes):
-        raise ConfigError("include", f"{path}: must be a file name or a list of them")
-    merged: dict = {}
-    for inc in includes:
-        merged = deep_merge(merged, load_toml(path.parent / inc, (*_seen, resolved)))
-    return deep_merge(merged, data)
+
+
+def _load(path: Path, seen: tuple[Path, ...], cache: dict) -> dict:
+    resolved = path.resolve()
+    if resolved in seen:
+        raise ConfigError("include", f"{path} includes itself (cycle: "
+                                     f"{' -> '.join(p.name for p in (*seen, resolved))})")
+    if len(seen) >= MAX_INCLUDE_DEPTH:
+        raise ConfigError("include", f"{path}: includes nested deeper than {MAX_INCLUDE_DEPTH}")
+    if resolved not in cache:
+        if len(cache) >= MAX_INCLUDED_FILES:
+            raise ConfigError("include", f"{path}: more than {MAX_INCLUDED_FILES} files included")
+        data = _read(path)
+        includes = data.pop("include", [])
+        if isinstance(includes, str):
+            includes = [includes]
+        if not isinstance(includes, list) or not all(isinstance(i, str) for i in includes):
+            raise ConfigError("include", f"{path}: must be a file name or a list of them")
+        merged: dict = {}
+        for inc in includes:
+            merged = deep_merge(merged, _load(path.parent / inc, (*seen, resolved), cache))
+        cache[resolved] = deep_merge(merged, data)
+    return copy.deepcopy(cache[resolved])
 
 
 def set_dotted(data: dict, key: str, value) -> None:

@@ -1,0 +1,42 @@
+"""The plug-in interface every controller and observer implements, built-in or not.
+
+A controller is a class constructed as ``Cls(model, **options)``: ``model`` is the nominal
+`reduced_model.ArmModel` (what the controller believes), ``options`` the keyword options
+of the scenario's ``[controller] options`` table.  Calling it returns the two joint
+torques::
+
+    tau = controller(t, x, ref)      # float array (2,) [N m]
+
+``x`` is the state the loop feeds back — the observer's estimate or the true state —
+as ``[Q, Q̇]`` in the model's coordinates (length 2n); ``ref(t)`` returns
+``(θ_d, θ̇_d, θ̈_d)``, three float arrays of shape (2,).  Optional attributes: ``name``
+(a label) and ``residual`` (a float array, recorded every sample as ``residual_*``, like
+the PBC's unrealisable forces).
+
+An observer is constructed the same way and has ``measured`` (the tuple of measurement
+names it needs, in the order of ``y``), ``reset(x_hat0)`` and
+``update(t, y, tau, Ts) -> x_hat`` (advance over the last period with the torque applied
+during it, then correct with ``y`` measured at ``t``; the first call after ``reset`` only
+corrects).  The state names are ``model.state_names``.
+"""
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["Controller", "Observer"]
+
+
+@runtime_checkable
+class Controller(Protocol):
+    def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray: ...
+
+
+@runtime_checkable
+class Observer(Protocol):
+    measured: tuple[str, ...]
+
+    def reset(self, x_hat0) -> np.ndarray: ...
+
+    def update(self, t: float, y: np.ndarray, tau: np.ndarray, Ts: float) -> np.ndarray: ...

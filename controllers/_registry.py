@@ -1,0 +1,61 @@
+"""Built-in laws by short name, and plug-ins by import path ``"package.module:Class"``.
+
+Built-in and plug-in laws are found the same way and constructed the same way,
+``Cls(model, **options)`` (`controllers._interface`); nothing else distinguishes them.
+"""
+from __future__ import annotations
+
+import importlib
+import inspect
+
+from ._baselines import JointPD, RigidComputedTorque
+from ._pbc import IdealisedPBC, PassivityBasedController
+from ._smo import BoundaryLayerSMO, PaperSMO, PositionOnlySMO
+
+__all__ = ["CONTROLLERS", "OBSERVERS", "PluginError", "resolve", "accepted_options"]
+
+CONTROLLERS: dict[str, type] = {
+    "pbc": PassivityBasedController, "pbc-idealised": IdealisedPBC, "pd": JointPD,
+    "ct": RigidComputedTorque,
+}
+OBSERVERS: dict[str, type] = {
+    "smo-paper": PaperSMO, "smo-bl": BoundaryLayerSMO, "smo-pos": PositionOnlySMO,
+}
+
+
+class PluginError(ValueError):
+    """A law that cannot be found, imported or constructed (one line, says why)."""
+
+
+def resolve(kind: str, builtins: dict[str, type], role: str) -> type:
+    """The class named by ``kind``: a built-in short name, or ``"package.module:Class"``."""
+    if ":" not in kind:
+        if kind not in builtins:
+            raise PluginError(f"unknown {role} {kind!r} (built-in: {', '.join(builtins)}; "
+                              "or a plug-in as \"package.module:Class\")")
+        return builtins[kind]
+    module_name, _, attr = kind.partition(":")
+    if not module_name or not attr:
+        raise PluginError(f"{kind!r} is not an import path \"package.module:Class\"")
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as exc:  # noqa: BLE001 - any import failure is the user's to see
+        raise PluginError(f"cannot import {module_name!r}: {type(exc).__name__}: {exc}") from None
+    cls = module
+    for part in attr.split("."):
+        cls = getattr(cls, part, None)
+        if cls is None:
+            raise PluginError(f"module {module_name!r} has no {attr!r}")
+    if not inspect.isclass(cls):
+        raise PluginError(f"{kind!r} is not a class")
+    return cls
+
+
+def accepted_options(cls: type) -> dict[str, object] | None:
+    """Keyword options of ``cls(model, **options)`` with their defaults (``inspect.empty``
+    if required); None if it takes ``**kwargs`` (anything goes)."""
+    params = list(inspect.signature(cls).parameters.values())[1:]  # after ``model``
+    if any(p.kind is p.VAR_KEYWORD for p in params):
+        return None
+    return {p.name: p.default for p in params
+            if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}

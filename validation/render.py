@@ -1,0 +1,52 @@
+"""Rendering from data: one Jinja2 template per output format (``validation/templates``).
+
+Tables are built as plain data (lists of rows of values) by the modules that compute
+them; the templates only lay them out.  Markdown cells are escaped with the ``md``
+filter (a ``|`` inside a cell would split it), HTML by Jinja2's autoescaping.
+"""
+from __future__ import annotations
+
+import math
+
+import jinja2
+
+__all__ = ["environment", "render", "fmt_number", "md_cell"]
+
+
+def fmt_number(value, digits: int = 3) -> str:
+    """A number for a table: 3 significant digits, "" for missing, "∞" for infinite."""
+    if value is None:
+        return ""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return str(value)
+    if math.isnan(value):
+        return ""
+    if math.isinf(value):
+        return "∞" if value > 0 else "−∞"
+    return f"{value:.{digits}g}"
+
+
+def md_cell(value) -> str:
+    """Text safe inside a markdown table cell: pipes escaped, no line breaks."""
+    text = fmt_number(value) if isinstance(value, float) else str(value)
+    return text.replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ").replace("\r", " ")
+
+
+_ENV: dict[bool, jinja2.Environment] = {}
+
+
+def environment(html: bool) -> jinja2.Environment:
+    if html not in _ENV:
+        env = jinja2.Environment(
+            loader=jinja2.PackageLoader("validation", "templates"),
+            autoescape=html, trim_blocks=True, lstrip_blocks=True,
+            undefined=jinja2.StrictUndefined, keep_trailing_newline=True)
+        env.filters["num"] = fmt_number
+        env.filters["md"] = md_cell
+        _ENV[html] = env
+    return _ENV[html]
+
+
+def render(template: str, **data) -> str:
+    """Render ``templates/<template>`` with ``data`` (HTML-escaped for .html templates)."""
+    return environment(template.endswith(".html.j2")).get_template(template).render(**data)
