@@ -44,7 +44,7 @@ __all__ = ["Campaign", "PlannedRun", "load_campaign", "campaign_from_mapping", "
 #: machine listing a million runs).
 MAX_RUNS = 100_000
 
-_TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report"}
+_TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
 _SPEC_KEYS = {"scale", "uniform", "loguniform", "choices"}
 

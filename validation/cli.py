@@ -19,7 +19,7 @@ import numpy as np
 
 from controllers import CONTROLLERS, OBSERVERS
 
-from ._config import ConfigError
+from ._config import ConfigError, check
 from .executor import Interrupted, available_cores, exit_status, make_runner
 from .scenario import ARMS, PLANTS, Scenario, scenario_from_mapping
 from .store import ResultStore, StoreError, run_id
@@ -328,6 +328,49 @@ def cmd_repair(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_attribute(args: argparse.Namespace) -> int:
+    from .attribution import attribute, default_factors, parse_factors, write_attribution
+    from .campaign import campaign_from_mapping, expand
+    data = load_toml(args.file)
+    section = data.pop("attribution", {})
+    check(isinstance(section, dict), "attribution", "must be a table")
+    for key in section:
+        check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
+    if "scenario" in data or "sweep" in data or "name" in data:
+        campaign = campaign_from_mapping(data, source=args.file)
+        systems = [(r.scenario.name.split("/")[-1], r.scenario) for r in expand(campaign)]
+        default_out = Path("results") / campaign.name
+    else:
+        scenario = scenario_from_mapping(data)
+        systems = [(Path(args.file).stem, scenario)]
+        default_out = Path("results") / f"attribution-{Path(args.file).stem}"
+    names = [n.strip() for n in args.factors.split(",")] if args.factors is not None else \
+        section.get("factors")
+    if names is not None and not isinstance(names, list):
+        raise ConfigError("attribution.factors", "must be a list of factor names")
+    plans = [(label, s, parse_factors(names, s) if names is not None else default_factors(s))
+             for label, s in systems]
+    from .attribution import plan
+    for label, s, factors in plans:  # every world checked before anything runs
+        plan(s, factors, label)
+    out = Path(args.out or default_out)
+    results = []
+    runner = _runner(args)
+    with runner:
+        open_output(out)
+        for label, s, factors in plans:
+            att, summary = attribute(s, factors, out, name=label, runner=runner,
+                                     progress=not args.no_progress)
+            print(summary.line(f"attribution {label}", out))
+            if summary.interrupted:
+                return _finish(summary, label, out)
+            results.append(att)
+    print(write_attribution(results, out))
+    print(f"attribution: {out / 'attribution.csv'} and attribution.md; "
+          f"'flexarm report {out}' draws the waterfalls")
+    return 0
+
+
 # --- flexarm baseline -----------------------------------------------------------------------
 def _baseline_rows(args) -> tuple:
     from .baselines import evaluate, load_baselines
@@ -514,6 +557,18 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("repair", help="rebuild a results folder's index from its run files")
     rep.add_argument("results", metavar="RESULTS_DIR")
     rep.set_defaults(func=cmd_repair)
+
+    att = sub.add_parser("attribute", help="which modelling assumption costs how much "
+                                           "(Shapley attribution over 2^k runs)")
+    att.add_argument("file", metavar="SCENARIO_OR_CAMPAIGN.toml",
+                     help="the real world (a campaign: one attribution per run, factors from "
+                          "its [attribution] table)")
+    att.add_argument("--factors", metavar="F1,F2,...",
+                     help="plant, truncation, parameters, sensing, estimation, sampling, "
+                          "actuation (default: every factor the scenario has)")
+    att.add_argument("--out", metavar="DIR", help="results folder")
+    _add_execution(att)
+    att.set_defaults(func=cmd_attribute)
 
     base = sub.add_parser("baseline", help="error-bound regression checks (baselines.toml)")
     bsub = base.add_subparsers(dest="action", required=True, parser_class=_Parser)

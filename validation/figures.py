@@ -19,7 +19,8 @@ from matplotlib.transforms import blended_transform_factory  # noqa: E402
 
 __all__ = ["png", "state_label", "state_unit", "tracking", "deflections", "rates",
            "estimation_errors", "phase_portrait", "sweep_figures", "validity_map",
-           "stability_chart", "animation", "AXIS_UNITS", "axis_label", "describe_run"]
+           "stability_chart", "animation", "waterfall", "AXIS_UNITS", "axis_label",
+           "describe_run"]
 
 PLANT_STYLE = {"reduced": dict(color="C0", ls="-"), "exudyn": dict(color="C3", ls="--")}
 PLANT_NAME = {"reduced": "reduced plant", "exudyn": "truth plant (Exudyn)"}
@@ -75,6 +76,14 @@ def _legend(ax, **kw) -> None:
     handles, labels = ax.get_legend_handles_labels()
     if handles:
         ax.legend(fontsize=7, **kw)
+
+
+def _figure_legend(fig, ax) -> None:
+    """One legend for a grid of panels, below them (never over the data)."""
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 4),
+                   fontsize=8)
 
 
 def _late_ylim(ax, t, series, transient: float) -> None:
@@ -149,9 +158,11 @@ def deflections(group, title: str, transient: float, cutoff_hz: float | None) ->
 
 
 def _state_grid(states):
-    cols = math.ceil(len(states) / 2)
-    fig, axes = plt.subplots(2, cols, figsize=(3.2 * cols + 1, 5.2), sharex=True,
-                             constrained_layout=True, squeeze=False)
+    """A grid of panels, one per state: positions in the first rows, rates after."""
+    cols = min(3, len(states))
+    rows = math.ceil(len(states) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols + 0.5, 2.3 * rows + 0.8),
+                             sharex=True, constrained_layout=True, squeeze=False)
     for ax in axes.ravel()[len(states):]:
         ax.set_visible(False)
     return fig, axes
@@ -174,7 +185,7 @@ def rates(group, title: str, transient: float) -> bytes:
         ax.tick_params(labelsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
-    _legend(axes[0, 0])
+    _figure_legend(fig, axes[0, 0])
     fig.suptitle(f"{title}: true vs estimated rates (cf. Figs. 5–6)", fontsize=10)
     return png(fig)
 
@@ -205,7 +216,7 @@ def estimation_errors(group, title: str, transient: float) -> bytes:
         ax.yaxis.get_offset_text().set_fontsize(7)
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
-    _legend(axes[0, 0])
+    _figure_legend(fig, axes[0, 0])
     fig.suptitle(f"{title}: estimation errors x̂ − x (cf. Fig. 7), y-range after the "
                  f"{transient:g} s transient", fontsize=10)
     return png(fig)
@@ -247,12 +258,15 @@ def _key(value) -> str:
 
 
 def _groups_of_axes(runs, axes: list[str]) -> list[list[str]]:
-    """Varying axes grouped where they vary together (zipped axes: one figure each)."""
+    """Varying axes grouped where one determines the others (a zip: ``name`` with the
+    controller and observer kinds it pairs with) — one x axis per group."""
+    distinct = {a: len({_key(r.axes.get(a)) for r in runs}) for a in axes}
+    order = sorted(axes, key=lambda a: (-distinct[a], a != "name", a))
     groups: list[list[str]] = []
-    for a in axes:
+    for a in order:
         for g in groups:
             pairs = {(_key(r.axes.get(g[0])), _key(r.axes.get(a))) for r in runs}
-            if len(pairs) == len({p[0] for p in pairs}) == len({p[1] for p in pairs}):
+            if len(pairs) == distinct[g[0]]:  # g's leader determines a
                 g.append(a)
                 break
         else:
@@ -261,75 +275,95 @@ def _groups_of_axes(runs, axes: list[str]) -> list[list[str]]:
 
 
 def sweep_figures(sweep: str, runs) -> list[tuple[str, bytes]]:
-    """Per varying axis group of a sweep: each metric against it, one line per value of
-    the other varying axes and per plant; diverged/failed runs marked with ×."""
+    """Each metric of a sweep against its swept values.
+
+    Axes that vary together (a zip) form one group and one x axis, labelled by the run
+    names if ``name`` is among them.  A figure is drawn for every numeric group and every
+    group of three or more values (the other groups become series, one per combination
+    and plant); with no such group, the largest group is the x axis.  Constant axes are
+    not drawn; list-valued axes are categories labelled by their value; diverged and
+    failed runs are a crimson × at the top of the panel, never a data point."""
     axes = sorted({a for r in runs for a in r.axes})
-    varying = [a for a in axes if a not in ("name", "plant.kind")
+    varying = [a for a in axes if a != "plant.kind"
                and len({_key(r.axes.get(a)) for r in runs}) > 1]
-    out = []
+    groups = _groups_of_axes(runs, varying)
+    values = {tuple(g): sorted({_key([r.axes.get(a) for a in g]) for r in runs},
+                               key=lambda k: _sort_key(json.loads(k))) for g in groups}
+
+    def numeric(g):
+        return len(g) == 1 and all(isinstance(json.loads(x)[0], (int, float)) and
+                                   not isinstance(json.loads(x)[0], bool) for x in values[tuple(g)])
+    primary = [g for g in groups if numeric(g) or len(values[tuple(g)]) >= 3] or \
+        sorted(groups, key=lambda g: -len(values[tuple(g)]))[:1]
     metrics = [m for m in SWEEP_METRICS if any(isinstance(r.metrics.get(k), float) and
                                                not math.isnan(r.metrics.get(k)) for r in runs
                                                for k in m[2])]
-    for group in _groups_of_axes(runs, varying):
-        others = [a for a in varying if a not in group]
-        xs = sorted({_key([r.axes.get(a) for a in group]) for r in runs},
-                    key=lambda k: _sort_key(json.loads(k)))
-        numeric = len(group) == 1 and all(isinstance(json.loads(x)[0], (int, float))
-                                          and not isinstance(json.loads(x)[0], bool) for x in xs)
-        scale = 1e3 if group[0] in ("Ts", "plant.step") else 1.0
-        fig, axs = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics) + 1.5, 3.4),
-                                squeeze=False, constrained_layout=True)
-        lines: dict[tuple, list] = {}
-        for r in runs:
-            label_other = ", ".join(f"{a.split('.')[-1]}={_short(r.axes.get(a))}" for a in others)
-            lines.setdefault((r.plant, label_other), []).append(r)
-        for ax, (key, title, names) in zip(axs[0], metrics):
-            marked = False
-            for (plant, other), rs in sorted(lines.items()):
-                pts, bad = [], []
-                for r in rs:
-                    xk = _key([r.axes.get(a) for a in group])
-                    x = json.loads(xk)[0] * scale if numeric else xs.index(xk)
-                    if r.status != "ok":
-                        bad.append(x)
-                        continue
-                    vals = [r.metrics.get(k) for k in names]
-                    vals = [v for v in vals if isinstance(v, float) and not math.isnan(v)]
-                    if vals:
-                        pts.append((x, max(vals)))
-                st = PLANT_STYLE.get(plant, {})
-                label = PLANT_NAME.get(plant, plant) + (f", {other}" if other else "")
-                if pts:
-                    pts.sort()
-                    ax.plot(*zip(*pts), marker="o", ms=4, label=label, color=st.get("color"),
-                            ls=st.get("ls"))
-                if bad:
-                    tr = blended_transform_factory(ax.transData, ax.transAxes)
-                    ax.plot(bad, [0.97] * len(bad), "x", color="crimson", ms=8, mew=2,
-                            transform=tr, label=None if marked else "diverged / failed")
-                    marked = True
-            ax.set_title(title, fontsize=9)
-            ax.set_xlabel(axis_label(group[0]) if numeric else " / ".join(group), fontsize=8)
-            if numeric and len(xs) > 2 and min(json.loads(x)[0] for x in xs) > 0 and \
-                    max(json.loads(x)[0] for x in xs) / min(json.loads(x)[0] for x in xs) > 20:
+    return [_sweep_figure(sweep, runs, g, [a for h in groups if h != g for a in h], values[tuple(g)],
+                          numeric(g), metrics) for g in primary]
+
+
+def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics) -> tuple[str, bytes]:
+    label_axis = "name" if "name" in group else group[0]
+    scale = 1e3 if group[0] in ("Ts", "plant.step") else 1.0
+    series: dict[tuple, list] = {}
+    for r in runs:
+        other = ", ".join(f"{a.split('.')[-1]}={_short(r.axes.get(a))}" for a in others)
+        series.setdefault((other, r.plant), []).append(r)
+    keys = sorted(series)
+    others_order = sorted({k[0] for k in keys})
+    fig, axs = plt.subplots(1, len(metrics), figsize=(4.0 * len(metrics) + 2.5, 3.6),
+                            squeeze=False, constrained_layout=True)
+    failed_any = False
+    for ax, (key, title, names) in zip(axs[0], metrics):
+        for n, (other, plant) in enumerate(keys):
+            color = f"C{others_order.index(other) % 10}"
+            pts, bad = [], []
+            for r in series[(other, plant)]:
+                xk = _key([r.axes.get(a) for a in group])
+                if numeric:
+                    x = json.loads(xk)[0] * scale
+                else:
+                    x = xs.index(xk) + (n - (len(keys) - 1) / 2) * 0.6 / max(len(keys), 1)
+                if r.status != "ok":
+                    bad.append(x)
+                    continue
+                vals = [r.metrics.get(k) for k in names]
+                vals = [v for v in vals if isinstance(v, float) and not math.isnan(v)]
+                if vals:
+                    pts.append((x, max(vals)))
+            label = f"{other or 'runs'}, {PLANT_NAME.get(plant, plant)}"
+            style = dict(color=color, marker="o" if plant == "exudyn" else "s", ms=5,
+                         mfc=color if plant == "exudyn" else "white", label=label)
+            if pts:
+                pts.sort()
+                ax.plot(*zip(*pts), ls=PLANT_STYLE.get(plant, {}).get("ls", "-") if numeric
+                        else "none", lw=1, **style)
+            if bad:
+                failed_any = True
+                tr = blended_transform_factory(ax.transData, ax.transAxes)
+                ax.plot(bad, [0.96] * len(bad), "x", color="crimson", ms=7, mew=2, transform=tr)
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel(axis_label(group[0]) if numeric else label_axis, fontsize=8)
+        if numeric:
+            lo = min(json.loads(x)[0] for x in xs) * scale
+            hi = max(json.loads(x)[0] for x in xs) * scale
+            if lo > 0 and hi / lo > 20:
                 ax.set_xscale("log")
-            if not numeric:
-                ax.set_xticks(range(len(xs)))
-                ax.set_xticklabels([_short(json.loads(x) if len(group) > 1 else json.loads(x)[0])
-                                    for x in xs], rotation=30, ha="right", fontsize=7)
-            ax.tick_params(labelsize=7)
-        handles, labels = axs[0, 0].get_legend_handles_labels()
-        for ax in axs[0, 1:]:
-            for h, l in zip(*ax.get_legend_handles_labels()):
-                if l not in labels:
-                    handles.append(h)
-                    labels.append(l)
-        fig.legend(handles, labels, loc="outside right center", fontsize=7)
-        caption = f"sweep '{sweep}': metrics vs {' / '.join(group)}"
-        fig.suptitle(caption + (" (crimson ×: run diverged or failed — no value)"
-                                if any(r.status != "ok" for r in runs) else ""), fontsize=10)
-        out.append((caption, png(fig)))
-    return out
+        else:
+            ax.set_xticks(range(len(xs)))
+            idx = group.index(label_axis)
+            ax.set_xticklabels([_short(json.loads(x)[idx]).split("/")[-1] for x in xs],
+                               rotation=30, ha="right", fontsize=7)
+        ax.tick_params(labelsize=7)
+    handles, labels = axs[0, 0].get_legend_handles_labels()
+    if failed_any:
+        handles.append(plt.Line2D([], [], ls="none", marker="x", color="crimson", mew=2))
+        labels.append("diverged / failed (no value)")
+    fig.legend(handles, labels, loc="outside right center", fontsize=7,
+               title="filled: truth plant; hollow: reduced", title_fontsize=7)
+    caption = f"sweep '{sweep}': metrics vs {' / '.join(group)}"
+    fig.suptitle(caption, fontsize=10)
+    return caption, png(fig)
 
 
 def _sort_key(values):
@@ -468,3 +502,30 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str:
     tmp.replace(path)
     return (f"{title}: arm motion over the whole {t_end:.0f} s run (2× speed), truth and "
             f"reduced plant, deflection ×{magnify:g}")
+
+
+def waterfall(study: str, metric: str, unit: str, ideal: float, contributions: dict,
+              total: float) -> bytes:
+    """From m(ideal) to m(real): one bar per factor's Shapley contribution."""
+    parts = [(f, v) for f, v in contributions.items() if not f.startswith("plant: ")]
+    fig, ax = plt.subplots(figsize=(1.1 * len(parts) + 3, 3.4), constrained_layout=True)
+    level = ideal
+    ax.bar(0, ideal, color="0.6")
+    labels = ["ideal"]
+    for i, (f, v) in enumerate(parts, start=1):
+        if not math.isfinite(v):
+            ax.text(i, level, "diverges", rotation=90, ha="center", va="bottom", fontsize=8,
+                    color="crimson")
+        else:
+            ax.bar(i, v, bottom=level, color="C3" if v > 0 else "C2")
+            level += v
+        labels.append(f)
+    ax.bar(len(parts) + 1, ideal + total, color="0.3")
+    labels.append("real")
+    ax.set_xticks(range(len(labels)))
+    ax.set_xticklabels(labels, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel(f"{metric} [{unit}]")
+    ax.axhline(ideal, color="grey", lw=0.5, ls=":")
+    ax.set_title(f"{study}: {metric} from the ideal to the real world "
+                 "(red: worsens, green: improves)", fontsize=9)
+    return png(fig)

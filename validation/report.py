@@ -155,10 +155,12 @@ def _figure_groups(runs, wanted: list[str] | None):
     else:
         both = [k for k, rs in groups.items() if len({r.plant for r in rs}) > 1]
         chosen = (both or list(groups))[:1]
+    order = {"default": 0, "table1": 1, "rest": 0, "reference": 1}
+    chosen.sort(key=lambda k: (k[0], order.get(json.loads(k[1]), 9), -k[2], order.get(k[3], 9), k[4]))
     drawable = [k for k in chosen if any(r.status == "ok" for r in groups[k])]
     skipped = [k for k in chosen if k not in drawable]
-    order = {"exudyn": 0, "reduced": 1}
-    return ([sorted(groups[k], key=lambda r: order.get(r.plant, 2)) for k in drawable],
+    plants = {"exudyn": 0, "reduced": 1}
+    return ([sorted(groups[k], key=lambda r: plants.get(r.plant, 2)) for k in drawable],
             [groups[k][0] for k in skipped])
 
 

@@ -1,0 +1,159 @@
+"""Bring your own controller and observer: plug-ins defined outside the package run
+everywhere the built-ins run, and their failures are results or one-line errors."""
+import json
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from validation.executor import execute_run
+from validation.scenario import scenario_from_mapping, scenario_to_mapping
+from validation.store import ResultStore
+
+PLUGIN = textwrap.dedent('''
+    """Plug-ins for the tests: written only against the public interface."""
+    import numpy as np
+
+
+    class MyPD:
+        """Joint PD without feedforward, as a user would write it."""
+        name = "my-pd"
+
+        def __init__(self, model, *, kp=(30.0, 15.0), kd=(18.1, 8.2)):
+            self.kp, self.kd = np.asarray(kp, float), np.asarray(kd, float)
+
+        def __call__(self, t, x, ref):
+            n = x.shape[0] // 2
+            theta_d, dtheta_d, _ = ref(t)
+            return self.kp * (theta_d - x[:2]) + self.kd * (dtheta_d - x[n:n + 2])
+
+
+    class Boom(MyPD):
+        """Raises at t = 0.5 s."""
+        def __call__(self, t, x, ref):
+            if t >= 0.5:
+                raise RuntimeError("boom at half a second")
+            return super().__call__(t, x, ref)
+
+
+    class PassThrough:
+        """An observer that returns the measured full state."""
+        def __init__(self, model):
+            self.measured = model.state_names
+
+        def reset(self, x_hat0):
+            self.x = np.array(x_hat0, float)
+            return self.x.copy()
+
+        def update(self, t, y, tau, Ts):
+            self.x = np.array(y, float)
+            return self.x.copy()
+
+
+    class NoUpdate:
+        measured = ("theta1",)
+
+        def __init__(self, model):
+            pass
+
+        def reset(self, x_hat0):
+            return x_hat0
+''')
+
+
+@pytest.fixture()
+def plugin_dir(tmp_path, monkeypatch):
+    (tmp_path / "mylab_plugins.py").write_text(PLUGIN)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "mylab_plugins", raising=False)  # this test's copy
+    return tmp_path
+
+
+def flexarm(cwd, *args):
+    return subprocess.run([sys.executable, "-m", "validation.cli", *args], cwd=cwd,
+                          capture_output=True, text=True)
+
+
+@pytest.mark.parametrize("plant", ["reduced", "exudyn"])
+def test_a_plugin_reproduces_the_builtin_pd(plugin_dir, plant):
+    base = {"duration": 3.0, "plant": {"kind": plant}}
+    builtin = execute_run(scenario_to_mapping(scenario_from_mapping(
+        base | {"controller": {"kind": "pd", "options": {"feedforward": False}}})))[1]
+    plugin = execute_run(scenario_to_mapping(scenario_from_mapping(
+        base | {"controller": {"kind": "mylab_plugins:MyPD"}})))[1]
+    keys = [k for k, v in builtin.items() if isinstance(v, float) and k not in
+            ("wall_s", "realtime_factor")]
+    assert len(keys) > 20
+    for k in keys:  # the same arithmetic in another order: agreement to 1e-9
+        assert plugin[k] == pytest.approx(builtin[k], rel=1e-9, abs=1e-12), k
+
+
+def test_flexarm_run_and_a_two_worker_campaign_with_plugins(plugin_dir):
+    out = plugin_dir / "run"
+    proc = flexarm(plugin_dir, "run", "--controller", "mylab_plugins:MyPD", "--observer",
+                   "mylab_plugins:PassThrough", "--duration", "3", "--plant", "exudyn",
+                   "--set", "controller.options.kp=[20.0, 10.0]", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    (row,) = ResultStore(out).rows()
+    assert row.status == "ok" and row.config["controller"]["options"]["kp"] == [20.0, 10.0]
+    camp = plugin_dir / "c.toml"
+    camp.write_text('name = "plug"\n[scenario]\nduration = 1.0\ntransient = 0.5\n'
+                    'controller.kind = "mylab_plugins:MyPD"\n'
+                    '[[sweep]]\ngrid.plant.kind = ["reduced", "exudyn"]\n'
+                    'zip.name = ["fine", "boom"]\n'
+                    'zip.controller.kind = ["mylab_plugins:MyPD", "mylab_plugins:Boom"]\n')
+    proc = flexarm(plugin_dir, "campaign", str(camp), "--out", str(plugin_dir / "c"),
+                   "--workers", "2", "--no-progress")
+    # The raising plug-in fails its two runs (exit 1); the campaign completes the others.
+    assert proc.returncode == 1, proc.stderr
+    rows = {(r.name, r.plant): r for r in ResultStore(plugin_dir / "c").rows()}
+    assert len(rows) == 4
+    for plant in ("reduced", "exudyn"):
+        assert rows[("plug/fine", plant)].status == "ok"
+        boom = rows[("plug/boom", plant)]
+        assert boom.status == "failed"
+        assert "raised RuntimeError: boom at half a second at t = 0.5 s" in boom.message
+
+
+@pytest.mark.parametrize("args, key", [
+    (["--controller", "nosuchmodule:Law"], "controller.kind: cannot import 'nosuchmodule'"),
+    (["--controller", "mylab_plugins:Nothing"], "controller.kind: module 'mylab_plugins' has no"),
+    (["--controller", "mylab_plugins:MyPD", "--set", "controller.options.kq=1.0"],
+     "controller.options.kq: not an option of mylab_plugins:MyPD"),
+    (["--observer", "mylab_plugins:NoUpdate"], "observer.kind: mylab_plugins:NoUpdate has no "
+                                              "method update()"),
+    (["--controller", "pbc", "--set", "controller.options.kv_flex=5.0"],
+     "controller.options.kv_flex: not an option of pbc"),
+    (["--observer", "mylab_plugins:PassThrough", "--set", "sensors.rates=false"],
+     "observer.kind: mylab_plugins:PassThrough needs the measurements"),
+])
+def test_bad_plugins_are_one_line_errors_and_nothing_is_written(plugin_dir, args, key):
+    out = plugin_dir / "never"
+    proc = flexarm(plugin_dir, "run", "--duration", "3", "--out", str(out), *args)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("flexarm: error: " + key), proc.stderr
+    assert not out.exists()
+
+
+def test_the_realisable_pbc_refuses_its_dead_settings_with_the_reason():
+    from validation._config import ConfigError
+    with pytest.raises(ConfigError) as exc:
+        scenario_from_mapping({"controller": {"kind": "pbc", "options": {"compensate_damping": False}}})
+    assert exc.value.path == "controller.options.compensate_damping"
+    assert "unactuated rows of eq. (20)" in exc.value.message
+    # The idealised law takes them (they change its torque there).
+    scenario_from_mapping({"controller": {"kind": "pbc-idealised",
+                                          "options": {"compensate_damping": False}}})
+
+
+def test_plugin_code_is_part_of_the_fingerprint(plugin_dir):
+    """Editing a plug-in's module makes its stored runs stale (not reused)."""
+    from validation.fingerprint import _plugin_source, run_fingerprint
+    config = json.loads(json.dumps(scenario_to_mapping(scenario_from_mapping(
+        {"controller": {"kind": "mylab_plugins:MyPD"}}))))
+    before = run_fingerprint(config)
+    (plugin_dir / "mylab_plugins.py").write_text(PLUGIN + "\n# edited\n")
+    _plugin_source.cache_clear()
+    assert run_fingerprint(config) != before
