@@ -5,14 +5,17 @@ trajectories (eq. 37).  All are plug-ins of one interface (`controllers._interfa
 ``tau = controller(t, x, ref)``; an observer has ``measured``, ``reset(x_hat0)`` and
 ``update(t, y, tau, Ts) -> x_hat``.
 """
-from ._baselines import JointPD, RigidComputedTorque
+from ._baselines import JointPD, RigidArm, RigidComputedTorque
+from ._ekf import ExtendedKalmanFilter, PositionEKF
 from ._interface import Controller, Observer
+from ._lqr import GainScheduledLQR
 from ._pbc import IdealisedPBC, PassivityBasedController
 from ._reference import PaperReference, QuinticMove
 from ._registry import CONTROLLERS, OBSERVERS, PluginError, accepted_options, resolve
 from ._smo import BoundaryLayerSMO, PaperSMO, PositionOnlySMO
 
 __all__ = ["Controller", "Observer", "PassivityBasedController", "IdealisedPBC", "PaperSMO",
-           "BoundaryLayerSMO", "PositionOnlySMO", "JointPD", "RigidComputedTorque",
+           "BoundaryLayerSMO", "PositionOnlySMO", "ExtendedKalmanFilter", "PositionEKF",
+           "JointPD", "RigidComputedTorque", "GainScheduledLQR", "RigidArm",
            "PaperReference", "QuinticMove", "CONTROLLERS", "OBSERVERS", "PluginError",
            "resolve", "accepted_options"]

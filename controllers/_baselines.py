@@ -12,22 +12,66 @@ torque (unit-inertia error dynamics) K_p = Λ K_v/M = (11.1, 14.1), K_d = Λ + K
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from reduced_model import ArmModel
 
 from ._gains import gain_vector
 
-__all__ = ["JointPD", "RigidComputedTorque", "rigid_inverse_dynamics"]
+__all__ = ["JointPD", "RigidComputedTorque", "RigidArm", "rigid_torque"]
 
 
-def rigid_inverse_dynamics(model: ArmModel, theta, dtheta, ddtheta) -> np.ndarray:
-    """M_θθ(θ) θ̈ + C_θθ(θ, θ̇) θ̇ of the rigid arm: the model at q = q̇ = 0."""
-    Q, Qd = np.zeros(model.n), np.zeros(model.n)
-    Q[:2], Qd[:2] = theta, dtheta
-    M = model.mass_matrix(Q)[:2, :2]
-    C = model.coriolis_matrix(Q, Qd)[:2, :2]
-    return M @ ddtheta + C @ dtheta
+class RigidArm:
+    """The rigid arm of a model (q = q̇ = 0) for fast inverse dynamics.
+
+    Every rigid planar two-link arm has M_θθ(θ2) = [[a + 2c, d + c], [d + c, d]] with
+    c = b_c cos θ2 − b_s sin θ2 and C_θθ θ̇ from the Christoffel symbols of that M.  The
+    four constants are read off the model's own M at θ2 = 0 and π/2 and checked against
+    its M and C at random states (to 1e-9 relative, else RuntimeError), so this is the
+    model's rigid part, evaluated in ~1 µs by `rigid_torque` instead of ~30 µs through
+    the general M and C."""
+
+    def __init__(self, model: ArmModel) -> None:
+        Q = np.zeros(model.n)
+        m0 = model.mass_matrix(Q)[:2, :2]
+        Q[1] = np.pi / 2
+        m90 = model.mass_matrix(Q)[:2, :2]
+        d = m0[1, 1]
+        bc, bs = m0[0, 1] - d, d - m90[0, 1]
+        #: (a, d, b_c, b_s)
+        self.constants = np.array([m0[0, 0] - 2.0 * bc, d, bc, bs])
+        rng = np.random.default_rng(0)
+        for _ in range(3):
+            th, dth, ddth = rng.uniform(-3, 3, 2), rng.uniform(-2, 2, 2), rng.uniform(-2, 2, 2)
+            Q, Qd = np.zeros(model.n), np.zeros(model.n)
+            Q[:2], Qd[:2] = th, dth
+            want = model.mass_matrix(Q)[:2, :2] @ ddth + model.coriolis_matrix(Q, Qd)[:2, :2] @ dth
+            got = self.torque(th, dth, ddth)
+            if not np.allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max()):
+                raise RuntimeError(f"the model's rigid part is not a planar two-link arm: "
+                                   f"{got} vs {want}")
+
+    def torque(self, theta, dtheta, ddtheta) -> np.ndarray:
+        """M_θθ(θ) θ̈ + C_θθ(θ, θ̇) θ̇ of the rigid arm."""
+        out = np.empty(2)
+        rigid_torque(self.constants, np.asarray(theta, float), np.asarray(dtheta, float),
+                     np.asarray(ddtheta, float), out)
+        return out
+
+
+@njit(cache=True)
+def rigid_torque(ff, th, dth, ddth, tau):
+    """M_θθ(θ2) θ̈ + C_θθ(θ2, θ̇) θ̇ of a rigid planar two-link arm, constants (a, d, b_c, b_s)."""
+    a, d, bc, bs = ff[0], ff[1], ff[2], ff[3]
+    c2, s2 = math.cos(th[1]), math.sin(th[1])
+    c = bc * c2 - bs * s2  # the θ2-dependent inertia term
+    dc = -(bc * s2 + bs * c2)  # ∂c/∂θ2
+    tau[0] = (a + 2.0 * c) * ddth[0] + (d + c) * ddth[1] \
+        + dc * (2.0 * dth[0] * dth[1] + dth[1] * dth[1])
+    tau[1] = (d + c) * ddth[0] + d * ddth[1] - dc * dth[0] * dth[0]
 
 
 class JointPD:
@@ -51,16 +95,15 @@ class JointPD:
                  feedforward: bool = True) -> None:
         if not isinstance(feedforward, (bool, np.bool_)):
             raise ValueError(f"feedforward must be true or false, got {feedforward!r}")
-        self.model = model
+        self.rigid = RigidArm(model) if feedforward else None
         self.kp, self.kd = gain_vector("kp", kp, 2), gain_vector("kd", kd, 2)
-        self.feedforward = bool(feedforward)
 
     def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
         n = x.shape[0] // 2
         theta_d, dtheta_d, ddtheta_d = ref(t)
         tau = self.kp * (theta_d - x[:2]) + self.kd * (dtheta_d - x[n:n + 2])
-        if self.feedforward:
-            tau = tau + rigid_inverse_dynamics(self.model, theta_d, dtheta_d, ddtheta_d)
+        if self.rigid is not None:
+            tau = tau + self.rigid.torque(theta_d, dtheta_d, ddtheta_d)
         return tau
 
 
@@ -75,7 +118,7 @@ class RigidComputedTorque:
     name = "ct"
 
     def __init__(self, model: ArmModel, *, kp=(11.1, 14.1), kd=(6.7, 7.7)) -> None:
-        self.model = model
+        self.rigid = RigidArm(model)
         self.kp, self.kd = gain_vector("kp", kp, 2), gain_vector("kd", kd, 2)
 
     def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
@@ -83,4 +126,4 @@ class RigidComputedTorque:
         theta, dtheta = x[:2], x[n:n + 2]
         theta_d, dtheta_d, ddtheta_d = ref(t)
         accel = ddtheta_d + self.kd * (dtheta_d - dtheta) + self.kp * (theta_d - theta)
-        return rigid_inverse_dynamics(self.model, theta, dtheta, accel)
+        return self.rigid.torque(theta, dtheta, accel)

@@ -6,16 +6,20 @@ import numpy as np
 __all__ = ["gain_vector", "joint_flex_gains"]
 
 
-def gain_vector(name: str, value, length: int) -> np.ndarray:
+def gain_vector(name: str, value, length: int, *, positive: bool = False) -> np.ndarray:
     """``value`` (one number, or ``length`` numbers) as an array of ``length`` gains, each
-    finite and >= 0; ValueError naming ``name`` otherwise."""
-    g = np.atleast_1d(np.asarray(value, dtype=float))
+    finite and >= 0 (> 0 if ``positive``); ValueError starting with ``name`` otherwise."""
+    try:
+        g = np.atleast_1d(np.asarray(value, dtype=float))
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers, got {value!r}") from None
     if g.shape == (1,):
         g = np.repeat(g, length)
     if g.shape != (length,):
         raise ValueError(f"{name}: need 1 or {length} values, got {np.size(value)}")
-    if not np.all(np.isfinite(g)) or np.any(g < 0):
-        raise ValueError(f"{name} must be finite and >= 0, got {g.tolist()}")
+    if not np.all(np.isfinite(g)) or np.any(g <= 0 if positive else g < 0):
+        raise ValueError(f"{name} must be finite and {'> 0' if positive else '>= 0'}, "
+                         f"got {g.tolist()}")
     return g
 
 

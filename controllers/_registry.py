@@ -9,6 +9,8 @@ import importlib
 import inspect
 
 from ._baselines import JointPD, RigidComputedTorque
+from ._ekf import ExtendedKalmanFilter, PositionEKF
+from ._lqr import GainScheduledLQR
 from ._pbc import IdealisedPBC, PassivityBasedController
 from ._smo import BoundaryLayerSMO, PaperSMO, PositionOnlySMO
 
@@ -16,10 +18,11 @@ __all__ = ["CONTROLLERS", "OBSERVERS", "PluginError", "resolve", "accepted_optio
 
 CONTROLLERS: dict[str, type] = {
     "pbc": PassivityBasedController, "pbc-idealised": IdealisedPBC, "pd": JointPD,
-    "ct": RigidComputedTorque,
+    "ct": RigidComputedTorque, "lqr": GainScheduledLQR,
 }
 OBSERVERS: dict[str, type] = {
     "smo-paper": PaperSMO, "smo-bl": BoundaryLayerSMO, "smo-pos": PositionOnlySMO,
+    "ekf": ExtendedKalmanFilter, "ekf-pos": PositionEKF,
 }
 
 

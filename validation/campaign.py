@@ -93,6 +93,11 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
                   f"unknown key (allowed: {', '.join(sorted(_SWEEP_KEYS))})")
     report = data.get("report", {})
     check(isinstance(report, dict), "report", "must be a table")
+    for key in report:
+        check(key == "figures", f"report.{key}", "unknown key (allowed: figures)")
+    figures = report.get("figures", [])
+    check(isinstance(figures, list) and all(isinstance(f, str) for f in figures),
+          "report.figures", "must be a list of run names")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
                     description=str(data.get("description", "")))
 
@@ -204,7 +209,17 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
 
 def expand(campaign: Campaign) -> list[PlannedRun]:
     """All runs of a campaign, each scenario resolved and checked; duplicates (the same
-    resolved scenario reached twice) are kept once."""
+    resolved scenario reached twice) are kept once.  ``[report] figures`` must name runs
+    of the campaign."""
+    runs = _expand(campaign)
+    names = {r.scenario.name for r in runs}
+    for wanted in campaign.report.get("figures", []):
+        check(any(n == wanted or n.endswith("/" + wanted) for n in names), "report.figures",
+              f"no run named {wanted!r} (runs: {', '.join(sorted(n.split('/')[-1] for n in names))})")
+    return runs
+
+
+def _expand(campaign: Campaign) -> list[PlannedRun]:
     try:
         base_scenario = scenario_from_mapping(campaign.base)
     except ConfigError as exc:
@@ -284,6 +299,13 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
     summary = CampaignSummary(planned=len(planned))
     wanted = {r.run_id for r in planned}
     rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
+    for run in planned:  # a file whose row was lost: its metadata rebuilds the row
+        path = store.runs_dir / f"{run.run_id}.npz"
+        if run.run_id not in rows and path.exists():
+            try:
+                rows[run.run_id] = store.adopt(path)
+            except ValueError:
+                pass  # unreadable: the run is redone and the file replaced
     damaged = store.verify(list(rows.values()))
     todo = []
     for run in planned:
@@ -342,6 +364,7 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
             if own:
                 runner.close()
     store.export()
+    store.close()
     return summary
 
 

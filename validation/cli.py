@@ -344,8 +344,8 @@ def cmd_attribute(args: argparse.Namespace) -> int:
         scenario = scenario_from_mapping(data)
         systems = [(Path(args.file).stem, scenario)]
         default_out = Path("results") / f"attribution-{Path(args.file).stem}"
-    names = [n.strip() for n in args.factors.split(",")] if args.factors is not None else \
-        section.get("factors")
+    names = [n.strip() for n in args.factors.split(",") if n.strip()] \
+        if args.factors is not None else section.get("factors")
     if names is not None and not isinstance(names, list):
         raise ConfigError("attribution.factors", "must be a list of factor names")
     plans = [(label, s, parse_factors(names, s) if names is not None else default_factors(s))

@@ -164,15 +164,20 @@ class LocalPoolRunner(_PoolRunner):
 
     def abort(self) -> None:
         processes = list((getattr(self.executor, "_processes", None) or {}).values())
+        self._aborted = True
         super().abort()
         for p in processes:  # do not wait for runs in progress: end them
             if p.is_alive():
-                p.terminate()
+                p.kill()
         for p in processes:
             p.join(timeout=5)
+        from multiprocessing import forkserver
+        forkserver._forkserver._stop()  # and the server that forked them (private API,
+        # the one the standard library's own tests use; nothing public stops it)
 
     def close(self) -> None:
-        self.executor.shutdown(wait=True, cancel_futures=True)
+        if not getattr(self, "_aborted", False):
+            self.executor.shutdown(wait=True, cancel_futures=True)
 
 
 class DaskRunner(_PoolRunner):

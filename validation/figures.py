@@ -522,8 +522,10 @@ def waterfall(study: str, metric: str, unit: str, ideal: float, contributions: d
         labels.append(f)
     ax.bar(len(parts) + 1, ideal + total, color="0.3")
     labels.append("real")
+    labels = [labels[0], *(f"{f}\n{v:+.2g}" if math.isfinite(v) else f"{f}\n(diverges)"
+                           for f, v in parts), labels[-1]]
     ax.set_xticks(range(len(labels)))
-    ax.set_xticklabels(labels, rotation=30, ha="right", fontsize=8)
+    ax.set_xticklabels(labels, fontsize=7)
     ax.set_ylabel(f"{metric} [{unit}]")
     ax.axhline(ideal, color="grey", lw=0.5, ls=":")
     ax.set_title(f"{study}: {metric} from the ideal to the real world "

@@ -1,6 +1,9 @@
 """Controllers and observers of a scenario: found, checked and built the same way for the
 built-in laws and for plug-ins (``kind = "package.module:Class"``).
 
+A law with an option named ``Ts`` (a discrete-time design such as the LQR) receives the
+scenario's control period there unless the scenario's options set it.
+
 `check_laws` runs before anything is simulated: the class must resolve, accept the
 options and construct on the nominal model, have the methods of the interface
 (`controllers._interface`), and an observer must find the measurements it needs among
@@ -44,6 +47,22 @@ def measurement_names(scenario, model: ArmModel) -> tuple[str, ...]:
     if s.tip_position:
         names += ["tip_x", "tip_y"]
     return tuple(names)
+
+
+def _options(scenario, role: str) -> dict:
+    """The law's options; a law with an option named ``Ts`` (a discrete-time design)
+    receives the scenario's control period there unless the options set it."""
+    spec = getattr(scenario, role)
+    options = dict(spec.options)
+    if "Ts" not in options:
+        try:
+            accepted = accepted_options(resolve(spec.kind, CONTROLLERS if role == "controller"
+                                                else OBSERVERS, role))
+        except PluginError:
+            return options  # reported by _construct
+        if accepted is not None and "Ts" in accepted:
+            options["Ts"] = scenario.Ts
+    return options
 
 
 def _construct(role: str, kind: str, options: dict, model: ArmModel):
@@ -105,14 +124,14 @@ def check_laws(scenario) -> None:
     """Raise `ConfigError` unless the scenario's controller and observer can be built."""
     s = scenario
     key = (s.nominal_params, s.model.modes_per_link)
-    _checked("controller", s.controller.kind, json.dumps(s.controller.options, sort_keys=True),
-             *key)
+    _checked("controller", s.controller.kind,
+             json.dumps(_options(s, "controller"), sort_keys=True), *key)
     if s.observer.kind == "none":
         check(not s.observer.options, "observer.options", "there is no observer "
                                                           "(observer.kind = 'none')")
         return
     measured = _checked("observer", s.observer.kind,
-                        json.dumps(s.observer.options, sort_keys=True), *key)
+                        json.dumps(_options(s, "observer"), sort_keys=True), *key)
     available = measurement_names(s, nominal_model(*key))
     missing = [m for m in measured if m not in available]
     check(not missing, "observer.kind",
@@ -123,7 +142,7 @@ def check_laws(scenario) -> None:
 
 def build_controller(scenario, model: ArmModel):
     """A fresh controller for one run (laws keep state; never share one between runs)."""
-    return _construct("controller", scenario.controller.kind, scenario.controller.options,
+    return _construct("controller", scenario.controller.kind, _options(scenario, "controller"),
                       model)
 
 
@@ -131,4 +150,4 @@ def build_observer(scenario, model: ArmModel):
     """A fresh observer for one run, or None."""
     if scenario.observer.kind == "none":
         return None
-    return _construct("observer", scenario.observer.kind, scenario.observer.options, model)
+    return _construct("observer", scenario.observer.kind, _options(scenario, "observer"), model)

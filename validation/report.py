@@ -62,6 +62,7 @@ class ReportData:
     figures: list = field(default_factory=list)
     notes: dict = field(default_factory=dict)
     animation: dict | None = None
+    attribution: list = field(default_factory=list)
 
 
 def _table(head: list[str], rows: list[list], classes: list[str] | None = None) -> dict:
@@ -189,7 +190,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                         f"installation ({', '.join(r.run_id for r in stale[:8])}"
                         f"{', …' if len(stale) > 8 else ''}); rerun the campaign to refresh them")
     campaigns = store.campaigns()
-    names = [n for n in campaigns if n != "stability"] or ["(single runs)"]
+    names = [n for n in campaigns if n not in ("stability",)] or ["(single runs)"]
     info = [campaigns.get(n, {}) for n in names]
     wanted = [w for i in info for w in i.get("report", {}).get("figures", [])] or None
     counts = {s: sum(r.status == s for r in runs) for s in ("ok", "diverged", "failed")}
@@ -224,6 +225,14 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                   r["reason"]] for r in rows])}
             tasks.append(("Stability map", "sampled-data stability map: tested control periods "
                           "per case, plant and arm", lambda: fig.stability_chart(results)))
+    for study, spec in campaigns.get("attribution", {}).get("studies", {}).items():
+        from .attribution import METRICS, attribution_from_store, study_view
+        a = attribution_from_store(store.out, study, tuple(spec["factors"]))
+        data.attribution.append(study_view(a))
+        for metric, contributions in a.contributions.items():
+            tasks.append(("Attribution", f"{study}: {metric}, from the ideal to the real world",
+                          lambda a=a, m=metric, c=contributions: fig.waterfall(
+                              a.name, m, METRICS[m][1], a.ideal_value[m], c, a.totals[m])))
     data.estimation = _estimation_table(runs)
     data.runs, data.metrics = _runs_table(runs), _metrics_table(runs)
 
@@ -311,7 +320,8 @@ def write_report(results_dir, *, animate: bool = True, progress: bool = True) ->
     for i, f in enumerate(data.figures):
         f.file = f"figures/fig{i:02d}.png"
         (out / f.file).write_bytes(f.png)
-    sections = ["Stability map", "Paper figures", "Sweeps", "Validity of the reduced model"]
+    sections = ["Stability map", "Attribution", "Paper figures", "Sweeps",
+                "Validity of the reduced model"]
     gif = None
     if data.animation:
         gif = "data:image/gif;base64," + base64.b64encode((out / "arm.gif").read_bytes()).decode()

@@ -289,17 +289,20 @@ class Scenario:
 def check_scenario(s: Scenario) -> None:
     """Reject combinations that cannot run, before anything is simulated."""
     samples = s.duration / s.Ts
-    check(samples <= MAX_SAMPLES, "duration", f"{s.duration!r} s at Ts = {s.Ts!r} s is "
+    check(samples <= MAX_SAMPLES, "duration", f"{s.duration:g} s at Ts = {s.Ts:g} s is "
                                               f"{samples:.3g} samples (at most {MAX_SAMPLES:.0e}: "
                                               "they are held in memory)")
     check(s.duration / s.plant.step <= MAX_PLANT_STEPS, "plant.step",
-          f"{s.plant.step!r} s over {s.duration!r} s is {s.duration / s.plant.step:.3g} "
+          f"{s.plant.step:g} s over {s.duration:g} s is {s.duration / s.plant.step:.3g} "
           f"internal steps (at most {MAX_PLANT_STEPS:.0e})")
     n_steps = round(s.Ts / s.plant.step)
     check(n_steps >= 1 and abs(n_steps * s.plant.step - s.Ts) <= 1e-9 * s.Ts, "Ts",
           f"{s.Ts!r} s is not a whole multiple of plant.step = {s.plant.step!r} s")
     check(s.duration >= s.Ts, "duration", f"must be at least one sample (Ts = {s.Ts}), "
                                           f"got {s.duration!r}")
+    check(s.sensors.delay * s.Ts < s.duration, "sensors.delay",
+          f"{s.sensors.delay} samples ({s.sensors.delay * s.Ts:g} s) is not shorter than the "
+          f"{s.duration:g} s run")
     check(s.transient < s.duration, "transient", f"{s.transient!r} s leaves nothing of the "
                                                  f"{s.duration!r} s run to measure")
     check(not (s.controller.kind == "pbc-idealised" and s.plant.kind == "exudyn"),

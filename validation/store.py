@@ -215,9 +215,18 @@ class ResultStore:
                    f"({', '.join('?' * len(_COLUMNS))})", values)
 
     def set_campaign(self, name: str, info: dict) -> None:
-        """Record a campaign (description, report settings) that stores runs here."""
-        self._connect(create=True).execute(
-            "INSERT OR REPLACE INTO campaigns VALUES (?, ?)", (name, json.dumps(info)))
+        """Record a campaign that stores runs here (description, report settings, …);
+        keys already recorded for it and not in ``info`` are kept."""
+        db = self._connect(create=True)
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            old = db.execute("SELECT info FROM campaigns WHERE name = ?", (name,)).fetchone()
+            merged = {**(json.loads(old[0]) if old else {}), **info}
+            db.execute("INSERT OR REPLACE INTO campaigns VALUES (?, ?)", (name, json.dumps(merged)))
+            db.execute("COMMIT")
+        except BaseException:
+            db.execute("ROLLBACK")
+            raise
 
     def remove_stale_temporaries(self, older_than: float = 3600.0) -> int:
         """Delete temporary files a killed writer left behind more than ``older_than``
@@ -324,25 +333,31 @@ class ResultStore:
                 path.rename(path.with_suffix(".npz.damaged"))
             report["dropped"].append(f"{rid} ({why})")
         for path in self.unindexed_files():
-            data = path.read_bytes()
             try:
-                result, meta = RunResult.from_bytes(data)
+                self.adopt(path)
             except ValueError as exc:
                 path.rename(path.with_suffix(".npz.damaged"))
                 report["unreadable"].append(f"{path.stem} ({exc})")
                 continue
-            row = {"run_id": path.stem, "name": result.config.get("name", ""),
-                   "campaign": meta.get("campaign", ""), "sweep": meta.get("sweep", ""),
-                   "axes": meta.get("axes", {}), "status": result.status,
-                   "message": result.message, "end_time": result.end_time,
-                   "fingerprint": meta.get("fingerprint", ""), "scenario": result.config,
-                   "metrics": meta.get("metrics", {}), "timings": result.timings,
-                   "environment": meta.get("environment", {}), "file": f"runs/{path.name}",
-                   "sha256": hashlib.sha256(data).hexdigest(), "size": len(data),
-                   "finished": meta.get("finished", "")}
-            self._insert(db, row)
             report["adopted"].append(path.stem)
         return report
+
+    def adopt(self, path: Path) -> StoredRun:
+        """Index a run file that has no row (its metadata holds everything); ValueError if
+        it is not a readable run file."""
+        data = Path(path).read_bytes()
+        result, meta = RunResult.from_bytes(data)
+        row = {"run_id": path.stem, "name": result.config.get("name", ""),
+               "campaign": meta.get("campaign", ""), "sweep": meta.get("sweep", ""),
+               "axes": meta.get("axes", {}), "status": result.status,
+               "message": result.message, "end_time": result.end_time,
+               "fingerprint": meta.get("fingerprint", ""), "scenario": result.config,
+               "metrics": meta.get("metrics", {}), "timings": result.timings,
+               "environment": meta.get("environment", {}), "file": f"runs/{path.name}",
+               "sha256": hashlib.sha256(data).hexdigest(), "size": len(data),
+               "finished": meta.get("finished", "")}
+        self._insert(self._connect(create=True), row)
+        return self.row(path.stem)
 
     def export(self) -> tuple[Path, Path]:
         """Write metrics.csv (one row per run: identity, what was run, swept values,

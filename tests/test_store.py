@@ -1,0 +1,222 @@
+"""A results store that loses nothing: concurrent writers, signals, code-aware resume,
+verification of damaged folders, repair, confined names and caps (issue 13's defects,
+each reproduced and shown fixed)."""
+import errno
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from campaign_testing import campaign_toml
+from validation.campaign import campaign_from_mapping, run_campaign
+from validation.cli import main
+from validation.store import ResultStore, StoreError
+
+
+def spec(name: str, n: int, duration: float = 0.5) -> dict:
+    return {"name": name, "scenario": {"duration": duration, "transient": 0.1,
+                                       "sensors": {"encoder_noise": 1e-4}},
+            "sweep": [{"grid": {"seed": list(range(n))}}]}
+
+
+def cli(*args, **kw):
+    return subprocess.Popen([sys.executable, "-m", "validation.cli", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+
+
+def wait_rows(out, n, timeout=120):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        try:
+            if len(ResultStore(out).rows()) >= n:
+                return
+        except (StoreError, sqlite3.Error):
+            pass
+        time.sleep(0.02)
+    raise AssertionError(f"fewer than {n} runs stored after {timeout} s")
+
+
+def test_two_campaigns_into_one_folder_both_keep_every_row(tmp_path):
+    out = tmp_path / "shared"
+    files = []
+    for name in ("c", "d"):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(campaign_toml(spec(name, 12)))
+        files.append(path)
+    procs = [cli("campaign", str(f), "--out", str(out), "--workers", "1", "--no-progress")
+             for f in files]
+    results = [p.communicate(timeout=600) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], results
+    store = ResultStore(out)
+    rows = store.rows()
+    assert len(rows) == 24 and len(list((out / "runs").glob("*.npz"))) == 24
+    assert store.verify() == {}
+    assert {r.campaign for r in rows} == {"c", "d"}
+    assert (out / "metrics.csv").read_text().count("\n") == 25  # header + every run
+
+
+@pytest.mark.parametrize("workers, sig, status", [("1", signal.SIGTERM, 143),
+                                                  ("2", signal.SIGINT, 130)])
+def test_a_signal_keeps_finished_runs_and_ends_the_workers(tmp_path, workers, sig, status):
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(campaign_toml(spec("s", 40, duration=1.0)))
+    out = tmp_path / "out"
+    proc = cli("campaign", str(cfg), "--out", str(out), "--workers", workers, "--no-progress",
+               start_new_session=True)
+    wait_rows(out, 3)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == status, err
+    assert "interrupted" in err and "Traceback" not in err
+    rows = ResultStore(out).rows()
+    assert 3 <= len(rows) < 40  # what finished is kept, the rest was not run
+    assert ResultStore(out).verify() == {}
+    deadline = time.time() + 10  # the resource tracker leaves when its pipe closes
+    while time.time() < deadline:
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
+    with pytest.raises(ProcessLookupError):  # no worker left behind in its session
+        os.killpg(proc.pid, 0)
+    again = subprocess.run([sys.executable, "-m", "validation.cli", "campaign", str(cfg),
+                            "--out", str(out), "--workers", "1", "--no-progress"],
+                           capture_output=True, text=True)
+    assert again.returncode == 0 and f"{len(rows)} already stored" in again.stdout
+
+
+def _one_run_folder(tmp_path, n=3):
+    c = campaign_from_mapping(spec("r", n))
+    run_campaign(c, tmp_path, progress=False)
+    return c, ResultStore(tmp_path)
+
+
+def test_results_of_other_code_are_rerun_not_reused(tmp_path):
+    c, store = _one_run_folder(tmp_path)
+    with sqlite3.connect(store.index_path) as db:  # as if stored by an older loop.py
+        db.execute("UPDATE runs SET fingerprint = 'older-code'")
+    summary = run_campaign(c, tmp_path, progress=False, reuse_stale=True)
+    assert summary.skipped == 3 and summary.done == 0  # only on request
+    summary = run_campaign(c, tmp_path, progress=False)
+    assert len(summary.stale) == 3 and summary.ok == 3
+    assert all(r.fingerprint != "older-code" for r in store.rows())
+
+
+def _corrupt(path, how):
+    data = path.read_bytes()
+    if how == "truncate":
+        path.write_bytes(data[: len(data) // 2])
+    elif how == "garbage":  # same size, different bytes: only the checksum tells
+        path.write_bytes(bytes(b ^ 0x5A for b in data))
+    elif how == "delete":
+        path.unlink()
+
+
+@pytest.mark.parametrize("how", ["truncate", "garbage", "delete"])
+def test_a_damaged_run_file_is_detected_and_redone(tmp_path, how):
+    c, store = _one_run_folder(tmp_path)
+    victim = store.rows()[1]
+    _corrupt(tmp_path / victim.file, how)
+    assert victim.run_id in store.verify()
+    with pytest.raises(StoreError, match=victim.run_id):
+        store.load(victim.run_id)
+    summary = run_campaign(c, tmp_path, progress=False)
+    assert list(summary.damaged) == [victim.run_id] and summary.ok == 1
+    assert store.verify() == {}
+
+
+def test_a_lost_index_is_rebuilt_from_the_run_files(tmp_path, capsys):
+    c, store = _one_run_folder(tmp_path)
+    before = {r.run_id: r.metrics for r in store.rows()}
+    store.close()
+    store.index_path.write_bytes(b"this is not a database" * 100)
+    for suffix in ("-wal", "-shm"):
+        (tmp_path / f"index.sqlite{suffix}").unlink(missing_ok=True)
+    assert main(["report", str(tmp_path)]) == 2  # one line, naming the index and the cure
+    assert "flexarm repair" in capsys.readouterr().err
+    assert main(["repair", str(tmp_path)]) == 0
+    after = ResultStore(tmp_path)
+    assert {r.run_id: r.metrics for r in after.rows()} == before
+    assert run_campaign(c, tmp_path, progress=False).skipped == 3
+
+
+def test_names_cannot_escape_the_results_folder(tmp_path, capsys):
+    for name in ("../../escaped", "/abs/path", "", "a/b", "line\nbreak", ".hidden"):
+        cfg = tmp_path / "c.toml"
+        cfg.write_text(f'name = "{name.encode("unicode_escape").decode()}"\n[scenario]\n'
+                       'duration = 0.5\ntransient = 0.1\n')
+        assert main(["campaign", str(cfg), "--workers", "1"]) == 2
+        assert "name: must be a plain name" in capsys.readouterr().err
+    assert not (tmp_path.parent / "escaped").exists()
+    assert main(["run", "--name", "x\ny", "--duration", "0.5"]) == 2  # a label: printable
+
+
+@pytest.mark.parametrize("args, text", [
+    (["--set", "duration=1e9"], "duration: 1e+09 s at Ts = 0.001 s is 1e+12 samples"),
+    (["--set", "plant.step=1e-9"], "internal steps"),
+    (["--set", "true_params.L1=1e300"], "true_params"),
+    (["--set", "true_params.rho1=5e-324"], "true_params"),
+    (["--set", "sensors.encoder_noise=1e300"], "sensors.encoder_noise: must be <= 1000"),
+    (["--set", "sensors.delay=100000", "--duration", "1"], "sensors.delay"),
+    (["--set", "transient=30", "--duration", "10"], "transient"),
+    (["--Ts", "1e-300"], "Ts"),
+])
+def test_caps_are_one_line_errors(tmp_path, capsys, args, text):
+    out = tmp_path / "never"
+    assert main(["run", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and text in err[0], err
+    assert not out.exists()
+
+
+def test_include_caps(tmp_path, capsys):
+    deep = tmp_path / "deep.toml"
+    deep.write_text("x = " + "[" * 1500 + "]" * 1500 + "\n")
+    (tmp_path / "zero.toml").write_text('include = "/dev/zero"\n')
+    for i in range(22):  # each file includes the next twice: 2^22 loads without a cache
+        nxt = f'"f{i + 1}.toml"' if i < 21 else None
+        (tmp_path / f"f{i}.toml").write_text(f"include = [{nxt}, {nxt}]\n" if nxt else "duration = 1.0\n")
+    for name, text in (("deep.toml", "nested too deeply"), ("zero.toml", "not a regular file"),
+                       ("f0.toml", "nested deeper than 16")):
+        start = time.time()
+        assert main(["run", "--config", str(tmp_path / name)]) == 2
+        assert text in capsys.readouterr().err and time.time() - start < 10
+
+
+def test_workers_beyond_the_cores_need_force(capsys, tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(campaign_toml(spec("w", 1)))
+    assert main(["campaign", str(cfg), "--workers", "1024", "--out", str(tmp_path / "o")]) == 2
+    assert "--force-workers" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_full_disk_is_one_line_naming_the_folder(tmp_path, capsys, monkeypatch):
+    import validation.store as store_module
+
+    def full(path, *a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+    monkeypatch.setattr(store_module, "write_atomic", full)
+    assert main(["run", "--duration", "0.5", "--set", "transient=0.1",
+                 "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no space left on the device" in err[0] and str(tmp_path) in err[0]
+
+
+def test_failed_runs_keep_the_exit_status_on_a_plain_rerun(tmp_path):
+    from validation.results import RunResult
+    from validation.scenario import scenario_to_mapping
+    c = campaign_from_mapping(spec("f", 1))
+    run = __import__("validation.campaign", fromlist=["expand"]).expand(c)[0]
+    ResultStore(tmp_path).add(run.run_id, RunResult(
+        time=np.zeros(0), names=(), signals=np.zeros((0, 0)), status="failed",
+        message="boom", config=scenario_to_mapping(run.scenario)), {"status": "failed"})
+    summary = run_campaign(c, tmp_path, progress=False)
+    assert summary.failed_before == [run.run_id] and summary.any_failed
+    assert "1 failed earlier" in summary.line("f", tmp_path)
