@@ -46,8 +46,8 @@ __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updat
            "proposed_bounds", "write_baselines", "DEFAULT_FILE"]
 
 DEFAULT_FILE = Path(__file__).resolve().parent.parent / "baselines.toml"
-_CHECK_KEYS = {"name", "kind", "scenario", "campaign", "run", "plant", "metric", "op", "bound",
-               "measured", "joints", "theta2", "mode", "margin", "note"}
+_CHECK_KEYS = {"name", "kind", "scenario", "campaign", "run", "plant", "arm", "initial_state",
+               "metric", "op", "bound", "measured", "joints", "theta2", "mode", "margin", "note"}
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,8 @@ class Check:
     campaign: str | None = None
     run: str | None = None
     plant: str | None = None
+    arm: str = "default"  # for campaign checks: which arm and start the run has
+    initial_state: str = "rest"
     joints: str = "locked"
     theta2: float = 0.0
     mode: int = 1
@@ -149,10 +151,13 @@ class _Runner:
         campaign = load_campaign(self.b.path.parent / "campaigns" / f"{c.campaign}.toml")
         wanted = f"{campaign.name}/{c.run}"
         for planned in expand(campaign):
-            if planned.scenario.name == wanted and planned.scenario.plant.kind == c.plant:
-                return scenario_to_mapping(planned.scenario)
+            s = planned.scenario
+            if (s.name, s.plant.kind, s.arm, s.initial_state, s.Ts) == (
+                    wanted, c.plant, c.arm, c.initial_state, 1e-3):
+                return scenario_to_mapping(s)
         raise ConfigError(f"check {c.name}", f"campaign {c.campaign!r} has no run {wanted!r} "
-                                             f"on the {c.plant} plant")
+                                             f"on the {c.plant} plant, {c.arm} arm, from "
+                                             f"{c.initial_state}, Ts = 1 ms")
 
     def _reusable(self, rid: str):
         """The stored row of ``rid`` in the --results folder if it can be trusted: present,
@@ -285,8 +290,9 @@ def write_baselines(b: Baselines, checks: list[Check]) -> None:
         lines.append("")
     for c in checks:
         lines.append("[[check]]")
-        for key in ("name", "kind", "scenario", "campaign", "run", "plant", "metric", "op",
-                    "bound", "measured", "joints", "theta2", "mode", "margin", "note"):
+        for key in ("name", "kind", "scenario", "campaign", "run", "plant", "arm",
+                    "initial_state", "metric", "op", "bound", "measured", "joints", "theta2",
+                    "mode", "margin", "note"):
             value = getattr(c, key)
             default = Check.__dataclass_fields__[key].default
             if value is None or (key not in ("name", "metric", "op", "bound") and value == default):

@@ -279,8 +279,11 @@ class CampaignSummary:
         parts = [f"{name}: {self.planned} runs"]
         if self.skipped:
             parts.append(f"{self.skipped} already stored")
-        parts.append(f"ran {self.done}: {self.ok} ok, {self.diverged} diverged, "
-                     f"{self.failed} failed")
+        if self.done or not self.skipped:
+            parts.append(f"ran {self.done}: {self.ok} ok, {self.diverged} diverged, "
+                         f"{self.failed} failed")
+        else:
+            parts.append("nothing to run")
         if self.failed_before:
             parts.append(f"{len(self.failed_before)} failed earlier (not retried: "
                          "--retry-failed)")

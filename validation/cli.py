@@ -585,9 +585,9 @@ def build_parser() -> argparse.ArgumentParser:
         b.add_argument("--campaign", metavar="NAME", help="checks on runs of this campaign")
         b.add_argument("--out", metavar="DIR", help="where runs are stored "
                                                     "(default results/baselines)")
+        b.add_argument("--results", metavar="DIR",
+                       help="reuse verified runs of this results folder (made by this code)")
         if action == "check":
-            b.add_argument("--results", metavar="DIR",
-                           help="reuse verified runs of this results folder (made by this code)")
             b.set_defaults(func=cmd_baseline_check)
         else:
             b.add_argument("--allow-loosen", action="store_true",

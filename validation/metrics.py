@@ -236,4 +236,5 @@ def all_metrics(result: RunResult) -> dict[str, float]:
             | estimation(result, transient) | tip_slope_rate_error(result, transient, model)
             | torque(result) | residual(result)
             | {"wall_s": timings.get("wall_s", math.nan),
+               "startup_s": timings.get("startup_s", math.nan),
                "realtime_factor": timings.get("realtime_factor", math.nan)})

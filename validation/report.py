@@ -97,7 +97,7 @@ _METRICS = [("track_max_1", "max |e₁| [rad]", 1), ("track_max_2", "max |e₂| 
             ("vib_rms_2", "vibration 2 [mm]", 1e3), ("defl_max_1", "max defl. 1 [mm]", 1e3),
             ("tau_max_1", "max |τ₁| [N m]", 1), ("tau_tv_1", "TV τ₁ [N m/s]", 1),
             ("tau_tv_2", "TV τ₂ [N m/s]", 1), ("realtime_factor", "real-time factor", 1),
-            ("wall_s", "wall [s]", 1)]
+            ("wall_s", "wall [s]", 1), ("startup_s", "first sample [s]", 1)]
 
 
 def _metrics_table(runs) -> dict:
