@@ -142,7 +142,9 @@ class _Runner:
 
     def __init__(self, baselines: Baselines, out: str | Path, results: str | Path | None) -> None:
         self.b, self.store = baselines, ResultStore(out)
-        self.reuse = ResultStore(results) if results else None
+        # Verified runs made by this code are reused: the given folder's, then our own.
+        self.reuse = [ResultStore(results)] if results else []
+        self.reuse.append(self.store)
         self.cache: dict[str, tuple[dict, Path | None]] = {}
 
     def scenario_data(self, c: Check) -> dict:
@@ -160,21 +162,25 @@ class _Runner:
                                              f"{c.initial_state}, Ts = 1 ms")
 
     def _reusable(self, rid: str):
-        """The stored row of ``rid`` in the --results folder if it can be trusted: present,
-        its file verified, made by this code."""
-        row = self.reuse.row(rid) if self.reuse else None
-        if row is None or row.fingerprint != run_fingerprint(row.config):
-            return None
-        return None if self.reuse.verify([row]) else row
+        """(store, row) of ``rid`` where it can be trusted: present, its file verified,
+        made by this code; None if nowhere."""
+        for store in self.reuse:
+            if not store.exists():
+                continue
+            row = store.row(rid)
+            if row is not None and row.fingerprint == run_fingerprint(row.config) \
+                    and not store.verify([row]):
+                return store, row
+        return None
 
     def metrics(self, c: Check) -> tuple[dict, Path | None]:
         data = self.scenario_data(c)
         rid = run_id(data)
         if rid not in self.cache:
-            row = self._reusable(rid)
-            if row is not None:
-                self.cache[rid] = (row.metrics | {"status": row.status},
-                                   self.reuse.out / row.file)
+            found = self._reusable(rid)
+            if found is not None:
+                store, row = found
+                self.cache[rid] = (row.metrics | {"status": row.status}, store.out / row.file)
             else:
                 result, metrics = execute_run(data)
                 path = self.store.add(rid, result, metrics)

@@ -215,7 +215,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     tasks = []
     if ResultStore(stability_dir).exists():
         from .stability import load_stability, stability_rows
-        results = load_stability(stability_dir)
+        results = load_stability(stability_dir, fresh_only=True)
         if results:
             rows = stability_rows(results)
             data.stability = {"table": _table(

@@ -169,10 +169,14 @@ def _result(case: StabilityCase, tested: dict) -> StabilityResult:
                            predicted_limit(case.base))
 
 
-def load_stability(out) -> list[StabilityResult]:
-    """The stability map of a results folder, rebuilt from its stored runs."""
+def load_stability(out, *, fresh_only: bool = False) -> list[StabilityResult]:
+    """The stability map of a results folder, rebuilt from its stored runs (with
+    ``fresh_only``, from the runs made by this code only)."""
+    from .fingerprint import run_fingerprint
     groups: dict[tuple, tuple[StabilityCase, dict]] = {}
     for row in ResultStore(out).rows(where="sweep = 'stability'"):
+        if fresh_only and row.fingerprint != run_fingerprint(row.config):
+            continue
         c = row.config
         key = (_label(c), _options_key(c), c["plant"]["kind"], c["arm"])
         case = StabilityCase(key[0], key[2], key[3], c)
