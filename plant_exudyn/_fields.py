@@ -154,15 +154,48 @@ class LinkField:
         return self._projector @ d
 
     def residual(self, d: np.ndarray, q: np.ndarray) -> float:
-        """Mass-weighted RMS of the deflection the modes do not represent, relative to
-        the RMS deflection (0 when the field is exactly modal or zero)."""
-        w = self._H_quad @ d
-        r = w - self._phi_quad_T @ q
-        total = float(self._rho_w @ (w * w))
-        return float(np.sqrt(self._rho_w @ (r * r) / total)) if total > 1e-30 else 0.0
+        """Mass-weighted RMS over the link [m] of the deflection the modes do not
+        represent (0 when the field is exactly modal): an absolute measure, which stays
+        meaningful when the deflection itself is near zero."""
+        r = self._H_quad @ d - self._phi_quad_T @ q
+        return float(np.sqrt(self._rho_w @ (r * r) / self._rho_w.sum()))
+
+    def compiled(self) -> tuple:
+        """The arrays `link_readout` needs, in its argument order."""
+        return (self._idx, self._ref, self._hub_idx, self._hub_ref, self._d, self._dd,
+                np.ascontiguousarray(self._projector), np.ascontiguousarray(self._H_quad),
+                np.ascontiguousarray(self._phi_quad_T), self._rho_w)
 
     def tip_deflection(self, d: np.ndarray) -> float:
         return float(d[self.n_nodes - 1])
+
+
+@njit(cache=True)
+def link_readout(u, v, ancf, idx, ref, hub_idx, hub_ref, d, dd, projector, H_quad, phi_T,
+                 rho_w, q, qd):
+    """One link, compiled: modal coordinates q and rates q̇ (into ``q``, ``qd``), and the
+    tip deflection and the projection residual (`LinkField.residual`) it returns."""
+    _local_dofs(u, v, ancf, idx, ref, hub_idx, hub_ref, d, dd)
+    m = d.shape[0]
+    for j in range(q.shape[0]):
+        a = 0.0
+        b = 0.0
+        for k in range(m):
+            a += projector[j, k] * d[k]
+            b += projector[j, k] * dd[k]
+        q[j] = a
+        qd[j] = b
+    num = 0.0
+    den = 0.0
+    for i in range(H_quad.shape[0]):
+        w = 0.0
+        for k in range(m):
+            w += H_quad[i, k] * d[k]
+        for j in range(q.shape[0]):
+            w -= phi_T[i, j] * q[j]
+        num += rho_w[i] * w * w
+        den += rho_w[i]
+    return d[m // 2 - 1], np.sqrt(num / den)
 
 
 @njit(cache=True)

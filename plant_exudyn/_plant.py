@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import exudyn as exu
 import numpy as np
+from numba import njit
 from scipy.integrate import cumulative_trapezoid
 
 from reduced_model import (ArmModel, ArmParameters, LinkModes, Measurement, PlantFailure,
@@ -10,7 +11,7 @@ from reduced_model import (ArmModel, ArmParameters, LinkModes, Measurement, Plan
 from reduced_model._plant_interface import TRUTH_EXTRAS, true_state_from_vector
 
 from ._build import ArmSystem, Mesh, build_arm
-from ._fields import LinkField
+from ._fields import LinkField, link_readout
 from ._modal import natural_frequencies
 
 __all__ = ["ExudynPlant", "simulation_settings"]
@@ -19,8 +20,8 @@ __all__ = ["ExudynPlant", "simulation_settings"]
 def simulation_settings(*, step: float, spectral_radius: float = 0.9,
                         newton_tolerance: float = 1e-6) -> exu.SimulationSettings:
     """Generalised-α settings measured on this model (EXUDYN_NOTES.md): Newton tolerances
-    1e-6 (the default absolute 1e-10 is below ANCF round-off), sparse linear solver,
-    no solution file, no console output, fixed step ``step``, halved on Newton failure
+    1e-6 (the default absolute 1e-10 is below ANCF round-off), sparse linear solver
+    reusing its analysed pattern, no solution file, no console output, fixed step ``step``, halved on Newton failure
     down to step/1000 (ten halvings; Exudyn's default 1e-8 s makes a hopeless step take
     seconds to be declared failed)."""
     ss = exu.SimulationSettings()
@@ -35,6 +36,7 @@ def simulation_settings(*, step: float, spectral_radius: float = 0.9,
     ti.newton.relativeTolerance = newton_tolerance
     ti.generalizedAlpha.spectralRadius = spectral_radius
     ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
+    ss.linearSolver.reuseAnalyzedPattern = True  # the sparsity never changes: identical results
     ss.solution.file.write = False
     ss.solution.sensors.writePeriod = 1e30
     ss.show.computationTime = False
@@ -96,8 +98,20 @@ class ExudynPlant:
         self.solver = exu.MainSolverImplicitSecondOrder()
         self._index_state()
         n1 = basis[0].n
+        self._compiled = (*self._joint_arrays(), *self.fields[0].compiled(),
+                          *self.fields[1].compiled())
         self._q_slices = (slice(0, n1), slice(n1, n1 + basis[1].n))
         self.sensors = SensorModel(sensors, self.modal_basis, self)
+        # Without gauges, quantisation or payload position the measurement is a part of
+        # the truth vector: read both in one compiled call per step.
+        state_names = ("theta1", "theta2", *(f"q{i + 1}{j + 1}" for i, m in enumerate(basis)
+                                             for j in range(m.n)))
+        state_names += tuple(f"{c}_dot" for c in state_names)
+        direct = (sensors.strain_gauges is None and sensors.encoder_resolution == 0
+                  and not sensors.tip_position)
+        self._direct = (np.array([state_names.index(m) for m in self.sensors.names])
+                        if direct else None)
+        self._truth = None
         self._Ts_nsteps = (None, 0)
         self._steps = 0
         self.time = 0.0
@@ -151,8 +165,8 @@ class ExudynPlant:
                                f"{self.solver.GetErrorString()}")
         self._steps = 0
         self.time = 0.0
-        self._cache = None
-        return self.sensors.measure(self.time)
+        self._cache = self._truth = None
+        return self._measure()
 
     def step(self, tau, Ts: float, tip_force=None) -> Measurement:
         """Hold joint torques ``tau`` (2,) [N m] and the payload force ``tip_force``
@@ -177,13 +191,18 @@ class ExudynPlant:
             mbs.SetLoadParameter(self.system.tip_load, "loadVector", [force[0], force[1], 0.0])
             self._tip_force = force
         self._steps += nsteps
-        self._cache = None
+        self._cache = self._truth = None
         self.solver.it.endTime = self._steps * self.h
         if not self.solver.SolveSteps(mbs, self.settings):
             msg = self.solver.GetErrorString() or "Newton iteration did not converge"
             raise PlantFailure(f"Exudyn solver failed at t = {self.solver.it.currentTime:.6g} s: "
                                f"{msg.strip()}")
         self.time = self._steps * self.h
+        return self._measure()
+
+    def _measure(self) -> Measurement:
+        if self._direct is not None:
+            return Measurement(self.time, self.sensors.names, self._truth_now()[self._direct])
         return self.sensors.measure(self.time)
 
     def truth(self) -> TrueState:
@@ -191,16 +210,18 @@ class ExudynPlant:
 
     def truth_vector(self) -> np.ndarray:
         """[θ, q, θ̇, q̇ (projected), tip positions, tip deflections, projection residuals]."""
-        u, theta, theta_dot, q, q_dot, dofs = self._read()
-        m = 2 + len(q)
-        out = np.empty(2 * m + len(TRUTH_EXTRAS))
-        out[:2], out[2:m], out[m:m + 2], out[m + 2:2 * m] = theta, q, theta_dot, q_dot
-        extras = out[2 * m:]
-        extras[:4] = self._tip_positions(u).ravel()
-        for i, (f, d, sl) in enumerate(zip(self.fields, dofs, self._q_slices)):
-            extras[4 + i] = f.tip_deflection(d)
-            extras[6 + i] = f.residual(d, q[sl])
-        return out
+        return self._truth_now().copy()
+
+    def _truth_now(self) -> np.ndarray:
+        """The truth vector of the current step, read once (compiled; treat as read-only)."""
+        if self._truth is None:
+            sd = self.system.mbs.systemData
+            m = self.state_size // 2
+            out = np.empty(2 * m + len(TRUTH_EXTRAS))
+            _truth_into(sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(),
+                        self.system.element == "ancf", *self._compiled, out)
+            self._truth = out
+        return self._truth
 
     # --- sensor primitives (see reduced_model._sensors) -------------------------------------
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -236,6 +257,16 @@ class ExudynPlant:
                 q_dot.append(f.project(dd))
             self._cache = (u, theta, theta_dot, np.concatenate(q), np.concatenate(q_dot), dofs)
         return self._cache
+
+    def _joint_arrays(self) -> tuple:
+        """Indices and reference values `_truth_into` reads the joints and tips from."""
+        ancf = self.system.element == "ancf"
+        slope = self._tip1_slope_idx if ancf else np.array([self._tip1_rot_idx, 0])
+        slope_ref = self._tip1_slope_ref if ancf else np.array([self._tip1_rot_ref, 0.0])
+        idx = np.array([self._hub1_rot, self._hub2_rot, *slope], dtype=np.int64)
+        ref = np.array([self._hub1_ref, self._hub2_ref, *slope_ref], dtype=float)
+        return (idx, ref, np.ascontiguousarray(self._tip_idx, dtype=np.int64),
+                np.ascontiguousarray(self._tip_ref, dtype=float))
 
     def _tip_positions(self, u: np.ndarray) -> np.ndarray:
         return self._tip_ref + u[self._tip_idx]
@@ -309,3 +340,34 @@ class ExudynPlant:
         """First ``n`` bending frequencies [Hz] of this plant's FE model linearised at
         ``theta`` (see `natural_frequencies`)."""
         return natural_frequencies(self.params, self.mesh, theta=theta, joints=joints, n=n)
+
+
+@njit(cache=True)
+def _truth_into(u, v, ancf, jidx, jref, tip_idx, tip_ref,
+                i1, r1, h1, hr1, d1, dd1, p1, H1, f1, w1,
+                i2, r2, h2, hr2, d2, dd2, p2, H2, f2, w2, out):
+    """The truth vector from Exudyn's ODE2 coordinates ``u`` and rates ``v``, in one
+    compiled call (`ExudynPlant._joints` and `LinkField` written out)."""
+    n1, n2 = p1.shape[0], p2.shape[0]
+    m = 2 + n1 + n2
+    th1 = jref[0] + u[jidx[0]]
+    hub2 = jref[1] + u[jidx[1]]
+    if ancf:
+        sx, sy = jref[2] + u[jidx[2]], jref[3] + u[jidx[3]]
+        sxd, syd = v[jidx[2]], v[jidx[3]]
+        c, s = np.cos(th1), np.sin(th1)
+        tangent = th1 + np.arctan2(-s * sx + c * sy, c * sx + s * sy)
+        tangent_rate = (sx * syd - sy * sxd) / (sx * sx + sy * sy)
+    else:
+        tangent = jref[2] + u[jidx[2]]
+        tangent_rate = v[jidx[2]]
+    out[0], out[1] = th1, hub2 - tangent
+    out[m], out[m + 1] = v[jidx[0]], v[jidx[1]] - tangent_rate
+    e = 2 * m
+    for k in range(2):
+        for j in range(2):
+            out[e + 2 * k + j] = tip_ref[k, j] + u[tip_idx[k, j]]
+    out[e + 4], out[e + 6] = link_readout(u, v, ancf, i1, r1, h1, hr1, d1, dd1, p1, H1, f1, w1,
+                                          out[2:2 + n1], out[m + 2:m + 2 + n1])
+    out[e + 5], out[e + 7] = link_readout(u, v, ancf, i2, r2, h2, hr2, d2, dd2, p2, H2, f2, w2,
+                                          out[2 + n1:m], out[m + 2 + n1:2 * m])

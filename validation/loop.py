@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import time as _time
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +17,7 @@ from plant_exudyn import ExudynPlant
 from reduced_model import ArmModel, PlantFailure, ReducedPlant, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
+from ._sample import OFFSETS, check_bounds, laws, pack_laws, post_sample, pre_sample, run_reduced
 from .laws import build_controller, build_observer, nominal_model
 from .results import RunResult
 from .scenario import Scenario, check_scenario, scenario_to_mapping
@@ -37,16 +37,18 @@ class Setup:
 
 
 class _SampledReference:
-    """The reference, evaluated once per sample: the loop and the controller both ask
-    for ref(t_k)."""
+    """The reference as the laws see it: at the current sample, the values the sample
+    kernel computed (so every path uses the same numbers); at any other time, the
+    reference object itself."""
 
-    def __init__(self, reference) -> None:
-        self.reference, self._t, self._value = reference, None, None
+    def __init__(self, reference, values: np.ndarray) -> None:
+        self.reference, self.values, self.t = reference, values, None
 
     def __call__(self, t: float):
-        if t != self._t:
-            self._t, self._value = t, self.reference(t)
-        return self._value
+        if t == self.t:
+            v = self.values
+            return v[0:2].copy(), v[2:4].copy(), v[4:6].copy()
+        return self.reference(t)
 
 
 def make_reference(spec):
@@ -87,40 +89,6 @@ def run_scenario(scenario: Scenario) -> RunResult:
                     reference=setup.reference, model=setup.model)
 
 
-class _Disturbances:
-    """Values of the scenario's disturbances at t, per target (τ1, τ2, Fx, Fy)."""
-
-    _TARGETS = {"tau1": 0, "tau2": 1, "tip_x": 2, "tip_y": 3}
-
-    def __init__(self, specs, Ts: float, rng: np.random.Generator) -> None:
-        self.specs, self.rng = specs, rng
-        self.noise_state = np.zeros(len(specs))
-        self.decay = np.array([np.exp(-2 * np.pi * d.bandwidth * Ts) for d in specs])
-        self.value = np.zeros(4)
-
-    def __call__(self, t: float) -> np.ndarray:
-        """Edges are half-open, [start, start + duration), decided to 1 ns: k·Ts and a
-        sum like 0.2 + 0.1 differ in their last bit."""
-        v = self.value
-        v[:] = 0.0
-        for i, d in enumerate(self.specs):
-            if t < d.start - 1e-9:
-                continue
-            if d.kind == "step":
-                x = d.amplitude
-            elif d.kind == "pulse":
-                x = d.amplitude if t < d.start + d.duration - 1e-9 else 0.0
-            elif d.kind == "sine":
-                x = d.amplitude * np.sin(2 * np.pi * d.frequency * (t - d.start))
-            else:  # first-order low-passed white noise with standard deviation = amplitude
-                a = self.decay[i]
-                self.noise_state[i] = a * self.noise_state[i] + np.sqrt(1 - a * a) \
-                    * d.amplitude * self.rng.standard_normal()
-                x = self.noise_state[i]
-            v[self._TARGETS[d.target]] += x
-        return v
-
-
 def _signal_layout(model: ArmModel, measured: tuple[str, ...], has_observer: bool,
                    n_residual: int):
     states = model.state_names
@@ -149,21 +117,30 @@ def _signal_layout(model: ArmModel, measured: tuple[str, ...], has_observer: boo
 
 def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
              model: ArmModel | None = None) -> RunResult:
-    """Run the closed loop of ``scenario`` on ``plant``; never raises for divergence or
-    a plant solver failure — those end the run with the corresponding status."""
+    """Run the closed loop of ``scenario`` on ``plant``; never raises for divergence, a
+    plant solver failure or a law that raises — those end the run with their status.
+
+    Every sample is the compiled `validation._sample` kernels: `pre_sample`, the laws,
+    `post_sample`.  Built-in laws run compiled (`pack_laws`); a plug-in runs as the
+    Python object it is.  A plant that offers compiled stepping (the reduced plant) with
+    built-in laws runs the whole loop in one compiled call; otherwise this loop steps
+    the plant from Python.  Every path computes the same numbers (tested)."""
     s = scenario
     model = model or nominal_model(s.nominal_params, s.model.modes_per_link)
-    ref = _SampledReference(reference or make_reference(s.reference))
+    spec_reference = make_reference(s.reference)
+    if reference is not None and reference != spec_reference:
+        raise ValueError("reference must be the scenario's own (see scenario.reference)")
     n, Ts = model.n, s.Ts
     N = int(round(s.duration / Ts))
     seeds = np.random.SeedSequence(s.seed).spawn(2)
-    noise_rng, dist = np.random.default_rng(seeds[0]), _Disturbances(
-        s.disturbances, Ts, np.random.default_rng(seeds[1]))
-    lengths = (s.true_params.L1, s.true_params.L2)
+    noise_rng, dist_rng = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
+    refkind, refspec = _reference_spec(s.reference)
+    ref_values = np.zeros(6)
+    ref = _SampledReference(spec_reference, ref_values)
 
     # Initial state: at rest at θ_d(0), or moving with the reference ("reference").
     x0 = np.zeros(2 * n)
-    theta_d0, dtheta_d0, _ = ref(0.0)
+    theta_d0, dtheta_d0, _ = spec_reference(0.0)
     x0[:2] = theta_d0
     if s.initial_state == "reference":
         x0[n:n + 2] = dtheta_d0
@@ -172,125 +149,179 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
     std = np.array([s.sensors.rate_noise if m.endswith("_dot") else
                     s.sensors.encoder_noise if m.startswith("theta") else
                     s.sensors.modal_noise if m.startswith("q") else 0.0 for m in names_y])
-    noisy = bool(np.any(std > 0))
-    delayed = deque(maxlen=s.sensors.delay + 1)
-
+    obs_index = np.zeros(0, dtype=np.int64)
     if observer is not None:
         missing = [m for m in observer.measured if m not in names_y]
         if missing:
             raise ValueError(f"the observer needs {missing} but the plant measures {names_y}")
-        obs_index = np.array([names_y.index(m) for m in observer.measured])
+        obs_index = np.array([names_y.index(m) for m in observer.measured], dtype=np.int64)
         observer.reset(x0 + s.initial_estimate_error())
-    use_estimate = s.uses_estimate
     residual = getattr(controller, "residual", None)  # the PBC's unrealisable forces
     names, sl = _signal_layout(model, names_y, observer is not None,
                                0 if residual is None else len(residual))
+    off = np.array([sl[k].start for k in OFFSETS], dtype=np.int64)
     rows = np.full((N, len(names)), np.nan)
-    limit = s.torque_limit
-    last_tau = np.zeros(2)
-    status, message, k_done = "ok", "", N
-    t_plant = t_ctrl = t_obs = 0.0
+    k_ = dict(std=std, noisy=bool(np.any(std > 0)),
+              dbuf=np.zeros((s.sensors.delay + 1, len(names_y))), rng=noise_rng,
+              refkind=refkind, refspec=refspec, n=n, off=off,
+              bounds=np.array([s.divergence.max_angle, s.divergence.max_rate,
+                               s.divergence.max_deflection * s.true_params.L1,
+                               s.divergence.max_deflection * s.true_params.L2]),
+              lengths=np.array([s.true_params.L1, s.true_params.L2]))
+    dspec, dstate = _disturbance_spec(s.disturbances, Ts), np.zeros(len(s.disturbances))
+    packed = pack_laws(controller, observer, Ts)
+    info = np.zeros(1)
     wall0 = _time.perf_counter()
-    first_sample = 0.0
-    truth = plant.truth_vector()  # [x, *TRUTH_EXTRAS]: one copy per sample
-    s_truth, s_state, s_ref, s_ref_rate, s_tip_ref = (
-        slice(sl["truth"].start, sl["tips"].stop), sl["truth"], sl["ref"], sl["ref_rate"],
-        sl["tip_ref"])
-    s_xhat, s_y, s_cmd, s_tau = sl["xhat"], sl["y"], sl["tau_cmd"], sl["tau"]
-    s_res, s_dist = sl["residual"], sl["dist"]
-    no_disturbance = np.zeros(4)
-    bounds = _Bounds(n, s.divergence, lengths)
-    tau_shapes = ((2,), (n,))  # joint torques, or the idealised law's n generalised forces
+    stepping = getattr(plant, "compiled_stepping", None)
+    fast = stepping(dspec) if packed is not None and stepping is not None else None
+    if fast is not None:
+        k_done, code = run_reduced(
+            N, Ts, fast["h"], fast["nsteps"](Ts), fast["x"], *fast["model"], fast["basis"],
+            np.array([model.state_names.index(m) for m in names_y], dtype=np.int64),
+            k_["std"], k_["noisy"], k_["dbuf"], noise_rng, refkind, refspec, k_["bounds"], n,
+            k_["lengths"], rows, off, s.torque_limit, dspec, dstate, dist_rng, *packed,
+            obs_index, s.uses_estimate, info)
+        timings = {"plant_s": math.nan, "controller_s": math.nan, "observer_s": math.nan,
+                   "first": 0.0}
+        message = _reason(code, info[0], s.divergence, (k_done if k_done < N else N) * Ts)
+        status = "ok" if code == 0 else "diverged"
+        if k_done < N:
+            rows[k_done] = np.nan
+    else:
+        status, message, k_done, timings = _python_loop(
+            plant, controller, observer, s, model, y, ref, ref_values, rows, k_, dspec,
+            dstate, dist_rng, obs_index, residual, packed, sl, info, N)
+    wall = _time.perf_counter() - wall0
+    simulated = k_done * Ts
+    steady = wall - timings.pop("first")
+    return RunResult(
+        time=np.arange(k_done) * Ts, names=names, signals=np.ascontiguousarray(rows[:k_done].T),
+        status=status, message=message, end_time=simulated, config=scenario_to_mapping(s),
+        timings={"wall_s": wall, "startup_s": wall - steady, **timings,
+                 "loop_s": wall - sum(v for v in timings.values() if math.isfinite(v)),
+                 "compiled_loop": fast is not None,
+                 # simulated time per wall second, without the first sample (kernel
+                 # loading or compilation is not simulation speed)
+                 "realtime_factor": (simulated - Ts) / steady if steady > 0 else math.nan})
 
+
+def _python_loop(plant, controller, observer, s, model, y, ref, ref_values, rows, k_, dspec,
+                 dstate, dist_rng, obs_index, residual, packed, sl, info, N):
+    """The loop stepping the plant from Python, one sample kernel call on each side of
+    the laws; returns (status, message, samples done, timings)."""
+    n, Ts, limit = model.n, s.Ts, s.torque_limit
+    use_estimate = s.uses_estimate
+    yv = np.zeros(len(y.values))
+    y_used = np.zeros(len(y.values))
+    y_obs = np.zeros(len(obs_index))
+    x_hat = np.zeros(2 * n)
+    tau = np.zeros(2 * n)
+    tau_plant = np.zeros(2 * n)
+    force = np.zeros(2)
+    last_tau = np.zeros(2)
+    s_state, s_res, s_y = sl["truth"], sl["residual"], sl["y"]
+    t_plant = t_ctrl = t_obs = first = 0.0
+    status, message, k_done = "ok", "", N
+    truth = plant.truth_vector()  # [x, *TRUTH_EXTRAS]: one copy per sample
+    wall0 = _time.perf_counter()
     for k in range(N):
         t = k * Ts
         row = rows[k]
-        row[s_truth] = truth
-        reason = bounds.violated(truth)
-        if reason:
-            row[:] = np.nan
-            status, message, k_done = "diverged", f"{reason} at t = {t:.4g} s", k
+        yv[:] = y.values
+        code = pre_sample(t, truth, yv, k_["std"], k_["noisy"], k_["dbuf"], k, k_["rng"],
+                          k_["refkind"], k_["refspec"], k_["bounds"], n, k_["lengths"], row,
+                          k_["off"], y_used, ref_values, info)
+        ref.t = t
+        if code:
+            status, message, k_done = "diverged", _reason(code, info[0], s.divergence, t), k
             break
-        theta_d, dtheta_d, _ = ref(t)
-        row[s_ref] = theta_d
-        row[s_ref_rate] = dtheta_d
-        row[s_tip_ref] = _rigid_tip(theta_d, lengths)
-
-        y_k = y.values + std * noise_rng.standard_normal(std.shape) if noisy else y.values
-        if not math.isfinite(y_k.sum()):
-            status, message, k_done = "diverged", f"measurement not finite at t = {t:.4g} s", k
-            break
-        delayed.append(y_k)
-        y_used = delayed[0]
-        row[s_y] = y_used
-
         a = b = _time.perf_counter()
-        calling = observer
-        try:  # a law (a plug-in above all) may raise: the run fails, the campaign goes on
-            if observer is not None:
-                x_hat = observer.update(t, y_used[obs_index], last_tau, Ts)
-                row[s_xhat] = x_hat
+        if packed is not None:
+            code, n_tau = laws(t, Ts, y_obs, obs_index, last_tau, row[s_state], use_estimate,
+                               ref_values, row, k_["off"], *packed, x_hat, tau)
             b = _time.perf_counter()
-            calling = controller
-            tau = np.asarray(controller(t, x_hat if use_estimate else row[s_state], ref),
-                             dtype=float)
-            if tau.shape not in tau_shapes:
-                raise ValueError(f"returned torques of shape {tau.shape}, expected (2,)")
-        except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
-            label = getattr(calling, "name", type(calling).__name__)
-            status, message, k_done = "failed", (f"{label} raised {type(exc).__name__}: "
-                                                 f"{_one_line(exc)} at t = {t:.4g} s"), k
-            break
+        else:
+            calling = observer
+            try:  # a plug-in may raise: the run fails, the campaign goes on
+                if observer is not None:
+                    x_hat = np.asarray(observer.update(t, row[s_y][obs_index], last_tau, Ts),
+                                       dtype=float)
+                    row[sl["xhat"]] = x_hat
+                b = _time.perf_counter()
+                calling = controller
+                out = np.asarray(controller(t, x_hat if use_estimate else row[s_state], ref),
+                                 dtype=float)
+                if out.shape not in ((2,), (n,)):
+                    raise ValueError(f"returned torques of shape {out.shape}, expected (2,)")
+            except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
+                label = getattr(calling, "name", type(calling).__name__)
+                status, message, k_done = "failed", (f"{label} raised {type(exc).__name__}: "
+                                                     f"{_one_line(exc)} at t = {t:.4g} s"), k
+                break
+            n_tau = out.shape[0]
+            tau[:n_tau] = out
+            if residual is not None:
+                row[s_res] = controller.residual  # read each sample: a law may rebind it
         c = _time.perf_counter()
         t_obs += b - a
         t_ctrl += c - b
-        if not math.isfinite(tau.sum()):
-            status, message, k_done = "diverged", f"controller output not finite at t = {t:.4g} s", k
+        code = post_sample(t, tau, n_tau, limit, dspec, dstate, dist_rng, row, k_["off"],
+                           tau_plant, force)
+        if code:
+            status, message, k_done = "diverged", _reason(code, info[0], s.divergence, t), k
             break
-        row[s_cmd] = tau[:2]
-        if limit > 0:
-            tau = tau.copy()
-            np.clip(tau[:2], -limit, limit, out=tau[:2])
-        row[s_tau] = tau[:2]
-        if residual is not None:
-            row[s_res] = controller.residual  # read each sample: a law may rebind it
-        last_tau = tau
-        if s.disturbances:
-            d = dist(t)
-            row[s_dist] = d
-            tau = tau.copy()
-            tau[:2] += d[:2]
-            force = d[2:] if d[2] or d[3] else None
-        else:
-            row[s_dist] = no_disturbance
-            force = None
+        last_tau = tau[:n_tau].copy()
         try:
-            y = plant.step(tau, Ts, tip_force=force)
+            y = plant.step(tau_plant[:n_tau], Ts,
+                           tip_force=force if force[0] or force[1] else None)
         except PlantFailure as exc:
             status, message, k_done = "failed", str(exc), k + 1
             break
         truth = plant.truth_vector()
         t_plant += _time.perf_counter() - c
         if k == 0:  # the first sample pays for loading or compiling the kernels
-            first_sample = _time.perf_counter() - wall0
+            first = _time.perf_counter() - wall0
     else:
-        reason = bounds.violated(truth)
-        if reason:
-            status, message = "diverged", f"{reason} at t = {N * Ts:.4g} s"
+        code = check_bounds(truth, n, k_["bounds"], info)
+        if code:
+            status, message = "diverged", _reason(code, info[0], s.divergence, N * Ts)
+    return status, message, k_done, {"plant_s": t_plant, "controller_s": t_ctrl,
+                                     "observer_s": t_obs, "first": first}
 
-    wall = _time.perf_counter() - wall0
-    simulated = k_done * Ts
-    rows = rows[:k_done]
-    steady = wall - first_sample
-    return RunResult(
-        time=np.arange(k_done) * Ts, names=names, signals=np.ascontiguousarray(rows.T),
-        status=status, message=message, end_time=simulated, config=scenario_to_mapping(s),
-        timings={"wall_s": wall, "startup_s": first_sample, "plant_s": t_plant,
-                 "controller_s": t_ctrl, "observer_s": t_obs,
-                 "loop_s": wall - t_plant - t_ctrl - t_obs,
-                 # simulated time per wall second, without the first sample (kernel
-                 # loading or compilation is not simulation speed)
-                 "realtime_factor": (simulated - Ts) / steady if steady > 0 else float("nan")})
+
+def _reason(code: int, value: float, spec, t: float) -> str:
+    """The message of a status code of the sample kernels (`validation._sample`)."""
+    if code == 0:
+        return ""
+    text = {1: "state not finite", 2: f"|θ| = {value:.3g} rad exceeds {spec.max_angle:g} rad",
+            3: f"|θ̇| = {value:.3g} rad/s exceeds {spec.max_rate:g} rad/s",
+            4: f"tip deflection of link 1 = {value:.3g} m exceeds {spec.max_deflection:g} x "
+               "its length",
+            5: f"tip deflection of link 2 = {value:.3g} m exceeds {spec.max_deflection:g} x "
+               "its length",
+            6: "measurement not finite", 7: "controller output not finite"}[code]
+    return f"{text} at t = {t:.4g} s"
+
+
+def _reference_spec(spec) -> tuple[int, np.ndarray]:
+    """(kind, parameters) of the scenario's reference for the sample kernel."""
+    values = [*spec.amplitude, *spec.omega, spec.move_time, *spec.start, *spec.goal]
+    return (0 if spec.kind == "paper" else 1), np.array(values, dtype=float)
+
+
+_DISTURBANCE_KINDS = {"step": 0, "pulse": 1, "sine": 2, "noise": 3}
+_TARGETS = {"tau1": 0, "tau2": 1, "tip_x": 2, "tip_y": 3}
+
+
+def _disturbance_spec(specs, Ts: float) -> np.ndarray:
+    """The scenario's disturbances as rows [kind, target, amplitude, start, duration,
+    frequency, decay] for the sample kernel; decay = exp(−2π·bandwidth·Ts) of the
+    low-passed noise."""
+    out = np.zeros((len(specs), 7))
+    for i, d in enumerate(specs):
+        out[i] = (_DISTURBANCE_KINDS[d.kind], _TARGETS[d.target], d.amplitude, d.start,
+                  d.duration, d.frequency, np.exp(-2 * np.pi * d.bandwidth * Ts))
+    return out
 
 
 def _one_line(exc: BaseException) -> str:
@@ -304,38 +335,3 @@ def _to_plant_state(x0: np.ndarray, plant, model: ArmModel) -> np.ndarray:
     half, n = plant.state_size // 2, model.n
     out[:2], out[half:half + 2] = x0[:2], x0[n:n + 2]
     return out
-
-
-def _rigid_tip(theta: np.ndarray, lengths) -> tuple[float, float]:
-    """Payload position of the rigid arm at joint angles ``theta``."""
-    a1 = theta.item(0)
-    a12 = a1 + theta.item(1)
-    return (lengths[0] * math.cos(a1) + lengths[1] * math.cos(a12),
-            lengths[0] * math.sin(a1) + lengths[1] * math.sin(a12))
-
-
-class _Bounds:
-    """The divergence test of a `truth_vector` with ``n`` coordinates; plain float
-    comparisons, since it runs at every sample."""
-
-    def __init__(self, n: int, spec, lengths) -> None:
-        self.n, self.spec = n, spec
-        self.max_deflection = (spec.max_deflection * lengths[0], spec.max_deflection * lengths[1])
-
-    def violated(self, truth: np.ndarray) -> str:
-        """Why the run must stop, or ""."""
-        if not math.isfinite(truth.sum()):  # any NaN or inf makes the sum non-finite
-            return "state not finite"
-        n, spec = self.n, self.spec
-        angle = max(abs(truth.item(0)), abs(truth.item(1)))
-        if angle > spec.max_angle:
-            return f"|θ| = {angle:.3g} rad exceeds {spec.max_angle:g} rad"
-        rate = max(abs(truth.item(n)), abs(truth.item(n + 1)))
-        if rate > spec.max_rate:
-            return f"|θ̇| = {rate:.3g} rad/s exceeds {spec.max_rate:g} rad/s"
-        for i in range(2):
-            w = truth.item(2 * n + 4 + i)
-            if abs(w) > self.max_deflection[i]:
-                return (f"tip deflection of link {i + 1} = {w:.3g} m exceeds "
-                        f"{spec.max_deflection:g} x its length")
-        return ""
