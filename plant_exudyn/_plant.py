@@ -6,7 +6,7 @@ import numpy as np
 from numba import njit
 from scipy.integrate import cumulative_trapezoid
 
-from reduced_model import (ArmModel, ArmParameters, LinkModes, Measurement, PlantFailure,
+from reduced_model import (ArmParameters, LinkModes, Measurement, PlantFailure, cached_model,
                            SensorConfig, SensorModel, TrueState, check_sample_time)
 from reduced_model._plant_interface import TRUTH_EXTRAS, true_state_from_vector
 
@@ -87,7 +87,7 @@ class ExudynPlant:
         self.params = params if params is not None else ArmParameters()
         self.mesh = mesh
         self.h = float(step)
-        basis = modal_basis or ArmModel(self.params, (2, 2)).mode_shapes
+        basis = modal_basis or cached_model(self.params, (2, 2)).mode_shapes
         self.modal_basis = tuple(basis)
         self.system: ArmSystem = build_arm(self.params, mesh)
         self.fields = (LinkField(self.system, 0, basis[0]), LinkField(self.system, 1, basis[1]))

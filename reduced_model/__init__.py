@@ -11,7 +11,7 @@ from ._cache_guard import invalidate_stale_kernel_caches
 invalidate_stale_kernel_caches()  # before any kernel is loaded from numba's cache
 
 # The imports below load the kernels, so they must follow the cache check.
-from ._model import ArmModel, validate_modes_per_link  # noqa: E402
+from ._model import ArmModel, cached_model, validate_modes_per_link  # noqa: E402
 from ._modes import LinkModes  # noqa: E402
 from ._parameters import ArmParameters, FieldError  # noqa: E402
 from ._plant import ReducedPlant  # noqa: E402
@@ -20,7 +20,7 @@ from ._plant_interface import (Measurement, Plant, PlantFailure, TrueState,  # n
 from ._sensors import STRAIN_QUANTITIES, SensorConfig, SensorModel  # noqa: E402
 
 __all__ = [
-    "ArmParameters", "FieldError", "ArmModel", "LinkModes", "ReducedPlant", "Measurement",
+    "ArmParameters", "FieldError", "ArmModel", "cached_model", "LinkModes", "ReducedPlant", "Measurement",
     "TrueState", "Plant", "PlantFailure", "SensorConfig", "SensorModel", "STRAIN_QUANTITIES",
     "check_sample_time", "validate_modes_per_link",
 ]

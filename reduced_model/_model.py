@@ -6,6 +6,7 @@ Kelvin–Voigt damping D Q̇ the paper leaves out).
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -15,7 +16,7 @@ from . import _kernels as kern
 from ._modes import LinkModes, gauss_legendre
 from ._parameters import ArmParameters
 
-__all__ = ["ArmModel", "validate_modes_per_link"]
+__all__ = ["ArmModel", "validate_modes_per_link", "cached_model"]
 
 MAX_MODES = 4
 
@@ -35,6 +36,14 @@ def validate_modes_per_link(modes_per_link, *, where: str = "modes_per_link") ->
             f"got {modes_per_link!r}"
         )
     return int(modes_per_link[0]), int(modes_per_link[1])
+
+
+@functools.lru_cache(maxsize=32)
+def cached_model(params: ArmParameters, modes_per_link: tuple[int, int]) -> "ArmModel":
+    """The `ArmModel` of ``params`` and ``modes_per_link``, built once per process
+    (~20 ms each; the runs of a sweep share most).  Users must not mutate it; its own
+    methods' scratch space is shared, so use it from one thread."""
+    return ArmModel(params, modes_per_link)
 
 
 def _gram(modes: LinkModes, tip_point_mass: float, *, with_constant: bool) -> np.ndarray:

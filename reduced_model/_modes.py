@@ -13,6 +13,8 @@ non-zero at λ = 0 (no spurious root there).
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy.optimize import brentq, minimize_scalar
 
@@ -168,9 +170,18 @@ def gauss_legendre(a: float, b: float, n: int = 96) -> tuple[np.ndarray, np.ndar
     96 nodes integrate the products of mode shapes used here (λ ≤ ~15, i.e. e^{2λx}
     growth) to round-off; checked against 192 nodes in the tests.
     """
-    t, w = np.polynomial.legendre.leggauss(n)
+    t, w = _legendre(n)
     half = 0.5 * (b - a)
     return a + half * (t + 1.0), half * w
+
+
+@functools.lru_cache(maxsize=8)
+def _legendre(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes and weights on [−1, 1] (2 ms to compute, asked for at every model build)."""
+    t, w = np.polynomial.legendre.leggauss(n)
+    t.setflags(write=False)
+    w.setflags(write=False)
+    return t, w
 
 
 def weighted_projector(basis: LinkModes, *, w_quad, basis_quad, basis_tip, target_quad,

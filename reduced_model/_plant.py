@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _kernels as kern
-from ._model import ArmModel
+from ._model import cached_model, validate_modes_per_link
 from ._modes import LinkModes, gauss_legendre, weighted_projector
 from ._parameters import ArmParameters
 from ._plant_interface import (TRUTH_EXTRAS, Measurement, TrueState, check_sample_time,
@@ -48,7 +48,8 @@ class ReducedPlant:
                  sensors: SensorConfig = SensorConfig()) -> None:
         if not (np.isfinite(step) and step > 0.0):
             raise ValueError(f"step must be a positive number of seconds, got {step!r}")
-        self.model = ArmModel(params, modes_per_link)
+        self.model = cached_model(params if params is not None else ArmParameters(),
+                                  validate_modes_per_link(modes_per_link))
         self.h = float(step)
         n = self.model.n
         self._x = np.zeros(2 * n)

@@ -377,4 +377,5 @@ def _jsonable(value):
 
 def _progress(total: int, name: str, *, enabled: bool):
     from tqdm import tqdm
+    tqdm.monitor_interval = 0  # no monitor thread: worker processes may still be forked
     return tqdm(total=total, desc=name, unit="run", disable=not enabled, dynamic_ncols=True)

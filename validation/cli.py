@@ -6,11 +6,17 @@ what finished; a full disk is one line naming the folder, exit 1.  Never a trace
 """
 from __future__ import annotations
 
+import os
+
+# One BLAS thread: the matrices here are small, and idle BLAS threads busy-wait on the
+# cores the simulation runs on.  Set before numpy is imported; a user's setting wins.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 import argparse
 import dataclasses
 import errno
 import math
-import os
 import sys
 from importlib.metadata import version
 from pathlib import Path

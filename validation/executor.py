@@ -8,10 +8,9 @@ SIGINT/SIGTERM the runner stops submitting, hands back what has already finished
 terminates its workers (none is left behind) and raises `Interrupted`; a second signal
 exits at once.
 
-Local workers are started once and reused for every run: a ``forkserver`` that has
-imported the simulation code (not the CLI, not matplotlib) forks them, and each is
-limited to one BLAS thread (two workers on two cores would otherwise busy-wait on each
-other's cores).
+Local workers are started once and reused for every run, forked from a process that has
+already loaded the simulation code and its compiled kernels, each limited to one BLAS
+thread (two workers on two cores would otherwise busy-wait on each other's cores).
 """
 from __future__ import annotations
 
@@ -151,15 +150,25 @@ class _PoolRunner(Runner):
 
 
 class LocalPoolRunner(_PoolRunner):
-    """``workers`` processes forked from a preloaded forkserver, reused for every run."""
+    """``workers`` processes started once and reused for every run.  On Linux they are
+    forked from this process, which has already imported and compiled everything they
+    need (started at once, before any other thread exists here); elsewhere a forkserver
+    that preloads the simulation code (not the CLI, not matplotlib) forks them."""
 
     def __init__(self, workers: int) -> None:
         from concurrent.futures import ProcessPoolExecutor
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["validation.worker"])
+        if "fork" in multiprocessing.get_all_start_methods():
+            import validation.worker  # noqa: F401 - what the workers need, loaded before the fork
+            ctx = multiprocessing.get_context("fork")
+        else:
+            ctx = multiprocessing.get_context("forkserver")
+            ctx.set_forkserver_preload(["validation.worker"])
         with _environment(_ONE_THREAD):
             executor = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                            initializer=_worker_init)
+            # Start every worker now (with "fork" the pool forks them all on the first
+            # submit, before its manager thread exists).
+            executor.submit(int).result()
         super().__init__(executor, workers)
 
     def abort(self) -> None:
@@ -171,9 +180,10 @@ class LocalPoolRunner(_PoolRunner):
                 p.kill()
         for p in processes:
             p.join(timeout=5)
-        from multiprocessing import forkserver
-        forkserver._forkserver._stop()  # and the server that forked them (private API,
-        # the one the standard library's own tests use; nothing public stops it)
+        if multiprocessing.get_start_method(allow_none=True) != "fork":
+            from multiprocessing import forkserver
+            forkserver._forkserver._stop()  # and the server that forked them (private
+            # API, the one the standard library's own tests use; nothing public stops it)
 
     def close(self) -> None:
         if not getattr(self, "_aborted", False):

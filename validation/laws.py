@@ -17,7 +17,7 @@ import inspect
 import json
 
 from controllers import CONTROLLERS, OBSERVERS, PluginError, accepted_options, resolve
-from reduced_model import ArmModel, ArmParameters
+from reduced_model import ArmModel, ArmParameters, cached_model
 
 from ._config import ConfigError, check
 
@@ -29,11 +29,10 @@ _IDEALISED_ONLY = {"kv_flex", "compensate_damping"}
 _OBSERVER_METHODS = ("reset", "update")
 
 
-@functools.lru_cache(maxsize=32)
 def nominal_model(params: ArmParameters, modes_per_link: tuple[int, int]) -> ArmModel:
-    """The `ArmModel` of ``params`` (cached: building one costs ~20 ms, and the runs of a
-    sweep share it; laws must not mutate it)."""
-    return ArmModel(params, modes_per_link)
+    """The `ArmModel` the laws are built on (`reduced_model.cached_model`: built once
+    per process; laws must not mutate it)."""
+    return cached_model(params, tuple(modes_per_link))
 
 
 def measurement_names(scenario, model: ArmModel) -> tuple[str, ...]:

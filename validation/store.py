@@ -195,7 +195,7 @@ class ResultStore:
                "sweep": sweep, "axes": axes or {}, "status": result.status,
                "message": result.message, "end_time": result.end_time,
                "fingerprint": fingerprint, "scenario": result.config,
-               "metrics": _finite_or_none(metrics), "timings": result.timings,
+               "metrics": _finite_or_none(metrics), "timings": _finite_or_none(result.timings),
                "environment": env or environment(), "file": f"runs/{rid}.npz",
                "finished": datetime.now(timezone.utc).isoformat(timespec="seconds")}
         result.signals = result.signals.astype("float32", copy=False)
