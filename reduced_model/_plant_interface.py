@@ -65,8 +65,8 @@ class TrueState:
     tip_deflections : ndarray (2,)
         w_i(L_i) [m] in each link's clamped root frame.
     projection_residual : ndarray (2,)
-        Per link, RMS over the link of the deflection the modes cannot represent,
-        divided by the RMS deflection (0 for the reduced plant in its own basis).
+        Per link, the mass-weighted RMS over the link [m] of the deflection the modes
+        cannot represent (0 for the reduced plant).
     x : ndarray
         The reduced model's state vector [θ, q, θ̇, q̇].
     """

@@ -1,21 +1,49 @@
 """Helpers shared by the campaign tests (tests/test_campaign.py, tests/reliability/)."""
 import json
+import math
 
-import numpy as np
+from validation.store import ResultStore, StoreError
 
-from validation.store import ResultStore
+
+#: Wall-clock metrics (also: any metric named like one of the run's timings).
+_WALL_CLOCK = {"wall_s", "startup_s", "realtime_factor"}
 
 
 def metrics_table(out) -> dict:
-    """metrics.csv as {run id: {metric: value}}, without wall-clock columns; NaN (a metric
-    that does not apply, e.g. tracking after a transient longer than the run) becomes the
-    string "nan" so that equal tables compare equal.  Asserts there are no duplicate rows."""
-    rows = ResultStore(out).metrics()
-    ids = [r["run_id"] for r in rows]
-    assert len(ids) == len(set(ids)), "duplicate rows in metrics.csv"
-    clean = lambda v: "nan" if isinstance(v, float) and np.isnan(v) else v  # noqa: E731
-    return {r["run_id"]: {k: clean(v) for k, v in r.items()
-                          if k not in ("wall_s", "realtime_factor")} for r in rows}
+    """The index of a results folder as {run id: {field: value}} — name, status, message,
+    end time and every metric — without wall-clock metrics, which differ between two
+    executions of the same run, nor the code fingerprint (this process caches its own, a
+    subprocess computes it afresh).  NaN (a metric that does not apply) becomes the string
+    "nan" so that equal tables compare equal.  Asserts there are no duplicate rows and
+    that every run file verifies."""
+    store = ResultStore(out)
+    try:
+        rows = store.rows()
+        assert store.verify(rows) == {}, "damaged run files"
+    finally:
+        store.close()
+    ids = [r.run_id for r in rows]
+    assert len(ids) == len(set(ids)), "duplicate rows in the index"
+    clean = lambda v: "nan" if isinstance(v, float) and math.isnan(v) else v  # noqa: E731
+    table = {}
+    for r in rows:
+        entry = {"name": r.name, "status": r.status, "message": r.message,
+                 "end_time": r.end_time}
+        entry |= {k: clean(v) for k, v in r.metrics.items() if k not in _WALL_CLOCK | set(r.timings)}
+        table[r.run_id] = entry
+    return table
+
+
+def stored_count(out) -> int:
+    """How many runs the index of ``out`` holds (0 while there is no index yet); opens
+    and closes its own connection, so it can poll a folder another process writes."""
+    store = ResultStore(out)
+    try:
+        return len(store.rows()) if store.exists() else 0
+    except StoreError:
+        return 0
+    finally:
+        store.close()
 
 
 def campaign_toml(spec: dict) -> str:

@@ -1,7 +1,9 @@
 """Campaigns: configuration errors, sweep expansion, run ids, resume after a kill,
 identical results on every executor, and reports."""
+import csv
 import dataclasses
 import json
+import math
 import signal
 import subprocess
 import sys
@@ -11,17 +13,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from campaign_testing import campaign_toml, metrics_table
+from campaign_testing import campaign_toml, metrics_table, stored_count
 from validation._config import ConfigError
-from validation.campaign import (SerialExecutor, campaign_from_mapping, expand, load_campaign,
-                                 make_executor, run_campaign)
-from validation.claims import write_claims
-from validation.report import SECTIONS, write_report
+from validation.campaign import campaign_from_mapping, expand, load_campaign, run_campaign
+from validation.claims import CLAIMS, claim_columns, write_claims
+from validation.executor import SerialRunner, make_runner
+from validation.report import write_report
+from validation.results import RunResult
 from validation.scenario import scenario_from_mapping, scenario_to_mapping
 from validation.store import ResultStore, run_id
 
 ROOT = Path(__file__).resolve().parent.parent
-SMALL = {"name": "small", "scenario": {"duration": 0.3, "sensors": {"encoder_noise": 1e-4}},
+SMALL = {"name": "small", "scenario": {"duration": 0.3, "transient": 0.1,
+                                       "sensors": {"encoder_noise": 1e-4}},
          "sweep": [{"name": "payload", "grid": {"true_params": {"Mp": [0.0, 0.5]},
                                                 "seed": [1, 2]}},
                    {"name": "observer", "zip": {"observer.kind": ["smo-bl", "smo-pos"],
@@ -48,6 +52,10 @@ SMALL = {"name": "small", "scenario": {"duration": 0.3, "sensors": {"encoder_noi
      "sweep[0].random.true_params.Mp"),
     ({"scenario": {"duration": -1.0}}, "scenario.duration"),
     ({"sweep": [{"grid": {"nonsense.key": [1]}}]}, "nonsense"),
+    ({"scenario": {"duration": 1.0}}, "scenario.transient"),  # the default transient is 2 s
+    ({"sweep": [{"grid": {"controller.options.kv_flex": [1.0]}}]}, "controller.options.kv_flex"),
+    ({"name": "../elsewhere"}, "name"),  # a campaign name names a folder: never a path
+    ({"name": "a/b"}, "name"),
 ])
 def test_config_errors_name_the_key(data, path):
     with pytest.raises(ConfigError) as exc:
@@ -56,7 +64,7 @@ def test_config_errors_name_the_key(data, path):
 
 
 def test_include_files_and_their_errors(tmp_path):
-    (tmp_path / "base.toml").write_text("[scenario]\nduration = 0.5\nseed = 3\n")
+    (tmp_path / "base.toml").write_text("[scenario]\nduration = 0.5\ntransient = 0.2\nseed = 3\n")
     (tmp_path / "c.toml").write_text('include = "base.toml"\nname = "c"\n[scenario]\nseed = 4\n')
     campaign = load_campaign(tmp_path / "c.toml")
     (run,) = expand(campaign)
@@ -120,134 +128,231 @@ def test_run_id_is_a_function_of_the_resolved_scenario():
 
 
 # --- execution -----------------------------------------------------------------------------------
-def test_executors_give_identical_metrics(tmp_path):
+def test_runners_give_identical_metrics(tmp_path):
     c = campaign_from_mapping(SMALL)
     results = {}
-    serial, close = make_executor("local", 1)
-    run_campaign(c, tmp_path / "serial", executor=serial, progress=False)
-    close()
+    with make_runner("local", 1) as serial:
+        assert isinstance(serial, SerialRunner)
+        run_campaign(c, tmp_path / "serial", runner=serial, progress=False)
     results["serial"] = metrics_table(tmp_path / "serial")
-    pool, close = make_executor("local", 2)
-    try:
-        run_campaign(c, tmp_path / "pool", executor=pool, progress=False)
-    finally:
-        close()
+    # Two forkserver workers; force: the test must also run on a one-core machine.
+    with make_runner("local", 2, force=True) as pool:
+        run_campaign(c, tmp_path / "pool", runner=pool, progress=False)
     results["pool"] = metrics_table(tmp_path / "pool")
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None, host="127.0.0.1") as cluster:
-        executor, close = make_executor("dask", scheduler=cluster.scheduler_address)
-        try:
-            run_campaign(c, tmp_path / "dask", executor=executor, progress=False)
-        finally:
-            close()
+        with make_runner("dask", scheduler=cluster.scheduler_address) as dask:
+            run_campaign(c, tmp_path / "dask", runner=dask, progress=False)
     results["dask"] = metrics_table(tmp_path / "dask")
     assert len(results["serial"]) == 6
+    assert all(m["status"] == "ok" for m in results["serial"].values())
     # Same seeds, same arithmetic: bit-identical metrics (wall time excluded).
     assert results["serial"] == results["pool"] == results["dask"]
+    # And bit-identical signals, as stored (float32).
+    stores = {k: ResultStore(tmp_path / k) for k in results}
+    for rid in results["serial"]:
+        a = stores["serial"].load(rid)
+        for other in ("pool", "dask"):
+            np.testing.assert_array_equal(stores[other].load(rid).signals, a.signals)
 
 
 def test_resume_after_a_kill(tmp_path):
     # 20 runs of ~50 ms: killed after the 3rd result, 17 runs remain to land the kill in.
-    spec = {"name": "resume", "scenario": {"duration": 2.0},
+    spec = {"name": "resume", "scenario": {"duration": 2.0, "transient": 1.0},
             "sweep": [{"grid": {"seed": list(range(20)),
                                 "sensors.encoder_noise": [1e-4]}}]}
     cfg = tmp_path / "resume.toml"
     cfg.write_text(campaign_toml(spec))
     reference = tmp_path / "reference"
-    run_campaign(campaign_from_mapping(spec), reference, executor=SerialExecutor(),
-                 progress=False)
+    run_campaign(campaign_from_mapping(spec), reference, runner=SerialRunner(), progress=False)
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "validation.cli", "campaign", str(cfg), "--out", str(out),
            "--workers", "1", "--no-progress"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120
-    while time.time() < deadline and len(ResultStore(out).completed()) < 3:
+    while time.time() < deadline and stored_count(out) < 3 and proc.poll() is None:
         time.sleep(0.01)
+    assert proc.poll() is None, f"the campaign ended before the kill: {proc.stderr.read()}"
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    partial = ResultStore(out).completed()
+    proc.stderr.close()
+    partial = metrics_table(out)  # the index is readable and every stored file verifies
     assert 3 <= len(partial) < 20, "the kill must land mid-campaign"
-    json.loads((out / "manifest.json").read_text())  # always valid JSON
     summary = subprocess.run(cmd, capture_output=True, text=True)
     assert summary.returncode == 0, summary.stderr
-    assert f"{len(partial)} already done" in summary.stdout
+    assert (f"resume: 20 runs; {len(partial)} already stored; ran {20 - len(partial)}: "
+            f"{20 - len(partial)} ok, 0 diverged, 0 failed -> {out}") in summary.stdout
     assert metrics_table(out) == metrics_table(reference)  # no duplicates, same numbers
+
+    def files():  # a rerun rewrites the file (its timings differ): a new checksum
+        store = ResultStore(out)
+        try:
+            return {r.run_id: r.sha256 for r in store.rows()}
+        finally:
+            store.close()
+
+    before = files()
     again = subprocess.run(cmd, capture_output=True, text=True)
-    assert "20 already done" in again.stdout
+    assert again.returncode == 0
+    assert "resume: 20 runs; 20 already stored" in again.stdout
+    assert files() == before  # nothing was run again
 
 
 def test_failed_runs_are_redone_only_on_request(tmp_path):
-    c = campaign_from_mapping({"name": "f", "scenario": {"duration": 0.2}})
+    c = campaign_from_mapping({"name": "f", "scenario": {"duration": 0.2, "transient": 0.1}})
     (run,) = expand(c)
     store = ResultStore(tmp_path)
-    from validation.results import RunResult
     store.add(run.run_id, RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)),
                                     status="failed", message="boom",
                                     config=scenario_to_mapping(run.scenario)),
               {"status": "failed"})
-    assert run_campaign(c, tmp_path, progress=False).skipped == 1
+    first = run_campaign(c, tmp_path, progress=False)
+    assert (first.skipped, first.done, first.failed_before) == (1, 0, [run.run_id])
+    assert first.any_failed  # an earlier failure, not retried, still fails the campaign
+    assert "1 failed earlier (not retried" in first.line("f", tmp_path)
     summary = run_campaign(c, tmp_path, progress=False, retry_failed=True)
-    assert summary.ok == 1 and store.completed()[run.run_id] == "ok"
-    assert len(store.metrics()) == 1
+    assert (summary.ok, summary.failed_before, summary.any_failed) == (1, [], False)
+    assert store.row(run.run_id).status == "ok" and store.load(run.run_id).status == "ok"
+    assert len(store.rows()) == 1
 
 
-# --- reports ------------------------------------------------------------------------------------------
+# --- reports ----------------------------------------------------------------------------
+REPORT_SECTIONS = ("Estimation against the measurement", "Runs", "Metrics", "Paper figures",
+                   "Sweeps", "Validity of the reduced model", "Animation")
+
+
 def test_report_from_stored_results(tmp_path):
     spec = {"name": "rep", "scenario": {"duration": 2.5, "observer": {"kind": "smo-paper"}},
             "report": {"figures": ["rep/both"]},
             "sweep": [{"name": "both", "grid": {"plant.kind": ["reduced", "exudyn"]}},
                       {"name": "payload", "grid": {"true_params.Mp": [0.0, 0.3]}}]}
     run_campaign(campaign_from_mapping(spec), tmp_path, progress=False)
-    html_path, md_path = write_report(tmp_path)
+    html_path, md_path = write_report(tmp_path, progress=False)
     md, page = md_path.read_text(), html_path.read_text()
-    for section in SECTIONS:
-        assert f"## {section}" in md and f"<h2>{section}</h2>" in page
+    for section in REPORT_SECTIONS:
+        assert f"## {section}" in md and f"<h2>{section}</h2>" in page, section
     assert "Fig. 3" in md and "Fig. 7" in md and "metrics vs true_params.Mp" in md
+    # Every stored run is in the runs table (4: the sweeps name their runs differently).
+    rows = ResultStore(tmp_path).rows()
+    assert len(rows) == 4 and all(r.status == "ok" for r in rows)
+    for row in rows:
+        assert row.run_id in md and row.run_id in page
     assert page.count("data:image/png;base64,") >= 7 and "http" not in page.split("<body>")[1]
     assert (tmp_path / "report" / "arm.gif").stat().st_size > 10_000
+
+
+def paper_claim_value(claim, metrics: dict, result) -> float:
+    """The value of each of the paper's claims, recomputed here from the stored metrics
+    and signals (validation.claims documents the criteria)."""
+    worst = lambda prefix: max(  # noqa: E731 - NaN (never converged) counts as +inf
+        math.inf if math.isnan(v) else v for k, v in metrics.items()
+        if k.startswith(prefix) and isinstance(v, float))
+    if claim.key == "tracking":
+        return max(metrics["track_max_1"], metrics["track_max_2"])
+    if claim.key == "vibration":
+        return max(metrics["vib_rms_1"], metrics["vib_rms_2"])
+    if claim.key == "phase_portrait":
+        return metrics["rate_err_rel"]
+    if claim.key == "estimation":
+        return max(metrics["est_max_theta1"], metrics["est_max_theta2"])
+    if claim.key == "flexible_rates":
+        return worst("est_rms_slope_rate_")
+    if claim.key == "noise_rejection":
+        return worst("est_to_noise_")
+    if claim.key == "convergence":
+        return worst("est_conv_")
+    assert claim.key == "disturbance"
+    start = result.config["disturbances"][0]["start"]
+    late = result.time >= start - 1e-12
+    err = result.select(["theta1", "theta2"]) - result.select(["theta1_ref", "theta2_ref"])
+    return float(np.abs(err[:, late]).max())
 
 
 def test_claims_table_of_the_paper_campaign(tmp_path):
     c = load_campaign(ROOT / "campaigns" / "paper.toml")
     runs = [r for r in expand(c) if r.scenario.name in ("paper/pbc+smo-paper",
-                                                         "paper/pbc+smo-paper+disturbance")]
+                                                         "paper/pbc+smo-paper+disturbance")
+            and r.scenario.arm == "default" and r.scenario.initial_state == "rest"
+            and r.scenario.Ts == 1e-3]
     assert len(runs) == 4  # both plants, with and without the disturbance
     short = [dataclasses.replace(r, scenario=dataclasses.replace(r.scenario, duration=11.0))
              for r in runs]  # past the disturbance at 10 s; ids stay those of the campaign
     run_campaign(c, tmp_path, progress=False, only=short)
     table = write_claims(tmp_path)
-    assert table.count("\n") == 9  # header, rule, 8 claims
-    assert "holds" in table and "not run" not in table
-    assert (tmp_path / "claims.csv").exists()
+    store = ResultStore(tmp_path)
+    columns = claim_columns(store.rows())
+    assert [col.key for col in columns] == [("default", "reduced", 1e-3, "rest"),
+                                            ("default", "exudyn", 1e-3, "rest")]
+    for col in columns:
+        system = col.runs["pbc+smo-paper"]
+        assert system.status == "ok" and col.runs["pbc+smo-paper+disturbance"].status == "ok"
+        for claim in CLAIMS:
+            verdict = col.verdicts[claim.key]
+            run = col.runs[claim.run]
+            expected = paper_claim_value(claim, run.metrics, run.load())
+            # The same numbers through the same arithmetic: exact.
+            assert verdict.value == expected, (col.key, claim.key)
+            # The verdict is the bound applied to the value, and every claim is judged.
+            assert verdict.verdict == ("holds" if expected <= claim.bound else "fails"), (
+                col.key, claim.key, expected)
+        # Known outcomes with a physical reason, so that the table shows both verdicts:
+        # tracking holds (the issue's acceptance bound; measured 0.0096 / 0.0100 rad), and
+        # the sign observer cannot beat its own noisy input: its ±Ts·L chatter (1e-3 rad,
+        # 5e-4 m) is 10× and 50× the encoder and modal noise (measured estimate error /
+        # measurement error: 6 on the angles, 28 on q11).
+        assert col.verdicts["tracking"].verdict == "holds"
+        assert col.verdicts["noise_rejection"].verdict == "fails"
+    # claims.md: one table (one arm), first row the run of the system, then one row per
+    # claim, each cell naming its column's verdict.
+    lines = [ln for ln in table.splitlines() if ln.startswith("| ")]
+    assert table.count("## Arm: ") == 1
+    body = lines[1:1 + 1 + len(CLAIMS)]  # after the header row
+    assert body[0].startswith("| run of the system")
+    for line, claim in zip(body[1:], CLAIMS):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")][1:]
+        assert len(cells) == 2, line
+        for cell, col in zip(cells, columns):
+            assert cell.endswith(col.verdicts[claim.key].verdict) or \
+                f"— {col.verdicts[claim.key].verdict} (" in cell, (claim.key, cell)
+    # claims.csv: long format, one row per (column, claim), the same verdicts.
+    with (tmp_path / "claims.csv").open(newline="") as fh:
+        records = list(csv.DictReader(fh))
+    assert len(records) == len(columns) * len(CLAIMS)
+    by_key = {(r["plant"], r["claim"]): r for r in records}
+    for col in columns:
+        for claim in CLAIMS:
+            record = by_key[(col.key[1], claim.key)]
+            assert record["verdict"] == col.verdicts[claim.key].verdict
+            assert record["run_id"] == col.runs[claim.run].run_id
 
 
 def test_shipped_campaigns_expand():
+    shipped = sorted(p.stem for p in (ROOT / "campaigns").glob("*.toml") if p.stem != "base")
     counts = {name: len(expand(load_campaign(ROOT / "campaigns" / f"{name}.toml")))
-              for name in ("paper", "mismatch", "robustness")}
-    assert counts == {"paper": 15, "mismatch": 29, "robustness": 26}
+              for name in shipped}
+    # paper: 2 arms × 2 plants × 2 initial conditions × 10 laws (PBC alone, with each of 3
+    # SMOs and 2 EKFs; LQR alone and with the EKF; PD; CT: 80) + the idealised PBC on the
+    # reduced plant (2 arms × 2 starts: 4) + the disturbance (2 × 2 × 2: 8) + Table 1 at
+    # Ts = 0.2 ms (2 starts × with/without the disturbance: 4).  mismatch: payload 2×4,
+    # stiffness 2×3, model order 2×3, damping 2×3, FE mesh 3.  robustness: noise 2×4,
+    # torque disturbances 2×5, sample time 2×4.  attribution: the PBC with each SMO.
+    assert counts == {"attribution": 3, "mismatch": 29, "paper": 96, "robustness": 26}
 
 
-def test_readme_campaign_example_is_valid(tmp_path):
-    """The complete example in the README parses, checks and expands."""
-    readme = (ROOT / "README.md").read_text()
-    block = readme.split("```toml\n# my.toml")[1].split("```")[0]
-    text = "# my.toml" + block.replace('include = "campaigns/base.toml"',
-                                       f'include = "{ROOT / "campaigns" / "base.toml"}"')
-    (tmp_path / "my.toml").write_text(text)
-    runs = expand(load_campaign(tmp_path / "my.toml"))
-    assert len(runs) == 2 * 4 * 3 * 2 + 8
-    assert {r.scenario.plant.kind for r in runs} == {"reduced", "exudyn"}
-    assert runs[0].scenario.disturbances[0].kind == "pulse"
-
-
-def test_metrics_table_keeps_identifiers_as_text(tmp_path):
-    from validation.results import RunResult
+def test_identifiers_stay_text_in_the_index_and_the_export(tmp_path):
+    # A hex id like 1234567e8901 or a name like 1e5 must never become a number.
     store = ResultStore(tmp_path)
     empty = RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)), status="ok",
                       config={"name": "1e5"})
-    for rid in ("1234567e8901", "000000000042", "abcdefabcdef"):
+    ids = ("1234567e8901", "000000000042", "abcdefabcdef")
+    for rid in ids:
         store.add(rid, empty, {"status": "ok", "track_max_1": 0.5})
-    rows = store.metrics()
-    assert sorted(r["run_id"] for r in rows) == ["000000000042", "1234567e8901", "abcdefabcdef"]
-    assert all(r["name"] == "1e5" and r["track_max_1"] == 0.5 for r in rows)
+    rows = store.rows()
+    assert sorted(r.run_id for r in rows) == sorted(ids)
+    assert all(r.name == "1e5" and r.metrics["track_max_1"] == 0.5 for r in rows)
+    csv_path, _ = store.export()
+    with csv_path.open(newline="") as fh:
+        exported = list(csv.DictReader(fh))
+    assert sorted(r["run_id"] for r in exported) == sorted(ids)  # written verbatim
+    assert all(r["name"] == "1e5" and float(r["track_max_1"]) == 0.5 for r in exported)

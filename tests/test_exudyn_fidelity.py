@@ -104,8 +104,13 @@ def test_energy_balance_undamped(element):
         # motor pair is exactly τ·Δθ with θ2 relative to the link-1 tip tangent.
         work += tau @ (new - theta)
         theta = new
-    # The issue allows 1 %; measured 0.05 % (ANCF) and 0.12 % (geometrically exact).
-    assert fe_energy(plant) - e0 == pytest.approx(work, rel=1e-2)
+    # The issue allows 1 %; measured 0.047 % (ANCF) and 0.117 % (geometrically exact), what
+    # the 1e-6 Newton tolerance and the nonlinear (large-rotation) terms leave over 3000
+    # steps.  Bounds ~3× the measured values: a lost stator reaction or a torque applied
+    # to the wrong body is a 10–100 % imbalance, and the default dissipative integrator
+    # (ρ∞ = 0.9) loses 0.68–0.78 % (measured): both fail.
+    rel = {"ancf": 1.5e-3, "geometrically_exact": 3e-3}[element]
+    assert fe_energy(plant) - e0 == pytest.approx(work, rel=rel)
 
 
 def torque_run(mesh: Mesh, seconds=5.0):

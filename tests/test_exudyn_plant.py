@@ -2,12 +2,14 @@
 errors, and the joint-2 stability that motivates the default stator inertia."""
 import os
 
+import exudyn as exu
 import numpy as np
 import pytest
 
 from controllers import JointPD, PaperReference
 from plant_exudyn import ExudynPlant, LinkField, Mesh
-from reduced_model import ArmModel, ArmParameters, Plant, PlantFailure, ReducedPlant, SensorConfig
+from reduced_model import ArmModel, ArmParameters, PlantFailure, ReducedPlant, SensorConfig
+from reduced_model._plant_interface import true_state_from_vector
 
 MESHES = [Mesh("ancf", (4, 4)), Mesh("geometrically_exact", (8, 6))]
 
@@ -17,8 +19,44 @@ def plant(request):
     return ExudynPlant(mesh=request.param)
 
 
-def test_is_a_plant(plant):
-    assert isinstance(plant, Plant) and plant.name == "exudyn"
+def test_behaves_as_a_plant(plant):
+    """What the closed loop (validation.loop) relies on, checked on numbers rather than on
+    method names: reset returns y(0) of the given state, truth_vector() is truth()
+    flattened, step holds the torque for Ts and returns y(t + Ts), and the torque moves
+    the arm as it moves the reduced plant."""
+    assert plant.name == "exudyn" and plant.state_size == 12
+    x0 = np.zeros(12)  # undeformed and moving, as the loop starts a run
+    x0[:2], x0[6:8] = (0.3, -0.5), (0.2, 0.1)
+    y = plant.reset(x0)
+    assert y.time == 0.0 and y.names == ("theta1", "theta2", "q11", "q12", "q21", "q22")
+    # An undeformed arm is placed exactly (measured 6e-18): round-off only.
+    np.testing.assert_allclose(y.values, x0[:6], atol=1e-14)
+    vector, truth = plant.truth_vector(), plant.truth()
+    back = true_state_from_vector(truth.time, vector)
+    np.testing.assert_array_equal(vector[:12], truth.x)
+    np.testing.assert_array_equal(back.tip_positions, truth.tip_positions)
+    np.testing.assert_array_equal(back.tip_deflections, truth.tip_deflections)
+    np.testing.assert_array_equal(back.projection_residual, truth.projection_residual)
+
+    def response(p, tau, steps=10):
+        p.reset(x0)
+        for _ in range(steps):
+            y = p.step(tau, 1e-3)
+        return y, p.truth()
+
+    tau = np.array([0.5, -0.3])
+    y, pushed = response(plant, tau)
+    assert y.time == pytest.approx(0.01, abs=1e-15) and pushed.time == y.time == plant.time
+    np.testing.assert_array_equal(y.values, pushed.x[:6])  # direct sensors read the truth
+    free = response(plant, np.zeros(2))[1]
+    red = ReducedPlant()
+    effect = pushed.theta_dot - free.theta_dot
+    effect_red = response(red, tau)[1].theta_dot - response(red, np.zeros(2))[1].theta_dot
+    # The torque's own effect on the joint rates after 10 ms (θ̇2: −0.23 rad/s) agrees with
+    # the reduced plant to 4.9 % (measured, both meshes): within 10 ms the FE arm's modes
+    # above the reduced model's 2+2 still respond.  10 % also catches a wrong sign, a
+    # missing stator reaction (−τ2 on link 1) or a torque applied twice.
+    np.testing.assert_allclose(effect, effect_red, rtol=0.1)
 
 
 @pytest.mark.parametrize("link", [0, 1])
@@ -57,6 +95,32 @@ def test_reset_places_a_modal_state(plant):
     assert truth.time == 0.0
 
 
+def elastic_energy(plant) -> float:
+    """Elastic energy of the FE links as Exudyn computes it."""
+    mbs, total = plant.system.mbs, 0.0
+    for obj in range(mbs.systemData.NumberOfObjects()):
+        if mbs.GetObject(obj)["objectType"] in ("ANCFCable2D", "BeamGeometricallyExact2D"):
+            total += mbs.GetObjectOutputBody(obj, exu.OutputVariableType.PotentialEnergy,
+                                             localPosition=[0, 0, 0])
+    return total
+
+
+def test_reset_places_the_modal_strain_energy(plant, request):
+    """The projection of q (test above) cannot see strain that the modes do not carry: the
+    placed FE arm must also store the modal state's elastic energy ½ qᵀ K q."""
+    if plant.mesh.element == "geometrically_exact":
+        request.applymarker(pytest.mark.xfail(strict=True, reason=(
+            "library bug: reset() of a geometrically exact mesh stores 10.9x the modal "
+            "strain energy (8+6 elements; 1.1 % at 32+32), and stepping from a deflected "
+            "link 2 then fails in Exudyn's Newton iteration")))
+    x0 = np.array([0.4, 1.1, 2e-3, -4e-4, 1e-3, 2e-4, 0.5, -0.3, 0.02, 0.01, -0.03, 0.005])
+    plant.reset(x0)
+    expected = ArmModel(plant.params).potential_energy(x0[:6])
+    # ANCF cubic elements carry the smooth mode shapes' curvature closely: measured 5e-4
+    # relative at 4 elements per link; 1 % leaves room for a finer or coarser mesh.
+    assert elastic_energy(plant) == pytest.approx(expected, rel=1e-2)
+
+
 def test_period_stepping_matches_one_continuous_run():
     a, b = ExudynPlant(), ExudynPlant()
     a.reset()
@@ -92,7 +156,10 @@ def pd_tracking(plant, kd2, seconds=3.0):
     """Joint PD at 1 kHz on the paper's reference from rest (true state fed back);
     returns the final joint error [rad], or inf if |q| left 0.5 or the solver failed."""
     plant.reset()
-    pd, ref = JointPD(kd=(8.0, kd2)), PaperReference()
+    # The gains this test was measured with: K_p = (40, 20), no feedforward.
+    # (The model only feeds the feedforward, which is off.)
+    pd = JointPD(ArmModel(), kp=(40.0, 20.0), kd=(8.0, kd2), feedforward=False)
+    ref = PaperReference()
     try:
         for k in range(int(round(seconds / 1e-3))):
             truth = plant.truth()

@@ -40,12 +40,22 @@ def test_pbc_true_state_on_reduced_plant():
     assert r.status == "ok" and r.end_time == pytest.approx(20.0)
     # The issue's bound is 0.02 rad after 2 s; measured 0.0054 / 0.0089.
     assert track_after(r) <= 0.02
-    d = metrics.deflection(r, 2.0, None)
+    d = metrics.deflection(r, 2.0)
     # Bounded deflection: the start from rest (reference at 0.6 and 1.3 rad/s) bends
     # link 1 by 8.5 cm; after 2 s it stays below 2.5 cm (measured 1.3 / 1.6 cm).
     assert max(d["defl_max_1"], d["defl_max_2"]) < 0.1
     late = np.abs(r.select(["tip_defl1", "tip_defl2"])[:, r.time >= 2.0]).max()
     assert late < 0.025
+
+
+# States whose estimate converges in the relative sense of `metrics.convergence_time`
+# (windowed error RMS within 10 % of the state's own RMS, so x̂ ≡ 0 never converges).
+# q12, q21, q22 and most of their rates move less than the sign observers' bands here
+# (q22: < 1e-5 m RMS against a band of 5e-4 m), and the position-only observer's q̇11 error
+# stays at 29 % of the signal: those are not claimed.
+CONVERGING = {"smo-paper": ("theta1_dot", "theta2_dot", "q11_dot"),
+              "smo-bl": ("theta1_dot", "theta2_dot", "q11_dot"),
+              "smo-pos": ("theta1_dot", "theta2_dot")}
 
 
 @pytest.mark.parametrize("observer", ["smo-paper", "smo-bl", "smo-pos"])
@@ -55,13 +65,24 @@ def test_pbc_with_each_smo_on_reduced_plant(observer):
     assert r.status == "ok"
     assert track_after(r) <= 0.03  # the issue's bound with the observer in the loop
     est = metrics.estimation(r, 2.0)
-    # Converges: every state's error stays within its tolerance (0.02 rad, 2 mm,
-    # 0.1 rad/s, 0.05 m/s) from a finite time on, here within the first 2 s.
-    conv = [v for k, v in est.items() if k.startswith("est_conv_")]
-    assert all(np.isfinite(conv)) and max(conv) < 2.0, est
+    # Converges, relative to each signal: the rate estimates start 0.3 rad/s off (35–70 %
+    # of the rates' RMS), so convergence takes time (measured 0.11–0.29 s); 1 s is the
+    # paper's "rapidly" (the convergence claim's bound).
+    for state in CONVERGING[observer]:
+        assert 0.0 < est[f"est_conv_{state}"] < 1.0, (state, est[f"est_conv_{state}"])
+    for state in ("theta1_dot", "theta2_dot"):
+        assert est[f"est_conv_{state}"] > 0.05  # not converged at t = 0: it started off
     # After 2 s the angle estimates stay within the paper's 0.02 rad by far: the sign
-    # band Ts·L_P = 1e-3 rad plus noise (measured ≤ 1.4e-3 rad).
+    # band Ts·L_P = 1e-3 rad plus noise (measured ≤ 1.32e-3 rad).  (The relative
+    # convergence test cannot show the angles converge: 10 % of their 1.47 rad RMS is
+    # more than the initial 0.1 rad error.)
     assert max(est["est_max_theta1"], est["est_max_theta2"]) < 5e-3
+    # The estimate is far better than x̂ ≡ 0 on the angles and joint rates (error / signal
+    # RMS measured ≤ 4e-4 and ≤ 0.023; x̂ ≡ 0 gives 1).
+    for state in ("theta1", "theta2"):
+        assert est[f"est_to_signal_{state}"] < 1e-2
+    for state in ("theta1_dot", "theta2_dot"):
+        assert est[f"est_to_signal_{state}"] < 0.1
 
 
 @pytest.mark.parametrize("observer", ["none", "smo-paper", "smo-bl", "smo-pos"])
@@ -72,7 +93,14 @@ def test_same_scenarios_run_on_the_exudyn_plant(observer):
     # 5 s here (20 s under `make test-all`): the FE plant tracks like the reduced one
     # (measured ≤ 0.0101 rad after 2 s for every observer).
     assert track_after(r) <= 0.03
-    assert np.all(r["proj_res1"][r.time > 0.5] < 0.05)  # the 2 modes capture the deflection
+    # The 2+2 modes capture the FE deflection: the part they cannot represent (absolute,
+    # mass-weighted RMS over the link [m]) stays below 0.5 % of each link's RMS tip
+    # deflection after the start (measured ≤ 1.1e-5 m of 2 cm and 1.7e-6 m of 1.9 mm:
+    # 0.05 % and 0.09 %).
+    late = r.time > 0.5
+    for link in (1, 2):
+        scale = np.sqrt(np.mean(np.square(r[f"tip_defl{link}"][late])))
+        assert np.all(r[f"proj_res{link}"][late] <= 5e-3 * scale), link
 
 
 @pytest.mark.slow
@@ -84,7 +112,7 @@ def test_paper_scenario_20s_on_the_exudyn_plant(observer):
 
 
 def test_swapping_the_plant_is_one_word():
-    base = {"duration": 0.5}
+    base = {"duration": 0.5, "transient": 0.2}
     a = run_scenario(scenario(**base))
     b = run_scenario(scenario(plant__kind="exudyn", **base))
     assert a.names == b.names and a.status == b.status == "ok"
@@ -93,36 +121,53 @@ def test_swapping_the_plant_is_one_word():
         assert word not in source, f"simulate() branches on the plant ({word!r})"
 
 
-@pytest.mark.parametrize("overrides, path", [
-    (dict(plant__kind="exudyn", controller__pbc__idealised=True), "controller.pbc.idealised"),
-    (dict(observer__kind="smo-pos", sensors__modal="none"), "observer.kind"),
-    (dict(observer__kind="smo-paper", sensors__rates=False), "observer.kind"),
-    (dict(Ts=1.5e-3), "Ts"),
-    (dict(controller__pbc__kv_joint=[10.0, -5.0]), "controller.pbc.kv_joint"),
-    (dict(controller__pd__kp=[-1.0, 1.0]), "controller.pd.kp"),
-    (dict(feedback="estimate"), "feedback"),
-    (dict(nominal_params__L1=0.6), "nominal_params.L1"),
-    (dict(sensors__modal="gauges", sensors__gauges_link1=[0.1]), "sensors.gauges_link1"),
-    (dict(observer__initial_error=[0.1, 0.2]), "observer.initial_error"),
+@pytest.mark.parametrize("overrides, path, text", [
+    (dict(plant__kind="exudyn", controller__kind="pbc-idealised"), "controller.kind",
+     "two actuators"),
+    # Options of the idealised law only: the realisable PBC refuses them and says why.
+    (dict(controller__options__kv_flex=5.0), "controller.options.kv_flex",
+     "cannot change the realisable PBC's torque"),
+    (dict(controller__options__compensate_damping=False),
+     "controller.options.compensate_damping", "cannot change"),
+    (dict(observer__kind="smo-pos", sensors__modal="none"), "observer.kind", "q11"),
+    (dict(observer__kind="smo-paper", sensors__rates=False), "observer.kind", "theta1_dot"),
+    (dict(Ts=1.5e-3), "Ts", "whole multiple"),
+    (dict(controller__options__kv_joint=[10.0, -5.0]), "controller.options.kv_joint", ">= 0"),
+    (dict(controller__kind="pd", controller__options__kp=[-1.0, 1.0]),
+     "controller.options.kp", ">= 0"),
+    (dict(controller__kind="pd", controller__options__kv_joint=1.0),
+     "controller.options.kv_joint", "not an option of pd"),
+    (dict(observer__kind="smo-bl", observer__options__l_velocity=[5.0, -2.0]),
+     "observer.options.l_velocity", ">= 0"),
+    (dict(observer__options__l_position=1.0), "observer.options", "no observer"),
+    (dict(controller__kind="fuzzy"), "controller.kind", "fuzzy"),
+    (dict(observer__kind="fuzzy"), "observer.kind", "fuzzy"),
+    (dict(feedback="estimate"), "feedback", "needs an observer"),
+    (dict(nominal_params__L1=0.6), "nominal_params.L1", "must equal"),
+    (dict(sensors__modal="gauges", sensors__gauges_link1=[0.1]), "sensors.gauges_link1",
+     "gauge"),
+    (dict(observer__initial_error=[0.1, 0.2]), "observer.initial_error", "needs 12 values"),
+    (dict(duration=2.0), "transient", "leaves nothing"),  # the default transient is 2 s
 ])
-def test_bad_combinations_are_rejected_before_simulation(overrides, path):
+def test_bad_combinations_are_rejected_before_simulation(overrides, path, text):
     with pytest.raises(ConfigError) as exc:
         scenario(**overrides)
-    assert exc.value.path == path
+    assert exc.value.path == path and text in str(exc.value), str(exc.value)
 
 
 @pytest.mark.parametrize("plant", ["reduced", "exudyn"])
 def test_unstable_gains_end_as_diverged(plant):
     # A 500 N m s/rad sampled D-term on joint 2 is far beyond the stability limit.
     r = run_scenario(scenario(plant__kind=plant, controller__kind="pd",
-                              controller__pd__kd=[8.0, 500.0], duration=2.0))
+                              controller__options__kd=[8.0, 500.0], duration=2.0,
+                              transient=1.0))
     assert r.status == "diverged"
     assert "at t = " in r.message and r.end_time < 0.5
     assert len(r.time) == round(r.end_time / 1e-3) and np.all(np.isfinite(r.signals))
 
 
 def test_solver_failure_ends_as_failed():
-    s = scenario(plant__kind="exudyn", duration=1.0)
+    s = scenario(plant__kind="exudyn", duration=1.0, transient=0.5)
     setup = build(s)
     setup.plant.settings.timeIntegration.newton.absoluteTolerance = 1e-16
     setup.plant.settings.timeIntegration.newton.relativeTolerance = 1e-16
@@ -133,7 +178,7 @@ def test_solver_failure_ends_as_failed():
 
 
 def test_noise_is_seeded():
-    noisy = dict(duration=0.3, **{f"sensors__{k}": v for k, v in NOISE.items()})
+    noisy = dict(duration=0.3, transient=0.1, **{f"sensors__{k}": v for k, v in NOISE.items()})
     a, b = run_scenario(scenario(seed=3, **noisy)), run_scenario(scenario(seed=3, **noisy))
     c = run_scenario(scenario(seed=4, **noisy))
     np.testing.assert_array_equal(a.signals, b.signals)
@@ -143,13 +188,13 @@ def test_noise_is_seeded():
 
 
 def test_measurement_delay_in_whole_samples():
-    r = run_scenario(scenario(duration=0.5, sensors__delay=3))
+    r = run_scenario(scenario(duration=0.5, transient=0.2, sensors__delay=3))
     np.testing.assert_array_equal(r["y_theta1"][3:], r["theta1"][:-3])
     np.testing.assert_array_equal(r["y_theta1"][:3], r["theta1"][0])
 
 
 def test_torque_saturation():
-    r = run_scenario(scenario(duration=1.0, torque_limit=2.0))
+    r = run_scenario(scenario(duration=1.0, transient=0.5, torque_limit=2.0))
     assert np.abs(r.select(["tau1", "tau2"])).max() <= 2.0
     assert np.abs(r.select(["tau1_cmd", "tau2_cmd"])).max() > 2.0  # it did saturate
 
@@ -158,8 +203,8 @@ def test_torque_saturation():
 def test_disturbances_reach_the_plant(plant):
     dist = [{"kind": "pulse", "target": "tau1", "amplitude": 3.0, "start": 0.2, "duration": 0.1},
             {"kind": "step", "target": "tip_y", "amplitude": 2.0, "start": 0.5}]
-    base = scenario(plant__kind=plant, duration=1.0)
-    hit = scenario(plant__kind=plant, duration=1.0, disturbances=dist)
+    base = scenario(plant__kind=plant, duration=1.0, transient=0.5)
+    hit = scenario(plant__kind=plant, duration=1.0, transient=0.5, disturbances=dist)
     r0, r1 = run_scenario(base), run_scenario(hit)
     t = r1.time
     k = np.arange(len(t))  # edges on the sample grid: samples 200..299 and from 500 on
@@ -179,7 +224,7 @@ def test_noise_disturbance_statistics():
 
 
 def test_result_roundtrip(tmp_path):
-    r = run_scenario(scenario(duration=0.2, observer__kind="smo-bl"))
+    r = run_scenario(scenario(duration=0.2, transient=0.1, observer__kind="smo-bl"))
     path = r.save(tmp_path / "run.npz")
     back = RunResult.load(path)
     assert back.names == r.names and back.status == r.status and back.config == r.config

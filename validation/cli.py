@@ -137,7 +137,10 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
 def open_output(out: str | Path) -> ResultStore:
     """Create (or open) a results folder; one line naming it if that is impossible."""
     store = ResultStore(out)
-    store.prepare()
+    try:
+        store.prepare()
+    except StoreError as exc:
+        raise StoreError(f"--out {exc}") from None
     probe = store.out / ".write-test"
     try:
         probe.write_text("")

@@ -135,7 +135,8 @@ def vibration(result: RunResult, transient: float, cutoff_hz: float) -> dict[str
 def convergence_time(time: np.ndarray, error: np.ndarray, tolerance: float,
                      window: float = CONVERGENCE_WINDOW) -> float:
     """Earliest t after which the RMS of ``error`` over the trailing ``window`` seconds
-    stays ≤ ``tolerance`` (NaN if it never settles)."""
+    stays ≤ ``tolerance``; NaN if it never settles, or settles only in the last ten
+    windows of the run (a dip at the end is not convergence)."""
     if time.size < 2:
         return math.nan
     k = max(1, int(round(window / (time[1] - time[0]))))
@@ -147,7 +148,9 @@ def convergence_time(time: np.ndarray, error: np.ndarray, tolerance: float,
     if outside.size == 0:
         return float(time[0])
     last = outside[-1]
-    return float(time[last + 1]) if last + 1 < time.size else math.nan
+    if time.size - (last + 1) < 10 * k:
+        return math.nan
+    return float(time[last + 1])
 
 
 def estimation(result: RunResult, transient: float) -> dict[str, float]:

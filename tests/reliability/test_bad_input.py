@@ -16,9 +16,11 @@ CAMPAIGN_UNKNOWN = 'name = "x"\nsweeps = 3\n'
 CAMPAIGN_BAD_SCENARIO = 'name = "x"\n[scenario]\nplant.kind = "fem"\n'
 CAMPAIGN_BAD_RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 0\nrandom.seed = 1\n' \
                       'random.true_params.Mp = {uniform = [0.0, 1.0]}\n'
+CAMPAIGN_OK = 'name = "x"\n[scenario]\nduration = 0.1\ntransient = 0.05\n'
+CAMPAIGN_PATH_NAME = 'name = "../x"\n'
 
-# (argv, text the single error line must contain); {tmp} is a scratch folder, {out} the
-# output folder that must not be created.
+# (argv, text — or texts — the single error line must contain); {tmp} is a scratch folder,
+# {out} the output folder that must not be created.
 CASES = [
     (["run", "--set", "foo=1"], "foo: unknown key"),
     (["run", "--set", "plant.foo=1"], "plant.foo: unknown key"),
@@ -31,18 +33,32 @@ CASES = [
     (["run", "--set", "nominal_params.Jh1=-0.5"], "nominal_params.Jh1: must be >= 0"),
     (["run", "--plant", "fem"], "--plant: invalid choice"),
     (["run", "--set", 'plant.kind="fem"'], "plant.kind: must be one of"),
-    (["run", "--set", 'controller.kind="lqr"'], "controller.kind: must be one of"),
-    (["run", "--set", 'observer.kind="ekf"'], "observer.kind: must be one of"),
+    (["run", "--set", 'controller.kind="fuzzy"'], "controller.kind: unknown controller 'fuzzy'"),
+    (["run", "--set", 'observer.kind="fuzzy"'], "observer.kind: unknown observer 'fuzzy'"),
+    (["run", "--controller", "fuzzy"], "controller.kind: unknown controller 'fuzzy'"),
     (["run", "--Ts", "0"], "Ts: must be > 0"),
     (["run", "--Ts", "-0.001"], "Ts: must be > 0"),
     (["run", "--Ts", "0.0015"], "Ts: 0.0015 s is not a whole multiple"),
     (["run", "--duration", "0"], "duration: must be > 0"),
     (["run", "--duration", "-5"], "duration: must be > 0"),
+    (["run", "--duration", "1.5"], ("transient: ", "leaves nothing")),
+    (["run", "--duration", "1e4"], ("duration: ", "1e+07 samples (at most 5e+06")),
+    (["run", "--set", "sensors.encoder_noise=1e4"], "sensors.encoder_noise: must be <= 1000"),
+    (["run", "--name", ""], "name: must be a non-empty printable string"),
     (["run", "--set", "model.modes_per_link=[5, 2]"], "model.modes_per_link"),
     (["run", "--set", "plant.modes_per_link=[0, 2]"], "plant.modes_per_link"),
     (["run", "--set", "model.modes_per_link=[2]"], "model.modes_per_link: expected 2 values"),
-    (["run", "--set", "controller.pbc.kv_joint=[10.0, -5.0]"], "controller.pbc.kv_joint"),
-    (["run", "--plant", "exudyn", "--idealised"], "controller.pbc.idealised"),
+    (["run", "--set", "controller.options.kv_joint=[10.0, -5.0]"],
+     "controller.options.kv_joint"),
+    (["run", "--set", "controller.options.kv_flex=5.0"],
+     "controller.options.kv_flex: not an option of pbc"),
+    (["run", "--controller", "pd", "--set", "controller.options.lambda_joint=3.0"],
+     "controller.options.lambda_joint: not an option of pd"),
+    (["run", "--observer", "smo-bl", "--set", "observer.options.boundary_layer=0.0"],
+     "observer.options.boundary_layer"),
+    (["run", "--plant", "exudyn", "--controller", "pbc-idealised"],
+     ("controller.kind: ", "two actuators")),
+    (["run", "--idealised"], "unrecognized arguments: --idealised"),
     (["run", "--observer", "smo-pos", "--set", 'sensors.modal="none"'], "observer.kind"),
     (["run", "--observer", "smo-paper", "--set", "sensors.rates=false"], "observer.kind"),
     (["run", "--set", "sensors.delay=-1"], "sensors.delay"),
@@ -52,15 +68,21 @@ CASES = [
     (["run", "--set", "=3"], "--set: expected KEY=VALUE"),
     (["run", "--config", "{tmp}/missing.toml"], "cannot read"),
     (["run", "--config", "{tmp}/broken.toml"], "invalid TOML"),
-    (["run", "--config", "{tmp}"], "cannot read"),
-    (["run", "--duration", "0.1", "--out", "{tmp}/a-file/sub"], "--out"),
+    (["run", "--config", "{tmp}"], "not a regular file"),
+    # The folder named by --out cannot be created (a file is in the way): named in full.
+    (["run", "--duration", "0.1", "--set", "transient=0.05", "--out", "{tmp}/a-file/sub"],
+     "a-file/sub: cannot create the results folder"),
     (["campaign", "{tmp}/empty-axis.toml"], "sweep[0].grid.seed: must not be empty"),
     (["campaign", "{tmp}/zip.toml"], "sweep[0].zip: zip axes need equal lengths"),
     (["campaign", "{tmp}/unknown.toml"], "sweeps: unknown key"),
     (["campaign", "{tmp}/bad-scenario.toml"], "scenario.plant.kind"),
     (["campaign", "{tmp}/bad-random.toml"], "sweep[0].random.samples"),
     (["campaign", "{tmp}/missing.toml"], "cannot read"),
-    (["campaign", "{tmp}/empty-axis.toml", "--workers", "0"], "--workers: must be in 1..1024"),
+    (["campaign", "{tmp}/empty-axis.toml", "--workers", "0"], "--workers: must be in 1..4096"),
+    (["campaign", "{tmp}/ok.toml", "--workers", "4096"], "pass --force-workers"),
+    (["campaign", "{tmp}/ok.toml", "--scheduler", "tcp://127.0.0.1:1"],
+     "--scheduler: only for --executor dask"),
+    (["campaign", "{tmp}/path-name.toml"], "name: must be a plain name"),
     (["report", "{tmp}"], "not a results folder"),
     (["baseline", "check", "--only", "no-such-check"], "no check matches"),
     (["modes", "--params", "{tmp}/broken.toml"], "invalid TOML"),
@@ -72,6 +94,7 @@ def scratch(tmp_path):
     files = {"broken.toml": BROKEN_TOML, "empty-axis.toml": CAMPAIGN_EMPTY_AXIS,
              "zip.toml": CAMPAIGN_ZIP, "unknown.toml": CAMPAIGN_UNKNOWN,
              "bad-scenario.toml": CAMPAIGN_BAD_SCENARIO, "bad-random.toml": CAMPAIGN_BAD_RANDOM,
+             "ok.toml": CAMPAIGN_OK, "path-name.toml": CAMPAIGN_PATH_NAME,
              "a-file": "not a folder"}
     for name, text in files.items():
         (tmp_path / name).write_text(text)
@@ -99,7 +122,7 @@ def test_bad_input(argv, text, scratch, capsys, monkeypatch):
     lines = captured.err.strip().splitlines()
     assert code == 2, captured
     assert len(lines) == 1 and lines[0].startswith("flexarm: error:"), captured.err
-    assert text in lines[0], lines[0]
+    assert all(t in lines[0] for t in ((text,) if isinstance(text, str) else text)), lines[0]
     assert "Traceback" not in captured.err + captured.out
     assert not out.exists(), "an output folder was created for bad input"
     assert sorted(p.name for p in scratch.iterdir()) == before  # nothing else either

@@ -1,6 +1,5 @@
 """Reliability of runs and campaigns: divergence as a result, crash safety under SIGKILL,
 determinism, and solver failures."""
-import json
 import os
 import random
 import signal
@@ -12,23 +11,25 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml, metrics_table
-from validation.campaign import SerialExecutor, campaign_from_mapping, run_campaign
+from validation.campaign import campaign_from_mapping, run_campaign
+from validation.executor import SerialRunner
 from validation.loop import run_scenario
-from validation.results import RunResult
 from validation.scenario import scenario_from_mapping
 from validation.store import ResultStore
 
-UNSTABLE = {"controller": {"kind": "pd", "pd": {"kd": [8.0, 500.0]}}}
+UNSTABLE = {"controller": {"kind": "pd", "options": {"kd": [8.0, 500.0]}}}
 
 
 @pytest.mark.parametrize("plant", ["reduced", "exudyn"])
 def test_divergence_is_recorded_when_the_bounds_are_left(plant):
     """Unstable gains end the run as "diverged" at the first sample beyond the bounds."""
-    s = scenario_from_mapping({"plant": {"kind": plant}, "duration": 1.0, **UNSTABLE})
+    s = scenario_from_mapping({"plant": {"kind": plant}, "duration": 1.0, "transient": 0.5,
+                               **UNSTABLE})
     result = run_scenario(s)
     assert result.status == "diverged" and "exceeds" in result.message
     # The same run with bounds too wide to trigger shows when the default ones are left.
     wide = scenario_from_mapping({"plant": {"kind": plant}, "duration": result.end_time + 0.05,
+                                  "transient": 0.0,
                                   "divergence": {"max_angle": 1e9, "max_rate": 1e9,
                                                  "max_deflection": 1e9}, **UNSTABLE})
     free = run_scenario(wide)
@@ -44,21 +45,25 @@ def test_divergence_is_recorded_when_the_bounds_are_left(plant):
 
 
 def test_a_diverging_run_does_not_stop_the_campaign(tmp_path):
-    spec = {"name": "mixed", "scenario": {"duration": 1.0},
+    spec = {"name": "mixed", "scenario": {"duration": 1.0, "transient": 0.5},
             "sweep": [{"zip": {"name": ["stable", "unstable", "stable-2"],
                                "controller.kind": ["pbc", "pd", "pd"],
-                               "controller.pd.kd": [[8.0, 4.0], [8.0, 500.0], [8.0, 4.0]]}}]}
+                               "controller.options": [{}, {"kd": [8.0, 500.0]},
+                                                      {"kd": [8.0, 4.0]}]}}]}
     summary = run_campaign(campaign_from_mapping(spec), tmp_path, progress=False)
     assert (summary.ok, summary.diverged, summary.failed) == (2, 1, 0)
     store = ResultStore(tmp_path)
-    assert len(store.metrics()) == 3
-    for rid, status in store.completed().items():
-        result = store.load(rid)
-        assert result.status == status and result.signals.shape[1] == len(result.time)
+    rows = store.rows()
+    assert {r.name: r.status for r in rows} == {
+        "mixed/stable": "ok", "mixed/unstable": "diverged", "mixed/stable-2": "ok"}
+    for row in rows:
+        result = store.load(row.run_id)
+        assert result.status == row.status and result.signals.shape[1] == len(result.time)
 
 
 def _spec(n_runs: int) -> dict:
-    return {"name": "crash", "scenario": {"duration": 2.0, "sensors": {"encoder_noise": 1e-4}},
+    return {"name": "crash", "scenario": {"duration": 2.0, "transient": 1.0,
+                                          "sensors": {"encoder_noise": 1e-4}},
             "sweep": [{"grid": {"seed": list(range(n_runs))}}]}
 
 
@@ -68,30 +73,45 @@ def test_sigkill_at_random_moments_then_resume(seed, tmp_path):
     cfg = tmp_path / "crash.toml"
     cfg.write_text(campaign_toml(spec))
     reference = tmp_path / "reference"
-    run_campaign(campaign_from_mapping(spec), reference, executor=SerialExecutor(),
-                 progress=False)
+    run_campaign(campaign_from_mapping(spec), reference, runner=SerialRunner(), progress=False)
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "validation.cli", "campaign", str(cfg), "--out", str(out),
            "--workers", "1", "--no-progress"]
     rng = random.Random(seed)
     for _ in range(3):  # kill it three times, at a random moment after it has started
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                text=True)
         start = time.time()
-        while time.time() - start < 60 and not (out / "manifest.json").exists():
+        while (time.time() - start < 60 and not (out / "index.sqlite").exists()
+               and proc.poll() is None):
             time.sleep(0.01)
         time.sleep(rng.uniform(0.0, 0.8))
+        assert proc.poll() is None, f"the campaign ended before the kill: {proc.stderr.read()}"
         proc.send_signal(signal.SIGKILL)
         proc.wait()
-        manifest = json.loads((out / "manifest.json").read_text())  # always valid JSON
-        # Written in the order .npz, metrics row, manifest entry: whatever the moment of
-        # the kill, every manifest entry has its row and a complete file.
-        assert set(manifest["runs"]) <= set(metrics_table(out))
-        for rid in manifest["runs"]:
-            RunResult.load(out / "runs" / f"{rid}.npz")  # never a truncated .npz
+        proc.stderr.close()
+        # Written in the order: file (temporary name, then renamed), then its index row in
+        # one transaction: whatever the moment of the kill, the index is readable and every
+        # row has a complete file that verifies (metrics_table checks both) and loads.
+        store = ResultStore(out)
+        for row in store.rows():
+            store.load(row.run_id)  # never a truncated .npz
+        store.close()
     final = subprocess.run(cmd, capture_output=True, text=True)
     assert final.returncode == 0, final.stderr
-    assert metrics_table(out) == metrics_table(reference)  # same numbers, no duplicate or missing rows
-    assert not list(out.rglob(".*.tmp"))
+    # Same numbers, no duplicate or missing rows.
+    assert metrics_table(out) == metrics_table(reference)
+    # Every run file is indexed (a file renamed just before a kill is redone and indexed);
+    # a temporary a kill interrupted may stay until it is an hour old (it might belong to a
+    # live writer) but is hidden and never taken for a result.
+    assert ResultStore(out).unindexed_files() == []
+
+    def visible(folder):
+        return {p.name for p in folder.iterdir() if not p.name.startswith(".")}
+
+    assert visible(out) <= {"index.sqlite", "index.sqlite-wal", "index.sqlite-shm", "runs",
+                            "metrics.csv", "manifest.json"}
+    assert visible(out / "runs") == {f"{rid}.npz" for rid in metrics_table(reference)}
 
 
 def test_two_invocations_are_bit_identical(tmp_path):
@@ -104,14 +124,15 @@ def test_two_invocations_are_bit_identical(tmp_path):
                        capture_output=True)
     assert metrics_table(tmp_path / "a") == metrics_table(tmp_path / "b")
     for rid in metrics_table(tmp_path / "a"):
-        a, b = (RunResult.load(tmp_path / n / "runs" / f"{rid}.npz") for n in ("a", "b"))
+        a, b = (ResultStore(tmp_path / n).load(rid) for n in ("a", "b"))
         np.testing.assert_array_equal(a.signals, b.signals)
 
 
 def test_exudyn_solver_failure_is_recorded_and_nothing_stray_is_written(tmp_path):
     # A Newton tolerance below ANCF round-off cannot be met: Exudyn gives up.
     cfg = tmp_path / "health.toml"
-    cfg.write_text('name = "health"\n[scenario]\nduration = 0.5\nplant.kind = "exudyn"\n'
+    cfg.write_text('name = "health"\n[scenario]\nduration = 0.5\ntransient = 0.25\n'
+                   'plant.kind = "exudyn"\n'
                    '[[sweep]]\nzip.name = ["fails", "runs"]\n'
                    'zip.plant.newton_tolerance = [1e-16, 1e-6]\n')
     work = tmp_path / "cwd"
@@ -121,7 +142,8 @@ def test_exudyn_solver_failure_is_recorded_and_nothing_stray_is_written(tmp_path
                           capture_output=True, text=True, cwd=work)
     assert proc.returncode == 1  # a run failed to execute
     assert "1 ok, 0 diverged, 1 failed" in proc.stdout
-    entries = json.loads((tmp_path / "out" / "manifest.json").read_text())["runs"].values()
-    failed = [e for e in entries if e["status"] == "failed"]
-    assert len(failed) == 1 and "Exudyn solver failed" in failed[0]["message"]
+    rows = ResultStore(tmp_path / "out").rows()
+    failed = [r for r in rows if r.status == "failed"]
+    assert len(rows) == 2 and len(failed) == 1 and failed[0].name == "health/fails"
+    assert "Exudyn solver failed" in failed[0].message
     assert os.listdir(work) == []  # no solution/ or other Exudyn files in the working dir
