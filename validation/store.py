@@ -25,7 +25,6 @@ import hashlib
 import io
 import json
 import math
-import os
 import platform
 import sqlite3
 import subprocess
