@@ -83,3 +83,24 @@ def test_update_refuses_to_loosen(tmp_path):
     assert updated[name].bound > 1e-9 and updated[name].measured is not None
     # The other checks are untouched.
     assert updated["pbc-tracking-reduced"] == {c.name: c for c in local.checks}["pbc-tracking-reduced"]
+
+
+def test_update_on_a_clean_checkout_changes_nothing(tmp_path):
+    """The stored bounds are the policy's at stored precision: `update` on the shipped
+    file says "no change", exits 0 and leaves the file byte for byte (issue 10: it used
+    to refuse to "loosen" 21 bounds that differed only in rounding)."""
+    file = tmp_path / "baselines.toml"
+    file.write_text(DEFAULT_FILE.read_text())
+    cmd = [sys.executable, "-m", "validation.cli", "baseline", "update", "--file", str(file),
+           "--only", "frequency-gap-*", "--tier", "all", "--out", str(tmp_path / "runs")]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    assert "no change" in proc.stdout and "LOOSER" not in proc.stdout
+    assert file.read_text() == DEFAULT_FILE.read_text()
+
+
+def test_results_that_are_not_a_results_folder_are_refused(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "validation.cli", "baseline", "check",
+                           "--results", str(tmp_path / "nowhere"), "--only", "pbc-*"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2 and "--results" in proc.stderr and "not a results folder" in proc.stderr

@@ -39,7 +39,7 @@ from .executor import execute_run
 from .fingerprint import run_fingerprint
 from .results import write_atomic
 from .scenario import scenario_from_mapping, scenario_to_mapping
-from .store import ResultStore, run_id
+from .store import INDEX_NAME, ResultStore, StoreError, run_id
 from .tomlfiles import load_toml
 
 __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",
@@ -144,6 +144,8 @@ class _Runner:
         self.b, self.store = baselines, ResultStore(out)
         # Verified runs made by this code are reused: the given folder's, then our own.
         self.reuse = [ResultStore(results)] if results else []
+        if results and not self.reuse[0].exists():
+            raise StoreError(f"--results {results}: not a results folder (no {INDEX_NAME})")
         self.reuse.append(self.store)
         self.cache: dict[str, tuple[dict, Path | None]] = {}
 
