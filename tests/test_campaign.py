@@ -334,10 +334,10 @@ def test_shipped_campaigns_expand():
     # paper: 2 arms × 2 plants × 2 initial conditions × 10 laws (PBC alone, with each of 3
     # SMOs and 2 EKFs; LQR alone and with the EKF; PD; CT: 80) + the idealised PBC on the
     # reduced plant (2 arms × 2 starts: 4) + the disturbance (2 × 2 × 2: 8) + Table 1 at
-    # Ts = 0.2 ms (2 starts × with/without the disturbance: 4).  mismatch: payload 2×4,
+    # Ts = 0.2 ms (2 plants × 2 starts × with/without the disturbance: 8).  mismatch: payload 2×4,
     # stiffness 2×3, model order 2×3, damping 2×3, FE mesh 3.  robustness: noise 2×4,
     # torque disturbances 2×5, sample time 2×4.  attribution: the PBC with each SMO.
-    assert counts == {"attribution": 3, "mismatch": 29, "paper": 96, "robustness": 26}
+    assert counts == {"attribution": 3, "mismatch": 29, "paper": 100, "robustness": 26}
 
 
 def test_identifiers_stay_text_in_the_index_and_the_export(tmp_path):
