@@ -18,7 +18,8 @@ import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
-from reduced_model._kernels import rk4_advance_packed
+from reduced_model._kernels import (cholesky_factor_inplace, cholesky_solve_factored,
+                                    rk4_advance_packed)
 
 from ._gains import gain_vector
 
@@ -250,35 +251,18 @@ def _ekf_update(ints, reals, wc, wr, x, P, tau, h, nsub, predict, y, r, Qd, xn, 
                 P[j, i] = acc
         x[:] = xn
 
-    # S = H P Hᵀ + R with H = [I_m 0]; its Cholesky factor L in the lower triangle of S.
+    # S = H P Hᵀ + R with H = [I_m 0], factored in place (Cholesky).
     for i in range(m):
         for j in range(m):
             S[i, j] = P[i, j]
         S[i, i] += r[i]
-    for j in range(m):
-        s = S[j, j]
-        for k in range(j):
-            s -= S[j, k] * S[j, k]
-        if not s > 0.0:
-            return False
-        S[j, j] = math.sqrt(s)
-        for i in range(j + 1, m):
-            s = S[i, j]
-            for k in range(j):
-                s -= S[i, k] * S[j, k]
-            S[i, j] = s / S[j, j]
+    if not cholesky_factor_inplace(S):
+        return False
     # K = P Hᵀ S⁻¹: row i of K solves S kᵢ = (H P)[:, i] = P[:m, i] (S symmetric).
     for i in range(N):
-        for a in range(m):  # forward substitution L z = P[:m, i]
-            s = P[a, i]
-            for k in range(a):
-                s -= S[a, k] * Kg[i, k]
-            Kg[i, a] = s / S[a, a]
-        for a in range(m - 1, -1, -1):  # back substitution Lᵀ k = z
-            s = Kg[i, a]
-            for k in range(a + 1, m):
-                s -= S[k, a] * Kg[i, k]
-            Kg[i, a] = s / S[a, a]
+        for a in range(m):
+            Kg[i, a] = P[a, i]
+        cholesky_solve_factored(S, Kg[i])
     for a in range(m):
         nu[a] = y[a] - x[a]
     for i in range(N):

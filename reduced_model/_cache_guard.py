@@ -1,11 +1,12 @@
-"""Keep numba's on-disk caches consistent with `_kernels.py`.
+"""Keep numba's on-disk caches consistent with the project's compiled code.
 
-Numba keys a cached function on its *own* source file.  Kernels elsewhere in the
-project (controllers, observers) inline `_kernels.py` functions and the layout of its
-packed buffers; after `_kernels.py` changes, their cached machine code would silently
-read the old layout.  On import we compare a fingerprint of `_kernels.py` with the one
-the caches were built from and, if it differs, delete the project's cached kernels so
-that numba recompiles them.
+Numba keys a cached function on its *own* source file, but the machine code it caches
+contains what it inlined or called from other files: the controllers inline
+`_kernels.py`, the compiled sample (`validation/_sample.py`) calls the laws' kernels.
+After any of those files changes, a cached caller would silently run the old callee.
+On import we compare a fingerprint of every project file that defines compiled code
+with the one the caches were built from and, if it differs, delete the project's cached
+kernels so that numba recompiles them.
 """
 from __future__ import annotations
 
@@ -17,7 +18,13 @@ _PACKAGES = ("reduced_model", "controllers", "plant_exudyn", "validation")
 
 def invalidate_stale_kernel_caches() -> None:
     here = Path(__file__).resolve().parent
-    fingerprint = hashlib.sha256((here / "_kernels.py").read_bytes()).hexdigest()
+    h = hashlib.sha256()
+    for package in _PACKAGES:
+        for source in sorted((here.parent / package).glob("*.py")):
+            text = source.read_bytes()
+            if b"@njit" in text:
+                h.update(source.name.encode() + b"\0" + text)
+    fingerprint = h.hexdigest()
     stamp = here / "__pycache__" / "numba_kernels.fingerprint"
     try:
         if stamp.exists() and stamp.read_text() == fingerprint:

@@ -377,9 +377,10 @@ def bias_forces_into(d, Q, Qd, h, ws):
 
 
 @njit(cache=True, inline="always")
-def cholesky_solve_inplace(M, b):
-    """Solve M y = b for symmetric positive definite M; M is overwritten by its lower
-    Cholesky factor (diagonal holds 1/L_jj), b by y.  False if M is not positive definite."""
+def cholesky_factor_inplace(M):
+    """Overwrite symmetric positive definite M by its lower Cholesky factor L, with
+    1/L_jj on the diagonal (for `cholesky_solve_factored`).  False if M is not
+    positive definite."""
     n = M.shape[0]
     for j in range(n):
         s = M[j, j]
@@ -394,16 +395,32 @@ def cholesky_solve_inplace(M, b):
             for k in range(j):
                 s -= M[i, k] * M[j, k]
             M[i, j] = s * inv
+    return True
+
+
+@njit(cache=True, inline="always")
+def cholesky_solve_factored(L, b):
+    """Solve L Lᵀ y = b in place (``b`` becomes y), L from `cholesky_factor_inplace`."""
+    n = L.shape[0]
     for i in range(n):
         s = b[i]
         for k in range(i):
-            s -= M[i, k] * b[k]
-        b[i] = s * M[i, i]
+            s -= L[i, k] * b[k]
+        b[i] = s * L[i, i]
     for i in range(n - 1, -1, -1):
         s = b[i]
         for k in range(i + 1, n):
-            s -= M[k, i] * b[k]
-        b[i] = s * M[i, i]
+            s -= L[k, i] * b[k]
+        b[i] = s * L[i, i]
+
+
+@njit(cache=True, inline="always")
+def cholesky_solve_inplace(M, b):
+    """Solve M y = b for symmetric positive definite M; M is overwritten by its factor,
+    b by y.  False if M is not positive definite."""
+    if not cholesky_factor_inplace(M):
+        return False
+    cholesky_solve_factored(M, b)
     return True
 
 
