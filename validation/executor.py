@@ -17,6 +17,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from contextlib import contextmanager
@@ -158,11 +159,12 @@ class LocalPoolRunner(_PoolRunner):
     def __init__(self, workers: int) -> None:
         from concurrent.futures import ProcessPoolExecutor
         if "fork" in multiprocessing.get_all_start_methods():
-            import validation.worker  # noqa: F401 - what the workers need, loaded before the fork
+            from .worker import warm_up
+            warm_up()  # compiled once here, inherited by every forked worker
             ctx = multiprocessing.get_context("fork")
         else:
             ctx = multiprocessing.get_context("forkserver")
-            ctx.set_forkserver_preload(["validation.worker"])
+            ctx.set_forkserver_preload(["validation.worker"])  # each worker compiles or loads
         with _environment(_ONE_THREAD):
             executor = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                            initializer=_worker_init)
@@ -239,6 +241,10 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
         check(workers >= 1, "--workers", f"must be >= 1, got {workers}")
         check(workers <= cores or force, "--workers", f"{workers} workers on {cores} cores "
               "only share the cores (each costs ~300 MB); pass --force-workers to insist")
+        from .worker import kernels_cached
+        if not kernels_cached():
+            print("compiling the simulation kernels: once per machine, a minute or two ...",
+                  file=sys.stderr, flush=True)
         return SerialRunner() if workers == 1 else LocalPoolRunner(workers)
     if kind == "dask":
         address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
