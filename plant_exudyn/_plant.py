@@ -97,10 +97,8 @@ class ExudynPlant:
                                             newton_tolerance=newton_tolerance)
         self.solver = exu.MainSolverImplicitSecondOrder()
         self._index_state()
-        n1 = basis[0].n
         self._compiled = (*self._joint_arrays(), *self.fields[0].compiled(),
                           *self.fields[1].compiled())
-        self._q_slices = (slice(0, n1), slice(n1, n1 + basis[1].n))
         self.sensors = SensorModel(sensors, self.modal_basis, self)
         # Without gauges, quantisation or payload position the measurement is a part of
         # the truth vector: read both in one compiled call per step.

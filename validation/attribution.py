@@ -219,9 +219,8 @@ class Attribution:
     totals: dict  # metric -> the attributed gap
     ladder: dict  # metric -> [(factor switched to ideal, metric after)]
     interaction: dict  # metric -> (pair, value)
-    destabilising: list = field(default_factory=list)
+    destabilising: list = field(default_factory=list)  # held at their ideal level
     diverging: list = field(default_factory=list)  # labels of worlds with no metrics
-    held_ideal: list = field(default_factory=list)
 
 
 def _hitting_set(missing: list[frozenset], players: list[str]) -> list[str]:
@@ -244,8 +243,7 @@ def compute(name: str, factors: tuple[str, ...], metrics_of: dict) -> Attributio
     held = _hitting_set(missing, players) if missing else []
     free = [p for p in players if p not in held]
     att = Attribution(name, factors, {}, {}, {}, {}, {}, {}, destabilising=held,
-                      diverging=sorted("+".join(sorted(r)) or "ideal" for r in missing),
-                      held_ideal=held)
+                      diverging=sorted("+".join(sorted(r)) or "ideal" for r in missing))
     if frozenset() in missing:  # the ideal world itself diverged: nothing to attribute
         return att
     for metric, (make, _) in METRICS.items():
