@@ -271,8 +271,13 @@ def _loaded(group):
 
 
 def _paper_figure_tasks(group) -> list:
+    """The paper's figures of one group; runs that diverged or failed are named in the
+    title, not drawn (their last samples before leaving the bounds are not data)."""
+    gone = [r for r in group if r.status != "ok"]
+    group = [r for r in group if r.status == "ok"]
     head = group[0]
-    title = f"{head.name} ({fig.describe_run(head.config)})"
+    title = f"{head.name} ({fig.describe_run(head.config)})" + "".join(
+        f"; {fig.PLANT_NAME.get(r.plant, r.plant)} {r.status.upper()}: {r.message}" for r in gone)
     transient = float(head.config.get("transient", 2.0))
     from .metrics import vibration_cutoff
     cutoff = vibration_cutoff(ArmParameters.from_mapping(head.config["true_params"]))
