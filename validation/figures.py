@@ -290,9 +290,9 @@ def sweep_figures(sweep: str, runs) -> list[tuple[str, bytes]]:
     values = {tuple(g): sorted({_key([r.axes.get(a) for a in g]) for r in runs},
                                key=lambda k: _sort_key(json.loads(k))) for g in groups}
 
-    def numeric(g):
-        return len(g) == 1 and all(isinstance(json.loads(x)[0], (int, float)) and
-                                   not isinstance(json.loads(x)[0], bool) for x in values[tuple(g)])
+    def numeric(g):  # the group's leading axis is a number: a numeric x axis
+        return all(isinstance(json.loads(x)[0], (int, float)) and
+                   not isinstance(json.loads(x)[0], bool) for x in values[tuple(g)])
     primary = [g for g in groups if numeric(g) or len(values[tuple(g)]) >= 3] or \
         sorted(groups, key=lambda g: -len(values[tuple(g)]))[:1]
     metrics = [m for m in SWEEP_METRICS if any(isinstance(r.metrics.get(k), float) and
@@ -331,7 +331,7 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics) -> tuple[str
                 vals = [v for v in vals if isinstance(v, float) and not math.isnan(v)]
                 if vals:
                     pts.append((x, max(vals)))
-            label = f"{other or 'runs'}, {PLANT_NAME.get(plant, plant)}"
+            label = PLANT_NAME.get(plant, plant) + (f", {other}" if other else "")
             style = dict(color=color, marker="o" if plant == "exudyn" else "s", ms=5,
                          mfc=color if plant == "exudyn" else "white", label=label)
             if pts:
@@ -343,7 +343,9 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics) -> tuple[str
                 tr = blended_transform_factory(ax.transData, ax.transAxes)
                 ax.plot(bad, [0.96] * len(bad), "x", color="crimson", ms=7, mew=2, transform=tr)
         ax.set_title(title, fontsize=9)
-        ax.set_xlabel(axis_label(group[0]) if numeric else label_axis, fontsize=8)
+        zipped = [a.split(".")[-1] for a in group if a != label_axis]
+        ax.set_xlabel(axis_label(label_axis) + (f"\n(zipped with {', '.join(zipped)})"
+                                                if zipped else ""), fontsize=8)
         if numeric:
             lo = min(json.loads(x)[0] for x in xs) * scale
             hi = max(json.loads(x)[0] for x in xs) * scale

@@ -276,7 +276,8 @@ def _paper_figure_tasks(group) -> list:
     gone = [r for r in group if r.status != "ok"]
     group = [r for r in group if r.status == "ok"]
     head = group[0]
-    title = f"{head.name} ({fig.describe_run(head.config)})" + "".join(
+    swept = _swept(head)
+    title = f"{head.name} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})" + "".join(
         f"; {fig.PLANT_NAME.get(r.plant, r.plant)} {r.status.upper()}: {r.message}" for r in gone)
     transient = float(head.config.get("transient", 2.0))
     from .metrics import vibration_cutoff
@@ -306,7 +307,8 @@ def _animation(group, path: Path) -> str:
     head = group[0]
     params = ArmParameters.from_mapping(head.config["nominal_params"])
     model = nominal_model(params, tuple(head.config["model"]["modes_per_link"]))
-    title = f"{head.name} ({fig.describe_run(head.config)})"
+    swept = _swept(head)
+    title = f"{head.name} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})"
     return fig.animation(_loaded(group), params, model, title, path)
 
 
