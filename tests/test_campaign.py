@@ -199,6 +199,29 @@ def test_resume_after_a_kill(tmp_path):
     assert files() == before  # nothing was run again
 
 
+_HALF_A_RESULT = """
+import os, struct
+from validation.executor import LocalPoolRunner
+runner = LocalPoolRunner(2)
+pipe = runner.executor._result_queue._writer
+# What a worker killed while sending its result leaves: a header promising 1 MiB and a
+# few bytes of it.  The pool's manager thread now waits in recv() for the rest.
+os.write(pipe.fileno(), struct.pack("!i", 1 << 20) + b"partial")
+runner.abort()
+print("aborted")
+"""
+
+
+def test_an_abort_exits_although_a_killed_worker_left_half_a_result():
+    # Without closing the parent's end of the result pipe, the interpreter's exit joins
+    # the pool's manager thread, which never returns: the timeout would fire.  600 s
+    # covers the parent's warm-up (~1 s with cached kernels, ~4 min compiling them cold).
+    done = subprocess.run([sys.executable, "-c", _HALF_A_RESULT], capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "aborted"
+
+
 def test_failed_runs_are_redone_only_on_request(tmp_path):
     c = campaign_from_mapping({"name": "f", "scenario": {"duration": 0.2, "transient": 0.1}})
     (run,) = expand(c)

@@ -175,6 +175,7 @@ class LocalPoolRunner(_PoolRunner):
 
     def abort(self) -> None:
         processes = list((getattr(self.executor, "_processes", None) or {}).values())
+        results_pipe = getattr(self.executor, "_result_queue", None)  # shutdown clears it
         self._aborted = True
         super().abort()
         for p in processes:  # do not wait for runs in progress: end them
@@ -182,6 +183,12 @@ class LocalPoolRunner(_PoolRunner):
                 p.kill()
         for p in processes:
             p.join(timeout=5)
+        if results_pipe is not None and not any(p.is_alive() for p in processes):
+            # A worker killed while sending a result leaves half a message in the pipe;
+            # the pool's manager thread would wait for the rest forever (and the exit
+            # with it), since this process still holds a write end.  Closing it gives
+            # that thread end-of-file.  (Private attribute, like ``_processes``.)
+            results_pipe._writer.close()
         if multiprocessing.get_start_method(allow_none=True) != "fork":
             from multiprocessing import forkserver
             forkserver._forkserver._stop()  # and the server that forked them (private

@@ -175,9 +175,10 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
     stepping = getattr(plant, "compiled_stepping", None)
     fast = stepping(dspec) if packed is not None and stepping is not None else None
     if fast is not None:
+        states = model.state_names
         k_done, code = run_reduced(
             N, Ts, fast["h"], fast["nsteps"](Ts), fast["x"], *fast["model"], fast["basis"],
-            np.array([model.state_names.index(m) for m in names_y], dtype=np.int64),
+            np.array([states.index(m) for m in names_y], dtype=np.int64),
             k_["std"], k_["noisy"], k_["dbuf"], noise_rng, refkind, refspec, k_["bounds"], n,
             k_["lengths"], rows, off, s.torque_limit, dspec, dstate, dist_rng, *packed,
             obs_index, s.uses_estimate, info)

@@ -27,6 +27,7 @@ Three metrics need a definition the paper does not give:
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -110,12 +111,19 @@ def vibration_cutoff(params: ArmParameters) -> float:
     return VIBRATION_CUTOFF * float(nominal_model(params, (2, 2)).natural_frequencies()[0])
 
 
+@functools.lru_cache(maxsize=64)  # every run of an arm at one Ts designs the same filter
+def _highpass(normalised_cutoff: float) -> np.ndarray:
+    sos = butter(4, normalised_cutoff, "highpass", output="sos")
+    sos.flags.writeable = False
+    return sos
+
+
 def oscillatory(result: RunResult, cutoff_hz: float) -> np.ndarray:
     """The tip deflections' oscillatory part (2, n_samples): zero-phase high-pass."""
     w = _f64(result, ["tip_defl1", "tip_defl2"])
     dt = result.time[1] - result.time[0]
     nyquist = 0.5 / dt
-    sos = butter(4, min(cutoff_hz / nyquist, 0.99), "highpass", output="sos")
+    sos = _highpass(min(cutoff_hz / nyquist, 0.99)).copy()  # scipy wants it writable
     padlen = min(3 * (2 * len(sos) + 1), w.shape[1] - 1)
     return sosfiltfilt(sos, w, axis=1, padlen=padlen)
 

@@ -8,6 +8,7 @@ combinations before anything is simulated.  Every error names the dotted key.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -349,13 +350,18 @@ def _check_modelable(params: ArmParameters, modes, key: str) -> None:
     """The assumed-modes model of ``params`` must exist and have finite, positive
     frequencies (absurd but finite values — L = 1e300, ρ = 5e-324 — overflow in it)."""
     try:
-        with np.errstate(all="raise"):
-            f = nominal_model(params, modes).natural_frequencies()
-        ok = bool(np.all(np.isfinite(f)) and np.all(f > 0))
+        ok = _has_positive_frequencies(params, tuple(modes))
     except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
         raise ConfigError(key, f"the arm cannot be modelled with these values "
                                f"({type(exc).__name__}: {exc})") from None
     check(ok, key, "the arm's natural frequencies are not finite and positive with these values")
+
+
+@functools.lru_cache(maxsize=256)  # an eigenproblem per check; campaigns repeat arms
+def _has_positive_frequencies(params: ArmParameters, modes: tuple[int, int]) -> bool:
+    with np.errstate(all="raise"):
+        f = nominal_model(params, modes).natural_frequencies()
+    return bool(np.all(np.isfinite(f)) and np.all(f > 0))
 
 
 def scenario_from_mapping(data: dict) -> Scenario:

@@ -364,9 +364,9 @@ class ResultStore:
         rows = self.rows()
         csv_path, json_path = self.out / "metrics.csv", self.out / "manifest.json"
         table = [export_row(r) for r in rows]
-        columns: list[str] = []
+        columns: dict[str, None] = {}  # first-seen order; a list would be quadratic
         for r in table:
-            columns += [c for c in r if c not in columns]
+            columns.update(dict.fromkeys(r))
         buf = io.StringIO()
         writer = csv.DictWriter(buf, fieldnames=columns, restval="", lineterminator="\n")
         writer.writeheader()
