@@ -27,11 +27,12 @@ SWEEPS = {
         "name": "bench-reduced", "scenario": {"duration": 5.0, "observer": {"kind": "smo-paper"}},
         "sweep": [{"grid": {"true_params.Mp": [0.0, 0.1, 0.2, 0.3, 0.5, 0.8],
                             "observer.kind": ["smo-paper", "smo-bl"],
-                            "seed": [1, 2, 3, 4]}}]}, 1.6),
+                            "seed": [1, 2, 3, 4]}}]}, 1.6, 10.0),
     "exudyn, 8 runs x 20 s": ({
         "name": "bench-exudyn", "scenario": {"plant": {"kind": "exudyn"},
                                              "observer": {"kind": "smo-paper"}},
-        "sweep": [{"grid": {"true_params.Mp": [0.0, 0.1, 0.5, 1.0], "seed": [1, 2]}}]}, 1.8),
+        "sweep": [{"grid": {"true_params.Mp": [0.0, 0.1, 0.5, 1.0], "seed": [1, 2]}}]}, 1.8,
+        None),  # its set-up includes assembling the Exudyn mesh: no orchestration target
 }
 
 
@@ -48,7 +49,7 @@ def main(only: str | None = None):
     warm_up()
     print(f"kernels loaded in {time.perf_counter() - t0:.2f} s (once per process)")
     rows = []
-    for label, (spec, speedup) in SWEEPS.items():
+    for label, (spec, speedup, orchestration) in SWEEPS.items():
         if only and only not in label:
             continue
         campaign = campaign_from_mapping(spec)
@@ -74,7 +75,8 @@ def main(only: str | None = None):
                     row |= {"overhead_ms_per_run": 1e3 * overhead,
                             "metrics_ms_per_run": 1e3 * analysis,
                             "orchestration_ms_per_run": 1e3 * (overhead - analysis)}
-                    row |= target(row["orchestration_ms_per_run"], "<=", 10.0)
+                    if orchestration is not None:
+                        row |= target(row["orchestration_ms_per_run"], "<=", orchestration)
                 else:
                     row["speedup"] = per_min[2] / per_min[1]
                     row |= target(row["speedup"], ">=", speedup)
