@@ -1,6 +1,8 @@
 """The reduced model used as a plant: fixed-step RK4 on the paper's eq. (2)."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from . import _kernels as kern
@@ -55,7 +57,8 @@ class ReducedPlant:
         self._x = np.zeros(2 * n)
         self._f = np.zeros(n)  # generalised forces when a tip force acts
         self.modal_basis = tuple(modal_basis) if modal_basis is not None else self.model.mode_shapes
-        self._basis_map = None if modal_basis is None else self._projection(self.modal_basis)
+        self._basis_map = None if modal_basis is None else _projection(self.model.mode_shapes,
+                                                                      self.modal_basis)
         self.sensors = SensorModel(sensors, self.modal_basis, self)
         # Without gauges, quantisation, tip position or a foreign basis the measurement is
         # the head of the state vector [θ, q, θ̇, q̇]: read it directly (a third of the
@@ -69,22 +72,6 @@ class ReducedPlant:
         self._steps = 0  # internal steps since reset: time = steps · h without round-off drift
         self._work = self.model.new_workspace()[0]
         self.time = 0.0
-
-    def _projection(self, basis) -> np.ndarray:
-        """Block matrix mapping the plant's modal coordinates to ``basis``'s."""
-        blocks = []
-        for link, (b, own) in enumerate(zip(basis, self.model.mode_shapes)):
-            if abs(b.L - own.L) > 1e-12 * own.L:
-                raise ValueError(f"modal_basis: link {link + 1} has L = {b.L}, the plant "
-                                 f"L = {own.L}; the deflection cannot be projected")
-            x, w = gauss_legendre(0.0, own.L)
-            blocks.append(weighted_projector(
-                b, w_quad=w, basis_quad=b.phi(x).T, basis_tip=np.vstack(b.tip_values),
-                target_quad=own.phi(x).T, target_tip=np.vstack(own.tip_values)))
-        out = np.zeros((sum(p.shape[0] for p in blocks), sum(p.shape[1] for p in blocks)))
-        out[:blocks[0].shape[0], :blocks[0].shape[1]] = blocks[0]
-        out[blocks[0].shape[0]:, blocks[0].shape[1]:] = blocks[1]
-        return out
 
     def _measure(self) -> Measurement:
         if self._direct:
@@ -204,3 +191,23 @@ class ReducedPlant:
         kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-8:-2])
         out[-2:] = 0.0  # a modal field is represented exactly by its own modes
         return out
+
+
+@functools.lru_cache(maxsize=64)
+def _projection(own: tuple[LinkModes, LinkModes], basis: tuple[LinkModes, LinkModes]) -> np.ndarray:
+    """Block matrix mapping modal coordinates of the mode shapes ``own`` to ``basis``'s
+    (cached by the shapes' identity: the models of a sweep are shared, `cached_model`;
+    callers must not modify it)."""
+    blocks = []
+    for link, (b, mine) in enumerate(zip(basis, own)):
+        if abs(b.L - mine.L) > 1e-12 * mine.L:
+            raise ValueError(f"modal_basis: link {link + 1} has L = {b.L}, the plant "
+                             f"L = {mine.L}; the deflection cannot be projected")
+        x, w = gauss_legendre(0.0, mine.L)
+        blocks.append(weighted_projector(
+            b, w_quad=w, basis_quad=b.phi(x).T, basis_tip=np.vstack(b.tip_values),
+            target_quad=mine.phi(x).T, target_tip=np.vstack(mine.tip_values)))
+    out = np.zeros((sum(p.shape[0] for p in blocks), sum(p.shape[1] for p in blocks)))
+    out[:blocks[0].shape[0], :blocks[0].shape[1]] = blocks[0]
+    out[blocks[0].shape[0]:, blocks[0].shape[1]:] = blocks[1]
+    return out

@@ -352,7 +352,7 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
         by_id = {r.run_id: r for r in todo}
         bar = _progress(len(todo), campaign.name, enabled=progress)
         try:
-            tasks = ((r.run_id, scenario_to_mapping(r.scenario)) for r in todo)
+            tasks = ((r.run_id, r.scenario) for r in todo)  # checked: not parsed again
             for rid, result, metrics in runner.results(tasks):
                 run = by_id[rid]
                 store.add(rid, result, metrics, campaign=campaign.name, sweep=run.sweep,
