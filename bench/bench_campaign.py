@@ -3,14 +3,17 @@
 Targets (issue 14): a 48-run campaign of 5 s reduced runs with 2 workers ≥ 1.6× the
 runs/min of 1 worker; 20 s Exudyn runs ≥ 1.8×; orchestration ≤ 10 ms per run.
 
-On the serial runner (where the sums are comparable with the wall time), after the
-kernels are loaded (`worker.warm_up`, timed and shown apart as a once-per-process cost):
-overhead per run = (campaign wall time − Σ the runs' simulation wall time) / runs; of it,
-the metrics are timed again on the stored runs, and orchestration is the rest
-(expansion, checking, building plants and laws, result transfer, storage).
+Each sweep runs REPEATS times with 1 and 2 workers back to back; the table gives
+medians and the range of the paired speed-ups.  On the serial runner (where the sums are
+comparable with the wall time), after the kernels are loaded (`worker.warm_up`, timed and
+shown apart as a once-per-process cost): overhead per run = (campaign wall time − Σ the
+runs' simulation wall time) / runs; of it, the metrics are timed again on the stored
+runs, and orchestration is the rest (expansion, checking, building plants and laws,
+result transfer, storage).
 """
 from __future__ import annotations
 
+import statistics
 import sys
 import tempfile
 import time
@@ -21,6 +24,8 @@ from validation.executor import make_runner
 from validation.metrics import all_metrics
 from validation.store import ResultStore
 from validation.worker import warm_up
+
+REPEATS = 5  # the machines drift up to 2x within an hour: medians of paired repeats
 
 SWEEPS = {
     "reduced, 48 runs x 5 s": ({
@@ -44,7 +49,29 @@ def _metrics_seconds(store: ResultStore) -> float:
     return time.perf_counter() - t0
 
 
-def main(only: str | None = None):
+def _campaign(campaign, workers: int) -> dict:
+    """One campaign into a fresh folder: its wall time and, serially, the overhead."""
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        with make_runner("local", workers) as runner:
+            summary = run_campaign(campaign, tmp, runner=runner, progress=False)
+        wall = time.perf_counter() - t0
+        if summary.failed or summary.diverged:
+            raise SystemExit(f"{campaign.name}, {workers} worker(s): {summary.failed} failed "
+                             f"and {summary.diverged} diverged runs; no timing reported")
+        store = ResultStore(tmp)
+        n = summary.done
+        out = {"runs": n, "wall_s": wall, "runs_per_min": 60 * n / wall}
+        if workers == 1:
+            overhead = (wall - sum(r.timings["wall_s"] for r in store.rows())) / n
+            analysis = _metrics_seconds(store) / n
+            out |= {"overhead_ms_per_run": 1e3 * overhead,
+                    "metrics_ms_per_run": 1e3 * analysis,
+                    "orchestration_ms_per_run": 1e3 * (overhead - analysis)}
+        return out
+
+
+def main(only: str | None = None, repeats: int = REPEATS):
     t0 = time.perf_counter()
     warm_up()
     print(f"kernels loaded in {time.perf_counter() - t0:.2f} s (once per process)")
@@ -53,39 +80,35 @@ def main(only: str | None = None):
         if only and only not in label:
             continue
         campaign = campaign_from_mapping(spec)
-        per_min = {}
+        pairs = []
+        for i in range(repeats):  # 1 and 2 workers back to back, alternating which first
+            order = (1, 2) if i % 2 == 0 else (2, 1)
+            pair = {w: _campaign(campaign, w) for w in order}
+            pairs.append(pair)
+            print(f"{label}: repeat {i + 1} of {repeats}: 2 workers "
+                  f"{pair[2]['runs_per_min'] / pair[1]['runs_per_min']:.2f}x", flush=True)
         for workers in (1, 2):
-            with tempfile.TemporaryDirectory() as tmp:
-                t0 = time.perf_counter()
-                with make_runner("local", workers) as runner:
-                    summary = run_campaign(campaign, tmp, runner=runner, progress=False)
-                wall = time.perf_counter() - t0
-                if summary.failed or summary.diverged:
-                    raise SystemExit(f"{label}, {workers} worker(s): {summary.failed} failed and "
-                                     f"{summary.diverged} diverged runs; no timing reported")
-                store = ResultStore(tmp)
-                simulated = sum(r.timings["wall_s"] for r in store.rows())
-                n = summary.done
-                per_min[workers] = 60 * n / wall
-                row = {"sweep": label, "workers": workers, "runs": n, "wall_s": wall,
-                       "runs_per_min": per_min[workers], "sim_wall_sum_s": simulated}
-                if workers == 1:
-                    overhead = (wall - simulated) / n
-                    analysis = _metrics_seconds(store) / n
-                    row |= {"overhead_ms_per_run": 1e3 * overhead,
-                            "metrics_ms_per_run": 1e3 * analysis,
-                            "orchestration_ms_per_run": 1e3 * (overhead - analysis)}
-                    if orchestration is not None:
-                        row |= target(row["orchestration_ms_per_run"], "<=", orchestration)
-                else:
-                    row["speedup"] = per_min[2] / per_min[1]
-                    row |= target(row["speedup"], ">=", speedup)
-                rows.append(row)
-    report("campaign", rows, title="Campaign throughput (local runners)",
-           columns=["sweep", "workers", "runs", "wall_s", "runs_per_min", "speedup", "target",
-                    "met", "sim_wall_sum_s", "overhead_ms_per_run", "metrics_ms_per_run",
-                    "orchestration_ms_per_run"])
+            runs = [p[workers] for p in pairs]
+            row = {"sweep": label, "workers": workers, "runs": runs[0]["runs"]}
+            row |= {k: statistics.median(r[k] for r in runs) for k in runs[0] if k != "runs"}
+            if workers == 1:
+                spread = [r["orchestration_ms_per_run"] for r in runs]
+                row["orchestration_range"] = f"{min(spread):.3g}-{max(spread):.3g}"
+                if orchestration is not None:
+                    row |= target(row["orchestration_ms_per_run"], "<=", orchestration)
+            else:
+                ratios = [p[2]["runs_per_min"] / p[1]["runs_per_min"] for p in pairs]
+                row["speedup"] = statistics.median(ratios)
+                row["speedup_range"] = f"{min(ratios):.2f}-{max(ratios):.2f}"
+                row |= target(row["speedup"], ">=", speedup)
+            rows.append(row)
+    report("campaign", rows, title=f"Campaign throughput (local runners), medians of {repeats} "
+                                   "paired repeats",
+           columns=["sweep", "workers", "runs", "wall_s", "runs_per_min", "speedup",
+                    "speedup_range", "target", "met", "overhead_ms_per_run",
+                    "metrics_ms_per_run", "orchestration_ms_per_run", "orchestration_range"])
 
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else None)
+    main(sys.argv[1] if len(sys.argv) > 1 else None,
+         int(sys.argv[2]) if len(sys.argv) > 2 else REPEATS)

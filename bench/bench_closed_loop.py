@@ -26,8 +26,7 @@ def main(repeats: int = REPEATS):
             run_scenario(scenario_from_mapping({"duration": 0.01, "transient": 0.0,
                                                 "plant": {"kind": plant},
                                                 "observer": {"kind": observer}}))  # warm-up
-            runs = [run_scenario(scenario) for _ in range(repeats if plant == "reduced" else
-                                                           max(1, repeats // 2))]
+            runs = [run_scenario(scenario) for _ in range(repeats)]
             t = {k: statistics.median(r.timings[k] for r in runs) for k in runs[0].timings}
             row = {"plant": plant, "observer": observer, "status": runs[0].status,
                    "wall_s": t["wall_s"], "realtime_x": t["realtime_factor"],
