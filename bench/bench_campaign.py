@@ -19,11 +19,11 @@ import tempfile
 import time
 
 from _report import report, target
-from validation.campaign import campaign_from_mapping, run_campaign
-from validation.executor import make_runner
-from validation.metrics import all_metrics
-from validation.store import ResultStore
-from validation.worker import warm_up
+from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.executor import make_runner
+from validation.run.metrics import all_metrics
+from validation.batch.store import ResultStore
+from validation.batch.worker import warm_up
 
 REPEATS = 5  # the machines drift up to 2x within an hour: medians of paired repeats
 

@@ -10,8 +10,8 @@ import statistics
 import sys
 
 from _report import report, target
-from validation.loop import run_scenario
-from validation.scenario import scenario_from_mapping
+from validation.run.loop import run_scenario
+from validation.run.scenario import scenario_from_mapping
 
 REPEATS = 5
 

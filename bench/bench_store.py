@@ -13,8 +13,8 @@ import time
 import numpy as np
 
 from _report import report, target
-from validation.results import RunResult
-from validation.store import ResultStore
+from validation.run.results import RunResult
+from validation.batch.store import ResultStore
 
 SIZES = (100, 1_000, 10_000)
 SAMPLES = 50  # adds timed at each size

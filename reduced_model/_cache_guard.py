@@ -20,10 +20,10 @@ def invalidate_stale_kernel_caches() -> None:
     here = Path(__file__).resolve().parent
     h = hashlib.sha256()
     for package in _PACKAGES:
-        for source in sorted((here.parent / package).glob("*.py")):
+        for source in sorted((here.parent / package).rglob("*.py")):
             text = source.read_bytes()
             if b"@njit" in text:
-                h.update(source.name.encode() + b"\0" + text)
+                h.update(str(source.relative_to(here.parent)).encode() + b"\0" + text)
     fingerprint = h.hexdigest()
     stamp = here / "__pycache__" / "numba_kernels.fingerprint"
     try:
@@ -31,7 +31,7 @@ def invalidate_stale_kernel_caches() -> None:
             return
         for package in _PACKAGES:
             for pattern in ("*.nbi", "*.nbc"):
-                for cached in (here.parent / package / "__pycache__").glob(pattern):
+                for cached in (here.parent / package).rglob(f"__pycache__/{pattern}"):
                     cached.unlink(missing_ok=True)
         stamp.parent.mkdir(exist_ok=True)
         stamp.write_text(fingerprint)

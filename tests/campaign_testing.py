@@ -2,7 +2,7 @@
 import json
 import math
 
-from validation.store import ResultStore, StoreError
+from validation.batch.store import ResultStore, StoreError
 
 
 #: Wall-clock metrics (also: any metric named like one of the run's timings).

@@ -7,8 +7,8 @@ import sys
 
 import pytest
 
-from validation import attribution as att
-from validation.scenario import scenario_from_mapping
+from validation.verdicts import attribution as att
+from validation.run.scenario import scenario_from_mapping
 
 PLAYERS = ("plant", "parameters", "sensing", "sampling")
 

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from validation.baselines import DEFAULT_FILE, _Runner, load_baselines, measure, write_baselines
+from validation.verdicts.baselines import DEFAULT_FILE, _Runner, load_baselines, measure, write_baselines
 
 BASELINES = load_baselines(DEFAULT_FILE)
 

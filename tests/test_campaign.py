@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml, metrics_table, stored_count
-from validation._config import ConfigError
-from validation.campaign import campaign_from_mapping, expand, load_campaign, run_campaign
-from validation.claims import CLAIMS, claim_columns, write_claims
-from validation.executor import SerialRunner, make_runner
-from validation.report import write_report
-from validation.results import RunResult
-from validation.scenario import scenario_from_mapping, scenario_to_mapping
-from validation.store import ResultStore, run_id
+from validation.run._config import ConfigError
+from validation.batch.campaign import campaign_from_mapping, expand, load_campaign, run_campaign
+from validation.verdicts.claims import CLAIMS, claim_columns, write_claims
+from validation.batch.executor import SerialRunner, make_runner
+from validation.report.report import write_report
+from validation.run.results import RunResult
+from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
+from validation.batch.store import ResultStore, run_id
 
 ROOT = Path(__file__).resolve().parent.parent
 SMALL = {"name": "small", "scenario": {"duration": 0.3, "transient": 0.1,
@@ -201,7 +201,7 @@ def test_resume_after_a_kill(tmp_path):
 
 _HALF_A_RESULT = """
 import os, struct
-from validation.executor import LocalPoolRunner
+from validation.batch.executor import LocalPoolRunner
 runner = LocalPoolRunner(2)
 pipe = runner.executor._result_queue._writer
 # What a worker killed while sending its result leaves: a header promising 1 MiB and a
@@ -267,7 +267,7 @@ def test_report_from_stored_results(tmp_path):
 
 def paper_claim_value(claim, metrics: dict, result) -> float:
     """The value of each of the paper's claims, recomputed here from the stored metrics
-    and signals (validation.claims documents the criteria)."""
+    and signals (validation.verdicts.claims documents the criteria)."""
     worst = lambda prefix: max(  # noqa: E731 - NaN (never converged) counts as +inf
         math.inf if math.isnan(v) else v for k, v in metrics.items()
         if k.startswith(prefix) and isinstance(v, float))

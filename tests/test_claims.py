@@ -14,11 +14,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from validation.claims import CLAIMS, SYSTEM, claim_columns, claims_tables, evaluate
-from validation.loop import run_scenario
-from validation.metrics import all_metrics
-from validation.results import RunResult
-from validation.scenario import scenario_from_mapping
+from validation.verdicts.claims import CLAIMS, SYSTEM, claim_columns, claims_tables, evaluate
+from validation.run.loop import run_scenario
+from validation.run.metrics import all_metrics
+from validation.run.results import RunResult
+from validation.run.scenario import scenario_from_mapping
 
 CLAIM = {c.key: c for c in CLAIMS}
 ESTIMATION = ("estimation", "flexible_rates", "noise_rejection", "convergence")

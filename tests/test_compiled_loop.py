@@ -8,10 +8,10 @@ multiplication where CPython calls pow)."""
 import numpy as np
 import pytest
 
-import validation.loop as loop
+import validation.run.loop as loop
 from reduced_model import ReducedPlant
-from validation.loop import build, run_scenario, simulate
-from validation.scenario import scenario_from_mapping
+from validation.run.loop import build, run_scenario, simulate
+from validation.run.scenario import scenario_from_mapping
 
 NOISE = {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}
 CASES = {

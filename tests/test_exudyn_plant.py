@@ -20,7 +20,7 @@ def plant(request):
 
 
 def test_behaves_as_a_plant(plant):
-    """What the closed loop (validation.loop) relies on, checked on numbers rather than on
+    """What the closed loop (validation.run.loop) relies on, checked on numbers rather than on
     method names: reset returns y(0) of the given state, truth_vector() is truth()
     flattened, step holds the torque for Ts and returns y(t + Ts), and the torque moves
     the arm as it moves the reduced plant."""

@@ -5,11 +5,11 @@ import inspect
 import numpy as np
 import pytest
 
-from validation import loop, metrics
-from validation._config import ConfigError
-from validation.loop import build, run_scenario, simulate
-from validation.results import RunResult
-from validation.scenario import scenario_from_mapping
+from validation.run import loop, metrics
+from validation.run._config import ConfigError
+from validation.run.loop import build, run_scenario, simulate
+from validation.run.results import RunResult
+from validation.run.scenario import scenario_from_mapping
 
 # The observer starts 0.1 rad, 5 mm and 0.3 rad/s off, and the sensors are noisy, so that
 # "converges" means something.

@@ -14,8 +14,8 @@ from controllers._ekf import ExtendedKalmanFilter, PositionEKF
 from controllers._lqr import GainScheduledLQR
 from reduced_model import ArmModel, ArmParameters, ReducedPlant, SensorConfig
 from reduced_model._kernels import rk4_advance_packed
-from validation.loop import simulate
-from validation.scenario import ObserverSpec, Scenario, SensorSpec
+from validation.run.loop import simulate
+from validation.run.scenario import ObserverSpec, Scenario, SensorSpec
 
 ARMS = {"default": ArmParameters(), "table1": ArmParameters.table1()}
 TS = 1e-3

@@ -4,9 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from validation.metrics import (CONVERGENCE_FRACTION, convergence_time, estimation,
+from validation.run.metrics import (CONVERGENCE_FRACTION, convergence_time, estimation,
                                 vibration, vibration_cutoff)
-from validation.results import RunResult
+from validation.run.results import RunResult
 from reduced_model import ArmModel, ArmParameters
 
 T = np.arange(0, 20.0, 1e-3)
@@ -71,7 +71,7 @@ def test_tip_slope_rate_error_is_the_tip_slope_of_the_error_field():
     """A constant error of 1e-3 m/s on one modal rate is a tip-slope-rate error of
     |φ'(L)|·1e-3 rad/s on its link and none on the other; φ'(L) here comes from a finite
     difference of the mode shape itself (independent of the stored tip values)."""
-    from validation.metrics import tip_slope_rate_error
+    from validation.run.metrics import tip_slope_rate_error
     model = ArmModel()
     names = model.coordinate_names[2:]
     signals = {f"{c}_dot": 0 * T for c in names}

@@ -7,9 +7,9 @@ import textwrap
 
 import pytest
 
-from validation.executor import execute_run
-from validation.scenario import scenario_from_mapping, scenario_to_mapping
-from validation.store import ResultStore
+from validation.batch.worker import execute_run
+from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
+from validation.batch.store import ResultStore
 
 PLUGIN = textwrap.dedent('''
     """Plug-ins for the tests: written only against the public interface."""
@@ -138,7 +138,7 @@ def test_bad_plugins_are_one_line_errors_and_nothing_is_written(plugin_dir, args
 
 
 def test_the_realisable_pbc_refuses_its_dead_settings_with_the_reason():
-    from validation._config import ConfigError
+    from validation.run._config import ConfigError
     with pytest.raises(ConfigError) as exc:
         scenario_from_mapping({"controller": {"kind": "pbc", "options": {"compensate_damping": False}}})
     assert exc.value.path == "controller.options.compensate_damping"
@@ -150,10 +150,10 @@ def test_the_realisable_pbc_refuses_its_dead_settings_with_the_reason():
 
 def test_plugin_code_is_part_of_the_fingerprint(plugin_dir):
     """Editing a plug-in's module makes its stored runs stale (not reused)."""
-    from validation.fingerprint import _plugin_source, run_fingerprint
+    from validation.batch.fingerprint import plugin_sources, run_fingerprint
     config = json.loads(json.dumps(scenario_to_mapping(scenario_from_mapping(
         {"controller": {"kind": "mylab_plugins:MyPD"}}))))
     before = run_fingerprint(config)
     (plugin_dir / "mylab_plugins.py").write_text(PLUGIN + "\n# edited\n")
-    _plugin_source.cache_clear()
+    plugin_sources.cache_clear()
     assert run_fingerprint(config) != before

@@ -56,7 +56,7 @@ def test_bring_your_own_example_runs_as_written(tmp_path):
 
 def test_readme_campaign_example_is_valid(tmp_path):
     """The complete campaign example parses, checks and expands."""
-    from validation.campaign import expand, load_campaign
+    from validation.batch.campaign import expand, load_campaign
     block = README.split("```toml\n# my.toml")[1].split("```")[0]
     text = "# my.toml" + block.replace('include = "campaigns/base.toml"',
                                        f'include = "{ROOT / "campaigns" / "base.toml"}"')

@@ -6,10 +6,10 @@ from html.parser import HTMLParser
 
 import pytest
 
-from validation.campaign import campaign_from_mapping, run_campaign
-from validation.figures import sweep_figures
-from validation.report import write_report
-from validation.store import ResultStore
+from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.report.figures import sweep_figures
+from validation.report.report import write_report
+from validation.batch.store import ResultStore
 
 SPEC = {"name": "rep", "description": "report test",
         "scenario": {"duration": 3.0, "transient": 1.0, "observer": {"kind": "smo-bl"},
@@ -101,7 +101,7 @@ def test_a_diverged_run_is_never_a_data_point(report, monkeypatch):
     out, _, _ = report
     rows = [r for r in ResultStore(out).rows() if r.sweep == "ts"]
     drawn = []
-    import validation.figures as figures
+    import validation.report.figures as figures
     real_plot = figures.plt.Axes.plot
 
     def spy(ax, *args, **kw):

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from reduced_model import ArmModel, ArmParameters
-from validation import stability
-from validation.scenario import scenario_from_mapping, scenario_to_mapping
+from validation.verdicts import stability
+from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 
 
 @pytest.mark.parametrize("arm, params", [("default", ArmParameters()),

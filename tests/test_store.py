@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml
-from validation.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping, run_campaign
 from validation.cli import main
-from validation.store import ResultStore, StoreError
+from validation.batch.store import ResultStore, StoreError
 
 
 def spec(name: str, n: int, duration: float = 0.5) -> dict:
@@ -198,7 +198,7 @@ def test_workers_beyond_the_cores_need_force(capsys, tmp_path):
 
 
 def test_a_full_disk_is_one_line_naming_the_folder(tmp_path, capsys, monkeypatch):
-    import validation.store as store_module
+    import validation.batch.store as store_module
 
     def full(path, *a, **k):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
@@ -210,10 +210,10 @@ def test_a_full_disk_is_one_line_naming_the_folder(tmp_path, capsys, monkeypatch
 
 
 def test_failed_runs_keep_the_exit_status_on_a_plain_rerun(tmp_path):
-    from validation.results import RunResult
-    from validation.scenario import scenario_to_mapping
+    from validation.run.results import RunResult
+    from validation.run.scenario import scenario_to_mapping
     c = campaign_from_mapping(spec("f", 1))
-    run = __import__("validation.campaign", fromlist=["expand"]).expand(c)[0]
+    run = __import__("validation.batch.campaign", fromlist=["expand"]).expand(c)[0]
     ResultStore(tmp_path).add(run.run_id, RunResult(
         time=np.zeros(0), names=(), signals=np.zeros((0, 0)), status="failed",
         message="boom", config=scenario_to_mapping(run.scenario)), {"status": "failed"})

@@ -25,11 +25,11 @@ import numpy as np
 
 from controllers import CONTROLLERS, OBSERVERS
 
-from ._config import ConfigError, check
-from .executor import Interrupted, available_cores, exit_status, make_runner
-from .scenario import ARMS, PLANTS, Scenario, scenario_from_mapping
-from .store import ResultStore, StoreError, run_id
-from .tomlfiles import load_toml, parse_value, set_dotted
+from .run._config import ConfigError, check
+from .batch.executor import Interrupted, available_cores, exit_status, make_runner
+from .run.scenario import ARMS, PLANTS, Scenario, scenario_from_mapping
+from .batch.store import ResultStore, StoreError, run_id
+from .run.tomlfiles import load_toml, parse_value, set_dotted
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
@@ -178,8 +178,8 @@ def format_metrics(metrics: dict) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .executor import execute_run
-    from .scenario import scenario_to_mapping
+    from .batch.worker import execute_run
+    from .run.scenario import scenario_to_mapping
     scenario = scenario_from_args(args)
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
@@ -214,7 +214,7 @@ def _finish(summary, name: str, out) -> int:
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
-    from .campaign import classify, expand, load_campaign, run_campaign
+    from .batch.campaign import classify, expand, load_campaign, run_campaign
     campaign = load_campaign(args.file)
     runs = expand(campaign)  # every scenario checked before anything runs
     out = Path(args.out or Path("results") / campaign.name)
@@ -240,7 +240,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from .report import write_report
+    from .report.report import write_report
     html_path, md_path = write_report(args.results, animate=not args.no_animation,
                                       progress=not args.no_progress)
     print(f"report: {html_path} (self-contained) and {md_path}")
@@ -257,8 +257,8 @@ def campaigns_dir() -> Path:
 
 
 def cmd_reproduce_paper(args: argparse.Namespace) -> int:
-    from .campaign import expand, load_campaign, run_campaign
-    from .claims import write_claims
+    from .batch.campaign import expand, load_campaign, run_campaign
+    from .verdicts.claims import write_claims
     campaign = load_campaign(campaigns_dir() / "paper.toml")
     runs = expand(campaign)
     out = Path(args.out or Path("results") / "paper")
@@ -280,7 +280,7 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     print(write_claims(out))
     print(f"claims: {out / 'claims.md'} and claims.csv")
     if not args.no_report:
-        from .report import write_report
+        from .report.report import write_report
         html_path, _ = write_report(out, animate=not args.no_animation,
                                     progress=not args.no_progress)
         print(f"report: {html_path}")
@@ -290,7 +290,7 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
 def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arms=None) -> int:
     """Run the stability map into ``out`` and print it; a non-zero exit status if it was
     interrupted."""
-    from .stability import cases_from_scenarios, stability_map, write_stability
+    from .verdicts.stability import cases_from_scenarios, stability_map, write_stability
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     open_output(out)
     results, summary = stability_map(cases, out, runner=runner, progress=progress)
@@ -302,7 +302,7 @@ def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arm
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
-    from .campaign import campaign_from_mapping, expand
+    from .batch.campaign import campaign_from_mapping, expand
     data = load_toml(args.file)
     if "scenario" in data or "sweep" in data:
         scenarios = [r.scenario for r in expand(campaign_from_mapping(data, source=args.file))]
@@ -338,8 +338,8 @@ def cmd_repair(args: argparse.Namespace) -> int:
 
 
 def cmd_attribute(args: argparse.Namespace) -> int:
-    from .attribution import attribute, default_factors, parse_factors, write_attribution
-    from .campaign import campaign_from_mapping, expand
+    from .verdicts.attribution import attribute, default_factors, parse_factors, write_attribution
+    from .batch.campaign import campaign_from_mapping, expand
     data = load_toml(args.file)
     section = data.pop("attribution", {})
     check(isinstance(section, dict), "attribution", "must be a table")
@@ -359,7 +359,7 @@ def cmd_attribute(args: argparse.Namespace) -> int:
         raise ConfigError("attribution.factors", "must be a list of factor names")
     plans = [(label, s, parse_factors(names, s) if names is not None else default_factors(s))
              for label, s in systems]
-    from .attribution import plan
+    from .verdicts.attribution import plan
     for label, s, factors in plans:  # every world checked before anything runs
         plan(s, factors, label)
     out = Path(args.out or default_out)
@@ -382,7 +382,7 @@ def cmd_attribute(args: argparse.Namespace) -> int:
 
 # --- flexarm baseline -----------------------------------------------------------------------
 def _baseline_rows(args) -> tuple:
-    from .baselines import evaluate, load_baselines
+    from .verdicts.baselines import evaluate, load_baselines
     if args.only is not None and not args.only.strip():
         raise ConfigError("--only", "must be a non-empty pattern")
     baselines = load_baselines(args.file)
@@ -425,7 +425,7 @@ def cmd_baseline_check(args: argparse.Namespace) -> int:
 
 
 def cmd_baseline_update(args: argparse.Namespace) -> int:
-    from .baselines import proposed_bounds, write_baselines
+    from .verdicts.baselines import proposed_bounds, write_baselines
     baselines, rows = _baseline_rows(args)
     proposals = proposed_bounds(rows, baselines)
     notes, loosened, changed = [], [], {}
@@ -581,7 +581,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     base = sub.add_parser("baseline", help="error-bound regression checks (baselines.toml)")
     bsub = base.add_subparsers(dest="action", required=True, parser_class=_Parser)
-    from .baselines import DEFAULT_FILE
+    from .verdicts.baselines import DEFAULT_FILE
     for action, helptext in (("check", "measure and compare with the bounds"),
                              ("update", "re-measure and rewrite the bounds")):
         b = bsub.add_parser(action, help=helptext)

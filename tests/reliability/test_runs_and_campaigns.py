@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml, metrics_table
-from validation.campaign import campaign_from_mapping, run_campaign
-from validation.executor import SerialRunner
-from validation.loop import run_scenario
-from validation.scenario import scenario_from_mapping
-from validation.store import ResultStore
+from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.executor import SerialRunner
+from validation.run.loop import run_scenario
+from validation.run.scenario import scenario_from_mapping
+from validation.batch.store import ResultStore
 
 UNSTABLE = {"controller": {"kind": "pd", "options": {"kd": [8.0, 500.0]}}}
 

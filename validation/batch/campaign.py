@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ._config import ConfigError, check, check_label
+from ..run._config import ConfigError, check, check_label
 from .executor import Interrupted, Runner, SerialRunner
 from .fingerprint import run_fingerprint
-from .scenario import Scenario, scenario_from_mapping, scenario_to_mapping
+from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .store import ResultStore, environment, run_id
-from .tomlfiles import deep_merge, load_toml
+from ..run.tomlfiles import deep_merge, load_toml
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "campaign_from_mapping", "expand",
            "run_campaign", "classify", "CampaignSummary", "MAX_RUNS"]

@@ -37,10 +37,10 @@ import itertools
 import math
 from dataclasses import dataclass, field
 
-from ._config import ConfigError, check
-from .campaign import Campaign, PlannedRun, run_campaign
-from .scenario import Scenario, scenario_from_mapping, scenario_to_mapping
-from .store import ResultStore, run_id
+from ..run._config import ConfigError, check
+from ..batch.campaign import Campaign, PlannedRun, run_campaign
+from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
+from ..batch.store import ResultStore, run_id
 
 __all__ = ["FACTORS", "METRICS", "World", "Attribution", "plan", "attribute", "shapley",
            "attribution_from_store", "write_attribution", "parse_factors"]
@@ -358,8 +358,8 @@ def write_attribution(atts: list[Attribution], out) -> str:
     import io
     from pathlib import Path
 
-    from .render import render
-    from .results import write_atomic
+    from ..report.render import render
+    from ..run.results import write_atomic
     rows = [r for a in atts for r in records(a)]
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=["study", "metric", "factor", "contribution",
@@ -376,7 +376,7 @@ def write_attribution(atts: list[Attribution], out) -> str:
 
 def study_view(att: Attribution) -> dict:
     """Data for the templates: per metric, one row per factor (and the sub-ladder)."""
-    from .render import fmt_number
+    from ..report.render import fmt_number
     metrics = []
     for metric, contributions in att.contributions.items():
         total = att.totals[metric]

@@ -33,19 +33,19 @@ from pathlib import Path
 
 import numpy as np
 
-from ._config import ConfigError, check
-from .campaign import expand, load_campaign
-from .executor import execute_run
-from .fingerprint import run_fingerprint
-from .results import write_atomic
-from .scenario import scenario_from_mapping, scenario_to_mapping
-from .store import INDEX_NAME, ResultStore, StoreError, run_id
-from .tomlfiles import load_toml
+from ..run._config import ConfigError, check
+from ..batch.campaign import expand, load_campaign
+from ..batch.worker import execute_run
+from ..batch.fingerprint import run_fingerprint
+from ..run.results import write_atomic
+from ..run.scenario import scenario_from_mapping, scenario_to_mapping
+from ..batch.store import INDEX_NAME, ResultStore, StoreError, run_id
+from ..run.tomlfiles import load_toml
 
 __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",
            "proposed_bounds", "write_baselines", "DEFAULT_FILE"]
 
-DEFAULT_FILE = Path(__file__).resolve().parent.parent / "baselines.toml"
+DEFAULT_FILE = Path(__file__).resolve().parents[2] / "baselines.toml"
 _CHECK_KEYS = {"name", "kind", "scenario", "campaign", "run", "plant", "arm", "initial_state",
                "metric", "op", "bound", "measured", "joints", "theta2", "mode", "margin", "note"}
 

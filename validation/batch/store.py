@@ -35,7 +35,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from .fingerprint import run_fingerprint
-from .results import RunResult, write_atomic
+from ..run.results import RunResult, write_atomic
 
 __all__ = ["ResultStore", "StoredRun", "StoreError", "run_id", "environment", "INDEX_NAME"]
 

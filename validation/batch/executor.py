@@ -16,8 +16,6 @@ Every process that runs or stores runs keeps its freed memory for the next run
 """
 from __future__ import annotations
 
-import ctypes
-import functools
 import multiprocessing
 import os
 import signal
@@ -26,13 +24,10 @@ import threading
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from contextlib import contextmanager
 
-import numpy as np
+from ..run._config import ConfigError, check
+from .worker import execute_run, failed_result, keep_freed_memory, worker_init
 
-from ._config import ConfigError, check
-from .results import RunResult
-
-__all__ = ["Runner", "make_runner", "execute_run", "Interrupted", "failed_result",
-           "available_cores", "exit_status"]
+__all__ = ["Runner", "make_runner", "Interrupted", "available_cores", "exit_status"]
 
 #: Environment that keeps numerical libraries to one thread in each worker.
 _ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
@@ -53,58 +48,6 @@ def available_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:
         return os.cpu_count() or 1
-
-
-@functools.cache
-def keep_freed_memory() -> None:
-    """Have the C allocator keep freed blocks of up to 32 MiB for reuse (glibc; elsewhere
-    nothing changes).  A run allocates its recording and copies of it (2.5 MB each for a
-    5 s run); by default glibc maps such blocks fresh and unmaps them when freed, so
-    every run pays its page faults again: ~3 ms of a 5 s reduced run's ~7 ms overhead
-    (measured by timing `execute_run` over 48 runs).  Freed memory up to 128 MiB is kept
-    (not trimmed): a worker's resident size stays at its largest run's."""
-    if not sys.platform.startswith("linux"):
-        return
-    mallopt = getattr(ctypes.CDLL(None), "mallopt", None)  # the allocator of this process
-    if mallopt is not None:  # glibc (musl has none)
-        mallopt(-1, 128 << 20)  # M_TRIM_THRESHOLD
-        mallopt(-3, 32 << 20)  # M_MMAP_THRESHOLD (glibc's largest on 64-bit)
-
-
-def failed_result(scenario, exc: BaseException) -> tuple[RunResult, dict]:
-    """The "failed" result of ``scenario`` (a `Scenario` or its mapping) that raised ``exc``."""
-    from .scenario import Scenario, scenario_to_mapping
-    config = scenario_to_mapping(scenario) if isinstance(scenario, Scenario) else scenario
-    text = str(exc).strip().splitlines()
-    message = f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
-    return (RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)), status="failed",
-                      message=message, config=config),
-            {"status": "failed", "end_time": 0.0})
-
-
-def execute_run(scenario) -> tuple[RunResult, dict]:
-    """Run one scenario (in a worker; a checked `Scenario`, or a mapping to check): the
-    result, with signals as float32 (what the store keeps; half the bytes to send back),
-    and its metrics computed from the float64 signals.  An unexpected exception becomes
-    a "failed" result carrying its message, so one bad run never stops a campaign."""
-    from .loop import run_scenario
-    from .metrics import all_metrics
-    from .scenario import Scenario, scenario_from_mapping
-    keep_freed_memory()
-    try:
-        if not isinstance(scenario, Scenario):
-            scenario = scenario_from_mapping(scenario)
-        result = run_scenario(scenario)
-        metrics = all_metrics(result)
-    except Exception as exc:  # noqa: BLE001 - reported as the run's failure
-        return failed_result(scenario, exc)
-    result.signals = result.signals.astype(np.float32)
-    return result, metrics
-
-
-def _worker_init() -> None:
-    # The parent decides what a Ctrl-C means (stop, keep what finished, end the workers).
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 class Runner:
@@ -190,10 +133,10 @@ class LocalPoolRunner(_PoolRunner):
             ctx = multiprocessing.get_context("fork")
         else:
             ctx = multiprocessing.get_context("forkserver")
-            ctx.set_forkserver_preload(["validation.worker"])  # each worker compiles or loads
+            ctx.set_forkserver_preload(["validation.batch.worker"])  # each worker compiles or loads
         with _environment(_ONE_THREAD):
             executor = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                                           initializer=_worker_init)
+                                           initializer=worker_init)
             # Start every worker now (with "fork" the pool forks them all on the first
             # submit, before its manager thread exists).
             executor.submit(int).result()

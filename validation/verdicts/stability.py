@@ -26,12 +26,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._config import ConfigError
-from .campaign import PlannedRun, run_campaign, Campaign
-from .executor import Runner
-from .laws import nominal_model
-from .scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
-from .store import ResultStore, run_id
+from ..run._config import ConfigError
+from ..batch.campaign import PlannedRun, run_campaign, Campaign
+from ..batch.executor import Runner
+from ..run.laws import nominal_model
+from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
+from ..batch.store import ResultStore, run_id
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "StabilityCase", "StabilityResult",
            "cases_from_scenarios", "stability_map", "load_stability", "predicted_limit",
@@ -172,7 +172,7 @@ def _result(case: StabilityCase, tested: dict) -> StabilityResult:
 def load_stability(out, *, fresh_only: bool = False) -> list[StabilityResult]:
     """The stability map of a results folder, rebuilt from its stored runs (with
     ``fresh_only``, from the runs made by this code only)."""
-    from .fingerprint import run_fingerprint
+    from ..batch.fingerprint import run_fingerprint
     groups: dict[tuple, tuple[StabilityCase, dict]] = {}
     for row in ResultStore(out).rows(where="sweep = 'stability'"):
         if fresh_only and row.fingerprint != run_fingerprint(row.config):
@@ -227,7 +227,7 @@ def predicted_limit(config: dict) -> float:
 
 def stability_rows(results: list[StabilityResult]) -> list[dict]:
     """Table rows (values in ms as text) for the templates and stability.csv."""
-    from .render import fmt_number
+    from ..report.render import fmt_number
 
     def ms(v):
         return "—" if math.isnan(v) else fmt_number(1e3 * v)
@@ -250,8 +250,8 @@ def write_stability(results: list[StabilityResult], out) -> str:
     import io
     from pathlib import Path
 
-    from .render import render
-    from .results import write_atomic
+    from ..report.render import render
+    from ..run.results import write_atomic
     rows = stability_rows(results)
     text = render("stability.md.j2", rows=rows, duration=f"{DURATION:g}",
                   grid=", ".join(f"{1e3 * t:g}" for t in GRID), bisections=BISECTIONS,

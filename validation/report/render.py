@@ -38,7 +38,7 @@ _ENV: dict[bool, jinja2.Environment] = {}
 def environment(html: bool) -> jinja2.Environment:
     if html not in _ENV:
         env = jinja2.Environment(
-            loader=jinja2.PackageLoader("validation", "templates"),
+            loader=jinja2.PackageLoader("validation.report", "templates"),
             autoescape=html, trim_blocks=True, lstrip_blocks=True,
             undefined=jinja2.StrictUndefined, keep_trailing_newline=True)
         env.filters["num"] = fmt_number

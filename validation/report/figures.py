@@ -130,7 +130,7 @@ def tracking(group, title: str, transient: float) -> bytes:
 
 def deflections(group, title: str, transient: float, cutoff_hz: float | None) -> bytes:
     """Fig. 4 analogue: tip deflections, and their oscillatory part (the vibration)."""
-    from .metrics import oscillatory
+    from ..run.metrics import oscillatory
     rows = 2 if cutoff_hz else 1
     fig, axes = plt.subplots(rows, 2, figsize=(10, 2.8 * rows), sharex=True, squeeze=False,
                              constrained_layout=True)

@@ -20,11 +20,11 @@ from pathlib import Path
 from reduced_model import ArmParameters
 
 from . import figures as fig
-from .fingerprint import run_fingerprint
+from ..batch.fingerprint import run_fingerprint
 from .render import fmt_number, render
-from .results import write_atomic
-from .scenario import ARMS
-from .store import ResultStore, StoreError
+from ..run.results import write_atomic
+from ..run.scenario import ARMS
+from ..batch.store import ResultStore, StoreError
 
 __all__ = ["write_report", "report_data"]
 
@@ -174,7 +174,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     """Everything the report shows, as data (figures as PNG bytes)."""
     from tqdm import tqdm
 
-    from .claims import CLAIMS, claim_columns, claims_tables
+    from ..verdicts.claims import CLAIMS, claim_columns, claims_tables
     store = ResultStore(results_dir)
     all_rows = store.rows()
     if not all_rows:
@@ -214,7 +214,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     stability_dir = store.out / "stability"
     tasks = []
     if ResultStore(stability_dir).exists():
-        from .stability import load_stability, stability_rows
+        from ..verdicts.stability import load_stability, stability_rows
         results = load_stability(stability_dir, fresh_only=True)
         if results:
             rows = stability_rows(results)
@@ -226,7 +226,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
             tasks.append(("Stability map", "sampled-data stability map: tested control periods "
                           "per case, plant and arm", lambda: fig.stability_chart(results)))
     for study, spec in campaigns.get("attribution", {}).get("studies", {}).items():
-        from .attribution import METRICS, attribution_from_store, study_view
+        from ..verdicts.attribution import METRICS, attribution_from_store, study_view
         a = attribution_from_store(store.out, study, tuple(spec["factors"]))
         data.attribution.append(study_view(a))
         for metric, contributions in a.contributions.items():
@@ -280,7 +280,7 @@ def _paper_figure_tasks(group) -> list:
     title = f"{head.name} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})" + "".join(
         f"; {fig.PLANT_NAME.get(r.plant, r.plant)} {r.status.upper()}: {r.message}" for r in gone)
     transient = float(head.config.get("transient", 2.0))
-    from .metrics import vibration_cutoff
+    from ..run.metrics import vibration_cutoff
     cutoff = vibration_cutoff(ArmParameters.from_mapping(head.config["true_params"]))
     cache = {}
 
@@ -303,7 +303,7 @@ def _paper_figure_tasks(group) -> list:
 
 
 def _animation(group, path: Path) -> str:
-    from .laws import nominal_model
+    from ..run.laws import nominal_model
     head = group[0]
     params = ArmParameters.from_mapping(head.config["nominal_params"])
     model = nominal_model(params, tuple(head.config["model"]["modes_per_link"]))

@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-from .metrics import CONVERGENCE_FRACTION, CONVERGENCE_WINDOW
+from ..run.metrics import CONVERGENCE_FRACTION, CONVERGENCE_WINDOW
 
 __all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "SYSTEM",
            "DISTURBED", "column_key", "claims_tables", "claims_records", "write_claims",
@@ -223,14 +223,14 @@ def cell_text(claim: Claim, v: Verdict) -> str:
         return f"— ({v.verdict})"
     if v.verdict in ("not run", "n/a"):
         return v.verdict + (f" ({v.note})" if v.note else "")
-    from .render import fmt_number
+    from ..report.render import fmt_number
     value = "never" if math.isinf(v.value) else f"{fmt_number(v.value)} {claim.unit}".strip()
     return f"{value} — {v.verdict}" + (f" ({v.note})" if v.note else "")
 
 
 def claims_tables(columns: list[Column]) -> list[dict]:
     """Per arm: column labels and one row of cell texts per claim (for the templates)."""
-    from .scenario import ARMS
+    from ..run.scenario import ARMS
     tables = []
     for arm in dict.fromkeys(c.arm for c in columns):
         cols = [c for c in columns if c.arm == arm]
@@ -278,9 +278,9 @@ def write_claims(results_dir) -> str:
     import io
     from pathlib import Path
 
-    from .render import render
-    from .results import write_atomic
-    from .store import ResultStore
+    from ..report.render import render
+    from ..run.results import write_atomic
+    from ..batch.store import ResultStore
     store = ResultStore(results_dir)
     rows = store.rows()
     columns = claim_columns(rows)

@@ -1,0 +1,1 @@
+"""Reports: tables and figures rendered from stored results through templates."""

@@ -1,0 +1,1 @@
+"""Verdicts: the paper's claims, the sampled-data stability map, attribution and regression bounds."""
