@@ -25,13 +25,11 @@ from concurrent.futures import FIRST_COMPLETED, Future, wait
 from contextlib import contextmanager
 
 from ..run._config import ConfigError, check
+from .threads import ONE_THREAD
 from .worker import execute_run, failed_result, keep_freed_memory, worker_init
 
 __all__ = ["Runner", "make_runner", "Interrupted", "available_cores", "exit_status"]
 
-#: Environment that keeps numerical libraries to one thread in each worker.
-_ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                      "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
 
 
 class Interrupted(BaseException):
@@ -134,7 +132,7 @@ class LocalPoolRunner(_PoolRunner):
         else:
             ctx = multiprocessing.get_context("forkserver")
             ctx.set_forkserver_preload(["validation.batch.worker"])  # each worker compiles or loads
-        with _environment(_ONE_THREAD):
+        with _environment(ONE_THREAD):
             executor = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                            initializer=worker_init)
             # Start every worker now (with "fork" the pool forks them all on the first
