@@ -133,7 +133,7 @@ def test_every_command_reads_a_scenario_file_the_same_way(tmp_path, monkeypatch)
     case that once drifted) and hand the same scenario to their work."""
     from validation import cli
     from validation.batch import worker
-    from validation.verdicts import attribution, stability
+    from validation.verdicts import attribution
     path = tmp_path / "s.toml"
     path.write_text('name = "mine"\nduration = 0.5\ntransient = 0.1\n'
                     '[controller]\nkind = "pd"\n')

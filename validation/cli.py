@@ -24,7 +24,7 @@ import numpy as np
 
 from controllers import CONTROLLERS, OBSERVERS
 
-from .run._config import ConfigError, check
+from .run._config import ConfigError
 from .batch.executor import Interrupted, available_cores, exit_status, make_runner
 from .run.scenario import ARMS, PLANTS, Scenario, scenario_from_mapping
 from .batch.store import ResultStore, StoreError, run_id
@@ -184,13 +184,14 @@ def format_metrics(metrics: dict) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .batch.worker import execute_run
+    from .batch.worker import compile_kernels, execute_run
     from .run.scenario import scenario_to_mapping
     scenario = scenario_from_args(args)
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
     store = open_output(args.out or Path("results") / f"run-{rid}")
-    result, metrics = execute_run(data)
+    compile_kernels([scenario], report=lambda line: print(line, file=sys.stderr, flush=True))
+    result, metrics = execute_run(scenario)
     path = store.add(rid, result, metrics)
     store.export()
     s = scenario
