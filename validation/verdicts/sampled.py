@@ -45,7 +45,7 @@ from ..run.loop import make_reference
 from ..run.scenario import scenario_from_mapping
 from .linear import (NotLinearisable, closed_loop_matrix, growth_rate, largest_stable_period,
                      law_gain, reduced_linear_model)
-from .nugap import margin_detail, gap_detail
+from .nugap import FactorisationError, gap_detail, margin_detail
 
 __all__ = ["POINTS", "Prediction", "CertificateRow", "predicted_period", "prediction",
            "certificate", "certified_period"]
@@ -72,7 +72,8 @@ class Prediction:
 @dataclass(frozen=True)
 class CertificateRow:
     """At period ``Ts`` [s]: the largest ν-gap and the smallest margin over the operating
-    points, and whether every point is certified (δν < b)."""
+    points (b = 0: the loop on the reduced model is unstable; δν NaN: not computable), and
+    whether every point is certified (δν < b at that point)."""
 
     Ts: float
     nu_gap: float
@@ -237,19 +238,19 @@ def certificate(config: dict, periods, *, mesh=None) -> list[CertificateRow]:
             continue
         if gains[0].shape[0] > 2:
             return []
-        worst_gap, worst_margin = 0.0, math.inf
+        gaps, margins = [], []
         for P_red, P_fe, K in zip(reduced, fe, gains):
             gain = control.ss(np.zeros((0, 0)), np.zeros((0, K.shape[1])),
                               np.zeros((2, 0)), K)
             loop_red = gain * control.sample_system(P_red, Ts)
-            loop_fe = gain * control.sample_system(P_fe, Ts)
-            worst_margin = min(worst_margin, margin_detail(loop_red, np.eye(2)).value)
-            if worst_margin <= worst_gap:
-                break  # not certified at this period whatever the other points say
-            worst_gap = max(worst_gap, gap_detail(loop_red, loop_fe).value)
-            if worst_margin <= worst_gap:
-                break
-        rows.append(CertificateRow(Ts, worst_gap, worst_margin, worst_gap < worst_margin))
+            margins.append(margin_detail(loop_red, np.eye(2)).value)
+            try:
+                gaps.append(gap_detail(loop_red, gain * control.sample_system(P_fe, Ts)).value)
+            except FactorisationError:
+                gaps.append(math.nan)  # no ν-gap: not certified
+
+        rows.append(CertificateRow(Ts, float(np.max(gaps)), min(margins),
+                                   all(g < b for g, b in zip(gaps, margins))))
     return rows
 
 
