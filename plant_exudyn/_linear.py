@@ -18,11 +18,15 @@ Jacobian at the configuration (u = Nᵀ z), so the joints and clamps are exact. 
 
 Rigid-body modes.  The free arm turns about joint 1 and folds about joint 2 at no cost;
 Exudyn's numerical Jacobian leaves those two modes at ~1e-4 Hz (ω² ~ 1e-6 against 190
-s⁻² for the first bending mode) instead of 0.  A spurious spring there would put the
-double pole of each joint at ±j6e-4 rad/s instead of s = 0, and flip the sign of the
-response below it — which the ν-gap would report as a distance of 1.  So the two modes
-with the smallest |ω²| are set exactly rigid (Ω² = 0, no damping), after checking that
-they are four orders of magnitude below the first flexible one.
+s⁻² for the first bending mode) instead of 0, and their eigenvectors carry 1e-8 of
+deformation.  A spurious spring would put the double pole of each joint at ±j6e-4 rad/s
+instead of s = 0 and flip the sign of the response below it, and a rigid mode that the
+tip deflections see at 1e-8 puts a double pole at s = 0 into τ → tip deflection — either
+of which the ν-gap reports as a distance of 1.  So the rigid modes are set exactly: their
+directions are the joint rotations of the exact node placement, with Ω² = 0 and no
+damping, and the flexible modes are solved on their M-orthogonal complement (after
+checking that K is four orders of magnitude smaller on them than on the first bending
+mode).
 """
 from __future__ import annotations
 
@@ -92,18 +96,12 @@ def linear_model(params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
     F = _input_forces(plant, settings)
     Cu, Cv = _output_jacobians(plant, u0)
 
-    omega2, Phi = scipy.linalg.eigh(K, M)
-    rigid = np.argsort(np.abs(omega2))[:2]
-    flexible = np.delete(omega2, rigid)
-    if np.abs(omega2[rigid]).max() > _RIGID_RATIO * flexible.min():
-        raise ArithmeticError(f"expected two rigid-body modes of the free arm, found ω² = "
-                              f"{omega2[rigid]} next to {flexible.min():.4g}")
-    omega2[rigid] = 0.0
+    Phi, omega2 = _modes(K, M, N @ _rigid_motions(plant, x0[:n]))
     Dm = Phi.T @ D @ Phi
-    if np.abs(Dm[rigid]).max() > 1e-6 * np.abs(Dm).max():
+    if np.abs(Dm[:2]).max() > 1e-6 * np.abs(Dm).max():
         raise ArithmeticError("the FE damping acts on a rigid-body mode")
-    Dm[rigid, :] = 0.0
-    Dm[:, rigid] = 0.0
+    Dm[:2, :] = 0.0
+    Dm[:, :2] = 0.0
     k = len(omega2)
     A = np.block([[np.zeros((k, k)), np.eye(k)], [-np.diag(omega2), -Dm]])
     B = np.vstack([np.zeros((k, 2)), Phi.T @ N @ F])
@@ -116,6 +114,40 @@ def linear_model(params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
                            f"{mesh.elements_per_link[1]}")
     return sys_ if Ts is None else control.sample_system(sys_, Ts, method="zoh",
                                                          name=sys_.name + "_zoh")
+
+
+def _rigid_motions(plant: ExudynPlant, Q0: np.ndarray) -> np.ndarray:
+    """ODE2 displacement directions (size, 2) of turning joint 1 and joint 2 at Q0: central
+    differences of the exact node placement (`ExudynPlant._node_displacements`); for a
+    rotation the difference quotient is parallel to the derivative, so no deformation
+    enters."""
+    columns = []
+    for j in range(2):
+        step = np.zeros(len(Q0))
+        step[j] = _FD_STEP
+        columns.append((plant._node_displacements(Q0 + step)
+                        - plant._node_displacements(Q0 - step)) / (2 * _FD_STEP))
+    return np.column_stack(columns)
+
+
+def _modes(K: np.ndarray, M: np.ndarray, rigid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mass-normalised modes Φ (rigid first) and Ω² of (K, M) in nullspace coordinates,
+    with the rigid subspace ``rigid`` (nullspace coordinates, 2 columns) set exactly:
+    Ω² = 0 there, and the flexible modes solved on its M-orthogonal complement (module
+    docstring).  Exudyn's K gives the rigid motions ω² ~ 1e-6 s⁻² (against 190 for the
+    first bending mode); a larger value means they are not rigid: ArithmeticError."""
+    spurious = np.abs(rigid.T @ K @ rigid).max() / np.abs(rigid.T @ M @ rigid).max()
+    first = scipy.linalg.eigh(K, M, eigvals_only=True, subset_by_index=[2, 2])[0]
+    if spurious > _RIGID_RATIO * first:
+        raise ArithmeticError(f"joint rotations are not rigid-body modes of the FE arm "
+                              f"(ω² = {spurious:.3g} next to {first:.4g} s⁻²)")
+    gram = rigid.T @ M @ rigid
+    vals, vecs = np.linalg.eigh(gram)
+    rigid_modes = rigid @ (vecs / np.sqrt(vals)) @ vecs.T  # Φ_rᵀ M Φ_r = I
+    complement = scipy.linalg.null_space((M @ rigid).T)  # zᵀ M Φ_r = 0
+    omega2, V = scipy.linalg.eigh(complement.T @ K @ complement, complement.T @ M @ complement)
+    return (np.hstack([rigid_modes, complement @ V]),
+            np.concatenate([[0.0, 0.0], omega2]))
 
 
 def _input_forces(plant: ExudynPlant, settings) -> np.ndarray:

@@ -217,9 +217,10 @@ def predicted_period(config: dict) -> float:
 
 def certificate(config: dict, periods, *, mesh=None) -> list[CertificateRow]:
     """The ν-gap certificate of a case's law against the FE arm (``mesh``; default: the
-    case's own mesh, or the default `Mesh` for a reduced-plant case) at each of
-    ``periods`` [s] (module docstring).  Empty for a law that cannot be certified (forces
-    on the modal coordinates, an observer in the loop, not linearisable)."""
+    case's own mesh, or the default `Mesh` for a reduced-plant case) at ``periods`` [s]
+    in increasing order, up to the first that is not certified (module docstring).
+    Empty for a law that cannot be certified (forces on the modal coordinates, an
+    observer in the loop, not linearisable)."""
     case = _case(_key(config))
     if case.scenario.observer.kind != "none":
         return []
@@ -251,6 +252,8 @@ def certificate(config: dict, periods, *, mesh=None) -> list[CertificateRow]:
 
         rows.append(CertificateRow(Ts, float(np.max(gaps)), min(margins),
                                    all(g < b for g, b in zip(gaps, margins))))
+        if not rows[-1].certified:
+            break  # the certified period ends here (`certified_period`)
     return rows
 
 
