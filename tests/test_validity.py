@@ -49,7 +49,7 @@ def synthetic_analysis() -> dict:
             "certified_s": 7e-4, "certificate": [{"Ts": 7e-4, "nu_gap": 0.47, "margin": 0.51,
                                                   "certified": True}],
             "largest_stable_s": 3.5e-3, "first_unstable_s": 4e-3, "in_bracket": "no",
-            "sound": "yes", "conservatism": 0.2, "step_check": "truth plant with step Ts/200: "
+            "sound": "yes", "conservatism": 0.2, "evidence": "truth plant with step Ts/200: "
                                                                "0.97×: ok, 1.05×: diverged",
             "seconds": 1.0}
     return {"arms": [arm], "cases": [case], "timings": {"everything [s]": 1.0},

@@ -28,10 +28,10 @@ def frequency_responses(arm: dict) -> bytes:
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), sharex=True, constrained_layout=True)
     for ax, channel in zip(axes.ravel(), _CHANNEL_TITLES):
         for k, entry in enumerate(chosen):
-            ax.loglog(f, entry["reduced"][channel], color=f"C{k}", lw=1.2,
+            ax.loglog(f, entry["reduced"][channel], color=f"C{k}", lw=0.9,
                       label=f"θ₂ = {entry['theta2']:.2f} rad, reduced")
-            ax.loglog(f, entry["fe"][channel], color=f"C{k}", lw=1, ls="--",
-                      label=f"θ₂ = {entry['theta2']:.2f} rad, FE")
+            ax.loglog(f, entry["fe"][channel], color=f"C{k}", lw=1.6, ls=(0, (2, 2)),
+                      alpha=0.8, label=f"θ₂ = {entry['theta2']:.2f} rad, FE")
         ax.set_title(_CHANNEL_TITLES[channel], fontsize=9)
         ax.grid(True, which="major", lw=0.3)
     for ax in axes[1]:

@@ -8,8 +8,10 @@ on the reduced model's mode shapes), their frequency responses τ → θ and τ 
 deflection, and δν of three views of the pair: τ → θ (what the encoders see), τ → tip
 deflections, and the PBC's loop broken at the plant input at the scenario's Ts (what
 feedback with the paper's law sees, `sampled`).  A view whose coprime factorisation
-cannot be computed (`nugap.FactorisationError`: undamped FE modes that two outputs barely
-see, on Table 1's arm) is left empty, not guessed.
+cannot be computed (`nugap.FactorisationError`: on Table 1's arm, which has no damping at
+all, the undamped FE modes that two outputs barely see) is left empty, not guessed;
+where it is computed there, δν = 1 — two undamped plants whose resonances differ are as
+far apart as feedback can tell.
 
 Per case (`case_rows`): the predicted period on the linearisation of the case's plant —
 for the truth plant, on the case's mesh and on a mesh twice as fine, since a truth-plant
@@ -38,7 +40,7 @@ from reduced_model import ArmModel
 
 from ..run.scenario import scenario_from_mapping
 from .linear import law_gain, reduced_linear_model
-from .nugap import FactorisationError, gap_detail
+from .nugap import gap_detail
 from .sampled import POINTS, _mesh, certificate, certified_period, prediction
 from .stability import _label, _options_key, load_stability
 
@@ -102,8 +104,8 @@ def arm_validity(config: dict) -> dict:
         for view, (a, b) in views.items():
             try:
                 detail = gap_detail(a, b)
-            except FactorisationError:
-                row[view] = row[f"{view}_peak_hz"] = math.nan  # shown as not computed
+            except ArithmeticError:  # FactorisationError: shown as not computed
+                row[view] = row[f"{view}_peak_hz"] = math.nan
                 continue
             row[view], row[f"{view}_peak_hz"] = detail.value, detail.frequency / (2 * np.pi)
         gaps.append(row)
@@ -173,7 +175,8 @@ def _against_measured(row: dict, result, base: dict) -> dict:
     """The measured bracket, whether the prediction lies in it, the soundness and the
     conservatism of the certificate, and the fine-step check of the truth plant."""
     out = {"largest_stable_s": math.nan, "first_unstable_s": math.nan, "in_bracket": "",
-           "sound": "", "conservatism": math.nan, "step_check": ""}
+           "sound": "", "conservatism": math.nan, "evidence": ""}  # why a prediction
+    # misses its bracket, as measured
     if result is None:
         return out
     lo, hi = result.largest_stable, result.first_unstable
@@ -182,15 +185,20 @@ def _against_measured(row: dict, result, base: dict) -> dict:
     if not math.isnan(p):
         out["in_bracket"] = "yes" if ((math.isnan(lo) or p >= lo) and
                                       (math.isnan(hi) or p < hi)) else "no"
+        if out["in_bracket"] == "no" and result.reason.startswith("max |θ − θd|"):
+            out["evidence"] = ("the measured limit is a loss of tracking, not a divergence: "
+                                 "no linear stability prediction describes it")
     c = row["certified_s"]
-    if row["plant"] == "exudyn" and not math.isnan(c):
+    if row["plant"] == "exudyn" and c == 0:
+        out["sound"], out["conservatism"] = "nothing certified", 0.0
+    elif row["plant"] == "exudyn" and not math.isnan(c):
         unstable = [Ts for Ts, (ok, _) in result.tested.items() if Ts <= c and not ok]
         out["sound"] = "yes" if not unstable else f"NO: unstable at {min(unstable):g} s"
         if lo > 0:
             out["conservatism"] = c / lo
     if (row["plant"] == "exudyn" and base["observer"]["kind"] == "none"
             and math.isfinite(p) and p >= min(result.tested) and not math.isnan(lo) and p < lo):
-        out["step_check"] = _step_check(base, p)
+        out["evidence"] = _step_check(base, p)
     return out
 
 
@@ -231,7 +239,7 @@ def table_rows(data: dict) -> tuple[list[str], list[list[str]]]:
             "certificate sound", "certified / measured", "notes"]
     rows = []
     for r in data["cases"]:
-        notes = "; ".join(n for n in (r["note"], r["step_check"]) if n)
+        notes = "; ".join(n for n in (r["note"], r["evidence"]) if n)
         rows.append([r["case"], r["plant"], r["arm"], _ms(r["predicted_s"]), r["mesh"],
                      _ms(r["predicted_fine_s"]) if r["mesh_fine"] else "",
                      _ms(r["certified_s"]) if r["certificate"] else "n/a",
