@@ -51,7 +51,6 @@ def test_pbc_prediction_brackets_the_reduced_plants_limit(arm, expected):
     assert assert_in_bracket("pbc", arm) == pytest.approx(expected, rel=1e-3)
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("controller", ["pd", "ct", "pbc-idealised"])
 @pytest.mark.parametrize("arm", ["default", "table1"])
 def test_prediction_brackets_the_reduced_plants_limit(controller, arm):

@@ -182,9 +182,6 @@ def _prediction(config_json: str) -> Prediction:
         notes.append(f"the controller fed the true state ({case.scenario.observer.kind} "
                      "not in the loop)")
     mesh = _mesh(config) if plant_kind == "exudyn" else None
-    if mesh is not None:
-        notes.append(f"FE linearisation, {mesh.element} {mesh.elements_per_link[0]}+"
-                     f"{mesh.elements_per_link[1]} elements")
     limit, where = math.inf, math.nan
     for i in range(len(case.points)):
         plant = case.fe_plant(i, mesh) if mesh is not None else \
