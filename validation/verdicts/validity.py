@@ -207,8 +207,8 @@ def validity_analysis(cases, *, stability_dir=None, progress=None) -> dict:
     (`arm_validity`), per case (`case_rows`), the timings."""
     timings = {}
     stability = []
-    if stability_dir is not None:
-        stability = load_stability(stability_dir)
+    if stability_dir is not None:  # runs made by other code are stale: left out
+        stability = load_stability(stability_dir, fresh_only=True)
     arms = {}
     for case in cases:  # an FE case carries the mesh; any case carries the arm
         if case.arm not in arms or case.plant == "exudyn":
