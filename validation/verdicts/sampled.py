@@ -45,10 +45,10 @@ from ..run.loop import make_reference
 from ..run.scenario import scenario_from_mapping
 from .linear import (NotLinearisable, closed_loop_matrix, growth_rate, largest_stable_period,
                      law_gain, reduced_linear_model)
-from .nugap import FactorisationError, gap_detail, margin_detail
+from .nugap import FactorisationError, as_statespace, gap_detail, margin_detail
 
 __all__ = ["POINTS", "Prediction", "CertificateRow", "predicted_period", "prediction",
-           "certificate", "certified_period"]
+           "certificate", "certified_period", "case_mesh"]
 
 #: Operating points per case, evenly spread over its run.
 POINTS = 5
@@ -150,7 +150,8 @@ def _key(config: dict) -> str:
     return json.dumps(config, sort_keys=True)
 
 
-def _mesh(config: dict):
+def case_mesh(config: dict):
+    """The FE mesh of a case (its own for an Exudyn plant, else the default `Mesh`)."""
     from plant_exudyn import Mesh
     mesh = config.get("plant", {}).get("mesh")
     if not mesh:
@@ -181,7 +182,7 @@ def _prediction(config_json: str) -> Prediction:
     if case.scenario.observer.kind != "none":
         notes.append(f"the controller fed the true state ({case.scenario.observer.kind} "
                      "not in the loop)")
-    mesh = _mesh(config) if plant_kind == "exudyn" else None
+    mesh = case_mesh(config) if plant_kind == "exudyn" else None
     limit, where = math.inf, math.nan
     for i in range(len(case.points)):
         plant = case.fe_plant(i, mesh) if mesh is not None else \
@@ -221,7 +222,7 @@ def certificate(config: dict, periods, *, mesh=None) -> list[CertificateRow]:
     case = _case(_key(config))
     if case.scenario.observer.kind != "none":
         return []
-    mesh = mesh if mesh is not None else _mesh(config)
+    mesh = mesh if mesh is not None else case_mesh(config)
     reduced = [case.reduced_plant(i, nominal=True)[case.names, :]
                for i in range(len(case.points))]
     fe = [case.fe_plant(i, mesh)[case.names, :] for i in range(len(case.points))]
@@ -238,8 +239,7 @@ def certificate(config: dict, periods, *, mesh=None) -> list[CertificateRow]:
             return []
         gaps, margins = [], []
         for P_red, P_fe, K in zip(reduced, fe, gains):
-            gain = control.ss(np.zeros((0, 0)), np.zeros((0, K.shape[1])),
-                              np.zeros((2, 0)), K)
+            gain = as_statespace(K)
             loop_red = gain * control.sample_system(P_red, Ts)
             margins.append(margin_detail(loop_red, np.eye(2)).value)
             try:

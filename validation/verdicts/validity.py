@@ -40,8 +40,8 @@ from reduced_model import ArmModel
 
 from ..run.scenario import scenario_from_mapping
 from .linear import law_gain, reduced_linear_model
-from .nugap import gap_detail
-from .sampled import POINTS, _mesh, certificate, certified_period, prediction
+from .nugap import as_statespace, gap_detail
+from .sampled import POINTS, case_mesh, certificate, certified_period, prediction
 from .stability import _label, _options_key, load_stability
 
 __all__ = ["THETA2", "FREQUENCIES_HZ", "CERTIFY_PERIODS", "STEP_CHECK", "arm_validity",
@@ -61,10 +61,6 @@ CHANNELS = (("tau1", "theta1"), ("tau2", "theta2"), ("tau1", "tip_defl1"),
 _GAP_VIEWS = ("theta", "tip", "pbc_loop")
 
 
-def _static(K: np.ndarray) -> control.StateSpace:
-    return control.ss(np.zeros((0, 0)), np.zeros((0, K.shape[1])), np.zeros((K.shape[0], 0)), K)
-
-
 def arm_validity(config: dict) -> dict:
     """The frequency responses and ν-gaps over `THETA2` of the arm of ``config`` (a
     resolved scenario mapping: its true parameters, FE mesh, model order and Ts), as
@@ -73,7 +69,7 @@ def arm_validity(config: dict) -> dict:
     from plant_exudyn import linear_model
     s = scenario_from_mapping(config)
     model = ArmModel(s.true_params, s.model.modes_per_link)
-    mesh = _mesh(config)
+    mesh = case_mesh(config)
     names = list(model.state_names)
     w = 2 * np.pi * np.asarray(FREQUENCIES_HZ)
     pbc = PassivityBasedController(model)
@@ -94,7 +90,7 @@ def arm_validity(config: dict) -> dict:
 
         def hold(t, x=x):
             return x[:2].copy(), np.zeros(2), np.zeros(2)
-        gain = _static(law_gain(pbc, x, 0.0, hold, shared=(model,)))
+        gain = as_statespace(law_gain(pbc, x, 0.0, hold, shared=(model,)))
         views = {"theta": (red[["theta1", "theta2"], :], fe[["theta1", "theta2"], :]),
                  "tip": (red[["tip_defl1", "tip_defl2"], :],
                          fe[["tip_defl1", "tip_defl2"], :]),
@@ -116,13 +112,13 @@ def arm_validity(config: dict) -> dict:
 
 def _refined(config: dict) -> dict:
     """``config`` with the FE mesh refined twice."""
-    mesh = dataclasses.asdict(_mesh(config))
+    mesh = dataclasses.asdict(case_mesh(config))
     mesh["elements_per_link"] = [2 * n for n in mesh["elements_per_link"]]
     return dict(config, plant=dict(config["plant"], mesh=mesh))
 
 
 def _mesh_text(config: dict) -> str:
-    m = _mesh(config)
+    m = case_mesh(config)
     return f"{m.element} {m.elements_per_link[0]}+{m.elements_per_link[1]}"
 
 
