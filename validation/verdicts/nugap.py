@@ -316,8 +316,7 @@ def _inverse_sqrt(W: np.ndarray) -> np.ndarray:
 
 
 # --- the frequency grid -------------------------------------------------------------------
-def _grid(poles: np.ndarray, discrete: bool, period: float | None,
-          points_per_decade: int) -> np.ndarray:
+def _grid(poles: np.ndarray, discrete: bool, points_per_decade: int) -> np.ndarray:
     """ω (rad/s) or θ (rad/sample) grid of the module docstring, sorted, with 0 and the
     end of the axis (∞, or π)."""
     poles = poles[np.isfinite(poles)]
@@ -397,7 +396,7 @@ def gap_detail(P1, P2, *, points_per_decade: int = POINTS_PER_DECADE) -> GapDeta
     G1, G2 = _graph_symbol(P1, discrete), _graph_symbol(P2, discrete)
     poles = np.concatenate([np.linalg.eigvals(P.A) if P.nstates else [] for P in (P1, P2)]
                            + [G1.poles, G2.poles]).astype(complex)
-    w = _grid(poles, discrete, period, points_per_decade)
+    w = _grid(poles, discrete, points_per_decade)
 
     def kappa_and_det(x):
         g1, g2 = G1(x), G2(x)
@@ -506,7 +505,7 @@ def margin_detail(P, C, *, points_per_decade: int = POINTS_PER_DECADE) -> Margin
     if not stable:
         return MarginDetail(0.0, False, math.nan, np.zeros(0), np.zeros(0))
     H = _Realisation(A, B, Cm, D, discrete)
-    w = _grid(poles.astype(complex), discrete, period, points_per_decade)
+    w = _grid(poles.astype(complex), discrete, points_per_decade)
 
     def gain(x):
         return np.linalg.svd(H(x), compute_uv=False)[:, 0]
