@@ -308,19 +308,64 @@ def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arm
     return 0
 
 
-def cmd_stability(args: argparse.Namespace) -> int:
+def _stability_scenarios(args: argparse.Namespace) -> tuple[list, list | None, list | None]:
+    """(scenarios, plants, arms) of `flexarm stability`/`validity FILE`: a single scenario
+    on both plants and both arms (unless --plant/--arm), or every run of a campaign."""
     from .batch.campaign import expand, load_study
-    study = load_study(args.file)
-    scenarios = [r.scenario for r in expand(study)]
-    if len(scenarios) == 1:  # one scenario: its laws on both plants and both arms
-        plants, arms = args.plant or list(PLANTS), args.arm or list(ARMS)
-    else:
-        plants, arms = args.plant, args.arm
+    scenarios = [r.scenario for r in expand(load_study(args.file))]
+    if len(scenarios) == 1:
+        return scenarios, args.plant or list(PLANTS), args.arm or list(ARMS)
+    return scenarios, args.plant, args.arm
+
+
+def cmd_stability(args: argparse.Namespace) -> int:
+    scenarios, plants, arms = _stability_scenarios(args)
     out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
     runner = _runner(args)
     with runner:
         return _stability(runner, scenarios, out, progress=not args.no_progress,
                           plants=plants, arms=arms)
+
+
+def _stability_folder(args, out: Path) -> Path | None:
+    """The stability map whose measurements `flexarm validity` joins: --stability, else
+    OUT/stability, else OUT itself if it holds one, else none."""
+    if args.stability:
+        store = ResultStore(args.stability)
+        if not store.exists():
+            raise StoreError(f"--stability {args.stability}: not a results folder "
+                             "(no index.sqlite)")
+        return store.out
+    for folder in (out / "stability", out):
+        if ResultStore(folder).exists() and ResultStore(folder).rows(where="sweep = 'stability'"):
+            return folder
+    return None
+
+
+def cmd_validity(args: argparse.Namespace) -> int:
+    from .verdicts.stability import cases_from_scenarios
+    from .verdicts.validity import validity_analysis, write_validity
+    scenarios, plants, arms = _stability_scenarios(args)
+    cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
+    out = Path(args.out or Path("results") / f"validity-{Path(args.file).stem}")
+    stability = _stability_folder(args, out)
+    folder = out / "validity"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise StoreError(f"--out {out}: cannot write ({exc.strerror or exc})") from None
+
+    def progress(row):
+        if not args.no_progress:
+            print(f"  {row['case']} · {row['plant']} · {row['arm']}: predicted "
+                  f"{1e3 * row['predicted_s']:.4g} ms, certified {1e3 * row['certified_s']:.3g} ms "
+                  f"({row['seconds']:.1f} s)", flush=True)
+    print(f"linear validity of {len(cases)} cases"
+          + (f", measured map: {stability}" if stability else ", no measured stability map"))
+    data = validity_analysis(cases, stability_dir=stability, progress=progress)
+    print(write_validity(data, folder))
+    print(f"validity: {folder / 'validity.md'}, validity.csv, nugap.csv, validity.json, figures/")
+    return 0
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -553,6 +598,22 @@ def build_parser() -> argparse.ArgumentParser:
                       help="arm(s) to test (default: both for a scenario, the campaign's own)")
     _add_execution(stab)
     stab.set_defaults(func=cmd_stability)
+
+    val = sub.add_parser("validity", help="is the reduced model good enough for control: "
+                                          "frequency responses, ν-gap, predicted and "
+                                          "certified stable control periods")
+    val.add_argument("file", metavar="SCENARIO_OR_CAMPAIGN.toml")
+    val.add_argument("--out", metavar="DIR",
+                     help="results folder; writes DIR/validity (default "
+                          "results/validity-<file name>)")
+    val.add_argument("--stability", metavar="DIR",
+                     help="stability map to compare with (default: DIR/stability or DIR)")
+    val.add_argument("--plant", action="append", choices=PLANTS,
+                     help="plant(s) (default: both for a scenario, the campaign's own)")
+    val.add_argument("--arm", action="append", choices=tuple(ARMS),
+                     help="arm(s) (default: both for a scenario, the campaign's own)")
+    val.add_argument("--no-progress", action="store_true", help="no line per case")
+    val.set_defaults(func=cmd_validity)
 
     exp = sub.add_parser("export", help="write metrics.csv and manifest.json from the index")
     exp.add_argument("results", metavar="RESULTS_DIR")

@@ -442,7 +442,7 @@ def stability_chart(results) -> bytes:
     ax.plot([], [], "o", color="seagreen", label="stable")
     ax.plot([], [], "x", color="crimson", mew=2, label="diverged or lost tracking")
     ax.plot([], [], "|", color="k", ms=10, mew=2, label="largest stable Ts")
-    ax.plot([], [], "D", color="0.5", mfc="none", label="predicted 2/λmax(W G)")
+    ax.plot([], [], "D", color="0.5", mfc="none", label="predicted (ZOH eigenvalues)")
     fig.legend(fontsize=7, loc="outside upper center", ncol=4)
     ax.set_title("sampled-data stability map (case · plant · arm; dotted: Ts = 1 ms)", fontsize=10)
     return png(fig)

@@ -6,7 +6,8 @@ figures embedded, no network) and ``report/report.md`` (figures in ``report/figu
 plus ``report/arm.gif``.  Sections: what was run; the paper's claims (if the folder holds
 the paper's system); the sampled-data stability map (if ``stability/`` holds one);
 estimation against the measurement; runs; metrics; the paper's figures; sweeps; the
-reduced model's validity map; the animation.  Runs whose file fails verification or that
+reduced model's validity map (with the linear analysis of ``validity/`` if `flexarm
+validity` wrote one); the animation.  Runs whose file fails verification or that
 were made by other code are left out and named.
 """
 from __future__ import annotations
@@ -20,11 +21,13 @@ from pathlib import Path
 from reduced_model import ArmParameters
 
 from . import figures as fig
+from . import linear_figures
 from ..batch.fingerprint import run_fingerprint
 from .render import fmt_number, render
 from ..run.results import write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
+from ..verdicts.validity import gap_rows, load_validity, table_rows
 
 __all__ = ["write_report", "report_data"]
 
@@ -63,6 +66,7 @@ class ReportData:
     notes: dict = field(default_factory=dict)
     animation: dict | None = None
     attribution: list = field(default_factory=list)
+    validity: dict | None = None
 
 
 def _table(head: list[str], rows: list[list], classes: list[str] | None = None) -> dict:
@@ -247,6 +251,12 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
             by_sweep.setdefault(r.sweep, []).append(r)
     for sweep, rs in by_sweep.items():
         tasks.append(("Sweeps", None, lambda sweep=sweep, rs=rs: fig.sweep_figures(sweep, rs)))
+    validity = load_validity(store.out / "validity")
+    if validity:
+        data.validity = {"cases": _table(*table_rows(validity)),
+                         "gaps": _table(*gap_rows(validity))}
+        tasks.append(("Validity of the reduced model", None,
+                      lambda: linear_figures.validity_figures(validity)))
     for arm in arms:
         example = next(r for r in runs if r.config.get("arm", "default") == arm)
         params = ArmParameters.from_mapping(example.config["true_params"])

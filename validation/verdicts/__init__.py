@@ -1,1 +1,2 @@
-"""Verdicts: the paper's claims, the sampled-data stability map, attribution and regression bounds."""
+"""Verdicts: the paper's claims, the sampled-data stability map, attribution, regression
+bounds, and the reduced model's linear validity (ν-gap, predicted and certified stability)."""

@@ -11,13 +11,10 @@ its second half ≤ `TRACKING_LIMIT` (0.1 rad, five times the paper's 0.02 rad y
 a loop that rings up slowly is caught even if it has not crossed the divergence bounds).
 Runs start moving with the reference (no start-up kick) and last `DURATION` seconds.
 
-The *predicted* limit explains what the map finds for the built-in joint-space laws: a
-sampled rate feedback −G θ̇ on a plant of instantaneous mobility W (the joint block of
-M⁻¹, flexible coupling included) is stable only if Ts·λ_max(W G) < 2, the stability
-bound of the explicit Euler step it amounts to.  The joint-2 mobility of the paper's
-Table-1 arm is 920 rad/(N m s²) — the motor-2 reaction acts on the link-1 tip, which has
-almost no rotary inertia — against 91 with a 0.01 kg m² stator; G is K_d for PD,
-M_θθ K_d for computed torque, M_θθ Λ + K_v for the PBC.
+The *predicted* limit is the exact zero-order-hold eigenvalue analysis of the case's own
+linearised sampled loop (`validation.verdicts.sampled`): the law linearised from its
+object (every gain it applies) at points of the reference, the plant linearised there —
+the reduced model, or the FE arm with the case's mesh.
 """
 from __future__ import annotations
 
@@ -26,16 +23,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..run._config import ConfigError
 from ..batch.campaign import PlannedRun, run_campaign, Campaign
 from ..batch.executor import Runner
-from ..run.laws import nominal_model
 from ..run.scenario import (arm_parameters, scenario_from_mapping, scenario_to_mapping,
                             with_plant)
 from ..batch.store import ResultStore, run_id
+from .sampled import predicted_period
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "StabilityCase", "StabilityResult",
-           "cases_from_scenarios", "stability_map", "load_stability", "predicted_limit",
+           "cases_from_scenarios", "stability_map", "load_stability",
            "is_stable", "stability_rows", "write_stability"]
 
 GRID = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
@@ -96,7 +92,9 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
                 label = _label(base)
                 key = (label, _options_key(base), plant, arm)
                 base["name"] = f"stability/{label}"
-                cases.setdefault(key, StabilityCase(label, plant, arm, base))
+                if key not in cases:  # resolved: every setting of its plant written out
+                    resolved = scenario_to_mapping(scenario_from_mapping(base))
+                    cases[key] = StabilityCase(label, plant, arm, resolved)
     return list(cases.values())
 
 
@@ -167,7 +165,7 @@ def _result(case: StabilityCase, tested: dict) -> StabilityResult:
     lo, hi = _bracket(tested)
     reason = tested[hi][1] if not math.isnan(hi) else ""
     return StabilityResult(case, dict(sorted(tested.items())), lo, hi, reason,
-                           predicted_limit(case.base))
+                           predicted_period(case.base))
 
 
 def load_stability(out, *, fresh_only: bool = False) -> list[StabilityResult]:
@@ -197,33 +195,6 @@ def _bracket(tested: dict[float, tuple[bool, str]]) -> tuple[float, float]:
             hi = Ts
             break
     return lo, hi
-
-
-def predicted_limit(config: dict) -> float:
-    """2 / λ_max(W G) for the built-in joint-space laws (module docstring); NaN else."""
-    from reduced_model import ArmParameters
-    kind, opts = config["controller"]["kind"], config["controller"].get("options", {})
-    params = ArmParameters.from_mapping(config["nominal_params"])
-    model = nominal_model(params, tuple(config["model"]["modes_per_link"]))
-    M = model.mass_matrix(np.zeros(model.n))
-    W = np.linalg.inv(M)[:2, :2]
-    Mtt = M[:2, :2]
-    try:
-        from controllers import CONTROLLERS, accepted_options
-        defaults = accepted_options(CONTROLLERS[kind]) if kind in CONTROLLERS else {}
-        get = lambda k: np.broadcast_to(np.asarray(opts.get(k, defaults[k]), float), (2,))  # noqa: E731
-        if kind == "pd":
-            G = np.diag(get("kd"))
-        elif kind == "ct":
-            G = Mtt @ np.diag(get("kd"))
-        elif kind in ("pbc", "pbc-idealised"):
-            G = Mtt @ np.diag(get("lambda_joint")) + np.diag(get("kv_joint"))
-        else:
-            return math.nan
-    except (KeyError, ValueError, ConfigError):
-        return math.nan
-    lam = np.max(np.abs(np.linalg.eigvals(W @ G)))
-    return float(2.0 / lam) if lam > 0 else math.inf
 
 
 def stability_rows(results: list[StabilityResult]) -> list[dict]:
