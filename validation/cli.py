@@ -351,9 +351,11 @@ def cmd_repair(args: argparse.Namespace) -> int:
     store = ResultStore(args.results)
     if not store.runs_dir.is_dir():
         raise StoreError(f"{args.results}: no runs/ folder (not a results folder)")
+    if not store.writable():
+        raise StoreError(f"{args.results}: read-only; repair rewrites the index")
     report = store.repair()
     store.remove_stale_temporaries(older_than=0.0)
-    store.export()
+    store.export(allow_fewer=True)  # what repair dropped is listed below
     for action, ids in report.items():
         print(f"{action}: {len(ids)}" + (f" ({', '.join(ids)})" if ids else ""))
     print(f"{store.out}: {len(store.rows())} runs indexed")
@@ -640,12 +642,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-#: Commands that execute scenarios (and so may import the plug-ins they name); the others
-#: only read results folders and never import a plug-in.
-_EXECUTING = {cmd_run, cmd_campaign, cmd_reproduce_paper, cmd_stability, cmd_attribute,
-              cmd_baseline_check, cmd_baseline_update}
-
-
 def main(argv: list[str] | None = None) -> int:
     try:
         with signals_interrupt():  # SIGINT/SIGTERM raise Interrupted from here on
@@ -653,8 +649,10 @@ def main(argv: list[str] | None = None) -> int:
             if getattr(args, "tier", "") is None:
                 args.tier = "full" if args.campaign else "short"
             # Plug-ins named "package.module:Class" are found like `python -m` finds
-            # modules: the current directory first (spawned workers inherit this path).
-            if args.func in _EXECUTING and os.getcwd() not in sys.path:
+            # modules: the current directory first (spawned workers inherit this path;
+            # commands that only read results locate plug-in files for the code
+            # fingerprint on the same path, without importing them).
+            if os.getcwd() not in sys.path:
                 sys.path.insert(0, os.getcwd())
             return _command(args)
     except Interrupted as exc:
@@ -677,10 +675,11 @@ def _command(args: argparse.Namespace) -> int:
         return _error("KeyboardInterrupt raised by code this command ran (a plug-in's?), "
                       "not by a Ctrl-C; stopped", EXIT_FAILED)
     except sqlite3.Error as exc:  # the store turns its own into StoreError: a last resort
-        return _error(f"{getattr(args, 'results', None) or getattr(args, 'out', None) or 'the index'}"
-                      f": the index cannot be used ({exc})", EXIT_FAILED)
+        where = getattr(args, "out", None) or getattr(args, "results", None) or "the index"
+        return _error(f"{where}: the index cannot be used ({exc})", EXIT_FAILED)
     except OSError as exc:
-        where = exc.filename or getattr(args, "out", None) or "the results folder"
+        where = exc.filename or getattr(args, "out", None) or getattr(args, "results", None) \
+            or "the results folder"
         reason = "no space left on the device" if exc.errno == errno.ENOSPC else \
             (exc.strerror or str(exc))
         return _error(f"{where}: {reason}", EXIT_FAILED)
