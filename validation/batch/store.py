@@ -538,10 +538,25 @@ class ResultStore:
 
     def export(self, *, allow_fewer: bool = False) -> tuple[Path, Path]:
         """Write metrics.csv (one row per run: identity, what was run, swept values,
-        status, every metric) and manifest.json from the index.  An index that lacks runs
-        the previous export listed (a damaged index reads as fewer runs) is refused
-        (StoreError, the old export kept) unless ``allow_fewer`` (after `repair`, which
-        says what it dropped)."""
+        status, every metric) and manifest.json from the index, holding its write lock
+        (of two processes exporting at once, the later one reads every row the earlier
+        one wrote).  An index that lacks runs the previous export listed (a damaged
+        index reads as fewer runs) is refused (StoreError, the old export kept) unless
+        ``allow_fewer`` (after `repair`, which says what it dropped)."""
+        db = self._connect(create=False)
+        if not self.writable():
+            raise StoreError(f"{self.out}: read-only, metrics.csv and manifest.json cannot "
+                             "be written here")
+        try:
+            db.execute("BEGIN IMMEDIATE")
+        except sqlite3.Error as exc:
+            raise self._error(exc) from None
+        try:
+            return self._export(allow_fewer)
+        finally:
+            db.execute("ROLLBACK")  # nothing was written to the index
+
+    def _export(self, allow_fewer: bool) -> tuple[Path, Path]:
         rows = self.rows()
         csv_path, json_path = self.out / "metrics.csv", self.out / "manifest.json"
         if not allow_fewer:
@@ -560,9 +575,6 @@ class ResultStore:
         writer.writeheader()
         for r in table:
             writer.writerow({k: _format(v) for k, v in r.items()})
-        if not self.writable():
-            raise StoreError(f"{self.out}: read-only, metrics.csv and manifest.json cannot "
-                             "be written here")
         write_atomic(csv_path, lambda fh: fh.write(buf.getvalue()))
         manifest = {"campaigns": self.campaigns(), "runs": {
             r.run_id: {"name": r.name, "campaign": r.campaign, "sweep": r.sweep,
