@@ -237,7 +237,7 @@ class LocalPoolRunner(Runner):
                 pass  # died while sending
             elapsed = time.monotonic() - w.started
             w.kill()
-            message = f"{_death(w.process.exitcode)}, {elapsed:.3g} s after it started"
+            message = f"{_death(w.process.exitcode)}, {elapsed:.3g} s after the run started"
         elif time.monotonic() >= w.deadline:
             w.kill()
             message = f"no result after {w.timeout:g} s (the run was stopped; " \
@@ -281,7 +281,8 @@ class DaskRunner(Runner):
     when it is submitted: a run without a result ``run_timeout`` after its submission
     (default `limits.default_run_timeout`) is recorded as failed and cancelled, and the
     Dask worker running it restarted (if it has a nanny).  The workers' memory limit is
-    the cluster's own (``dask worker --memory-limit``)."""
+    the cluster's own (``dask worker --memory-limit``).  Every worker loads the
+    simulation code and its kernels when the runner starts."""
 
     def __init__(self, address: str, timeout: float = 10.0, *,
                  run_timeout: float | None = None) -> None:
@@ -304,6 +305,8 @@ class DaskRunner(Runner):
         self.client, self.run_timeout = client, run_timeout
         self.workers = max(1, sum(w.get("nthreads", 1) for w in
                                   client.scheduler_info()["workers"].values()))
+        from .worker import warm_up
+        client.run(warm_up)  # load the kernels now: not within the first runs' limits
 
     def results(self, tasks):
         from distributed import wait

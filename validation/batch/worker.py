@@ -11,6 +11,7 @@ import ctypes
 import functools
 import signal
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -80,16 +81,21 @@ def execute_run(scenario) -> tuple[RunResult, dict]:
     from ..run.metrics import all_metrics
     from ..run.scenario import Scenario, scenario_from_mapping
     keep_freed_memory()
+    started = time.perf_counter()
     try:
         if not isinstance(scenario, Scenario):
             scenario = scenario_from_mapping(scenario)
         result = run_scenario(scenario)
-        metrics = all_metrics(result)
+        # A diverged run's last samples may be huge: their squares overflow to inf and
+        # beyond float32 they are stored as inf, as they should; no warning to print.
+        with np.errstate(over="ignore", invalid="ignore"):
+            metrics = all_metrics(result)
+            result.signals = result.signals.astype(np.float32)
     except (Exception, SystemExit, KeyboardInterrupt) as exc:  # noqa: BLE001 - the run's failure
-        return failed_result(scenario, _over_memory(describe(exc)))
+        return failed_result(scenario, _over_memory(
+            f"{describe(exc)}, {time.perf_counter() - started:.3g} s after the run started"))
     if result.status == "failed":
         result.message = _over_memory(result.message)
-    result.signals = result.signals.astype(np.float32)
     return result, metrics
 
 
