@@ -15,6 +15,7 @@ import time
 
 import pytest
 
+from campaign_testing import wait_gone
 from validation.batch.store import ResultStore
 
 FAULTS = textwrap.dedent('''
@@ -90,18 +91,6 @@ def campaign_text() -> str:
         name = "good-after"
         grid.seed = {list(range(GOOD_RUNS // 2, GOOD_RUNS))}
     ''')
-
-
-def wait_gone(group: int, timeout: float = 10.0) -> bool:
-    """Whether every process of process group ``group`` has ended within ``timeout``."""
-    deadline = time.time() + timeout
-    while time.time() < deadline:
-        try:
-            os.killpg(group, 0)
-        except ProcessLookupError:
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def flexarm(cwd, *args, **kw):
