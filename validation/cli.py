@@ -202,9 +202,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_run_name(scenario.name, "name")
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
-    store = open_output(args.out or Path("results") / f"run-{rid}")
     with make_runner("local", 1, run_timeout=args.run_timeout,
                      memory_limit=args.memory_limit) as runner:  # a worker process
+        store = open_output(args.out or Path("results") / f"run-{rid}")
         (_, result, metrics), = runner.results([(rid, scenario)])
     path = store.add(rid, result, metrics)
     store.export()

@@ -9,7 +9,7 @@ internal step × steps)``, the plant's cost being 0.1 ms per step for the reduce
 2+2-mode reduced run with compiled laws, 100 µs with a Python plug-in law or the 4+4
 EKF; Exudyn 0.31, 0.68 and 2.1 ms per step with 8, 32 and 128 ANCF elements), and the
 factor 10 covers a machine that is slower or busy: no healthy run comes near its limit
-(a 20 s paper run on the truth plant: 5 s measured, limit 7 min; a 0.5 s reduced run:
+(a 20 s paper run on the truth plant: 5 s measured, limit 358 s; a 0.5 s reduced run:
 0.01 s measured, limit 66 s).
 
 The default memory limit of a worker is three quarters of the machine's memory (or of
