@@ -229,8 +229,8 @@ def _runner(args):
 def _finish(summary, name: str, out) -> int:
     print(summary.line(name, out))
     if summary.interrupted:
-        print(f"interrupted ({summary.done} finished runs kept): rerun the same command to "
-              "resume", file=sys.stderr)
+        print(f"flexarm: interrupted ({summary.done} finished runs kept): rerun the same "
+              "command to resume", file=sys.stderr)
         return exit_status(summary.interrupted)
     return EXIT_FAILED if summary.any_failed else 0
 

@@ -44,7 +44,9 @@ def interrupt(cwd, args, *, after: float = 0.0, once=None) -> subprocess.Complet
 def assert_interrupted(done):
     assert done.returncode == 130, done.stderr
     assert "Traceback" not in done.stderr + done.stdout, done.stderr
-    assert done.stderr.strip().splitlines()[-1] == "flexarm: interrupted", done.stderr
+    lines = done.stderr.strip().splitlines()
+    # "flexarm: interrupted", and from a campaign how many finished runs it kept.
+    assert len(lines) <= 2 and lines[-1].startswith("flexarm: interrupted"), done.stderr
 
 
 @pytest.fixture()

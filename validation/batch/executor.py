@@ -185,29 +185,15 @@ class LocalPoolRunner(Runner):
         return w
 
     def results(self, tasks):
-        tasks = iter(tasks)
         with signals_interrupt():
             try:
-                yield from self._results(tasks)
+                yield from self._results(iter(tasks))
             finally:  # left early (an error or a signal): end the runs still in flight
                 self._kill_busy()
 
     def _results(self, tasks):
-        pending = True
+        pending = self._dispatch(tasks, True)
         while True:
-            for i in range(self.workers):
-                if not pending:
-                    break
-                if self._pool[i] is not None and self._pool[i].task is not None:
-                    continue
-                task = next(tasks, None)
-                if task is None:
-                    pending = False
-                    break
-                timeout = _run_timeout(task[1], self.run_timeout)
-                while not self._worker(i).give(task, timeout):
-                    self._pool[i].kill()  # died while idle: a new one takes the run
-                    self._pool[i] = None
             busy = [w for w in self._pool if w is not None and w.task is not None]
             if not busy:
                 return
@@ -218,10 +204,27 @@ class LocalPoolRunner(Runner):
             except Interrupted:
                 yield from self._finished(busy)  # keep what finished before the signal
                 raise
-            for w in busy:
-                outcome = self._outcome(w, ready)
-                if outcome is not None:
-                    yield outcome
+            outcomes = [o for o in (self._outcome(w, ready) for w in busy) if o is not None]
+            # The next runs start before the caller stores these: it stores while they run.
+            pending = self._dispatch(tasks, pending)
+            yield from outcomes
+
+    def _dispatch(self, tasks, pending: bool) -> bool:
+        """Give each idle worker its next task (a new worker if it died while idle);
+        whether tasks remain."""
+        for i in range(self.workers):
+            if not pending:
+                break
+            if self._pool[i] is not None and self._pool[i].task is not None:
+                continue
+            task = next(tasks, None)
+            if task is None:
+                return False
+            timeout = _run_timeout(task[1], self.run_timeout)
+            while not self._worker(i).give(task, timeout):
+                self._pool[i].kill()  # died while idle: a new one takes the run
+                self._pool[i] = None
+        return pending
 
     def _outcome(self, w: _Worker, ready) -> tuple | None:
         """The result of ``w``'s run if it has one: what the worker sent, or a failed

@@ -137,6 +137,7 @@ def kernels_cached() -> bool:
         "_sample.run_reduced-*.nbi"))
 
 
+@functools.cache  # once per process: every runner it starts forks from the same state
 def warm_up() -> None:
     """Compile or load every kernel a run uses: the reduced loop with the built-in laws
     and an observer, and the Exudyn plant's readout."""
