@@ -35,14 +35,11 @@ from multiprocessing import connection
 
 from ..run._config import ConfigError, check
 from .limits import MIN_MEMORY_MIB, default_memory_limit, default_run_timeout
+from .threads import ONE_THREAD
 from .worker import execute_run, failed_result, keep_freed_memory, serve
 
 __all__ = ["Runner", "SerialRunner", "LocalPoolRunner", "DaskRunner", "make_runner",
-           "Interrupted", "available_cores", "exit_status"]
-
-#: Environment that keeps numerical libraries to one thread in each worker.
-_ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                      "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
+           "Interrupted", "available_cores", "exit_status", "compile_for"]
 
 
 class Interrupted(BaseException):
@@ -180,7 +177,7 @@ class LocalPoolRunner(Runner):
         if w is None or (w.task is None and not w.process.is_alive()):
             if w is not None:
                 w.kill()
-            with _environment(_ONE_THREAD):
+            with _environment(ONE_THREAD):
                 w = self._pool[i] = _Worker(self._ctx, self.memory_limit, self._warm)
         return w
 
@@ -394,10 +391,6 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
         check(memory_limit is None or memory_limit >= MIN_MEMORY_MIB, "--memory-limit",
               f"must be >= {MIN_MEMORY_MIB} MiB (an idle worker takes ~650 MiB of address "
               f"space), got {memory_limit}")
-        from .worker import kernels_cached
-        if not kernels_cached():
-            print("compiling the simulation kernels: once per machine, a minute or two ...",
-                  file=sys.stderr, flush=True)
         return LocalPoolRunner(workers, run_timeout=run_timeout, memory_limit=memory_limit)
     if kind == "dask":
         address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
@@ -408,6 +401,41 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
                                                       "(dask worker --memory-limit)")
         return DaskRunner(address, run_timeout=run_timeout)
     raise ConfigError("--executor", f"must be 'local' or 'dask', got {kind!r}")
+
+
+def compile_for(scenarios, *, report=None) -> None:
+    """Compile or load the kernels the runs of ``scenarios`` use (`worker.compile_kernels`,
+    ``report`` told of each slow group) before their workers start, so that compiling is
+    never counted in a run's time limit.  Compiling executes two samples of each run: with
+    a plug-in law (whose code may exit or crash) that happens in a child process, and
+    numba's cache hands the kernels on; built-in laws compile here."""
+    from .worker import compile_kernels
+    if not any(":" in kind for s in scenarios for kind in (s.controller.kind, s.observer.kind)):
+        compile_kernels(scenarios, report=report)
+        return
+    child = multiprocessing.get_context("fork" if "fork" in multiprocessing
+                                        .get_all_start_methods() else "spawn").Process(
+        target=_compile_in_child, args=(os.getpid(), scenarios, report is not None),
+        name="flexarm-compile", daemon=True)
+    child.start()
+    try:
+        child.join()
+    finally:
+        if child.is_alive():
+            child.kill()
+            child.join()
+
+
+def _compile_in_child(parent: int, scenarios, report: bool) -> None:
+    from .limits import die_with_parent
+    from .worker import compile_kernels
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides
+    die_with_parent(parent)
+    try:
+        compile_kernels(scenarios, report=(lambda line: print(line, file=sys.stderr,
+                                                              flush=True)) if report else None)
+    except BaseException:  # noqa: BLE001 - the run itself will fail and say why
+        pass
 
 
 @contextmanager

@@ -216,9 +216,15 @@ class ResultStore:
                 raise sqlite3.DatabaseError("the index holds no table of runs")
             db.executescript(_SCHEMA)
             db.execute("INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (str(_SCHEMA_VERSION),))
+            (schema,) = db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
         except BaseException:
             db.close()
             raise
+        if schema != str(_SCHEMA_VERSION):
+            db.close()
+            raise StoreError(f"{self.index_path}: index schema {schema}, this version reads "
+                             f"{_SCHEMA_VERSION}; 'flexarm repair {self.out}' rebuilds the index "
+                             "from the run files")
         return db
 
     def _open_read_only(self) -> sqlite3.Connection:

@@ -2,9 +2,9 @@
 exception (`execute_run`); the loop of a worker process (`serve`); and what a worker
 needs before it runs anything: the simulation code (models, plants, laws, the closed
 loop, metrics) loaded and its kernels compiled — not the command line and not
-matplotlib.  `warm_up` runs two tiny scenarios in the parent before the workers are
-forked, so numba compiles (first use on a machine) or loads (from its cache) each kernel
-once, not once per worker."""
+matplotlib.  `warm_up` compiles or loads the kernels the runs need in the parent before
+the workers are forked, so numba compiles (first use in a checkout) or loads (from its
+cache) each kernel once, not once per worker."""
 from __future__ import annotations
 
 import ctypes
@@ -12,7 +12,6 @@ import functools
 import signal
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -20,7 +19,7 @@ from ..run import loop, metrics  # noqa: F401 - loaded once, before the fork
 from ..run.results import RunResult
 
 __all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "serve",
-           "warm_up", "kernels_cached"]
+           "warm_up", "kernel_groups", "compile_kernels"]
 
 #: The memory limit this process runs under [MiB] (set by `worker_init`; None: none).
 _memory_limit: int | None = None
@@ -130,20 +129,76 @@ def serve(conn, parent: int, memory_mib: int | None, warm: bool) -> None:
         conn.send(execute_run(task))
 
 
-def kernels_cached() -> bool:
-    """Whether numba's cache holds the compiled sample loop (else the first run on this
-    machine compiles it: a minute or two)."""
-    return any((Path(__file__).parent.parent / "run" / "__pycache__").glob(
-        "_sample.run_reduced-*.nbi"))
+def kernel_groups(scenarios) -> list[tuple[str, object]]:
+    """The compiled code the runs of ``scenarios`` use, as (label, callable that compiles
+    or loads it) in the order a run needs them: the arm model's kernels, each distinct
+    law, the closed loop on each plant (the sample kernels, the FE plant's readout).
+    Each piece is compiled once per checkout (numba's cache) and loaded in well under a
+    second afterwards."""
+    from controllers import compiled_form
+    from reduced_model import ReducedPlant
+
+    from ..run.laws import build_controller, build_observer, nominal_model
+
+    def model_kernels():
+        plant = ReducedPlant()
+        plant.reset()
+        plant.step([0.0, 0.0], plant.h)
+        plant.truth_vector()
+
+    groups, seen = [("arm model (M, C, RK4, kinematics)", model_kernels)], set()
+    for s in scenarios:
+        model = nominal_model(s.nominal_params, s.model.modes_per_link)
+        for role, spec, build in (("controller", s.controller, build_controller),
+                                  ("observer", s.observer, build_observer)):
+            key = (role, spec.kind)
+            if spec.kind == "none" or key in seen:
+                continue
+            seen.add(key)
+            groups.append((f"{role} {spec.kind}", lambda b=build, s=s, m=model, r=role:
+                           compiled_form(b(s, m), r, s.Ts)))
+    for plant in sorted({s.plant.kind for s in scenarios}):
+        example = next(s for s in scenarios if s.plant.kind == plant)
+        groups.append((f"closed loop on the {plant} plant", lambda e=example: _short_run(e)))
+    return groups
+
+
+def _short_run(scenario) -> None:
+    """Two samples of ``scenario`` (compiles what its loop needs)."""
+    from ..run.loop import run_scenario
+    from ..run.scenario import scenario_from_mapping, scenario_to_mapping
+    data = scenario_to_mapping(scenario)
+    data.update(duration=(scenario.sensors.delay + 2) * scenario.Ts, transient=0.0)
+    run_scenario(scenario_from_mapping(data))
+
+
+def compile_kernels(scenarios, *, report=None) -> float:
+    """Compile or load every kernel the runs of ``scenarios`` use (`kernel_groups`),
+    telling ``report`` (a callable taking a line) about each group that took more than
+    half a second; returns the seconds spent."""
+    total = 0.0
+    for label, build in kernel_groups(scenarios):
+        t0 = time.perf_counter()
+        build()
+        spent = time.perf_counter() - t0
+        total += spent
+        if report is not None and spent > 0.5:
+            report(f"compiled {label} in {spent:.1f} s (once per checkout)")
+    return total
+
+
+def warm_up(scenarios=None) -> None:
+    """Compile or load every kernel the runs of ``scenarios`` use (default: the PBC with
+    the paper's SMO on both plants), here in the parent before the workers fork."""
+    if scenarios is None:
+        _warm_up_default()
+    else:
+        compile_kernels(scenarios)
 
 
 @functools.cache  # once per process: every runner it starts forks from the same state
-def warm_up() -> None:
-    """Compile or load every kernel a run uses: the reduced loop with the built-in laws
-    and an observer, and the Exudyn plant's readout."""
-    from ..run.loop import run_scenario
+def _warm_up_default() -> None:
     from ..run.scenario import scenario_from_mapping
-    for plant in ("reduced", "exudyn"):
-        run_scenario(scenario_from_mapping({"duration": 0.002, "transient": 0.0,
-                                            "plant": {"kind": plant},
-                                            "observer": {"kind": "smo-paper"}}))
+    compile_kernels([scenario_from_mapping({"plant": {"kind": plant},
+                                            "observer": {"kind": "smo-paper"}})
+                     for plant in ("reduced", "exudyn")])
