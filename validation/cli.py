@@ -208,10 +208,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_run_name(scenario.name, "name")
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
+    compile_for([scenario], report=_report_line)  # before its worker forks from here
     with make_runner("local", 1, run_timeout=args.run_timeout,
                      memory_limit=args.memory_limit) as runner:  # a worker process
         store = open_output(args.out or Path("results") / f"run-{rid}")
-        compile_for([scenario], report=lambda line: print(line, file=sys.stderr, flush=True))
         (_, result, metrics), = runner.results([(rid, scenario)])
     path = store.add(rid, result, metrics)
     store.export()
@@ -224,6 +224,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     print(format_metrics(metrics))
     print(f"results: {path} (index and metrics.csv in {store.out})")
     return 0 if result.status != "failed" else EXIT_FAILED
+
+
+def _report_line(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
 
 
 # --- campaigns ----------------------------------------------------------------------------
@@ -259,6 +263,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         print(f"{len(runs)} runs planned: {len(todo)} to run, {len(runs) - len(todo)} already "
               f"stored in {out}")
         return 0
+    compile_for([r.scenario for r in runs], report=_report_line)
     runner = _runner(args)
     with runner:
         open_output(out)

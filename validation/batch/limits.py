@@ -31,7 +31,7 @@ __all__ = ["default_run_timeout", "default_memory_limit", "machine_memory",
            "limit_memory", "die_with_parent", "MIN_MEMORY_MIB"]
 
 #: Wall time every run may take before its first sample (building the laws, Exudyn
-#: assembling its mesh) [s].
+#: assembling its mesh, a worker compiling a kernel on its first use in a checkout) [s].
 RUN_TIMEOUT_BASE = 60.0
 #: How many times the pessimistic estimate of a run's wall time its limit is.
 RUN_TIMEOUT_FACTOR = 10.0
