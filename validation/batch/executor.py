@@ -189,7 +189,8 @@ class LocalPoolRunner(Runner):
                 self._kill_busy()
 
     def _results(self, tasks):
-        pending = self._dispatch(tasks, True)
+        pending, unstarted = self._dispatch(tasks, True)
+        yield from unstarted
         while True:
             busy = [w for w in self._pool if w is not None and w.task is not None]
             if not busy:
@@ -203,12 +204,15 @@ class LocalPoolRunner(Runner):
                 raise
             outcomes = [o for o in (self._outcome(w, ready) for w in busy) if o is not None]
             # The next runs start before the caller stores these: it stores while they run.
-            pending = self._dispatch(tasks, pending)
+            pending, unstarted = self._dispatch(tasks, pending)
             yield from outcomes
+            yield from unstarted
 
-    def _dispatch(self, tasks, pending: bool) -> bool:
-        """Give each idle worker its next task (a new worker if it died while idle);
-        whether tasks remain."""
+    def _dispatch(self, tasks, pending: bool) -> tuple[bool, list]:
+        """Give each idle worker its next task (a new worker if it died while idle):
+        whether tasks remain, and the failed results of tasks no new worker would take
+        (one that dies as it starts)."""
+        unstarted = []
         for i in range(self.workers):
             if not pending:
                 break
@@ -216,12 +220,17 @@ class LocalPoolRunner(Runner):
                 continue
             task = next(tasks, None)
             if task is None:
-                return False
+                return False, unstarted
             timeout = _run_timeout(task[1], self.run_timeout)
-            while not self._worker(i).give(task, timeout):
+            for _ in range(2):
+                if self._worker(i).give(task, timeout):
+                    break
                 self._pool[i].kill()  # died while idle: a new one takes the run
                 self._pool[i] = None
-        return pending
+            else:
+                unstarted.append((task[0], *failed_result(
+                    task[1], "no worker process could be started for the run")))
+        return pending, unstarted
 
     def _outcome(self, w: _Worker, ready) -> tuple | None:
         """The result of ``w``'s run if it has one: what the worker sent, or a failed
