@@ -161,3 +161,17 @@ def test_exudyn_solver_failure_is_recorded_and_nothing_stray_is_written(tmp_path
     assert len(rows) == 2 and len(failed) == 1 and failed[0].name == "health/fails"
     assert "Exudyn solver failed" in failed[0].message
     assert os.listdir(work) == []  # no solution/ or other Exudyn files in the working dir
+
+
+def test_a_diverged_run_prints_no_numpy_warnings(tmp_path):
+    """Gains of 1e300 overflow the metrics' squares and the float32 store: the run is
+    "diverged", its metrics inf or nan, and nothing but the report is printed."""
+    done = subprocess.run([sys.executable, "-m", "validation.cli", "run", "--controller", "pd",
+                           "--set", "controller.options.kp=[1e300, 1e300]", "--duration", "1",
+                           "--set", "transient=0.5", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert "diverged: " in done.stdout
+    assert "Warning" not in done.stderr + done.stdout, done.stderr
+    (row,) = ResultStore(tmp_path / "out").rows()
+    assert row.status == "diverged"

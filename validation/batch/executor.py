@@ -33,7 +33,8 @@ from contextlib import contextmanager
 from multiprocessing import connection
 
 from ..run._config import ConfigError, check
-from .limits import MIN_MEMORY_MIB, default_memory_limit, default_run_timeout
+from .limits import (MIN_MEMORY_MIB, RUN_TIMEOUT_BASE, default_memory_limit,
+                     default_run_timeout)
 from .threads import ONE_THREAD
 from .worker import execute_run, failed_result, keep_freed_memory, serve
 
@@ -91,7 +92,11 @@ def _run_timeout(data, run_timeout: float | None) -> float:
     if run_timeout is not None:
         return run_timeout
     from ..run.scenario import Scenario, scenario_from_mapping
-    return default_run_timeout(data if isinstance(data, Scenario) else scenario_from_mapping(data))
+    try:
+        scenario = data if isinstance(data, Scenario) else scenario_from_mapping(data)
+    except ValueError:  # a mapping that is no scenario: its worker says so at once
+        return RUN_TIMEOUT_BASE
+    return default_run_timeout(scenario)
 
 
 def _death(exitcode: int | None) -> str:
