@@ -6,8 +6,6 @@ workers.
 
 One campaign holds every fault and is run once per worker count (module fixtures); each
 fault is then its own test on the stored results."""
-import os
-import signal
 import subprocess
 import sys
 import textwrap
@@ -72,7 +70,6 @@ MEMORY_LIMIT = "2048"
 
 
 def campaign_text() -> str:
-    faults = ", ".join(f'"{f}"' for f in EXPECTED)
     names = ", ".join(f'"{f.replace("_", "").replace(".", "-")}"' for f in EXPECTED)
     return textwrap.dedent(f'''
         name = "faults"
