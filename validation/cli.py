@@ -2,11 +2,28 @@
 
 Bad input ends with one line on stderr and exit status 2, before anything is written;
 a run or campaign with failed runs exits 1; SIGINT/SIGTERM exit 130/143 after keeping
-what finished; a full disk is one line naming the folder, exit 1.  Never a traceback.
+what finished (at once, while the program is still starting); a full disk is one line
+naming the folder, exit 1.  Never a traceback, and never status 0 because code a
+command ran (a plug-in) called ``sys.exit``.
 """
 from __future__ import annotations
 
 import os
+import signal
+import sys
+
+
+def _stop_while_starting(signum, frame):
+    print("flexarm: interrupted", file=sys.stderr)
+    os._exit(128 + signum)
+
+
+# A Ctrl-C while the program imports its libraries (numpy, numba, Exudyn: a second or
+# two, nothing written yet) ends it at once, without a traceback.  Only when this module
+# is the program: importing it (tests, notebooks) leaves the handlers alone.
+if __name__ == "__main__" or os.path.basename(sys.argv[0]) == "flexarm":
+    for _signal in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(_signal, _stop_while_starting)
 
 from .batch.threads import prefer_one_thread
 
@@ -16,7 +33,7 @@ import argparse  # noqa: E402
 import dataclasses
 import errno
 import math
-import sys
+import sqlite3
 from importlib.metadata import version
 from pathlib import Path
 
@@ -25,7 +42,8 @@ import numpy as np
 from controllers import CONTROLLERS, OBSERVERS
 
 from .run._config import ConfigError
-from .batch.executor import Interrupted, available_cores, exit_status, make_runner
+from .batch.executor import (Interrupted, available_cores, compile_for, exit_status,
+                             make_runner, signals_interrupt)
 from .run.scenario import ARMS, PLANTS, Scenario, scenario_from_mapping
 from .batch.store import ResultStore, StoreError, run_id
 from .run.tomlfiles import deep_merge, load_toml, parse_value, set_dotted
@@ -136,7 +154,7 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
         key, sep, text = item.partition("=")
         if not sep or not key.strip():
             raise ConfigError("--set", f"expected KEY=VALUE, got {item!r}")
-        set_dotted(data, key.strip(), parse_value(text.strip()))
+        set_dotted(data, key.strip(), parse_value(text.strip(), key.strip()))
     return scenario_from_mapping(data)
 
 
@@ -184,14 +202,17 @@ def format_metrics(metrics: dict) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .batch.worker import compile_kernels, execute_run
+    from .batch.campaign import check_run_name
     from .run.scenario import scenario_to_mapping
     scenario = scenario_from_args(args)
+    check_run_name(scenario.name, "name")
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
-    store = open_output(args.out or Path("results") / f"run-{rid}")
-    compile_kernels([scenario], report=lambda line: print(line, file=sys.stderr, flush=True))
-    result, metrics = execute_run(scenario)
+    compile_for([scenario], report=_report_line)  # before its worker forks from here
+    with make_runner("local", 1, run_timeout=args.run_timeout,
+                     memory_limit=args.memory_limit) as runner:  # a worker process
+        store = open_output(args.out or Path("results") / f"run-{rid}")
+        (_, result, metrics), = runner.results([(rid, scenario)])
     path = store.add(rid, result, metrics)
     store.export()
     s = scenario
@@ -205,17 +226,22 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0 if result.status != "failed" else EXIT_FAILED
 
 
+def _report_line(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
 # --- campaigns ----------------------------------------------------------------------------
 def _runner(args):
     return make_runner(args.executor, args.workers, args.scheduler,
-                       force=getattr(args, "force_workers", False))
+                       force=getattr(args, "force_workers", False),
+                       run_timeout=args.run_timeout, memory_limit=args.memory_limit)
 
 
 def _finish(summary, name: str, out) -> int:
     print(summary.line(name, out))
     if summary.interrupted:
-        print(f"interrupted ({summary.done} finished runs kept): rerun the same command to "
-              "resume", file=sys.stderr)
+        print(f"flexarm: interrupted ({summary.done} finished runs kept): rerun the same "
+              "command to resume", file=sys.stderr)
         return exit_status(summary.interrupted)
     return EXIT_FAILED if summary.any_failed else 0
 
@@ -237,6 +263,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         print(f"{len(runs)} runs planned: {len(todo)} to run, {len(runs) - len(todo)} already "
               f"stored in {out}")
         return 0
+    compile_for([r.scenario for r in runs], report=_report_line)
     runner = _runner(args)
     with runner:
         open_output(out)
@@ -269,7 +296,8 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     campaign = load_campaign(campaigns_dir() / "paper.toml")
     runs = expand(campaign)
     out = Path(args.out or Path("results") / "paper")
-    runner = make_runner("local", args.workers, force=args.force_workers)
+    runner = make_runner("local", args.workers, force=args.force_workers,
+                         run_timeout=args.run_timeout, memory_limit=args.memory_limit)
     with runner:
         open_output(out)
         summary = run_campaign(campaign, out, runner=runner, progress=not args.no_progress,
@@ -379,9 +407,11 @@ def cmd_repair(args: argparse.Namespace) -> int:
     store = ResultStore(args.results)
     if not store.runs_dir.is_dir():
         raise StoreError(f"{args.results}: no runs/ folder (not a results folder)")
+    if not store.writable():
+        raise StoreError(f"{args.results}: read-only; repair rewrites the index")
     report = store.repair()
     store.remove_stale_temporaries(older_than=0.0)
-    store.export()
+    store.export(allow_fewer=True)  # what repair dropped is listed below
     for action, ids in report.items():
         print(f"{action}: {len(ids)}" + (f" ({', '.join(ids)})" if ids else ""))
     print(f"{store.out}: {len(store.rows())} runs indexed")
@@ -499,10 +529,21 @@ def cmd_baseline_update(args: argparse.Namespace) -> int:
 
 
 # --- the parser ---------------------------------------------------------------------------------
+def _add_limits(p) -> None:
+    p.add_argument("--run-timeout", type=_positive, default=None, metavar="SECONDS",
+                   help="wall-time limit of each run; a run without a result by then is "
+                        "stopped and recorded as failed (default: derived from each run's "
+                        "duration and plant, far beyond what a healthy run takes)")
+    p.add_argument("--memory-limit", type=_int_in(1, 1 << 40), default=None, metavar="MIB",
+                   help="memory limit of each worker process, MiB (default: three quarters "
+                        "of the machine's memory shared among the workers)")
+
+
 def _add_execution(p, *, dask: bool = True) -> None:
     p.add_argument("--workers", type=_int_in(1, 4096), default=None, metavar="N",
-                   help=f"parallel runs (default: the {available_cores()} cores; 1 = serial, "
-                        "in this process)")
+                   help=f"parallel runs (default: the {available_cores()} cores; 1 = one "
+                        "worker process)")
+    _add_limits(p)
     p.add_argument("--force-workers", action="store_true",
                    help="allow more workers than cores")
     if dask:
@@ -558,6 +599,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="any scenario field by dotted key, value in TOML syntax, e.g. "
                           "--set true_params.Mp=0.5 --set plant.mesh.elements_per_link=[8,8]")
     run.add_argument("--out", metavar="DIR", help="results folder (default results/run-<id>)")
+    _add_limits(run)
     run.set_defaults(func=cmd_run)
 
     camp = sub.add_parser("campaign", help="run a campaign of scenarios (resumable)")
@@ -664,27 +706,51 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    if getattr(args, "tier", "") is None:
-        args.tier = "full" if args.campaign else "short"
-    # Plug-ins named "package.module:Class" are found like `python -m` finds modules: the
-    # current directory first (spawned workers inherit this path).
-    if os.getcwd() not in sys.path:
-        sys.path.insert(0, os.getcwd())
     try:
-        return args.func(args)
-    except (ValueError, StoreError) as exc:  # ConfigError, StoreError: bad input
-        print(f"flexarm: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        with signals_interrupt():  # SIGINT/SIGTERM raise Interrupted from here on
+            args = build_parser().parse_args(argv)
+            if getattr(args, "tier", "") is None:
+                args.tier = "full" if args.campaign else "short"
+            # Plug-ins named "package.module:Class" are found like `python -m` finds
+            # modules: the current directory first (spawned workers inherit this path;
+            # commands that only read results locate plug-in files for the code
+            # fingerprint on the same path, without importing them).
+            if os.getcwd() not in sys.path:
+                sys.path.insert(0, os.getcwd())
+            return _command(args)
     except Interrupted as exc:
         print("flexarm: interrupted", file=sys.stderr)
         return exit_status(exc.signum)
+
+
+def _command(args: argparse.Namespace) -> int:
+    """Run the command: every error one line on stderr, and its exit status."""
+    try:
+        return args.func(args)
+    except (ValueError, StoreError) as exc:  # ConfigError, StoreError: bad input
+        return _error(exc, EXIT_USAGE)
+    except RecursionError:  # a structure the checks did not bound
+        return _error("input nested too deeply", EXIT_USAGE)
+    except SystemExit as exc:  # flexarm's own code never exits from inside a command
+        return _error(f"sys.exit({exc.code!r}) was called by code this command ran "
+                      "(a plug-in's?); stopped", EXIT_FAILED)
+    except KeyboardInterrupt:  # a Ctrl-C raises Interrupted: this one was raised by code
+        return _error("KeyboardInterrupt raised by code this command ran (a plug-in's?), "
+                      "not by a Ctrl-C; stopped", EXIT_FAILED)
+    except sqlite3.Error as exc:  # the store turns its own into StoreError: a last resort
+        where = getattr(args, "out", None) or getattr(args, "results", None) or "the index"
+        return _error(f"{where}: the index cannot be used ({exc})", EXIT_FAILED)
     except OSError as exc:
-        where = exc.filename or getattr(args, "out", None) or "the results folder"
+        where = exc.filename or getattr(args, "out", None) or getattr(args, "results", None) \
+            or "the results folder"
         reason = "no space left on the device" if exc.errno == errno.ENOSPC else \
             (exc.strerror or str(exc))
-        print(f"flexarm: error: {where}: {reason}", file=sys.stderr)
-        return EXIT_FAILED
+        return _error(f"{where}: {reason}", EXIT_FAILED)
+
+
+def _error(message, status: int) -> int:
+    print(f"flexarm: error: {message}", file=sys.stderr)
+    return status
 
 
 if __name__ == "__main__":

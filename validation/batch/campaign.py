@@ -40,7 +40,8 @@ from ..run.tomlfiles import deep_merge, flatten, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
            "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
-           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS"]
+           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "run_name",
+           "check_run_name"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
@@ -97,7 +98,9 @@ def load_study(path: str | Path) -> Campaign:
     if is_campaign(data):
         return campaign_from_mapping(data, source=str(path))
     label = re.sub(r"[^A-Za-z0-9._+-]", "-", Path(path).stem).lstrip(".") or "scenario"
-    sweep = {"name": data["name"]} if isinstance(data.get("name"), str) else {}
+    sweep = {"name": data["name"]} if "name" in data else {}
+    if sweep:
+        check_label(sweep["name"], "name")  # names its run: the rule of every run's name
     base = {k: v for k, v in data.items() if k != "name"}
     return Campaign(name=label[:100], base=base, sweeps=(sweep,) if sweep else ())
 
@@ -119,6 +122,8 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
         for key in sweep:
             check(key in _SWEEP_KEYS, f"{where}.{key}",
                   f"unknown key (allowed: {', '.join(sorted(_SWEEP_KEYS))})")
+        if "name" in sweep:
+            check_label(sweep["name"], f"{where}.name")
     report = data.get("report", {})
     check(isinstance(report, dict), "report", "must be a table")
     for key in report:
@@ -182,6 +187,8 @@ def _random_values(path: str, spec, n: int, rng: np.random.Generator, where: str
         isinstance(v, (int, float)) and not isinstance(v, bool) for v in arg) and arg[0] <= arg[1],
         where, f"{kind} needs [low, high] with low <= high")
     lo, hi = arg
+    check(math.isfinite(lo) and math.isfinite(hi) and math.isfinite(hi - lo), where,
+          f"{kind} needs finite bounds less than 1.8e308 apart, got {arg!r}")
     if kind == "uniform":
         return [float(v) for v in rng.uniform(lo, hi, n)]
     check(lo > 0, where, "loguniform needs low > 0")
@@ -248,13 +255,12 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
     for i, sweep in enumerate(sweeps):
         where = f"sweep[{i}]"
         sweep_name = sweep.get("name", f"sweep{i}" if campaign.sweeps else campaign.name)
-        check(isinstance(sweep_name, str), f"{where}.name", "must be a string")
         for point in _sweep_points(sweep, resolved_base, where):
             data = deep_merge({}, campaign.base)
             for path, value in point.items():
                 set_dotted(data, path, value)
-            # Every run is named within its campaign: "campaign/<name axis or sweep name>".
-            set_dotted(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
+            set_dotted(data, "name", run_name(campaign.name, point.get("name", sweep_name),
+                                              _name_axis(sweep, where)))
             try:
                 scenario = scenario_from_mapping(data)
             except ConfigError as exc:
@@ -266,6 +272,30 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
             check(len(runs) <= MAX_RUNS, "sweep", f"the campaign expands to more than "
                                                   f"{MAX_RUNS} runs")
     return list(runs.values())
+
+
+def run_name(campaign: str, label, where: str) -> str:
+    """The name of a campaign's run: ``"<campaign>/<label>"``, both plain names (letters,
+    digits, ``. _ - +``; `check_label`) — the rule for every run name (`check_run_name`),
+    whether the label comes from a name axis or a sweep's name."""
+    check_label(label, where)
+    return f"{campaign}/{label}"
+
+
+def check_run_name(name, where: str) -> None:
+    """A run's name: a plain name, or ``"<campaign>/<label>"`` of two (`run_name`)."""
+    parts = name.split("/") if isinstance(name, str) else [name]
+    check(len(parts) <= 2, where, f"must be a plain name or campaign/label, got {name!r}")
+    for part in parts:
+        check_label(part, where)
+
+
+def _name_axis(sweep: dict, where: str) -> str:
+    """The dotted key of a sweep's name axis (for errors), or of its name."""
+    for part in ("grid", "zip", "random"):
+        if "name" in sweep.get(part, {}):
+            return f"{where}.{part}.name"
+    return f"{where}.name"
 
 
 # --- execution ----------------------------------------------------------------------------------
