@@ -38,7 +38,8 @@ from .store import ResultStore, environment, run_id
 from ..run.tomlfiles import deep_merge, load_toml
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "campaign_from_mapping", "expand",
-           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS"]
+           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "is_campaign",
+           "single_scenario"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
@@ -100,6 +101,26 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
           "report.figures", "must be a list of run names")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
                     description=str(data.get("description", "")))
+
+
+def is_campaign(data: dict) -> bool:
+    """Whether a file's mapping is a campaign (a ``[scenario]`` base or sweeps) rather
+    than a scenario."""
+    return "scenario" in data or "sweep" in data
+
+
+def single_scenario(data: dict, *, source: str) -> tuple[dict, str]:
+    """The one scenario a scenario-or-campaign file describes, for a command that runs
+    one scenario: a scenario file's own keys, or a campaign's ``[scenario]`` base.
+    Returns (scenario mapping, a note for the user: empty for a scenario file)."""
+    if not is_campaign(data):
+        return data, ""
+    campaign = campaign_from_mapping(data, source=source)
+    note = f"{source} is a campaign: running its [scenario] base"
+    if campaign.sweeps:
+        note += (f" (its {len(campaign.sweeps)} sweep(s) are not run: flexarm campaign "
+                 f"{source})")
+    return dict(campaign.base), note
 
 
 # --- expansion --------------------------------------------------------------------------------
@@ -275,6 +296,16 @@ class CampaignSummary:
     def any_failed(self) -> bool:
         return bool(self.failed or self.failed_before)
 
+    def __add__(self, other: "CampaignSummary") -> "CampaignSummary":
+        """Two invocations' summaries as one (e.g. the rounds of a stability map)."""
+        return CampaignSummary(
+            planned=self.planned + other.planned, skipped=self.skipped + other.skipped,
+            ok=self.ok + other.ok, diverged=self.diverged + other.diverged,
+            failed=self.failed + other.failed, stale=self.stale + other.stale,
+            damaged={**self.damaged, **other.damaged},
+            failed_before=self.failed_before + other.failed_before,
+            interrupted=other.interrupted or self.interrupted)
+
     def line(self, name: str, out) -> str:
         parts = [f"{name}: {self.planned} runs"]
         if self.skipped:
@@ -332,9 +363,11 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
 
 def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
                  retry_failed: bool = False, reuse_stale: bool = False,
-                 progress: bool = True, only: list[PlannedRun] | None = None) -> CampaignSummary:
+                 progress: bool = True, only: list[PlannedRun] | None = None,
+                 label: str | None = None) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
-    stored as soon as it finishes.  On SIGINT/SIGTERM, what finished is kept and
+    stored as soon as it finishes; the progress bar is labelled ``label`` (default: the
+    campaign's name).  On SIGINT/SIGTERM, what finished is kept and
     ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json are
     exported at the end."""
     planned = only if only is not None else expand(campaign)
@@ -350,7 +383,7 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
         runner = runner or SerialRunner()
         env = environment()
         by_id = {r.run_id: r for r in todo}
-        bar = _progress(len(todo), campaign.name, enabled=progress)
+        bar = _progress(len(todo), label or campaign.name, enabled=progress)
         try:
             tasks = ((r.run_id, r.scenario) for r in todo)  # checked: not parsed again
             for rid, result, metrics in runner.results(tasks):

@@ -19,7 +19,6 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
-import sys
 import threading
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from contextlib import contextmanager
@@ -218,10 +217,8 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
         check(workers >= 1, "--workers", f"must be >= 1, got {workers}")
         check(workers <= cores or force, "--workers", f"{workers} workers on {cores} cores "
               "only share the cores (each costs ~300 MB); pass --force-workers to insist")
-        from .worker import kernels_cached
-        if not kernels_cached():
-            print("compiling the simulation kernels: once per machine, a minute or two ...",
-                  file=sys.stderr, flush=True)
+        from .worker import prepare_kernels
+        prepare_kernels()
         return SerialRunner() if workers == 1 else LocalPoolRunner(workers)
     if kind == "dask":
         address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")

@@ -1,9 +1,10 @@
 """What runs inside a worker: one scenario in, its result and metrics out, never an
 exception (`execute_run`); and what a worker process needs before it runs anything: the
 simulation code (models, plants, laws, the closed loop, metrics) loaded and its kernels
-compiled — not the command line and not matplotlib.  `warm_up` runs two tiny scenarios
-in the parent before the workers are forked, so numba compiles (first use on a machine)
-or loads (from its cache) each kernel once, not once per worker."""
+compiled — not the command line and not matplotlib.  `warm_up` compiles (first use in
+this checkout: numba caches the machine code in its ``__pycache__`` folders) or loads
+every kernel group of `kernel_groups` in the parent before the workers are forked, once,
+not once per worker; `prepare_kernels` does it with progress when nothing is cached."""
 from __future__ import annotations
 
 import ctypes
@@ -18,7 +19,7 @@ from ..run import loop, metrics  # noqa: F401 - loaded once, before the fork
 from ..run.results import RunResult
 
 __all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
-           "kernels_cached"]
+           "kernels_cached", "kernel_groups", "prepare_kernels"]
 
 
 @functools.cache
@@ -74,18 +75,48 @@ def worker_init() -> None:
 
 
 def kernels_cached() -> bool:
-    """Whether numba's cache holds the compiled sample loop (else the first run on this
-    machine compiles it: a minute or two)."""
+    """Whether numba's cache in this checkout holds the compiled sample loop (else the
+    first run compiles it: minutes on 2 cores)."""
     return any((Path(__file__).parent.parent / "run" / "__pycache__").glob(
         "_sample.run_reduced-*.nbi"))
 
 
-def warm_up() -> None:
-    """Compile or load every kernel a run uses: the reduced loop with the built-in laws
-    and an observer, and the Exudyn plant's readout."""
+def _tiny_run(plant: str, observer: str = "smo-paper") -> None:
     from ..run.loop import run_scenario
     from ..run.scenario import scenario_from_mapping
-    for plant in ("reduced", "exudyn"):
-        run_scenario(scenario_from_mapping({"duration": 0.002, "transient": 0.0,
-                                            "plant": {"kind": plant},
-                                            "observer": {"kind": "smo-paper"}}))
+    run_scenario(scenario_from_mapping({"duration": 0.002, "transient": 0.0,
+                                        "plant": {"kind": plant},
+                                        "observer": {"kind": observer}}))
+
+
+def _model_kernels() -> None:
+    from reduced_model import ArmModel, ArmParameters
+    model = ArmModel(ArmParameters())
+    q = np.zeros(model.n)
+    model.mass_matrix(q), model.coriolis_matrix(q, q)
+
+
+def kernel_groups() -> list:
+    """The kernels a run uses, as compile groups (`validation.batch.compiling`), each
+    with its compile time measured on 2 shared cores: the arm model's kernels, then the
+    compiled loop of the reduced plant with every built-in law (one compiled sample
+    dispatches to all of them), then the Exudyn plant's per-sample path."""
+    from .compiling import KernelGroup
+    return [KernelGroup("the arm model (M, C, RK4)", _model_kernels, 7.0),
+            KernelGroup("the reduced plant's loop with every built-in law",
+                        lambda: _tiny_run("reduced"), 200.0),
+            KernelGroup("the Exudyn plant's sample path", lambda: _tiny_run("exudyn"), 20.0)]
+
+
+def warm_up(*, progress: bool = False) -> dict:
+    """Compile or load every kernel a run uses (`kernel_groups`); with ``progress``,
+    report each group on stderr as it finishes.  Returns {group: seconds}."""
+    from .compiling import compile_groups
+    return compile_groups(kernel_groups(), stream=sys.stderr if progress else None)
+
+
+def prepare_kernels() -> None:
+    """Before the first run in this process: if this checkout has no compiled kernels
+    yet, compile them now, group by group with progress (else each loads on first use)."""
+    if not kernels_cached():
+        warm_up(progress=True)
