@@ -55,8 +55,10 @@ AXIS_UNITS = {
 
 
 def png(fig, dpi: int = 90) -> bytes:
+    """The figure as PNG bytes (its layout engine already fits everything in: no second
+    "tight" layout pass)."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=dpi)
     plt.close(fig)
     return buf.getvalue()
 
@@ -258,8 +260,8 @@ _RATE_STYLE = {"exudyn": ("black", "darkred"), "reduced": ("0.45", "tab:blue")}
 
 
 def rates(group, title: str, transient: float) -> bytes:
-    """Figs. 5–6 analogue: true rates (lines) and their estimates (envelopes where they
-    chatter), y-range after the transient; modal rates in mm/s."""
+    """Figs. 5–6 analogue: true rates (black, grey) and their estimates (colours), each an
+    envelope where it chatters; y-range after the transient; modal rates in mm/s."""
     observed = [(r, res) for r, res in group if "xhat_theta1" in res]
     states = [n.removeprefix("xhat_") for n in observed[0][1].names_with("xhat_") if n.endswith("_dot")]
     fig, axes = _state_grid(states)
@@ -273,8 +275,8 @@ def rates(group, title: str, transient: float) -> bytes:
             true = scale * res[s].astype(float)
             _trace(ax, res.time, estimate, color=estimate_color, lw=0.8, zorder=2,
                    label=f"{name}: estimate")
-            ax.plot(res.time, true, color=true_color, lw=0.7, ls="--", zorder=4,
-                    label=f"{name}: true")
+            _trace(ax, res.time, true, color=true_color, lw=0.7, zorder=4,
+                   label=f"{name}: true")
             series += [(res.time, estimate), (res.time, true)]
         _fit_ylim(ax, series, transient)
         ax.axvline(transient, color="grey", lw=0.5, ls=":")
@@ -587,8 +589,9 @@ def stability_chart(results) -> bytes:
 # --- animation -----------------------------------------------------------------------------------
 def animation(group, params, model, title: str, path, *, fps: int = 8) -> str:
     """A GIF of the whole run, truth and reduced plant, deflection magnified; returns the
-    caption."""
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    caption.  The axes, legend and title are drawn once; each frame redraws only the arms
+    and the clock over them (matplotlib's blitting), and Pillow writes the GIF."""
+    from PIL import Image
     coords = model.coordinate_names
     ok = [(r, res) for r, res in group if res.time.size > 1]
     typical = max(float(np.percentile(np.abs(res.select(["tip_defl1", "tip_defl2"]).astype(float)), 95))
@@ -596,48 +599,59 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str:
     magnify = float(max(1, round(0.1 * params.L1 / max(typical, 1e-9))))
     t_end = max(res.time[-1] for _, res in ok)
     frames = np.arange(0.0, t_end, 1.0 / fps * 2)  # 2 s of motion per second of GIF
-    fig, ax = plt.subplots(figsize=(5, 5.4), layout="constrained")
+    fig, ax = plt.subplots(figsize=(5, 5.6), layout="constrained", dpi=80)
     reach = params.L1 + params.L2
     ax.set_xlim(-1.1 * reach, 1.1 * reach)
     ax.set_ylim(-1.1 * reach, 1.1 * reach)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    lines = [ax.plot([], [], lw=2, label=PLANT_NAME.get(r.plant, r.plant),
+    lines = [ax.plot([], [], lw=2, label=PLANT_NAME.get(r.plant, r.plant), animated=True,
                      color=PLANT_STYLE.get(r.plant, {}).get("color"))[0] for r, _ in ok]
-    ref_line, = ax.plot([], [], color="k", lw=0.8, alpha=0.5, label="rigid arm at θd")
-    text = ax.set_title("", fontsize=8)
+    ref_line, = ax.plot([], [], color="k", lw=0.8, alpha=0.5, label="rigid arm at θd",
+                        animated=True)
+    clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=8,
+                    animated=True)
+    ax.set_title(f"{textwrap.fill(title, 70)}\ndeflection ×{magnify:g}", fontsize=8)
     fig.legend(loc="outside lower center", fontsize=7, ncol=3)
-    wrapped = textwrap.fill(title, 70)
+    n1 = model.modes_per_link[0]
+    x1, x2 = np.linspace(0, params.L1, 15), np.linspace(0, params.L2, 15)
+    m1, m2 = model.mode_shapes
+    phi1, phi2, slope = m1.phi(x1).T, m2.phi(x2).T, m1.tip_values[1]
+    states = [(res.time, res.select(coords).astype(float)) for _, res in ok]
+    longest = max((res for _, res in ok), key=lambda r: r.time.size)
+    reference = (longest.time, longest.select(["theta1_ref", "theta2_ref"]).astype(float))
+
+    def sample(time, values, t):
+        return values[:, min(int(round(t / (time[1] - time[0]))), time.size - 1)]
 
     def shape(Q):
-        n1 = model.modes_per_link[0]
-        x1, x2 = np.linspace(0, params.L1, 15), np.linspace(0, params.L2, 15)
-        m1, m2 = model.mode_shapes
-        w1 = magnify * (m1.phi(x1).T @ Q[2:2 + n1])
-        w2 = magnify * (m2.phi(x2).T @ Q[2 + n1:])
-        slope1 = magnify * (m1.tip_values[1] @ Q[2:2 + n1])
+        w1, w2 = magnify * (phi1 @ Q[2:2 + n1]), magnify * (phi2 @ Q[2 + n1:])
         z1 = np.exp(1j * Q[0]) * (x1 + 1j * w1)
-        z2 = z1[-1] + np.exp(1j * (Q[0] + Q[1] + slope1)) * (x2 + 1j * w2)
+        z2 = z1[-1] + np.exp(1j * (Q[0] + Q[1] + magnify * (slope @ Q[2:2 + n1]))) * (x2 + 1j * w2)
         return np.concatenate([[0], z1, z2])
 
-    def draw(t):
-        for line, (_, res) in zip(lines, ok):
-            k = min(int(round(t / (res.time[1] - res.time[0]))), len(res.time) - 1)
-            z = shape(res.select(coords)[:, k].astype(float))
+    fig.canvas.draw()  # the static parts, laid out once
+    fig.set_layout_engine("none")
+    background = fig.canvas.copy_from_bbox(fig.bbox)
+    images = []
+    for t in frames:
+        fig.canvas.restore_region(background)
+        for line, (time, values) in zip(lines, states):
+            z = shape(sample(time, values, t))
             line.set_data(z.real, z.imag)
-        res = max((res for _, res in ok), key=lambda r: r.time.size)
-        k = min(int(round(t / (res.time[1] - res.time[0]))), len(res.time) - 1)
-        th = res.select(["theta1_ref", "theta2_ref"])[:, k].astype(float)
+        th = sample(*reference, t)
         zr = np.cumsum([0, params.L1 * np.exp(1j * th[0]), params.L2 * np.exp(1j * th.sum())])
         ref_line.set_data(zr.real, zr.imag)
-        text.set_text(f"{wrapped}\nt = {t:4.1f} s, deflection ×{magnify:g}")
-        return (*lines, ref_line, text)
-
-    anim = FuncAnimation(fig, draw, frames=frames, blit=False)
-    tmp = path.with_suffix(".tmp.gif")
-    anim.save(tmp, writer=PillowWriter(fps=fps))
+        clock.set_text(f"t = {t:4.1f} s")
+        for artist in (*lines, ref_line, clock):
+            ax.draw_artist(artist)
+        rgba = np.asarray(fig.canvas.buffer_rgba())
+        images.append(Image.fromarray(rgba[..., :3].copy()).quantize(colors=64))
     plt.close(fig)
+    tmp = path.with_suffix(".tmp.gif")
+    images[0].save(tmp, save_all=True, append_images=images[1:], duration=int(1000 / fps),
+                   loop=0)
     tmp.replace(path)
     return (f"{title}: arm motion over the whole {t_end:.0f} s run (2× speed), truth and "
             f"reduced plant, deflection ×{magnify:g}")

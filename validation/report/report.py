@@ -30,6 +30,7 @@ from pathlib import Path
 from reduced_model import ArmParameters
 
 from . import figures as fig
+from .drawing import draw_all
 from ..batch.fingerprint import run_fingerprint
 from .render import fmt_number, render
 from ..run.results import write_atomic
@@ -132,12 +133,14 @@ def _metrics_table(runs) -> dict:
 
 @functools.lru_cache(maxsize=64)
 def _observer_inputs(observer_json: str, params_json: str, modes: tuple) -> frozenset:
-    """The states an observer is fed (its ``measured``), built like the run built it."""
+    """The states an observer is fed (its ``measured``), built like the run built it (from
+    its stored scenario, which was checked when it ran)."""
+    from ..run._config import from_mapping
     from ..run.laws import build_observer, nominal_model
-    from ..run.scenario import scenario_from_mapping
-    scenario = scenario_from_mapping({"observer": json.loads(observer_json),
-                                      "nominal_params": json.loads(params_json),
-                                      "model": {"modes_per_link": list(modes)}})
+    from ..run.scenario import Scenario
+    scenario = from_mapping(Scenario, {"observer": json.loads(observer_json),
+                                       "nominal_params": json.loads(params_json),
+                                       "model": {"modes_per_link": list(modes)}})
     model = nominal_model(scenario.nominal_params, scenario.model.modes_per_link)
     return frozenset(build_observer(scenario, model).measured)
 
@@ -266,15 +269,13 @@ def _scope(runs) -> list[str]:
     windows = sorted({(r.config["transient"], r.config["duration"]) for r in runs})
     scope.append("metrics after the transient: " + ", ".join(
         f"{t:g} s of {d:g} s runs" for t, d in windows[:6]) + (", …" if len(windows) > 6 else "")
-        + " (torque variation and wall time: the whole run)")
+        + " (maxima of deflection and torque, torque variation: the whole run)")
     return scope
 
 
 def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                 animation_path: Path | None = None) -> ReportData:
     """Everything the report shows, as data (figures as PNG bytes)."""
-    from tqdm import tqdm
-
     from ..verdicts.claims import CLAIMS, claim_columns
     from .summary import NOTE_MEANING, claims_view, pairs_table, summary_view
     store = ResultStore(results_dir)
@@ -350,14 +351,15 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       f"validity map, {arm} arm: reduced model vs FE frequencies over θ₂ and "
                       "their relative gap",
                       lambda p=params, m=modes, a=arm: fig.validity_map(p, m, f"{a} arm")))
-    for section, caption, make in tqdm(tasks, desc="report figures", unit="fig",
-                                       disable=not progress):
-        made = make()
+    makes = [make for _, _, make in tasks]
+    if animate and groups and animation_path is not None:
+        makes.append(lambda: _animation(groups[0], animation_path))
+    drawn = draw_all(makes, stores=[store], progress=progress)
+    for (section, caption, _), made in zip(tasks, drawn):
         items = made if isinstance(made, list) else [(caption, made)]
         data.figures += [Figure(section, c, p) for c, p in items]
-    if animate and groups and animation_path is not None:
-        data.animation = {"caption": _animation(groups[0], animation_path),
-                          "file": animation_path.name}
+    if len(drawn) > len(tasks):
+        data.animation = {"caption": drawn[-1], "file": animation_path.name}
     return data
 
 
