@@ -286,7 +286,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     wanted = [w for i in info for w in i.get("report", {}).get("figures", [])] or None
     counts = {s: sum(r.status == s for r in runs) for s in ("ok", "diverged", "failed")}
     data = ReportData(title=", ".join(names), folder=str(store.out),
-                      description=" ".join(i.get("description", "") for i in info).strip(),
+                      description="; ".join(i["description"] for i in info
+                                            if i.get("description")),
                       counts=counts, scope=_scope(runs), warnings=warnings)
     bounds = claim_bounds()
 

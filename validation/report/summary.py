@@ -142,12 +142,9 @@ def _finite(x) -> bool:
 
 
 def _short_verdict(claim, v) -> str:
-    if v.verdict in ("diverged", "failed", "not run"):
-        return v.verdict.upper() if v.verdict != "not run" else "not run"
-    if v.verdict == "n/a":
-        return "n/a"
-    extra = _margin_text(claim, v.value)
-    return f"{v.verdict} {_value(claim, v.value)}" + (f" ({extra})" if extra else "")
+    if v.verdict in ("diverged", "failed"):
+        return v.verdict.upper()
+    return verdict_text(claim, v)
 
 
 #: (metric keys whose largest value is shown, name, SI unit) of the reduced-vs-truth table.
