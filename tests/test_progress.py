@@ -1,30 +1,45 @@
 """Progress that tells the truth: the kernel compile reports each group with an estimate
 of the rest, the stability map names its round, and failed runs make the command exit 1."""
 import io
-import itertools
 
 import pytest
 
-from validation.batch.compiling import KernelGroup, compile_groups
+from validation.batch.compiling import compile_groups
 from validation.cli import main
 
 
 def test_compile_reports_each_group_with_the_time_left():
-    """The estimate scales the reference times of the remaining groups by this machine's
-    pace so far: after the first group (2 s for a 1 s reference: twice as slow) 2 × (3 + 6)
-    = 18 s are left; after the second (4 s for 4 s of reference) 1 × 6 = 6 s."""
-    ticks = itertools.count(step=2.0)  # every clock reading 2 s later: each group takes 2 s
+    """Groups that load from the cache are silent; each group that compiles is reported
+    with the time left: the remaining groups' reference times scaled by this machine's
+    pace.  Here every compile takes 2 s: after "model" (reference 1 s: twice as slow)
+    2 × (5 + 3 + 6) = 28 s at most are left (the cached group is counted until it loads);
+    after "pbc" (4 s for 4 s of reference) 1 × 6 = 6 s."""
+    durations = iter([2.0, 0.125, 2.0, 2.0])  # "cached" loads in 0.125 s (exact in binary)
+    now = [0.0]
+
+    def clock():
+        return now[0]
     done = []
-    groups = [KernelGroup(name, lambda name=name: done.append(name), expected)
-              for name, expected in (("the model", 1.0), ("the PBC", 3.0), ("the SMO", 6.0))]
+
+    def build(name):
+        def run():
+            done.append(name)
+            now[0] += next(durations)
+        return run
+    groups = [(name, build(name)) for name in ("model", "cached", "pbc", "smo")]
+    reference = {"model": 1.0, "cached": 5.0, "pbc": 3.0, "smo": 6.0}
     stream = io.StringIO()
-    taken = compile_groups(groups, stream=stream, clock=lambda: next(ticks))
+    taken = compile_groups(groups, stream=stream, clock=clock, reference=reference)
     lines = stream.getvalue().splitlines()
-    assert done == ["the model", "the PBC", "the SMO"] and taken == {n: 2.0 for n in done}
-    assert "once per checkout" in lines[0] and "3 groups, about 10 s" in lines[0]
-    assert lines[1] == "  [1/3] the model: 2 s; about 18 s left"
-    assert lines[2] == "  [2/3] the PBC: 2 s; about 6 s left"
-    assert lines[3] == "  [3/3] the SMO: 2 s; all compiled in 6 s"
+    assert done == ["model", "cached", "pbc", "smo"]
+    assert taken == {"model": 2.0, "cached": 0.125, "pbc": 2.0, "smo": 2.0}
+    assert "once per checkout" in lines[0] and "4 groups, about 15 s" in lines[0]
+    assert lines[1:] == ["  [1/4] model: 2 s; at most about 28 s left",
+                         "  [3/4] pbc: 2 s; at most about 6 s left",
+                         "  [4/4] smo: 2 s"]
+    quiet = io.StringIO()
+    compile_groups([("x", lambda: None)], stream=quiet)  # nothing compiles: nothing said
+    assert quiet.getvalue() == ""
 
 
 FAILING_LAW = '''

@@ -8,12 +8,11 @@ from __future__ import annotations
 
 import os
 
-# One BLAS thread: the matrices here are small, and idle BLAS threads busy-wait on the
-# cores the simulation runs on.  Set before numpy is imported; a user's setting wins.
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from .batch.threads import prefer_one_thread
 
-import argparse
+prefer_one_thread()  # before numpy is imported; a user's setting wins
+
+import argparse  # noqa: E402
 import copy
 import dataclasses
 import errno
@@ -26,12 +25,12 @@ import numpy as np
 
 from controllers import CONTROLLERS, OBSERVERS
 
-from .run._config import ConfigError, check
+from .run._config import ConfigError
 from .batch.executor import Interrupted, available_cores, exit_status, make_runner
 from .run.scenario import (ARMS, DEFAULT_TRANSIENT, PLANTS, Scenario, default_transient,
                            scenario_from_mapping)
 from .batch.store import ResultStore, StoreError, run_id
-from .run.tomlfiles import load_toml, parse_value, set_dotted
+from .run.tomlfiles import deep_merge, flatten, load_toml, parse_value, set_dotted
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
@@ -177,13 +176,6 @@ def stored_run(spec: str, flag: str):
     return found[0]
 
 
-def _flatten(data, prefix: str = "") -> dict:
-    if isinstance(data, dict):
-        return {k: v for key, value in data.items()
-                for k, v in _flatten(value, f"{prefix}.{key}" if prefix else key).items()}
-    return {prefix: data}
-
-
 def auto_name(s: Scenario) -> str:
     """A run's name from what it is: controller (+ observer) @ plant, e.g.
     "pbc+smo-paper@exudyn" (a plug-in by its class name)."""
@@ -194,7 +186,7 @@ def auto_name(s: Scenario) -> str:
 
 def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     """The scenario of ``flexarm run`` and what to tell the user about where it came from."""
-    from .batch.campaign import single_scenario
+    from .batch.campaign import load_study
     notes, like = [], getattr(args, "like", None)
     if like and args.config:
         raise ConfigError("--like", "--like and --config exclude each other")
@@ -202,8 +194,14 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
         row = stored_run(like, "--like")
         data = copy.deepcopy(row.config)
     elif args.config:
-        data, note = single_scenario(load_toml(args.config), source=args.config)
-        notes += [note] if note else []
+        study = load_study(args.config)
+        data = deep_merge({}, study.base)
+        if len(study.sweeps) == 1 and set(study.sweeps[0]) == {"name"}:
+            data["name"] = study.sweeps[0]["name"]  # a scenario file's own name
+        elif study.sweeps:
+            notes.append(f"{args.config} is a campaign: running its [scenario] base (its "
+                         f"{len(study.sweeps)} sweep(s) are not run: flexarm campaign "
+                         f"{args.config})")
     else:
         data = {}
     named = "name" in data or args.name is not None
@@ -227,7 +225,7 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     if like:
         from .batch.fingerprint import run_fingerprint
         from .run.scenario import scenario_to_mapping
-        old, new = _flatten(row.config), _flatten(scenario_to_mapping(scenario))
+        old, new = flatten(row.config), flatten(scenario_to_mapping(scenario))
         changed = [f"{k} = {new.get(k)!r} (was {old.get(k)!r})" for k in sorted(old | new)
                    if old.get(k) != new.get(k)]
         head = f"rerunning {row.run_id} ({row.name}, stored in {row.store.out})"
@@ -312,7 +310,8 @@ def _compare_with_stored(stored, metrics: dict) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .batch.worker import execute_run, prepare_kernels
+    from .batch.compiling import compile_groups
+    from .batch.worker import execute_run, kernel_groups
     from .run.scenario import scenario_to_mapping
     scenario, notes = scenario_from_args(args)
     for note in notes:
@@ -320,8 +319,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
     store = open_output(args.out or Path("results") / f"run-{rid}")
-    prepare_kernels()
-    result, metrics = execute_run(data)
+    compile_groups(kernel_groups([scenario]))
+    result, metrics = execute_run(scenario)
     path = store.add(rid, result, metrics)
     store.export()
     s = scenario
@@ -362,7 +361,17 @@ Rerun a stored run:  flexarm run --like results/paper/RUN_ID  (--set KEY=VALUE t
 
 
 # --- campaigns ----------------------------------------------------------------------------
-def _runner(args):
+def _compile(scenarios) -> None:
+    """Compile (or load) here, with progress, the kernels the runs of ``scenarios`` use,
+    before a local runner forks its workers (they inherit them) or runs them serially."""
+    from .batch.compiling import compile_groups
+    from .batch.worker import kernel_groups
+    compile_groups(kernel_groups(list(scenarios)))
+
+
+def _runner(args, scenarios=()):
+    if args.executor == "local":
+        _compile(scenarios)
     return make_runner(args.executor, args.workers, args.scheduler,
                        force=getattr(args, "force_workers", False))
 
@@ -393,7 +402,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         print(f"{len(runs)} runs planned: {len(todo)} to run, {len(runs) - len(todo)} already "
               f"stored in {out}")
         return 0
-    runner = _runner(args)
+    runner = _runner(args, [r.scenario for r in runs])
     with runner:
         open_output(out)
         summary = run_campaign(campaign, out, runner=runner, retry_failed=args.retry_failed,
@@ -451,6 +460,7 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     campaign = load_campaign(campaigns_dir() / "paper.toml")
     runs = expand(campaign)
     out = Path(args.out or Path("results") / "paper")
+    _compile(r.scenario for r in runs)
     runner = make_runner("local", args.workers, force=args.force_workers)
     with runner:
         open_output(out)
@@ -494,16 +504,15 @@ def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arm
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
-    from .batch.campaign import campaign_from_mapping, expand
-    data = load_toml(args.file)
-    if "scenario" in data or "sweep" in data:
-        scenarios = [r.scenario for r in expand(campaign_from_mapping(data, source=args.file))]
-        plants, arms = args.plant, args.arm
-    else:
-        scenarios = [scenario_from_mapping(data)]
+    from .batch.campaign import expand, load_study
+    study = load_study(args.file)
+    scenarios = [r.scenario for r in expand(study)]
+    if len(scenarios) == 1:  # one scenario: its laws on both plants and both arms
         plants, arms = args.plant or list(PLANTS), args.arm or list(ARMS)
+    else:
+        plants, arms = args.plant, args.arm
     out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
-    runner = _runner(args)
+    runner = _runner(args, scenarios)
     with runner:
         return _stability(runner, scenarios, out, progress=not args.no_progress,
                           plants=plants, arms=arms)
@@ -530,23 +539,14 @@ def cmd_repair(args: argparse.Namespace) -> int:
 
 
 def cmd_attribute(args: argparse.Namespace) -> int:
+    from .batch.campaign import expand, load_study
     from .verdicts.attribution import attribute, default_factors, parse_factors, write_attribution
-    from .batch.campaign import campaign_from_mapping, expand
-    data = load_toml(args.file)
-    section = data.pop("attribution", {})
-    check(isinstance(section, dict), "attribution", "must be a table")
-    for key in section:
-        check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
-    if "scenario" in data or "sweep" in data or "name" in data:
-        campaign = campaign_from_mapping(data, source=args.file)
-        systems = [(r.scenario.name.split("/")[-1], r.scenario) for r in expand(campaign)]
-        default_out = Path("results") / campaign.name
-    else:
-        scenario = scenario_from_mapping(data)
-        systems = [(Path(args.file).stem, scenario)]
-        default_out = Path("results") / f"attribution-{Path(args.file).stem}"
+    study = load_study(args.file)
+    systems = [(r.scenario.name.split("/")[-1], r.scenario) for r in expand(study)]
+    default_out = Path("results") / (study.name if study.sweeps or study.attribution
+                                     else f"attribution-{study.name}")
     names = [n.strip() for n in args.factors.split(",") if n.strip()] \
-        if args.factors is not None else section.get("factors")
+        if args.factors is not None else study.attribution.get("factors")
     if names is not None and not isinstance(names, list):
         raise ConfigError("attribution.factors", "must be a list of factor names")
     plans = [(label, s, parse_factors(names, s) if names is not None else default_factors(s))
@@ -556,7 +556,7 @@ def cmd_attribute(args: argparse.Namespace) -> int:
         plan(s, factors, label)
     out = Path(args.out or default_out)
     results = []
-    runner = _runner(args)
+    runner = _runner(args, [s for _, s, _ in plans])
     with runner:
         open_output(out)
         for label, s, factors in plans:

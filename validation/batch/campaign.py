@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,11 +36,11 @@ from .executor import Interrupted, Runner, SerialRunner
 from .fingerprint import run_fingerprint
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .store import ResultStore, environment, run_id
-from ..run.tomlfiles import deep_merge, load_toml
+from ..run.tomlfiles import deep_merge, flatten, load_toml, set_dotted
 
-__all__ = ["Campaign", "PlannedRun", "load_campaign", "campaign_from_mapping", "expand",
-           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "is_campaign",
-           "single_scenario"]
+__all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
+           "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
+           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
@@ -62,17 +63,43 @@ class PlannedRun:
 
 @dataclass(frozen=True)
 class Campaign:
+    """A base scenario (a mapping), its sweeps and the sections of a campaign file."""
+
     name: str
     base: dict
     sweeps: tuple[dict, ...]
     report: dict = field(default_factory=dict)
     description: str = ""
+    attribution: dict = field(default_factory=dict)
 
 
 # --- loading ------------------------------------------------------------------------------
+#: Top-level keys only a campaign file has (a scenario file may have ``name``, ``include``).
+CAMPAIGN_KEYS = frozenset(_TOP_KEYS - {"name", "include"})
+
+
+def is_campaign(data: dict) -> bool:
+    """Whether a file's mapping is a campaign (it has a key of `CAMPAIGN_KEYS`) rather
+    than a scenario."""
+    return bool(CAMPAIGN_KEYS & set(data))
+
+
 def load_campaign(path: str | Path) -> Campaign:
     """Read a campaign TOML (with includes) and check its structure."""
     return campaign_from_mapping(load_toml(path), source=str(path))
+
+
+def load_study(path: str | Path) -> Campaign:
+    """A scenario file or a campaign file, read the one way every command reads them: a
+    campaign (`is_campaign`) as it is; a scenario as a campaign of that one run, named
+    after the file (the run keeps the scenario's own ``name``, if it has one)."""
+    data = load_toml(path)
+    if is_campaign(data):
+        return campaign_from_mapping(data, source=str(path))
+    label = re.sub(r"[^A-Za-z0-9._+-]", "-", Path(path).stem).lstrip(".") or "scenario"
+    sweep = {"name": data["name"]} if isinstance(data.get("name"), str) else {}
+    base = {k: v for k, v in data.items() if k != "name"}
+    return Campaign(name=label[:100], base=base, sweeps=(sweep,) if sweep else ())
 
 
 def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
@@ -99,42 +126,19 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     figures = report.get("figures", [])
     check(isinstance(figures, list) and all(isinstance(f, str) for f in figures),
           "report.figures", "must be a list of run names")
+    attribution = data.get("attribution", {})
+    check(isinstance(attribution, dict), "attribution", "must be a table")
+    for key in attribution:
+        check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
-                    description=str(data.get("description", "")))
-
-
-def is_campaign(data: dict) -> bool:
-    """Whether a file's mapping is a campaign (a ``[scenario]`` base or sweeps) rather
-    than a scenario."""
-    return "scenario" in data or "sweep" in data
-
-
-def single_scenario(data: dict, *, source: str) -> tuple[dict, str]:
-    """The one scenario a scenario-or-campaign file describes, for a command that runs
-    one scenario: a scenario file's own keys, or a campaign's ``[scenario]`` base.
-    Returns (scenario mapping, a note for the user: empty for a scenario file)."""
-    if not is_campaign(data):
-        return data, ""
-    campaign = campaign_from_mapping(data, source=source)
-    note = f"{source} is a campaign: running its [scenario] base"
-    if campaign.sweeps:
-        note += (f" (its {len(campaign.sweeps)} sweep(s) are not run: flexarm campaign "
-                 f"{source})")
-    return dict(campaign.base), note
+                    description=str(data.get("description", "")), attribution=attribution)
 
 
 # --- expansion --------------------------------------------------------------------------------
-def _flatten(table: dict, prefix: str = "") -> dict[str, object]:
-    """{"a": {"b": [..]}} → {"a.b": [..]}; a table whose keys are a value spec (scale,
-    uniform, ...) is a leaf."""
-    out = {}
-    for key, value in table.items():
-        path = f"{prefix}.{key}" if prefix else key
-        if isinstance(value, dict) and not (set(value) & _SPEC_KEYS):
-            out.update(_flatten(value, path))
-        else:
-            out[path] = value
-    return out
+def _flatten(table: dict) -> dict[str, object]:
+    """Sweep axes by dotted key; a table whose keys are a value spec (scale, uniform, …)
+    is one axis."""
+    return flatten(table, leaf=lambda value: bool(set(value) & _SPEC_KEYS))
 
 
 def _get(data: dict, path: str):
@@ -144,13 +148,6 @@ def _get(data: dict, path: str):
             raise KeyError(path)
         node = node[part]
     return node
-
-
-def _set(data: dict, path: str, value) -> None:
-    parts = path.split(".")
-    for part in parts[:-1]:
-        data = data.setdefault(part, {})
-    data[parts[-1]] = value
 
 
 def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
@@ -255,9 +252,9 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
         for point in _sweep_points(sweep, resolved_base, where):
             data = deep_merge({}, campaign.base)
             for path, value in point.items():
-                _set(data, path, value)
+                set_dotted(data, path, value)
             # Every run is named within its campaign: "campaign/<name axis or sweep name>".
-            _set(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
+            set_dotted(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
             try:
                 scenario = scenario_from_mapping(data)
             except ConfigError as exc:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ._config import ConfigError
 
-__all__ = ["load_toml", "deep_merge", "set_dotted", "parse_value"]
+__all__ = ["load_toml", "deep_merge", "set_dotted", "flatten", "parse_value"]
 
 
 def deep_merge(base: dict, override: dict) -> dict:
@@ -95,6 +95,19 @@ def set_dotted(data: dict, key: str, value) -> None:
             raise ConfigError(".".join(parts[:i + 1]), "is a value, not a table")
         data = node
     data[parts[-1]] = value
+
+
+def flatten(table: dict, prefix: str = "", *, leaf=lambda value: False) -> dict[str, object]:
+    """{"a": {"b": 1}} → {"a.b": 1}: every value by its dotted key; a table for which
+    ``leaf(table)`` is true stays a value (e.g. a sweep's ``{scale = [...]}``)."""
+    out = {}
+    for key, value in table.items():
+        path = f"{prefix}.{key}" if prefix else key
+        if isinstance(value, dict) and not leaf(value):
+            out.update(flatten(value, path, leaf=leaf))
+        else:
+            out[path] = value
+    return out
 
 
 def parse_value(text: str):

@@ -40,7 +40,7 @@ from ..batch.fingerprint import run_fingerprint
 from ..run.results import write_atomic
 from ..run.scenario import scenario_from_mapping, scenario_to_mapping
 from ..batch.store import INDEX_NAME, ResultStore, StoreError, run_id
-from ..run.tomlfiles import load_toml
+from ..run.tomlfiles import flatten, load_toml
 
 __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",
            "proposed_bounds", "write_baselines", "DEFAULT_FILE"]
@@ -280,21 +280,13 @@ def _toml_value(v) -> str:
     raise TypeError(f"cannot write {v!r} as TOML")
 
 
-def _flat(table: dict, prefix: str = "") -> list[tuple[str, object]]:
-    out = []
-    for k, v in table.items():
-        key = f"{prefix}.{k}" if prefix else k
-        out += _flat(v, key) if isinstance(v, dict) else [(key, v)]
-    return out
-
-
 def write_baselines(b: Baselines, checks: list[Check]) -> None:
     """Rewrite the baselines file (atomically) with ``checks``."""
     lines = [b.header.rstrip("\n"), "", "[policy]", f"relative = {b.relative!r}",
              f"absolute = {b.absolute!r}", ""]
     for name, spec in b.scenarios.items():
         lines.append(f"[scenarios.{name}]")
-        lines += [f"{k} = {_toml_value(v)}" for k, v in _flat(spec)]
+        lines += [f"{k} = {_toml_value(v)}" for k, v in flatten(spec).items()]
         lines.append("")
     for c in checks:
         lines.append("[[check]]")
