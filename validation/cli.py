@@ -496,9 +496,13 @@ def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arm
     print(write_stability(results, out))
     print(f"stability map: {out / 'stability.md'} and stability.csv")
     if summary.any_failed:
-        print(f"stability: {summary.failed + len(summary.failed_before)} run(s) failed (not "
-              f"diverged: the simulation itself stopped); see {out / 'metrics.csv'}",
-              file=sys.stderr)
+        from .report.figures import describe_run
+        failed = ResultStore(out).rows(where="status = 'failed'")
+        print(f"stability: {len(failed)} run(s) failed (the simulation itself stopped, so "
+              "they count as not stable):", file=sys.stderr)
+        for r in failed[:5]:
+            print(f"  {r.run_id} {r.name}, {r.plant} plant, {describe_run(r.config)}: "
+                  f"{r.message}", file=sys.stderr)
         return EXIT_FAILED
     return 0
 

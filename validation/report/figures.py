@@ -474,7 +474,7 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
                 ax.text(0.99, 0.97, f"bound {factor * bound:g} {unit}: above", ha="right",
                         va="top", transform=ax.transAxes, fontsize=7, color="crimson")
         ax.set_title(f"{title} [{unit}]", fontsize=9)
-        zipped = [a.split(".")[-1] for a in group if a != label_axis]
+        zipped = [a for a in group if a != label_axis]
         ax.set_xlabel(axis_label(label_axis) + (f"\n(zipped with {', '.join(zipped)})"
                                                 if zipped else ""), fontsize=8)
         if numeric:
@@ -494,8 +494,8 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
             strip.tick_params(labelbottom=False, labelsize=7)
             strip.set_title(f"{title} [{unit}]", fontsize=9)
             ax.set_title("")
-            strip.text(0.01, 0.5, "diverged / failed:", transform=strip.transAxes,
-                       fontsize=7, va="center", color="crimson")
+            strip.set_ylabel("diverged,\nfailed", rotation=0, ha="right", va="center",
+                             fontsize=7, color="crimson")
     handles, labels = legend_from.get_legend_handles_labels()
     if any_bad:
         handles.append(plt.Line2D([], [], ls="none", marker="x", color="crimson", mew=2))

@@ -5,7 +5,8 @@ toolkit's central question), values in the units a reader expects (mrad, mm).
 The verdicts themselves come from `validation.verdicts.claims`; this module only says
 them.  Margin = 1 − value/bound: positive when the claim holds (the share of the bound
 left), negative when it fails; a value at twice the bound or more is said as a multiple of
-it ("3.4× the bound").  Δ = (truth − reduced)/|reduced|.
+it ("3.4× the bound").  Δ = (truth − reduced)/|reduced|; beyond ±1000 %, the ratio
+("truth = 1700× reduced").
 """
 from __future__ import annotations
 
@@ -52,7 +53,12 @@ def _margin_text(claim, value: float) -> str:
     m = margin(claim, value)
     if not math.isfinite(m):
         return ""
-    return f"{value / claim.bound:.2g}× the bound" if m <= -1 else f"margin {_percent(m)}"
+    return f"{_times(value / claim.bound)} the bound" if m <= -1 else f"margin {_percent(m)}"
+
+
+def _times(ratio: float) -> str:
+    """A ratio of 2 or more as a multiple: "2.9×", "34×", "570×"."""
+    return f"{ratio:.2g}×" if ratio < 10 else f"{ratio:.0f}×"
 
 
 def verdict_text(claim, v) -> str:
@@ -132,9 +138,17 @@ def _summary_cell(claim, plants: dict) -> tuple[list[str], str]:
         line = f"{_PLANT_SHORT.get(other, other)}: {_short_verdict(claim, w)}"
         truth, reduced = (v, w) if first == "exudyn" else (w, v)
         if _finite(truth.value) and _finite(reduced.value) and reduced.value != 0:
-            line += f"; Δ {_percent((truth.value - reduced.value) / abs(reduced.value))}"
+            line += f"; {_delta(truth.value, reduced.value)}"
         lines.append(line)
     return lines, v.verdict
+
+
+def _delta(truth: float, reduced: float) -> str:
+    """"Δ +3 %"; beyond ±1000 %, the ratio: "truth = 1700× reduced"."""
+    delta = (truth - reduced) / abs(reduced)
+    if abs(delta) < 10:
+        return f"Δ {_percent(delta)}"
+    return f"truth = {_times(truth / reduced)} reduced"
 
 
 def _finite(x) -> bool:
@@ -188,5 +202,5 @@ def _pair_cell(red, tru, keys, scale) -> str:
     (a, ta), (b, tb) = value(red), value(tru)
     if ta == tb == "—":
         return "—"
-    delta = f" ({_percent((b - a) / abs(a))})" if math.isfinite(a) and math.isfinite(b) and a else ""
+    delta = f" ({_delta(b, a)})" if math.isfinite(a) and math.isfinite(b) and a else ""
     return f"{ta} / {tb}{delta}"
