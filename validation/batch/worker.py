@@ -76,12 +76,12 @@ def worker_init() -> None:
 def kernel_groups(scenarios) -> list[tuple[str, object]]:
     """The compiled code the runs of ``scenarios`` use, as (label, callable that compiles
     or loads it) in the order a run needs them: the arm model's kernels, each distinct
-    law, the sample loop, the FE plant's readout.  Each piece is compiled once per
-    checkout (numba's cache) and loaded in well under a second afterwards."""
+    law, the closed loop on each plant (the sample kernels, the FE plant's readout).
+    Each piece is compiled once per checkout (numba's cache) and loaded in well under a
+    second afterwards."""
     from controllers import compiled_form
     from reduced_model import ReducedPlant
 
-    from ..run import _sample
     from ..run.laws import build_controller, build_observer, nominal_model
 
     def model_kernels():
@@ -101,16 +101,19 @@ def kernel_groups(scenarios) -> list[tuple[str, object]]:
             seen.add(key)
             groups.append((f"{role} {spec.kind}", lambda b=build, s=s, m=model, r=role:
                            compiled_form(b(s, m), r, s.Ts)))
-    groups.append(("sample loop", _sample.compile_sample_laws))
-    plants = {s.plant.kind for s in scenarios}
-    if "reduced" in plants:
-        groups.append(("reduced-plant loop", _sample.compile_run_reduced))
-    if "exudyn" in plants:
-        def fe_readout():
-            from plant_exudyn import ExudynPlant
-            ExudynPlant().reset().values  # noqa: B018 - the readout compiles on first use
-        groups.append(("FE plant readout", fe_readout))
+    for plant in sorted({s.plant.kind for s in scenarios}):
+        example = next(s for s in scenarios if s.plant.kind == plant)
+        groups.append((f"closed loop on the {plant} plant", lambda e=example: _short_run(e)))
     return groups
+
+
+def _short_run(scenario) -> None:
+    """Two samples of ``scenario`` (compiles what its loop needs)."""
+    from ..run.loop import run_scenario
+    from ..run.scenario import scenario_from_mapping, scenario_to_mapping
+    data = scenario_to_mapping(scenario)
+    data.update(duration=(scenario.sensors.delay + 2) * scenario.Ts, transient=0.0)
+    run_scenario(scenario_from_mapping(data))
 
 
 def compile_kernels(scenarios, *, report=None) -> float:
