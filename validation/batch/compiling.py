@@ -34,7 +34,7 @@ REFERENCE_SECONDS = {
     "controller ct": 0.5, "controller lqr": 3.0,
     "observer smo-paper": 8.0, "observer smo-bl": 0.5, "observer smo-pos": 0.5,
     "observer ekf": 22.0, "observer ekf-pos": 0.5,
-    "sample loop": 6.0, "reduced-plant loop": 9.0, "FE plant readout": 4.0,
+    "closed loop on the exudyn plant": 8.0, "closed loop on the reduced plant": 8.0,
 }
 
 
