@@ -52,7 +52,7 @@ SMALL = {"name": "small", "scenario": {"duration": 0.3, "transient": 0.1,
      "sweep[0].random.true_params.Mp"),
     ({"scenario": {"duration": -1.0}}, "scenario.duration"),
     ({"sweep": [{"grid": {"nonsense.key": [1]}}]}, "nonsense"),
-    ({"scenario": {"duration": 1.0}}, "scenario.transient"),  # the default transient is 2 s
+    ({"scenario": {"duration": 1.0, "transient": 2.0}}, "scenario.transient"),
     ({"sweep": [{"grid": {"controller.options.kv_flex": [1.0]}}]}, "controller.options.kv_flex"),
     ({"name": "../elsewhere"}, "name"),  # a campaign name names a folder: never a path
     ({"name": "a/b"}, "name"),

@@ -49,7 +49,7 @@ CASES = [
     (["run", "--Ts", "0.0015"], "Ts: 0.0015 s is not a whole multiple"),
     (["run", "--duration", "0"], "duration: must be > 0"),
     (["run", "--duration", "-5"], "duration: must be > 0"),
-    (["run", "--duration", "1.5"], ("transient: ", "leaves nothing")),
+    (["run", "--duration", "1.5", "--set", "transient=2"], ("transient: ", "leaves nothing")),
     (["run", "--duration", "1e4"], ("duration: ", "1e+07 samples (at most 5e+06")),
     (["run", "--set", "sensors.encoder_noise=1e4"], "sensors.encoder_noise: must be <= 1000"),
     (["run", "--name", ""], "name: must be a non-empty printable string"),

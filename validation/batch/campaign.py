@@ -323,6 +323,16 @@ class CampaignSummary:
     def any_failed(self) -> bool:
         return bool(self.failed or self.failed_before)
 
+    def __add__(self, other: "CampaignSummary") -> "CampaignSummary":
+        """Two invocations' summaries as one (e.g. the rounds of a stability map)."""
+        return CampaignSummary(
+            planned=self.planned + other.planned, skipped=self.skipped + other.skipped,
+            ok=self.ok + other.ok, diverged=self.diverged + other.diverged,
+            failed=self.failed + other.failed, stale=self.stale + other.stale,
+            damaged={**self.damaged, **other.damaged},
+            failed_before=self.failed_before + other.failed_before,
+            interrupted=other.interrupted or self.interrupted)
+
     def line(self, name: str, out) -> str:
         parts = [f"{name}: {self.planned} runs"]
         if self.skipped:
@@ -380,9 +390,11 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
 
 def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
                  retry_failed: bool = False, reuse_stale: bool = False,
-                 progress: bool = True, only: list[PlannedRun] | None = None) -> CampaignSummary:
+                 progress: bool = True, only: list[PlannedRun] | None = None,
+                 label: str | None = None) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
-    stored as soon as it finishes.  On SIGINT/SIGTERM, what finished is kept and
+    stored as soon as it finishes; the progress bar is labelled ``label`` (default: the
+    campaign's name).  On SIGINT/SIGTERM, what finished is kept and
     ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json are
     exported at the end."""
     planned = only if only is not None else expand(campaign)
@@ -398,7 +410,7 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
         runner = runner or SerialRunner()
         env = environment()
         by_id = {r.run_id: r for r in todo}
-        bar = _progress(len(todo), campaign.name, enabled=progress)
+        bar = _progress(len(todo), label or campaign.name, enabled=progress)
         try:
             tasks = ((r.run_id, r.scenario) for r in todo)  # checked: not parsed again
             for rid, result, metrics in runner.results(tasks):

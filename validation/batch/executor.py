@@ -39,7 +39,7 @@ from .threads import ONE_THREAD
 from .worker import execute_run, failed_result, keep_freed_memory, serve
 
 __all__ = ["Runner", "SerialRunner", "LocalPoolRunner", "DaskRunner", "make_runner",
-           "Interrupted", "available_cores", "exit_status", "compile_for"]
+           "Interrupted", "available_cores", "exit_status"]
 
 
 class Interrupted(BaseException):
@@ -415,19 +415,6 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
                                                       "(dask worker --memory-limit)")
         return DaskRunner(address, run_timeout=run_timeout)
     raise ConfigError("--executor", f"must be 'local' or 'dask', got {kind!r}")
-
-
-def compile_for(scenarios, *, report=None) -> None:
-    """Compile or load here, before the workers fork, the kernels the runs of ``scenarios``
-    use (`worker.compile_kernels`; ``report`` is told of each slow group), so that
-    compiling is not counted in their time limits.  Compiling executes two samples of a
-    run, so runs of plug-in laws (whose code may exit, crash or hang) are left out: their
-    workers compile what they need within the run (the limit's 60 s base allows for it)."""
-    from .worker import compile_kernels
-    trusted = [s for s in scenarios
-               if ":" not in s.controller.kind and ":" not in s.observer.kind]
-    if trusted:
-        compile_kernels(trusted, report=report)
 
 
 @contextmanager

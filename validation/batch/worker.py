@@ -19,7 +19,7 @@ from ..run import loop, metrics  # noqa: F401 - loaded once, before the fork
 from ..run.results import RunResult
 
 __all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "serve",
-           "warm_up", "kernel_groups", "compile_kernels"]
+           "warm_up", "kernel_groups"]
 
 #: The memory limit this process runs under [MiB] (set by `worker_init`; None: none).
 _memory_limit: int | None = None
@@ -172,33 +172,19 @@ def _short_run(scenario) -> None:
     run_scenario(scenario_from_mapping(data))
 
 
-def compile_kernels(scenarios, *, report=None) -> float:
-    """Compile or load every kernel the runs of ``scenarios`` use (`kernel_groups`),
-    telling ``report`` (a callable taking a line) about each group that took more than
-    half a second; returns the seconds spent."""
-    total = 0.0
-    for label, build in kernel_groups(scenarios):
-        t0 = time.perf_counter()
-        build()
-        spent = time.perf_counter() - t0
-        total += spent
-        if report is not None and spent > 0.5:
-            report(f"compiled {label} in {spent:.1f} s (once per checkout)")
-    return total
-
-
 def warm_up(scenarios=None) -> None:
-    """Compile or load every kernel the runs of ``scenarios`` use (default: the PBC with
-    the paper's SMO on both plants), here in the parent before the workers fork."""
+    """Compile or load, silently, every kernel the runs of ``scenarios`` use (default: the
+    PBC with the paper's SMO on both plants), e.g. in a process before it forks workers
+    (`validation.batch.compiling` does it with progress)."""
     if scenarios is None:
         _warm_up_default()
     else:
-        compile_kernels(scenarios)
+        for _, build in kernel_groups(scenarios):
+            build()
 
 
 @functools.cache  # once per process: every runner it starts forks from the same state
 def _warm_up_default() -> None:
     from ..run.scenario import scenario_from_mapping
-    compile_kernels([scenario_from_mapping({"plant": {"kind": plant},
-                                            "observer": {"kind": "smo-paper"}})
-                     for plant in ("reduced", "exudyn")])
+    warm_up([scenario_from_mapping({"plant": {"kind": plant}, "observer": {"kind": "smo-paper"}})
+             for plant in ("reduced", "exudyn")])

@@ -129,16 +129,17 @@ def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
 def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = None,
                   progress: bool = True) -> tuple[list[StabilityResult], object]:
     """Run the grid and the bisections for every case into the results folder ``out``
-    (resumable like any campaign); returns the results and the last campaign summary."""
+    (resumable like any campaign; the progress bar names the round: grid, bisection k/3);
+    returns the results and the summary of every round together."""
     campaign = Campaign(name="stability", base={}, sweeps=(),
                         description="sampled-data stability map")
     tested: dict[int, dict[float, tuple[bool, str]]] = {i: {} for i in range(len(cases))}
     store = ResultStore(out)
 
-    def run(points: list[tuple[int, float]]):
+    def run(points: list[tuple[int, float]], label: str):
         planned = {(i, Ts): _planned(cases[i], Ts) for i, Ts in points}
         summary = run_campaign(campaign, out, runner=runner, progress=progress,
-                               only=list(planned.values()))
+                               only=list(planned.values()), label=label)
         if summary.interrupted:
             return summary
         rows = {r.run_id: r for r in store.rows()}
@@ -146,8 +147,8 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
             tested[i][Ts] = is_stable(rows[p.run_id])
         return summary
 
-    summary = run([(i, Ts) for i in range(len(cases)) for Ts in GRID])
-    for _ in range(BISECTIONS):
+    summary = run([(i, Ts) for i in range(len(cases)) for Ts in GRID], "stability: grid")
+    for round_ in range(1, BISECTIONS + 1):
         if summary.interrupted:
             break
         points = []
@@ -157,7 +158,7 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
                 points.append((i, float(np.sqrt(lo * hi))))
         if not points:
             break
-        summary = run(points)
+        summary = summary + run(points, f"stability: bisection {round_}/{BISECTIONS}")
     return [_result(case, tested[i]) for i, case in enumerate(cases)], summary
 
 
