@@ -276,7 +276,7 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
 
 def run_name(campaign: str, label, where: str) -> str:
     """The name of a campaign's run: ``"<campaign>/<label>"``, both plain names (letters,
-    digits, ``. _ - +``; `check_label`) — the rule for every run name (`check_run_name`),
+    digits, ``. _ - + @``; `check_label`) — the rule for every run name (`check_run_name`),
     whether the label comes from a name axis or a sweep's name."""
     check_label(label, where)
     return f"{campaign}/{label}"

@@ -172,6 +172,9 @@ def _prediction(config_json: str) -> Prediction:
         K0 = case.gains(case.scenario.Ts)
     except NotLinearisable as exc:
         return Prediction(math.nan, math.nan, f"{case.scenario.controller.kind}: {exc}")
+    except Exception as exc:  # noqa: BLE001 - a plug-in law may raise anything: no prediction
+        return Prediction(math.nan, math.nan, f"{case.scenario.controller.kind} raised "
+                          f"{type(exc).__name__} while being linearised: {exc}")
     if K0 is None:
         return Prediction(math.nan, math.nan, "the law does not build at the case's Ts")
     forces = K0[0].shape[0] > 2
