@@ -174,6 +174,8 @@ def format_metrics(metrics: dict) -> str:
         lines.append(f"  {'estimate / measurement error, worst':<44} {ratios[worst]:.3g} ({worst})")
     if metrics.get("est_worse"):
         lines.append(f"  {'estimate worse than the measurement':<44} {metrics['est_worse']}")
+    if metrics.get("est_worse_zero"):
+        lines.append(f"  {'estimate worse than x̂ ≡ 0':<44} {metrics['est_worse_zero']}")
     return "\n".join(lines)
 
 
@@ -236,7 +238,25 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         summary = run_campaign(campaign, out, runner=runner, retry_failed=args.retry_failed,
                                reuse_stale=args.reuse_stale, progress=not args.no_progress,
                                only=runs)
+        if args.mesh_check and not summary.interrupted:
+            status = _mesh_checks(runner, out, {r.run_id for r in runs},
+                                  progress=not args.no_progress)
+            if status:
+                return status
     return _finish(summary, campaign.name, out)
+
+
+def _mesh_checks(runner, out: Path, run_ids: set, *, progress: bool) -> int:
+    """Run the mesh checks of the truth-plant runs ``run_ids`` stored in ``out``; a
+    non-zero exit status if interrupted or a check failed."""
+    from .verdicts.mesh import MESH_SWEEP, run_checks
+    rows = [r for r in ResultStore(out).rows() if r.run_id in run_ids]
+    summary = run_checks(rows, out, runner=runner, progress=progress)
+    if summary.planned:
+        print(summary.line(MESH_SWEEP, out))
+    if summary.interrupted:
+        return _finish(summary, MESH_SWEEP, out)
+    return EXIT_FAILED if summary.any_failed else 0
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -270,11 +290,16 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
         if summary.interrupted:
             return _finish(summary, campaign.name, out)
         print(summary.line(campaign.name, out))
+        checks = _mesh_checks(runner, out, {r.run_id for r in runs},
+                              progress=not args.no_progress)
+        if checks and checks != EXIT_FAILED:
+            return checks
+        stability = 0
         if not args.no_stability:
             stability = _stability(runner, [r.scenario for r in runs if not
                                             r.scenario.disturbances], out / "stability",
                                    progress=not args.no_progress)
-            if stability:
+            if stability and stability != EXIT_FAILED:
                 return stability
     print()
     print(write_claims(out))
@@ -284,12 +309,12 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
         html_path, _ = write_report(out, animate=not args.no_animation,
                                     progress=not args.no_progress)
         print(f"report: {html_path}")
-    return EXIT_FAILED if summary.any_failed else 0
+    return EXIT_FAILED if summary.any_failed or checks or stability else 0
 
 
 def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arms=None) -> int:
     """Run the stability map into ``out`` and print it; a non-zero exit status if it was
-    interrupted."""
+    interrupted or a run failed."""
     from .verdicts.stability import cases_from_scenarios, stability_map, write_stability
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     open_output(out)
@@ -298,6 +323,12 @@ def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arm
         return _finish(summary, "stability", out)
     print(write_stability(results, out))
     print(f"stability map: {out / 'stability.md'} and stability.csv")
+    failed = [f"{r.case.label} ({r.case.plant}, {r.case.arm}) at {1e3 * Ts:.3g} ms"
+              for r in results for Ts in r.failed]
+    if failed:  # a failure is no verdict on stability: the map is incomplete
+        print(f"flexarm: {len(failed)} stability run(s) failed: {'; '.join(failed)}",
+              file=sys.stderr)
+        return EXIT_FAILED
     return 0
 
 
@@ -527,6 +558,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="keep stored runs made by other code instead of rerunning them")
     camp.add_argument("--dry-run", action="store_true",
                       help="list the runs and which are already stored; run nothing")
+    camp.add_argument("--mesh-check", action="store_true",
+                      help="also run every truth-plant run on the check meshes (closed-loop "
+                           "mesh convergence; the report and claims need it for a verdict)")
     camp.set_defaults(func=cmd_campaign)
 
     rep = sub.add_parser("report", help="write report.html and report.md of a results folder")

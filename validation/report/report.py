@@ -25,6 +25,7 @@ from .render import fmt_number, render
 from ..run.results import write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
+from ..verdicts.mesh import MESH_SWEEP, is_check
 
 __all__ = ["write_report", "report_data"]
 
@@ -55,6 +56,7 @@ class ReportData:
     warnings: list = field(default_factory=list)
     claims: list | None = None
     claims_criteria: list = field(default_factory=list)
+    mesh: dict | None = None
     stability: dict | None = None
     estimation: dict | None = None
     runs: dict | None = None
@@ -120,25 +122,56 @@ def _estimation_table(runs) -> dict | None:
     states = [k.removeprefix("est_rms_") for k in observed[0].metrics
               if k.startswith("est_rms_") and not k.startswith("est_rms_slope")]
     head = ["name", "arm", "plant", "Ts [ms]", "start", "observer"] + \
-        [fig.state_label(s) for s in states] + ["worse than the measurement"]
+        [fig.state_label(s) for s in states] + ["worse than the measurement",
+                                                "worse than x̂ ≡ 0"]
     rows, detail = [], []
     for r in observed:
         m = r.metrics
         cells = []
         for s in states:
-            ratio = m.get(f"est_to_noise_{s}")
-            cells.append("—" if not isinstance(ratio, float) or math.isnan(ratio) else
-                         fmt_number(ratio, 2) + (" ⚠" if ratio > 1 else ""))
+            ratio, zero = m.get(f"est_to_noise_{s}"), m.get(f"est_to_signal_{s}")
+            cells.append(("—" if not isinstance(ratio, float) or math.isnan(ratio) else
+                          fmt_number(ratio, 2) + (" ⚠" if ratio > 1 else ""))
+                         + (" ⊘" if isinstance(zero, float) and zero >= 1 else ""))
             detail.append([*_identity(r), r.config["observer"]["kind"], fig.state_label(s),
                            fig.state_unit(s), m.get(f"est_rms_{s}"), m.get(f"noise_rms_{s}"),
                            m.get(f"signal_rms_{s}"), m.get(f"est_to_noise_{s}"),
                            m.get(f"est_to_signal_{s}")])
-        worse = " ".join(fig.state_label(s) for s in (m.get("est_worse") or "").split())
-        rows.append([*_identity(r), r.config["observer"]["kind"], *cells, worse or "none"])
+        worse, zero = (" ".join(fig.state_label(s) for s in (m.get(k) or "").split())
+                       for k in ("est_worse", "est_worse_zero"))
+        rows.append([*_identity(r), r.config["observer"]["kind"], *cells, worse or "none",
+                     zero or "none"])
     detail_head = ["name", "arm", "plant", "Ts [ms]", "start", "observer", "state", "unit",
                    "error RMS", "measurement error RMS", "signal RMS", "error / measurement",
                    "error / signal"]
     return {"compact": _table(head, rows), "detail": _table(detail_head, detail)}
+
+
+def _mesh_table(runs) -> dict | None:
+    """Closed-loop mesh convergence of the truth-plant runs that have checks: each judged
+    value (a claim's measure) on every mesh."""
+    from ..verdicts.claims import mesh_rows
+    from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
+    rows = mesh_rows(runs)
+    if not rows:
+        return None
+    labels = list(dict.fromkeys(label for r in rows for label, _ in r.values))
+    head = ["name", "arm", "Ts [ms]", "start", "judged value"] + labels + ["verdict"]
+    cells, classes = [], []
+    for r in rows:
+        by_label = dict(r.values)
+        unit = r.claim.unit if r.claim else ""
+        values = [(v if isinstance(v, str) else f"{fmt_number(v)} {unit}".strip())
+                  if label in by_label else "" for label, v in
+                  ((label, by_label.get(label)) for label in labels)]
+        verdict = {True: "converged", False: "not converged", None: "check not run"}[r.converged]
+        c = r.run.config
+        cells.append([r.run.name, c.get("arm", "default"), f"{1e3 * c['Ts']:g}", _start(c),
+                      r.claim.key if r.claim else "run status", *values, verdict])
+        classes.append({True: "holds", False: "fails", None: ""}[r.converged])
+    return {"table": _table(head, cells, classes),
+            "tolerance": f"|a − b| ≤ {MESH_RTOL:.0%} of the larger value + {MESH_ATOL:.0%} "
+                         "of the claim's bound"}
 
 
 def _figure_groups(runs, wanted: list[str] | None):
@@ -181,8 +214,9 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         raise StoreError(f"{results_dir}: no stored runs")
     damaged = store.verify(all_rows)
     stale = [r for r in all_rows if r.fingerprint != run_fingerprint(r.config)]
-    runs = [r for r in all_rows if r.run_id not in damaged and r not in stale
-            and r.sweep != "stability"]
+    fresh = [r for r in all_rows if r.run_id not in damaged and r not in stale]
+    checks = [r for r in fresh if is_check(r)]
+    runs = [r for r in fresh if r.sweep != "stability" and not is_check(r)]
     warnings = [f"run {rid} left out: {why} (rerun the campaign to redo it)"
                 for rid, why in damaged.items()]
     if stale:
@@ -190,7 +224,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                         f"installation ({', '.join(r.run_id for r in stale[:8])}"
                         f"{', …' if len(stale) > 8 else ''}); rerun the campaign to refresh them")
     campaigns = store.campaigns()
-    names = [n for n in campaigns if n not in ("stability",)] or ["(single runs)"]
+    names = [n for n in campaigns if n not in ("stability", MESH_SWEEP)] or ["(single runs)"]
     info = [campaigns.get(n, {}) for n in names]
     wanted = [w for i in info for w in i.get("report", {}).get("figures", [])] or None
     counts = {s: sum(r.status == s for r in runs) for s in ("ok", "diverged", "failed")}
@@ -205,7 +239,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       description=" ".join(i.get("description", "") for i in info).strip(),
                       counts=counts, scope=scope, warnings=warnings)
 
-    columns = claim_columns(runs)
+    columns = claim_columns(runs + checks)
+    data.mesh = _mesh_table(runs + checks)
     if columns:
         data.claims = claims_tables(columns)
         data.claims_criteria = [{"text": c.text, "criterion": c.criterion,
@@ -219,10 +254,13 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         if results:
             rows = stability_rows(results)
             data.stability = {"table": _table(
-                ["case", "plant", "arm", "largest stable Ts [ms]", "first unstable Ts [ms]",
-                 "predicted [ms]", "why the first unstable one is"],
-                [[r["case"], r["plant"], r["arm"], r["largest"], r["unstable"], r["predicted"],
-                  r["reason"]] for r in rows])}
+                ["case", "plant", "arm", "no divergence up to [ms]", "first divergence [ms]",
+                 "keeps tracking up to [ms]", "first loss [ms]", "predicted [ms]",
+                 "monotone?", "mesh", "why the first bad one is"],
+                [[r["case"], r["plant"], r["arm"], r["no_divergence"], r["first_divergence"],
+                  r["tracking"], r["first_loss"], r["predicted"], r["notes"], r["mesh"],
+                  r["reason"]] for r in rows],
+                ["failed" if "FAILED" in r["notes"] else "" for r in rows])}
             tasks.append(("Stability map", "sampled-data stability map: tested control periods "
                           "per case, plant and arm", lambda: fig.stability_chart(results)))
     for study, spec in campaigns.get("attribution", {}).get("studies", {}).items():
