@@ -405,6 +405,11 @@ def cmd_attribute(args: argparse.Namespace) -> int:
             if summary.interrupted:
                 return _finish(summary, label, out)
             results.append(att)
+        if args.mesh_check:
+            status = _mesh_checks(runner, out, {r.run_id for r in ResultStore(out).rows()},
+                                  progress=not args.no_progress)
+            if status:
+                return status
     print(write_attribution(results, out))
     print(f"attribution: {out / 'attribution.csv'} and attribution.md; "
           f"'flexarm report {out}' draws the waterfalls")
@@ -610,6 +615,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="plant, truncation, parameters, sensing, estimation, sampling, "
                           "actuation (default: every factor the scenario has)")
     att.add_argument("--out", metavar="DIR", help="results folder")
+    att.add_argument("--mesh-check", action="store_true",
+                     help="also run every truth-plant world on the check meshes (closed-loop "
+                          "mesh convergence, shown by the report)")
     _add_execution(att)
     att.set_defaults(func=cmd_attribute)
 

@@ -148,28 +148,47 @@ def _estimation_table(runs) -> dict | None:
 
 
 def _mesh_table(runs) -> dict | None:
-    """Closed-loop mesh convergence of the truth-plant runs that have checks: each judged
-    value (a claim's measure) on every mesh."""
+    """Closed-loop mesh convergence of the truth-plant runs that have checks: per run, its
+    verdict and the values that moved (compact); each judged value (a claim's measure) on
+    every mesh (detail)."""
     from ..verdicts.claims import mesh_rows
     from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
-    rows = mesh_rows(runs)
+    rows = sorted(mesh_rows(runs), key=lambda r: (r.run.name, _swept(r.run),
+                                                  r.run.config["Ts"]))
     if not rows:
         return None
     labels = list(dict.fromkeys(label for r in rows for label, _ in r.values))
-    head = ["name", "arm", "Ts [ms]", "start", "judged value"] + labels + ["verdict"]
-    cells, classes = [], []
+
+    def text(v, unit):
+        if isinstance(v, str):
+            return v
+        return "never" if math.isinf(v) else f"{fmt_number(v)} {unit}".strip()
+    detail, detail_classes, per_run = [], [], {}
     for r in rows:
         by_label = dict(r.values)
         unit = r.claim.unit if r.claim else ""
-        values = [(v if isinstance(v, str) else f"{fmt_number(v)} {unit}".strip())
-                  if label in by_label else "" for label, v in
-                  ((label, by_label.get(label)) for label in labels)]
-        verdict = {True: "converged", False: "not converged", None: "check not run"}[r.converged]
-        c = r.run.config
-        cells.append([r.run.name, c.get("arm", "default"), f"{1e3 * c['Ts']:g}", _start(c),
-                      r.claim.key if r.claim else "run status", *values, verdict])
-        classes.append({True: "holds", False: "fails", None: ""}[r.converged])
-    return {"table": _table(head, cells, classes),
+        values = [text(by_label[label], unit) if label in by_label else "" for label in labels]
+        verdict = {True: "converged" if r.claim else "same outcome on every mesh",
+                   False: "not converged", None: "check not run"}[r.converged]
+        detail.append([*_identity(r.run)[:2], *_identity(r.run)[3:], _swept(r.run),
+                       r.claim.key if r.claim else "run status", *values, verdict])
+        detail_classes.append({True: "holds", False: "fails", None: ""}[r.converged])
+        per_run.setdefault(r.run.run_id, (r.run, []))[1].append((r, values))
+    compact, classes = [], []
+    for run, items in per_run.values():
+        moved = [f"{r.claim.key if r.claim else 'status'} ({', '.join(v)})"
+                 for r, v in items if r.converged is False]
+        missing = any(r.converged is None for r, _ in items)
+        verdict = ("not converged" if moved else "check not run" if missing else
+                   "converged" if run.status == "ok" else f"{run.status} on every mesh")
+        compact.append([*_identity(run)[:2], *_identity(run)[3:], _swept(run), verdict,
+                        "; ".join(moved) or "—"])
+        classes.append("fails" if moved else "" if missing else "holds")
+    head = ["name", "arm", "Ts [ms]", "start", "swept values"]
+    return {"compact": _table(head + ["verdict", f"moved ({', '.join(labels)})"], compact,
+                              classes),
+            "detail": _table(head + ["judged value", *labels, "verdict"], detail,
+                             detail_classes),
             "tolerance": f"|a − b| ≤ {MESH_RTOL:.0%} of the larger value + {MESH_ATOL:.0%} "
                          "of the claim's bound"}
 

@@ -282,7 +282,10 @@ class _Measured:
         return self._result
 
     def metrics(self, transient: float | None = None) -> dict:
-        if transient is None:
+        """The metrics after ``transient`` (None: the scenario's own, as stored — computed
+        from the float64 signals; the stored file's float32 copy would differ in the last
+        digits, and the family must contain the stored value itself)."""
+        if transient is None or transient == float(self.stored.config.get("transient", 2.0)):
             return self.stored.metrics
         if transient not in self._metrics:
             self._metrics[transient] = all_metrics(self.result, transient)
