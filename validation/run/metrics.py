@@ -39,10 +39,10 @@ Three metrics need a definition the paper does not give:
   tolerance cannot show convergence at all (x̂ ≡ 0 meets it too): ``est_worse_zero``
   names the states whose estimate is worse than x̂ ≡ 0 (error RMS ≥ the state's RMS).
 - **Vibration decay**: the oscillatory deflection's RMS per ``VIBRATION_WINDOW`` (2 s)
-  window from t = 0 (``vib_win_i_TT``, TT the window's start in s), and its decay rate
-  ``vib_decay_i`` [1/s]: minus the least-squares slope of ln(window RMS) against time
-  over the windows from the transient on (ln 10 / 2 s = 1.15/s: ten-fold every 2 s; 0:
-  vibration that stays).  ``vib_last_i`` is the RMS of the last full window.  A start-up
+  window from t = 0 (``vib_win_i_TT``, TT the window's start in s); the decay rate right
+  after the transient ``vib_decay_i`` [1/s] = ln(RMS of the first full window from the
+  transient ÷ RMS of the next) / 2 s (1.15/s: ten-fold in 2 s; 0: it does not decay);
+  and ``vib_late_i``, the RMS over the second half of the run: what stays.  A start-up
   kick that dies out and a vibration that stays can have the same RMS after a transient;
   these tell them apart.
 """
@@ -180,23 +180,23 @@ def vibration(result: RunResult, transient: float, cutoff_hz: float) -> dict[str
 
 def vibration_decay(time: np.ndarray, oscillation: np.ndarray, transient: float) -> dict:
     """Per link: the RMS of ``oscillation`` (2, n_samples) in each full
-    `VIBRATION_WINDOW` from t = 0, the RMS of the last one, and the decay rate [1/s] fitted
-    to the windows from ``transient`` on (module docstring); NaN with fewer than two."""
+    `VIBRATION_WINDOW` from t = 0, the decay rate [1/s] between the first two windows
+    that start at or after ``transient``, and the RMS over the run's second half (module
+    docstring); NaN where the run is too short."""
     dt = time[1] - time[0]
     k = max(1, int(round(VIBRATION_WINDOW / dt)))
     n = time.size // k
     starts = time[0] + VIBRATION_WINDOW * np.arange(n)
+    first = int(np.searchsorted(starts, transient - 1e-9))
+    second_half = time >= time[0] + 0.5 * (time[-1] - time[0])
     out = {}
     for i in range(2):
         rms = np.array([_rms(oscillation[i, j * k:(j + 1) * k]) for j in range(n)])
         out |= {f"vib_win_{i + 1}_{s:02.0f}": float(r) for s, r in zip(starts, rms)}
-        out[f"vib_last_{i + 1}"] = float(rms[-1]) if n else math.nan
-        fit = (starts >= transient - 1e-9) & (rms > 0)
-        if fit.sum() >= 2:
-            slope = np.polyfit(starts[fit] + VIBRATION_WINDOW / 2, np.log(rms[fit]), 1)[0]
-            out[f"vib_decay_{i + 1}"] = float(-slope)
-        else:
-            out[f"vib_decay_{i + 1}"] = math.nan
+        pair = rms[first:first + 2]
+        out[f"vib_decay_{i + 1}"] = (float(np.log(pair[0] / pair[1]) / VIBRATION_WINDOW)
+                                     if pair.size == 2 and np.all(pair > 0) else math.nan)
+        out[f"vib_late_{i + 1}"] = float(_rms(oscillation[i, second_half]))
     return out
 
 

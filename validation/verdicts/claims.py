@@ -89,8 +89,11 @@ def _vibration(m, _):
                  + ", ".join(_mm(v) for _, v in windows) + " mm")
     decay = m.get(f"vib_decay_{link}", math.nan)
     if isinstance(decay, float) and math.isfinite(decay):
-        note += f"; decay {decay:.2g}/s (×{math.exp(-VIBRATION_WINDOW * decay):.2g} per " \
-                f"{VIBRATION_WINDOW:g} s)"
+        note += f"; after the transient it decays ×{math.exp(-VIBRATION_WINDOW * decay):.2g} " \
+                f"per {VIBRATION_WINDOW:g} s"
+    late = m.get(f"vib_late_{link}", math.nan)
+    if isinstance(late, float) and math.isfinite(late):
+        note += f"; {_mm(late)} mm stays (second half of the run)"
     return value, note
 
 
