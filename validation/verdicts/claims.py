@@ -546,8 +546,9 @@ def _arm_notes(columns: list[Column]) -> list[str]:
                 "on an FE node whose only rotary inertia is the elements' consistent mass: "
                 "the FE model has no mesh limit (its joint-2 mobility grows as elements³), "
                 "so its truth-plant columns describe the mesh, not the arm.  Give the arm "
-                "a stator inertia (true_params.stator_inertia; the smallest at which the "
-                "truth plant converged in closed loop is in README.md, 'Verdicts').")
+                "a stator inertia (true_params.stator_inertia): campaigns/stator.toml "
+                "measures the smallest at which the truth plant converges in closed loop "
+                "(README.md, 'Mesh convergence of the truth plant').")
             break
     return notes
 
