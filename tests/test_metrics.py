@@ -92,8 +92,8 @@ def test_convergence_tolerance_is_the_noise_floor_the_paper_bound_or_the_scale()
     assert good["est_to_noise_theta1"] == pytest.approx(0.1, rel=1e-6)
     # Tolerances: the angle's is the paper's 0.02 rad (above 1.5 × its 1e-3 noise floor);
     # the rate has no paper number: 10 % of its 0.707 rad/s RMS (above 1.5e-3).
-    assert good["est_conv_tol_theta1"] == PAPER_ANGLE_BOUND
-    assert good["est_conv_tol_theta1_dot"] == pytest.approx(
+    assert good["est_tol_theta1"] == PAPER_ANGLE_BOUND
+    assert good["est_tol_theta1_dot"] == pytest.approx(
         CONVERGENCE_FRACTION * good["signal_rms_theta1_dot"], rel=1e-12)
     # x̂ ≡ 0 and a 0.1 rad bias never converge; the pass-through and 0.5σ noise at once.
     assert math.isnan(null["est_conv_theta1"]) and math.isnan(null["est_conv_theta1_dot"])
@@ -105,7 +105,7 @@ def test_convergence_tolerance_is_the_noise_floor_the_paper_bound_or_the_scale()
     small = dict(q11=1e-6 * np.sin(T), y_q11=1e-6 * np.sin(T) + 1e-5 * rng.standard_normal(T.size))
     floor = estimation(result(**small, xhat_q11=small["q11"] + 0.5e-5 * rng.standard_normal(T.size)), 2.0)
     noisy = estimation(result(**small, xhat_q11=small["q11"] + 2e-5 * rng.standard_normal(T.size)), 2.0)
-    assert floor["est_conv_tol_q11"] == pytest.approx(CONVERGENCE_NOISE_FACTOR * 1e-5, rel=0.02)
+    assert floor["est_tol_q11"] == pytest.approx(CONVERGENCE_NOISE_FACTOR * 1e-5, rel=0.02)
     assert floor["est_conv_q11"] == 0.0 and math.isnan(noisy["est_conv_q11"])
 
 

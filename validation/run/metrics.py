@@ -254,9 +254,9 @@ def _sensor_sigma(config: dict, state: str) -> float:
 
 def estimation(result: RunResult, transient: float, model=None) -> dict[str, float]:
     """Per estimated state: error RMS and max after ``transient``, the raw measurement's
-    error RMS and the signal RMS with the two ratios, the convergence tolerance and time
-    (module docstring; ``model`` gives the flexible rates the paper's bound).  Empty if
-    the run had no observer."""
+    error RMS and the signal RMS with the two ratios, the convergence tolerance
+    (``est_tol_*``) and time (``est_conv_*``; module docstring — ``model`` gives the
+    flexible rates the paper's bound).  Empty if the run had no observer."""
     states = [n.removeprefix("xhat_") for n in result.names_with("xhat_")]
     if not states:
         return {}
@@ -284,7 +284,7 @@ def estimation(result: RunResult, transient: float, model=None) -> dict[str, flo
                 worse.append(s)
     tolerance = convergence_tolerances(states, signal, floor, model)
     for i, s in enumerate(states):
-        out[f"est_conv_tol_{s}"] = tolerance[s]
+        out[f"est_tol_{s}"] = tolerance[s]
         out[f"est_conv_{s}"] = convergence_time(result.time, err[i], tolerance[s])
     out["est_worse"] = " ".join(worse)
     out["est_worse_zero"] = " ".join(worse_zero)
