@@ -433,9 +433,10 @@ def stability_chart(results) -> bytes:
             marker, color, size = style[outcome]
             ax.plot(1e3 * Ts, i, marker, color=color, ms=size, mew=2,
                     mfc="none" if outcome == "failed" else color)
-        for limit, color in ((r.divergence, "k"), (r.tracking, "darkorange")):
+        # The longer black bar stays visible where both limits coincide.
+        for limit, color, half in ((r.divergence, "k", 0.42), (r.tracking, "darkorange", 0.25)):
             if not math.isnan(limit.largest):
-                ax.plot([1e3 * limit.largest] * 2, [i - 0.35, i + 0.35], color=color, lw=2)
+                ax.plot([1e3 * limit.largest] * 2, [i - half, i + half], color=color, lw=2)
         if math.isfinite(r.predicted):
             ax.plot(1e3 * r.predicted, i, "D", color="0.5", ms=5, mfc="none")
     ax.set_yticks(range(len(results)))
