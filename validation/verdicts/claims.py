@@ -322,7 +322,7 @@ def _window_family(claim: Claim, run: _Measured) -> tuple:
 
 
 def _flip_note(family: tuple) -> str:
-    """"fails for transient 1–2.5 s, holds for 3–4 s"."""
+    """"fails for transient 1–2.5 s, holds for transient 3–4 s"."""
     spans: list[list] = []
     for T, _, verdict in family:
         if spans and spans[-1][0] == verdict:
