@@ -467,14 +467,20 @@ def mesh_rows(runs) -> list[MeshRow]:
     return out
 
 
-def mesh_status(checks: dict | None, verdicts: dict) -> str:
-    """The claims table's mesh row for one column."""
+def mesh_status(run, checks: dict | None, verdicts: dict) -> str:
+    """The claims table's mesh row for one column (``run``: the system's stored run)."""
     if checks is None:
         return "— (reduced plant)"
     if not checks or not any(checks.values()):
         return "not checked"
-    moved = [k for k, v in verdicts.items() if v.verdict == "not converged"]
     labels = ", ".join(checks)
+    if run.status != "ok":
+        others = {label: other.status for label, other in checks.items() if other is not None}
+        if any(status != run.status for status in others.values()):
+            return f"NOT CONVERGED: {run.status} on its mesh, " + ", ".join(
+                f"{status} on {label}" for label, status in others.items())
+        return f"{run.status} on every mesh ({labels})"
+    moved = [k for k, v in verdicts.items() if v.verdict == "not converged"]
     if moved:
         return f"NOT CONVERGED against {labels}: {', '.join(moved)}"
     if any(v is None for v in checks.values()):
@@ -510,7 +516,8 @@ def claims_tables(columns: list[Column]) -> list[dict]:
                               for c in cols]},
                 {"claim": "truth plant under mesh refinement (closed loop)", "key": "mesh",
                  "guards": "results of the FE discretisation taken for the arm's",
-                 "cells": [mesh_status(c.checks.get(SYSTEM), c.verdicts) for c in cols],
+                 "cells": [mesh_status(c.runs.get(SYSTEM), c.checks.get(SYSTEM), c.verdicts)
+                           if SYSTEM in c.runs else "not run" for c in cols],
                  "verdicts": [_mesh_verdict(c) for c in cols]}]
         rows += [{"claim": claim.text, "key": claim.key, "guards": claim.guards,
                   "cells": [cell_text(claim, c.verdicts[claim.key]) for c in cols],
@@ -526,7 +533,7 @@ def _mesh_verdict(column: Column) -> str:
     checks = column.checks.get(SYSTEM)
     if checks is None:
         return "n/a"
-    if any(v.verdict == "not converged" for v in column.verdicts.values()):
+    if mesh_status(column.runs[SYSTEM], checks, column.verdicts).startswith("NOT CONVERGED"):
         return "not converged"
     return "converged" if checks and all(checks.values()) else "mesh not checked"
 
