@@ -21,7 +21,12 @@ from numba import njit
 from reduced_model import ArmModel
 
 from ._baselines import RigidArm, rigid_torque
+from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
 from ._gains import gain_vector as _weights
+
+#: The most θ2 grid points: one per degree.  Each is one Riccati design (16 ms measured),
+#: so the largest schedule designs in ~6 s; the default 24 already interpolates the gains.
+MAX_GRID_POINTS = 360
 
 __all__ = ["GainScheduledLQR"]
 
@@ -110,7 +115,7 @@ class GainScheduledLQR:
     Ts : float
         Sample time [s] of the design (the loop's control period), > 0.
     grid_points : int
-        Number of θ2 grid points over one period, >= 4.
+        Number of θ2 grid points over one period, 4..`MAX_GRID_POINTS`.
     """
 
     name = "lqr"
@@ -128,8 +133,9 @@ class GainScheduledLQR:
         if not (isinstance(Ts, numbers.Real) and math.isfinite(Ts) and Ts > 0):
             raise ValueError(f"Ts must be a finite number of seconds > 0, got {Ts!r}")
         if (isinstance(grid_points, bool) or not isinstance(grid_points, numbers.Integral)
-                or grid_points < 4):
-            raise ValueError(f"grid_points must be an integer >= 4, got {grid_points!r}")
+                or not 4 <= grid_points <= MAX_GRID_POINTS):
+            raise ValueError(f"grid_points must be an integer in 4..{MAX_GRID_POINTS}, "
+                             f"got {grid_points!r}")
         self.Ts = float(Ts)
         N = int(grid_points)
         #: θ2 grid [rad]: N points over [−π, π); K(−π) = K(π).
@@ -186,6 +192,15 @@ class GainScheduledLQR:
                     ddtheta_d, self._tau)
         return self._tau.copy()
 
+    def compiled(self, Ts: float) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`): the gain table (designed at this
+        law's own ``Ts``), the scheduling scale and the rigid feedforward constants."""
+        return CompiledLaw.of(lqr_kernel, CONTROLLER_SIGNATURE, self.model,
+                              ints=[self._table.shape[0]],
+                              reals=np.concatenate([[self._scale], self._ff,
+                                                    self._table.ravel()]),
+                              state=np.zeros(self._K.size))
+
 
 @njit(cache=True)
 def _interpolate_gain(table, scale, theta2, K):
@@ -221,3 +236,15 @@ def _lqr_torque(table, scale, ff, K, x, theta_d, dtheta_d, ddtheta_d, tau):
             err = x[j]
         tau[0] -= K[0, j] * err
         tau[1] -= K[1, j] * err
+
+
+@njit(cache=True)
+def lqr_kernel(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
+    """`GainScheduledLQR` compiled: ints = [grid rows + 1], reals = [scale, rigid
+    constants, gain table], state = K."""
+    N = x.shape[0]
+    rows = ints[0]
+    table = reals[5:5 + rows * 2 * N].reshape((rows, 2, N))
+    _lqr_torque(table, reals[0], reals[1:5], state.reshape((2, N)), x, ref[0:2], ref[2:4],
+                ref[4:6], tau)
+    return 2

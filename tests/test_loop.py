@@ -153,7 +153,7 @@ def test_swapping_the_plant_is_one_word():
     (dict(sensors__modal="gauges", sensors__gauges_link1=[0.1]), "sensors.gauges_link1",
      "gauge"),
     (dict(observer__initial_error=[0.1, 0.2]), "observer.initial_error", "needs 12 values"),
-    (dict(duration=2.0), "transient", "leaves nothing"),  # the default transient is 2 s
+    (dict(duration=2.0, transient=2.0), "transient", "leaves nothing"),
 ])
 def test_bad_combinations_are_rejected_before_simulation(overrides, path, text):
     with pytest.raises(ConfigError) as exc:

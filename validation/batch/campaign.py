@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,10 +36,12 @@ from .executor import Interrupted, Runner, SerialRunner
 from .fingerprint import run_fingerprint
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .store import ResultStore, environment, run_id
-from ..run.tomlfiles import deep_merge, load_toml
+from ..run.tomlfiles import deep_merge, flatten, load_toml, set_dotted
 
-__all__ = ["Campaign", "PlannedRun", "load_campaign", "campaign_from_mapping", "expand",
-           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS"]
+__all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
+           "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
+           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "run_name",
+           "check_run_name"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
@@ -61,17 +64,45 @@ class PlannedRun:
 
 @dataclass(frozen=True)
 class Campaign:
+    """A base scenario (a mapping), its sweeps and the sections of a campaign file."""
+
     name: str
     base: dict
     sweeps: tuple[dict, ...]
     report: dict = field(default_factory=dict)
     description: str = ""
+    attribution: dict = field(default_factory=dict)
 
 
 # --- loading ------------------------------------------------------------------------------
+#: Top-level keys only a campaign file has (a scenario file may have ``name``, ``include``).
+CAMPAIGN_KEYS = frozenset(_TOP_KEYS - {"name", "include"})
+
+
+def is_campaign(data: dict) -> bool:
+    """Whether a file's mapping is a campaign (it has a key of `CAMPAIGN_KEYS`) rather
+    than a scenario."""
+    return bool(CAMPAIGN_KEYS & set(data))
+
+
 def load_campaign(path: str | Path) -> Campaign:
     """Read a campaign TOML (with includes) and check its structure."""
     return campaign_from_mapping(load_toml(path), source=str(path))
+
+
+def load_study(path: str | Path) -> Campaign:
+    """A scenario file or a campaign file, read the one way every command reads them: a
+    campaign (`is_campaign`) as it is; a scenario as a campaign of that one run, named
+    after the file (the run keeps the scenario's own ``name``, if it has one)."""
+    data = load_toml(path)
+    if is_campaign(data):
+        return campaign_from_mapping(data, source=str(path))
+    label = re.sub(r"[^A-Za-z0-9._+-]", "-", Path(path).stem).lstrip(".") or "scenario"
+    sweep = {"name": data["name"]} if "name" in data else {}
+    if sweep:
+        check_label(sweep["name"], "name")  # names its run: the rule of every run's name
+    base = {k: v for k, v in data.items() if k != "name"}
+    return Campaign(name=label[:100], base=base, sweeps=(sweep,) if sweep else ())
 
 
 def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
@@ -91,6 +122,8 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
         for key in sweep:
             check(key in _SWEEP_KEYS, f"{where}.{key}",
                   f"unknown key (allowed: {', '.join(sorted(_SWEEP_KEYS))})")
+        if "name" in sweep:
+            check_label(sweep["name"], f"{where}.name")
     report = data.get("report", {})
     check(isinstance(report, dict), "report", "must be a table")
     for key in report:
@@ -98,22 +131,19 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     figures = report.get("figures", [])
     check(isinstance(figures, list) and all(isinstance(f, str) for f in figures),
           "report.figures", "must be a list of run names")
+    attribution = data.get("attribution", {})
+    check(isinstance(attribution, dict), "attribution", "must be a table")
+    for key in attribution:
+        check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
-                    description=str(data.get("description", "")))
+                    description=str(data.get("description", "")), attribution=attribution)
 
 
 # --- expansion --------------------------------------------------------------------------------
-def _flatten(table: dict, prefix: str = "") -> dict[str, object]:
-    """{"a": {"b": [..]}} → {"a.b": [..]}; a table whose keys are a value spec (scale,
-    uniform, ...) is a leaf."""
-    out = {}
-    for key, value in table.items():
-        path = f"{prefix}.{key}" if prefix else key
-        if isinstance(value, dict) and not (set(value) & _SPEC_KEYS):
-            out.update(_flatten(value, path))
-        else:
-            out[path] = value
-    return out
+def _flatten(table: dict) -> dict[str, object]:
+    """Sweep axes by dotted key; a table whose keys are a value spec (scale, uniform, …)
+    is one axis."""
+    return flatten(table, leaf=lambda value: bool(set(value) & _SPEC_KEYS))
 
 
 def _get(data: dict, path: str):
@@ -123,13 +153,6 @@ def _get(data: dict, path: str):
             raise KeyError(path)
         node = node[part]
     return node
-
-
-def _set(data: dict, path: str, value) -> None:
-    parts = path.split(".")
-    for part in parts[:-1]:
-        data = data.setdefault(part, {})
-    data[parts[-1]] = value
 
 
 def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
@@ -164,6 +187,8 @@ def _random_values(path: str, spec, n: int, rng: np.random.Generator, where: str
         isinstance(v, (int, float)) and not isinstance(v, bool) for v in arg) and arg[0] <= arg[1],
         where, f"{kind} needs [low, high] with low <= high")
     lo, hi = arg
+    check(math.isfinite(lo) and math.isfinite(hi) and math.isfinite(hi - lo), where,
+          f"{kind} needs finite bounds less than 1.8e308 apart, got {arg!r}")
     if kind == "uniform":
         return [float(v) for v in rng.uniform(lo, hi, n)]
     check(lo > 0, where, "loguniform needs low > 0")
@@ -230,13 +255,12 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
     for i, sweep in enumerate(sweeps):
         where = f"sweep[{i}]"
         sweep_name = sweep.get("name", f"sweep{i}" if campaign.sweeps else campaign.name)
-        check(isinstance(sweep_name, str), f"{where}.name", "must be a string")
         for point in _sweep_points(sweep, resolved_base, where):
             data = deep_merge({}, campaign.base)
             for path, value in point.items():
-                _set(data, path, value)
-            # Every run is named within its campaign: "campaign/<name axis or sweep name>".
-            _set(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
+                set_dotted(data, path, value)
+            set_dotted(data, "name", run_name(campaign.name, point.get("name", sweep_name),
+                                              _name_axis(sweep, where)))
             try:
                 scenario = scenario_from_mapping(data)
             except ConfigError as exc:
@@ -248,6 +272,30 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
             check(len(runs) <= MAX_RUNS, "sweep", f"the campaign expands to more than "
                                                   f"{MAX_RUNS} runs")
     return list(runs.values())
+
+
+def run_name(campaign: str, label, where: str) -> str:
+    """The name of a campaign's run: ``"<campaign>/<label>"``, both plain names (letters,
+    digits, ``. _ - +``; `check_label`) — the rule for every run name (`check_run_name`),
+    whether the label comes from a name axis or a sweep's name."""
+    check_label(label, where)
+    return f"{campaign}/{label}"
+
+
+def check_run_name(name, where: str) -> None:
+    """A run's name: a plain name, or ``"<campaign>/<label>"`` of two (`run_name`)."""
+    parts = name.split("/") if isinstance(name, str) else [name]
+    check(len(parts) <= 2, where, f"must be a plain name or campaign/label, got {name!r}")
+    for part in parts:
+        check_label(part, where)
+
+
+def _name_axis(sweep: dict, where: str) -> str:
+    """The dotted key of a sweep's name axis (for errors), or of its name."""
+    for part in ("grid", "zip", "random"):
+        if "name" in sweep.get(part, {}):
+            return f"{where}.{part}.name"
+    return f"{where}.name"
 
 
 # --- execution ----------------------------------------------------------------------------------
@@ -274,6 +322,16 @@ class CampaignSummary:
     @property
     def any_failed(self) -> bool:
         return bool(self.failed or self.failed_before)
+
+    def __add__(self, other: "CampaignSummary") -> "CampaignSummary":
+        """Two invocations' summaries as one (e.g. the rounds of a stability map)."""
+        return CampaignSummary(
+            planned=self.planned + other.planned, skipped=self.skipped + other.skipped,
+            ok=self.ok + other.ok, diverged=self.diverged + other.diverged,
+            failed=self.failed + other.failed, stale=self.stale + other.stale,
+            damaged={**self.damaged, **other.damaged},
+            failed_before=self.failed_before + other.failed_before,
+            interrupted=other.interrupted or self.interrupted)
 
     def line(self, name: str, out) -> str:
         parts = [f"{name}: {self.planned} runs"]
@@ -332,9 +390,11 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
 
 def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
                  retry_failed: bool = False, reuse_stale: bool = False,
-                 progress: bool = True, only: list[PlannedRun] | None = None) -> CampaignSummary:
+                 progress: bool = True, only: list[PlannedRun] | None = None,
+                 label: str | None = None) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
-    stored as soon as it finishes.  On SIGINT/SIGTERM, what finished is kept and
+    stored as soon as it finishes; the progress bar is labelled ``label`` (default: the
+    campaign's name).  On SIGINT/SIGTERM, what finished is kept and
     ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json are
     exported at the end."""
     planned = only if only is not None else expand(campaign)
@@ -350,7 +410,7 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
         runner = runner or SerialRunner()
         env = environment()
         by_id = {r.run_id: r for r in todo}
-        bar = _progress(len(todo), campaign.name, enabled=progress)
+        bar = _progress(len(todo), label or campaign.name, enabled=progress)
         try:
             tasks = ((r.run_id, r.scenario) for r in todo)  # checked: not parsed again
             for rid, result, metrics in runner.results(tasks):

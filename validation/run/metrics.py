@@ -1,8 +1,9 @@
 """Metrics of a run: pure functions of a `RunResult` and its stored scenario.
 
 Conventions: metrics "after the transient" use the samples at t ≥ the scenario's
-``transient`` (default 2 s, so that the start-up is excluded); RMS and max are per joint
-/ per state; angles in rad, lengths in m, torques in N m.
+``transient`` (default 2 s, or half of a run shorter than 4 s, so that the start-up is
+excluded), recorded with them as ``transient_s`` (the window is [transient_s, end_time]);
+RMS and max are per joint / per state; angles in rad, lengths in m, torques in N m.
 
 Three metrics need a definition the paper does not give:
 
@@ -333,11 +334,12 @@ def all_metrics(result: RunResult, transient: float | None = None) -> dict[str, 
     unless ``transient`` [s] is given: the claims evaluate a family of them)."""
     from .laws import nominal_model
     config = result.config
-    base = {"status": result.status, "end_time": result.end_time}
+    base = {"status": result.status, "end_time": result.end_time,
+            "transient_s": float(config["transient"])}
     if result.time.size == 0:
         return base
     if transient is None:
-        transient = float(config.get("transient", 2.0))
+        transient = float(config["transient"])
     true_params = ArmParameters.from_mapping(config["true_params"])
     model = nominal_model(ArmParameters.from_mapping(config["nominal_params"]),
                           tuple(config["model"]["modes_per_link"]))

@@ -40,7 +40,7 @@ from ..batch.fingerprint import run_fingerprint
 from ..run.results import write_atomic
 from ..run.scenario import scenario_from_mapping, scenario_to_mapping
 from ..batch.store import INDEX_NAME, ResultStore, StoreError, run_id
-from ..run.tomlfiles import load_toml
+from ..run.tomlfiles import flatten, load_toml
 
 __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",
            "proposed_bounds", "write_baselines", "DEFAULT_FILE"]
@@ -110,9 +110,14 @@ def load_baselines(path: str | Path = DEFAULT_FILE) -> Baselines:
     checks, names = [], set()
     for i, raw in enumerate(data.get("check", [])):
         where = f"check[{i}]"
+        check(isinstance(raw, dict), where, "must be a table ([[check]])")
         for key in raw:
             check(key in _CHECK_KEYS, f"{where}.{key}",
                   f"unknown key (allowed: {', '.join(sorted(_CHECK_KEYS))})")
+        for key in ("name", "op", "bound"):
+            check(key in raw, f"{where}.{key}", "missing (a check needs name, op and bound)")
+        check(isinstance(raw["bound"], (int, float)) and not isinstance(raw["bound"], bool),
+              f"{where}.bound", f"must be a number, got {raw['bound']!r}")
         metric = raw.get("metric", "gap")
         metric = (metric,) if isinstance(metric, str) else tuple(metric)
         c = Check(**{**raw, "metric": metric, "bound": float(raw.get("bound", math.nan))})
@@ -280,21 +285,13 @@ def _toml_value(v) -> str:
     raise TypeError(f"cannot write {v!r} as TOML")
 
 
-def _flat(table: dict, prefix: str = "") -> list[tuple[str, object]]:
-    out = []
-    for k, v in table.items():
-        key = f"{prefix}.{k}" if prefix else k
-        out += _flat(v, key) if isinstance(v, dict) else [(key, v)]
-    return out
-
-
 def write_baselines(b: Baselines, checks: list[Check]) -> None:
     """Rewrite the baselines file (atomically) with ``checks``."""
     lines = [b.header.rstrip("\n"), "", "[policy]", f"relative = {b.relative!r}",
              f"absolute = {b.absolute!r}", ""]
     for name, spec in b.scenarios.items():
         lines.append(f"[scenarios.{name}]")
-        lines += [f"{k} = {_toml_value(v)}" for k, v in _flat(spec)]
+        lines += [f"{k} = {_toml_value(v)}" for k, v in flatten(spec).items()]
         lines.append("")
     for c in checks:
         lines.append("[[check]]")

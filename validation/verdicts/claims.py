@@ -40,7 +40,8 @@ from . import mesh as mesh_check
 
 __all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "SYSTEM",
            "DISTURBED", "WINDOWS", "column_key", "claims_tables", "claims_records",
-           "write_claims", "cell_text", "mesh_rows", "mesh_status", "MeshRow"]
+           "write_claims", "cell_text", "mesh_rows", "mesh_status", "mesh_row", "arm_notes",
+           "MeshRow"]
 
 SYSTEM, DISTURBED = "pbc+smo-paper", "pbc+smo-paper+disturbance"
 #: The family of transients [s] every windowed claim is measured over.
@@ -514,19 +515,26 @@ def claims_tables(columns: list[Column]) -> list[dict]:
                  "cells": [_run_text(c.runs.get(SYSTEM)) for c in cols],
                  "verdicts": [c.runs[SYSTEM].status if SYSTEM in c.runs else "not run"
                               for c in cols]},
-                {"claim": "truth plant under mesh refinement (closed loop)", "key": "mesh",
-                 "guards": "results of the FE discretisation taken for the arm's",
-                 "cells": [mesh_status(c.runs.get(SYSTEM), c.checks.get(SYSTEM), c.verdicts)
-                           if SYSTEM in c.runs else "not run" for c in cols],
-                 "verdicts": [_mesh_verdict(c) for c in cols]}]
+                mesh_row(cols)]
         rows += [{"claim": claim.text, "key": claim.key, "guards": claim.guards,
                   "cells": [cell_text(claim, c.verdicts[claim.key]) for c in cols],
                   "verdicts": [c.verdicts[claim.key].verdict for c in cols]}
                  for claim in CLAIMS]
         tables.append({"arm": arm, "arm_text": ARMS.get(arm, arm),
                        "columns": [c.label for c in cols], "rows": rows,
-                       "notes": _arm_notes(cols)})
+                       "notes": arm_notes(cols)})
     return tables
+
+
+def mesh_row(columns: list[Column]) -> dict:
+    """The claims table's row saying, per column, whether the system's truth-plant run
+    survived the mesh refinement (cells and their verdicts)."""
+    return {"claim": "truth plant under mesh refinement (closed loop)", "key": "mesh",
+            "guards": "results of the FE discretisation taken for the arm's",
+            "cells": [mesh_status(c.runs[SYSTEM], c.checks.get(SYSTEM), c.verdicts)
+                      if SYSTEM in c.runs else "not run" for c in columns],
+            "verdicts": [_mesh_verdict(c) if SYSTEM in c.runs else "not run"
+                         for c in columns]}
 
 
 def _mesh_verdict(column: Column) -> str:
@@ -538,7 +546,7 @@ def _mesh_verdict(column: Column) -> str:
     return "converged" if checks and all(checks.values()) else "mesh not checked"
 
 
-def _arm_notes(columns: list[Column]) -> list[str]:
+def arm_notes(columns: list[Column]) -> list[str]:
     """What is true of an arm's truth plant when its columns did not converge."""
     from reduced_model import ArmParameters
     notes = []

@@ -24,13 +24,10 @@ above a limit that nevertheless did not diverge (or kept tracking) is reported a
 limits are repeated on the check meshes (`validation.verdicts.mesh`); a limit whose
 outcomes differ between meshes is "not converged".
 
-The *predicted* limit explains what the map finds for the built-in joint-space laws: a
-sampled rate feedback −G θ̇ on a plant of instantaneous mobility W (the joint block of
-M⁻¹, flexible coupling included) is stable only if Ts·λ_max(W G) < 2, the stability
-bound of the explicit Euler step it amounts to.  The joint-2 mobility of the paper's
-Table-1 arm is 920 rad/(N m s²) — the motor-2 reaction acts on the link-1 tip, which has
-almost no rotary inertia — against 91 with a 0.01 kg m² stator; G is K_d for PD,
-M_θθ K_d for computed torque, M_θθ Λ + K_v for the PBC.
+The *predicted* limit is the exact zero-order-hold eigenvalue analysis of the case's own
+linearised sampled loop (`validation.verdicts.sampled`): the law linearised from its
+object (every gain it applies) at points of the reference, the plant linearised there —
+the reduced model, or the FE arm with the case's mesh.
 """
 from __future__ import annotations
 
@@ -39,16 +36,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..run._config import ConfigError
 from ..batch.campaign import PlannedRun, run_campaign, Campaign
 from ..batch.executor import Runner
-from ..run.laws import nominal_model
-from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
+from ..run.scenario import (arm_parameters, scenario_from_mapping, scenario_to_mapping,
+                            with_plant)
 from ..batch.store import ResultStore, run_id
+from .sampled import predicted_period
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "OUTCOMES", "StabilityCase", "StabilityResult",
-           "cases_from_scenarios", "stability_map", "load_stability", "predicted_limit",
-           "outcome", "stability_rows", "write_stability"]
+           "cases_from_scenarios", "stability_map", "load_stability", "outcome",
+           "stability_rows", "write_stability"]
 
 GRID = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
 DURATION = 2.0
@@ -128,7 +125,7 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
             for arm in arms or (data["arm"],):
                 base = dict(data, disturbances=[], initial_state="reference",
                             duration=DURATION, transient=DURATION / 2)
-                base["plant"] = dict(base["plant"], kind=plant)
+                base["plant"] = with_plant(base["plant"], plant)
                 base["arm"] = arm
                 params = scenario_to_mapping(arm_parameters(arm))
                 if arm != data["arm"]:  # start the parameter tables from the other arm
@@ -138,7 +135,9 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
                 label = _label(base)
                 key = (label, _options_key(base), plant, arm)
                 base["name"] = f"stability/{label}"
-                cases.setdefault(key, StabilityCase(label, plant, arm, base))
+                if key not in cases:  # resolved: every setting of its plant written out
+                    resolved = scenario_to_mapping(scenario_from_mapping(base))
+                    cases[key] = StabilityCase(label, plant, arm, resolved)
     return list(cases.values())
 
 
@@ -206,18 +205,18 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
                   progress: bool = True, mesh_check: bool = True
                   ) -> tuple[list[StabilityResult], object]:
     """Run the grid and the bisections for every case into the results folder ``out``
-    (resumable like any campaign), then, with ``mesh_check``, the truth-plant runs that
-    define the limits on the check meshes; returns the results and the last campaign
-    summary."""
+    (resumable like any campaign; the progress bar names the round: grid, bisection k/3,
+    mesh check), then, with ``mesh_check``, the truth-plant runs that define the limits on
+    the check meshes; returns the results and the summary of every round together."""
     campaign = Campaign(name="stability", base={}, sweeps=(),
                         description="sampled-data stability map")
     tested: dict[int, dict[float, tuple[str, str]]] = {i: {} for i in range(len(cases))}
     store = ResultStore(out)
 
-    def run(points: list[tuple[int, float]]):
+    def run(points: list[tuple[int, float]], label: str):
         planned = {(i, Ts): _planned(cases[i], Ts) for i, Ts in points}
         summary = run_campaign(campaign, out, runner=runner, progress=progress,
-                               only=list(planned.values()))
+                               only=list(planned.values()), label=label)
         if summary.interrupted:
             return summary
         rows = {r.run_id: r for r in store.rows()}
@@ -225,21 +224,21 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
             tested[i][Ts] = outcome(rows[p.run_id])
         return summary
 
-    summary = run([(i, Ts) for i in range(len(cases)) for Ts in GRID])
-    for _ in range(BISECTIONS):
+    summary = run([(i, Ts) for i in range(len(cases)) for Ts in GRID], "stability: grid")
+    for round_ in range(1, BISECTIONS + 1):
         if summary.interrupted:
             break
         points = [(i, Ts) for i in range(len(cases)) for Ts in sorted(_bisection_points(tested[i]))]
         if not points:
             break
-        summary = run(points)
+        summary = summary + run(points, f"stability: bisection {round_}/{BISECTIONS}")
     if mesh_check and not summary.interrupted:
         rows = {r.run_id: r for r in store.rows()}
         defining = [rows[_planned(case, Ts).run_id] for i, case in enumerate(cases)
                     if case.plant == "exudyn" for Ts in _defining(tested[i])]
         if defining:
             from .mesh import run_checks
-            summary = run_checks(defining, out, runner=runner, progress=progress)
+            summary = summary + run_checks(defining, out, runner=runner, progress=progress)
     if summary.interrupted:
         return [], summary
     return load_stability(out, cases=cases), summary
@@ -317,34 +316,7 @@ def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[Stabili
 def _result(case: StabilityCase, tested: dict) -> StabilityResult:
     tested = dict(sorted(tested.items()))
     return StabilityResult(case, tested, _limit(tested, _GOOD["divergence"]),
-                           _limit(tested, _GOOD["tracking"]), predicted_limit(case.base))
-
-
-def predicted_limit(config: dict) -> float:
-    """2 / λ_max(W G) for the built-in joint-space laws (module docstring); NaN else."""
-    from reduced_model import ArmParameters
-    kind, opts = config["controller"]["kind"], config["controller"].get("options", {})
-    params = ArmParameters.from_mapping(config["nominal_params"])
-    model = nominal_model(params, tuple(config["model"]["modes_per_link"]))
-    M = model.mass_matrix(np.zeros(model.n))
-    W = np.linalg.inv(M)[:2, :2]
-    Mtt = M[:2, :2]
-    try:
-        from controllers import CONTROLLERS, accepted_options
-        defaults = accepted_options(CONTROLLERS[kind]) if kind in CONTROLLERS else {}
-        get = lambda k: np.broadcast_to(np.asarray(opts.get(k, defaults[k]), float), (2,))  # noqa: E731
-        if kind == "pd":
-            G = np.diag(get("kd"))
-        elif kind == "ct":
-            G = Mtt @ np.diag(get("kd"))
-        elif kind in ("pbc", "pbc-idealised"):
-            G = Mtt @ np.diag(get("lambda_joint")) + np.diag(get("kv_joint"))
-        else:
-            return math.nan
-    except (KeyError, ValueError, ConfigError):
-        return math.nan
-    lam = np.max(np.abs(np.linalg.eigvals(W @ G)))
-    return float(2.0 / lam) if lam > 0 else math.inf
+                           _limit(tested, _GOOD["tracking"]), predicted_period(case.base))
 
 
 def stability_rows(results: list[StabilityResult]) -> list[dict]:
