@@ -307,6 +307,8 @@ def format_metrics(metrics: dict) -> str:
         lines.append(f"  {'estimate / measurement error, worst':<44} {ratios[worst]:.3g} ({worst})")
     if metrics.get("est_worse"):
         lines.append(f"  {'estimate worse than the measurement':<44} {metrics['est_worse']}")
+    if metrics.get("est_worse_zero"):
+        lines.append(f"  {'estimate worse than x̂ ≡ 0':<44} {metrics['est_worse_zero']}")
     return "\n".join(lines)
 
 
@@ -428,7 +430,25 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         summary = run_campaign(campaign, out, runner=runner, retry_failed=args.retry_failed,
                                reuse_stale=args.reuse_stale, progress=not args.no_progress,
                                only=runs)
+        if args.mesh_check and not summary.interrupted:
+            status = _mesh_checks(runner, out, {r.run_id for r in runs},
+                                  progress=not args.no_progress)
+            if status:
+                return status
     return _finish(summary, campaign.name, out)
+
+
+def _mesh_checks(runner, out: Path, run_ids: set, *, progress: bool) -> int:
+    """Run the mesh checks of the truth-plant runs ``run_ids`` stored in ``out``; a
+    non-zero exit status if interrupted or a check failed."""
+    from .verdicts.mesh import MESH_SWEEP, run_checks
+    rows = [r for r in ResultStore(out).rows() if r.run_id in run_ids]
+    summary = run_checks(rows, out, runner=runner, progress=progress)
+    if summary.planned:
+        print(summary.line(MESH_SWEEP, out))
+    if summary.interrupted:
+        return _finish(summary, MESH_SWEEP, out)
+    return EXIT_FAILED if summary.any_failed else 0
 
 
 def _write_report(results, *, animate: bool, progress: bool, force: bool = False) -> str:
@@ -490,6 +510,10 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
         if summary.interrupted:
             return _finish(summary, campaign.name, out)
         print(summary.line(campaign.name, out))
+        checks = _mesh_checks(runner, out, {r.run_id for r in runs},
+                              progress=not args.no_progress)
+        if checks and checks != EXIT_FAILED:
+            return checks
         stability = 0
         if not args.no_stability:
             stability = _stability(runner, [r.scenario for r in runs if not
@@ -502,12 +526,13 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     print(f"claims: {out / 'claims.md'} and claims.csv")
     if not args.no_report:
         print(_write_report(out, animate=not args.no_animation, progress=not args.no_progress))
-    return EXIT_FAILED if summary.any_failed or stability else 0
+    return EXIT_FAILED if summary.any_failed or checks or stability else 0
 
 
 def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arms=None) -> int:
     """Run the stability map into ``out`` and print it; the exit status: 130/143 if it
-    was interrupted, 1 if some of its runs failed."""
+    was interrupted, 1 if some of its runs failed (a failure is no verdict on stability:
+    the map is incomplete there)."""
     from .verdicts.stability import cases_from_scenarios, stability_map, write_stability
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     open_output(out)
@@ -516,14 +541,11 @@ def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arm
         return _finish(summary, "stability", out)
     print(write_stability(results, out))
     print(f"stability map: {out / 'stability.md'} and stability.csv")
-    if summary.any_failed:
-        from .report.figures import describe_run
-        failed = ResultStore(out).rows(where="status = 'failed'")
-        print(f"stability: {len(failed)} run(s) failed (the simulation itself stopped, so "
-              "they count as not stable):", file=sys.stderr)
-        for r in failed[:5]:
-            print(f"  {r.run_id} {r.name}, {r.plant} plant, {describe_run(r.config)}: "
-                  f"{r.message}", file=sys.stderr)
+    failed = [f"{r.case.label} ({r.case.plant}, {r.case.arm}) at {1e3 * Ts:.3g} ms"
+              for r in results for Ts in r.failed]
+    if failed or summary.any_failed:
+        print(f"flexarm: {len(failed)} stability run(s) failed — no verdict on stability "
+              f"there: {'; '.join(failed) or 'mesh-check runs'}", file=sys.stderr)
         return EXIT_FAILED
     return 0
 
@@ -638,6 +660,11 @@ def cmd_attribute(args: argparse.Namespace) -> int:
             if summary.interrupted:
                 return _finish(summary, label, out)
             results.append(att)
+        if args.mesh_check:
+            status = _mesh_checks(runner, out, {r.run_id for r in ResultStore(out).rows()},
+                                  progress=not args.no_progress)
+            if status:
+                return status
     print(write_attribution(results, out))
     print(f"attribution: {out / 'attribution.csv'} and attribution.md; "
           f"'flexarm report {out}' draws the waterfalls")
@@ -830,6 +857,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="keep stored runs made by other code instead of rerunning them")
     camp.add_argument("--dry-run", action="store_true",
                       help="list the runs and which are already stored; run nothing")
+    camp.add_argument("--mesh-check", action="store_true",
+                      help="also run every truth-plant run on the check meshes (closed-loop "
+                           "mesh convergence; the report and claims need it for a verdict)")
     camp.set_defaults(func=cmd_campaign)
 
     rep = sub.add_parser("report", help="write report.html and report.md of a results folder")
@@ -897,6 +927,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="plant, truncation, parameters, sensing, estimation, sampling, "
                           "actuation (default: every factor the scenario has)")
     att.add_argument("--out", metavar="DIR", help="results folder")
+    att.add_argument("--mesh-check", action="store_true",
+                     help="also run every truth-plant world on the check meshes (closed-loop "
+                          "mesh convergence, shown by the report)")
     _add_execution(att)
     att.set_defaults(func=cmd_attribute)
 

@@ -558,17 +558,23 @@ def validity_map(params, modes: tuple[int, int], arm_text: str) -> bytes:
 
 
 def stability_chart(results) -> bytes:
-    """Tested Ts per case (green: stable, crimson ×: not), the largest stable Ts (bar)
-    and the predicted limit (grey diamond)."""
+    """Tested Ts per case by outcome (stable, lost tracking, diverged, failed), the largest
+    Ts with no divergence and the largest that keeps tracking (bars), and the predicted
+    limit (grey diamond)."""
+    style = {"stable": ("o", "seagreen", 5), "lost tracking": ("^", "darkorange", 6),
+             "diverged": ("x", "crimson", 7), "failed": ("s", "k", 6)}
     fig, ax = plt.subplots(figsize=(9, 0.32 * len(results) + 1.8), layout="constrained")
     labels = []
     for i, r in enumerate(results):
         labels.append(f"{r.case.label} · {r.case.plant} · {r.case.arm}")
-        for Ts, (ok, _) in r.tested.items():
-            ax.plot(1e3 * Ts, i, "o" if ok else "x", color="seagreen" if ok else "crimson",
-                    ms=5 if ok else 7, mew=2)
-        if not math.isnan(r.largest_stable):
-            ax.plot([1e3 * r.largest_stable] * 2, [i - 0.35, i + 0.35], color="k", lw=2)
+        for Ts, (outcome, _) in r.tested.items():
+            marker, color, size = style[outcome]
+            ax.plot(1e3 * Ts, i, marker, color=color, ms=size, mew=2,
+                    mfc="none" if outcome == "failed" else color)
+        # The longer black bar stays visible where both limits coincide.
+        for limit, color, half in ((r.divergence, "k", 0.42), (r.tracking, "darkorange", 0.25)):
+            if not math.isnan(limit.largest):
+                ax.plot([1e3 * limit.largest] * 2, [i - half, i + half], color=color, lw=2)
         if math.isfinite(r.predicted):
             ax.plot(1e3 * r.predicted, i, "D", color="0.5", ms=5, mfc="none")
     ax.set_yticks(range(len(results)))
@@ -577,9 +583,11 @@ def stability_chart(results) -> bytes:
     ax.set_xscale("log")
     ax.set_xlabel("control period Ts [ms]")
     ax.axvline(1.0, color="grey", lw=0.5, ls=":")
-    ax.plot([], [], "o", color="seagreen", label="stable")
-    ax.plot([], [], "x", color="crimson", mew=2, label="diverged or lost tracking")
-    ax.plot([], [], "|", color="k", ms=10, mew=2, label="largest stable Ts")
+    for outcome, (marker, color, size) in style.items():
+        ax.plot([], [], marker, color=color, ms=size, mew=2,
+                mfc="none" if outcome == "failed" else color, label=outcome)
+    ax.plot([], [], "|", color="k", ms=10, mew=2, label="no divergence up to")
+    ax.plot([], [], "|", color="darkorange", ms=10, mew=2, label="keeps tracking up to")
     ax.plot([], [], "D", color="0.5", mfc="none", label="predicted (ZOH eigenvalues)")
     fig.legend(fontsize=7, loc="outside lower center", ncol=4)
     _title(fig, "sampled-data stability map (case · plant · arm; dotted: Ts = 1 ms)")

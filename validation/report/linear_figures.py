@@ -84,7 +84,7 @@ def periods_chart(cases: list[dict]) -> bytes:
     ax.invert_yaxis()
     ax.set_xscale("log")
     ax.set_xlabel("control period Ts [ms]")
-    ax.plot([], [], color="0.75", lw=5, label="measured: largest stable – first unstable")
+    ax.plot([], [], color="0.75", lw=5, label="measured: no divergence up to – first divergence")
     ax.plot([], [], "D", color="C0", mfc="none", label="predicted (the case's plant)")
     ax.plot([], [], "s", color="C1", mfc="none", label="predicted, FE mesh ×2")
     ax.plot([], [], "^", color="C2", mfc="none", label="certified (ν-gap < b)")

@@ -37,6 +37,7 @@ from .render import fmt_number, render
 from ..run.results import write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
+from ..verdicts.mesh import MESH_SWEEP, is_check
 from ..verdicts.validity import gap_rows, load_validity, table_rows
 
 __all__ = ["write_report", "report_data", "content_key", "report_is_current", "figure_group",
@@ -74,6 +75,7 @@ class ReportData:
     claims: list | None = None
     claims_criteria: list = field(default_factory=list)
     claim_notes: list = field(default_factory=list)
+    mesh: dict | None = None
     stability: dict | None = None
     estimation: dict | None = None
     runs: dict | None = None
@@ -167,7 +169,8 @@ def _estimation_table(runs) -> dict | None:
     states = [k.removeprefix("est_rms_") for k in observed[0].metrics
               if k.startswith("est_rms_") and not k.startswith("est_rms_slope")]
     ident = ["name", "arm", "plant", "Ts [ms]", "start", "observer"]
-    head = ident + [fig.state_label(s) for s in states] + ["worse than the measurement it is fed"]
+    head = ident + [fig.state_label(s) for s in states] + ["worse than the measurement it is fed",
+                                                           "worse than x̂ ≡ 0"]
     detail_head = ident + [f"{fig.state_label(s)} [{fig.state_display(s)[1]}]" for s in states]
     rows, detail = [], []
     for r in observed:
@@ -175,22 +178,71 @@ def _estimation_table(runs) -> dict | None:
         cells, values = [], []
         for s in states:
             ratio = m.get(f"est_to_noise_{s}")
+            zero = m.get(f"est_to_signal_{s}")
+            zero = " ⊘" if isinstance(zero, float) and zero >= 1 else ""
             if not isinstance(ratio, float) or math.isnan(ratio):
-                cells.append("—")
+                cells.append("—" + zero)
             elif s not in fed:
-                cells.append(fmt_number(ratio, 2) + " †")
+                cells.append(fmt_number(ratio, 2) + " †" + zero)
             else:
-                cells.append(fmt_number(ratio, 2) + (" ⚠" if ratio > 1 else ""))
+                cells.append(fmt_number(ratio, 2) + (" ⚠" if ratio > 1 else "") + zero)
             scale = fig.state_display(s)[0]
             rms = [m.get(f"{k}_rms_{s}") for k in ("est", "noise", "signal")]
             values.append(" / ".join(fmt_number(scale * v) if isinstance(v, float) else "—"
                                      for v in rms) + ("" if s in fed else " †"))
         worse = " ".join(fig.state_label(s) for s in (m.get("est_worse") or "").split()
                          if s in fed)
+        zero = " ".join(fig.state_label(s) for s in (m.get("est_worse_zero") or "").split())
         ident_cells = [*_identity(r), r.config["observer"]["kind"]]
-        rows.append([*ident_cells, *cells, worse or "none"])
+        rows.append([*ident_cells, *cells, worse or "none", zero or "none"])
         detail.append([*ident_cells, *values])
     return {"compact": _table(head, rows), "detail": _table(detail_head, detail)}
+
+
+def _mesh_table(runs) -> dict | None:
+    """Closed-loop mesh convergence of the truth-plant runs that have checks: per run, its
+    verdict and the values that moved (compact); each judged value (a claim's measure) on
+    every mesh (detail)."""
+    from ..verdicts.claims import mesh_rows
+    from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
+    rows = sorted(mesh_rows(runs), key=lambda r: (r.run.name, _swept(r.run),
+                                                  r.run.config["Ts"]))
+    if not rows:
+        return None
+    labels = list(dict.fromkeys(label for r in rows for label, _ in r.values))
+
+    def text(v, unit):
+        if isinstance(v, str):
+            return v
+        return "never" if math.isinf(v) else f"{fmt_number(v)} {unit}".strip()
+    detail, detail_classes, per_run = [], [], {}
+    for r in rows:
+        by_label = dict(r.values)
+        unit = r.claim.unit if r.claim else ""
+        values = [text(by_label[label], unit) if label in by_label else "" for label in labels]
+        verdict = {True: "converged" if r.claim else "same outcome on every mesh",
+                   False: "not converged", None: "check not run"}[r.converged]
+        detail.append([*_identity(r.run)[:2], *_identity(r.run)[3:], _swept(r.run),
+                       r.claim.key if r.claim else "run status", *values, verdict])
+        detail_classes.append({True: "holds", False: "fails", None: ""}[r.converged])
+        per_run.setdefault(r.run.run_id, (r.run, []))[1].append((r, values))
+    compact, classes = [], []
+    for run, items in per_run.values():
+        moved = [f"{r.claim.key if r.claim else 'status'} ({', '.join(v)})"
+                 for r, v in items if r.converged is False]
+        missing = any(r.converged is None for r, _ in items)
+        verdict = ("not converged" if moved else "check not run" if missing else
+                   "converged" if run.status == "ok" else f"{run.status} on every mesh")
+        compact.append([*_identity(run)[:2], *_identity(run)[3:], _swept(run), verdict,
+                        "; ".join(moved) or "—"])
+        classes.append("fails" if moved else "" if missing else "holds")
+    head = ["name", "arm", "Ts [ms]", "start", "swept values"]
+    return {"compact": _table(head + ["verdict", f"moved ({', '.join(labels)})"], compact,
+                              classes),
+            "detail": _table(head + ["judged value", *labels, "verdict"], detail,
+                             detail_classes),
+            "tolerance": f"|a − b| ≤ {MESH_RTOL:.0%} of the larger value + {MESH_ATOL:.0%} "
+                         "of the claim's bound"}
 
 
 def _group_key(r) -> tuple:
@@ -244,14 +296,15 @@ def claim_bounds() -> dict:
 
 
 def _included(store: ResultStore):
-    """(rows, runs to report, warnings): runs whose file verifies and that this code made."""
+    """(rows, runs to report, warnings): runs whose file verifies and that this code made
+    (mesh-check runs are in ``rows``: they check the runs, they are not reported as runs)."""
     all_rows = store.rows()
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
     stale = [r for r in all_rows if r.fingerprint != run_fingerprint(r.config)]
     runs = [r for r in all_rows if r.run_id not in damaged and r not in stale
-            and r.sweep != "stability"]
+            and r.sweep != "stability" and not is_check(r)]
     warnings = [f"run {rid} left out: {why} (rerun the campaign to redo it)"
                 for rid, why in damaged.items()]
     if stale:
@@ -282,9 +335,14 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     from ..verdicts.claims import CLAIMS, claim_columns
     from .summary import NOTE_MEANING, claims_view, pairs_table, summary_view
     store = ResultStore(results_dir)
-    _, runs, warnings = _included(store)
+    all_rows, runs, warnings = _included(store)
+    fresh_ids = {r.run_id for r in runs}
+    checks = [r for r in all_rows if is_check(r) and r.run_id not in fresh_ids
+              and r.fingerprint == run_fingerprint(r.config)]
+    damaged_checks = store.verify(checks)
+    checks = [r for r in checks if r.run_id not in damaged_checks]
     campaigns = store.campaigns()
-    names = [n for n in campaigns if n not in ("stability",)] or ["(single runs)"]
+    names = [n for n in campaigns if n not in ("stability", MESH_SWEEP)] or ["(single runs)"]
     info = [campaigns.get(n, {}) for n in names]
     wanted = [w for i in info for w in i.get("report", {}).get("figures", [])] or None
     counts = {s: sum(r.status == s for r in runs) for s in ("ok", "diverged", "failed")}
@@ -294,7 +352,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       counts=counts, scope=_scope(runs), warnings=warnings)
     bounds = claim_bounds()
 
-    columns = claim_columns(runs)
+    columns = claim_columns(runs + checks)
+    data.mesh = _mesh_table(runs + checks)
     if columns:
         data.summary = summary_view(columns)
         data.claims = claims_view(columns)
@@ -312,10 +371,13 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         if results:
             rows = stability_rows(results)
             data.stability = {"table": _table(
-                ["case", "plant", "arm", "largest stable Ts [ms]", "first unstable Ts [ms]",
-                 "predicted [ms]", "why the first unstable one is"],
-                [[r["case"], r["plant"], r["arm"], r["largest"], r["unstable"], r["predicted"],
-                  r["reason"]] for r in rows])}
+                ["case", "plant", "arm", "no divergence up to [ms]", "first divergence [ms]",
+                 "keeps tracking up to [ms]", "first loss [ms]", "predicted [ms]",
+                 "monotone?", "mesh", "why the first bad one is"],
+                [[r["case"], r["plant"], r["arm"], r["no_divergence"], r["first_divergence"],
+                  r["tracking"], r["first_loss"], r["predicted"], r["notes"], r["mesh"],
+                  r["reason"]] for r in rows],
+                ["failed" if "FAILED" in r["notes"] else "" for r in rows])}
             tasks.append(("Stability map", "sampled-data stability map: tested control periods "
                           "per case, plant and arm", lambda: fig.stability_chart(results)))
     for study, spec in campaigns.get("attribution", {}).get("studies", {}).items():

@@ -19,7 +19,9 @@ __all__ = ["claims_view", "summary_view", "pairs_table", "NOTE_MEANING", "margin
 
 #: What the note in brackets after a verdict says, per claim.
 NOTE_MEANING = {
-    "vibration": "the link with the larger value (the one shown)",
+    "vibration": "the link with the larger value (the one shown), its RMS per 2 s window, "
+                 "its decay after the transient and what stays over the run's second half",
+    "beats_zero": "the states whose estimate is worse than x̂ ≡ 0 (else the worst state)",
     "flexible_rates": "the link with the larger value (the one shown)",
     "noise_rejection": "the state with the largest ratio",
     "convergence": "the state that converged last (or never)",
@@ -62,13 +64,18 @@ def _times(ratio: float) -> str:
 
 
 def verdict_text(claim, v) -> str:
-    """"9.63 mrad — holds, margin +52 % (link 2)", or what happened instead."""
+    """"9.63 mrad — holds, margin +52 % (link 2)", or what happened instead.  A value
+    without a verdict (window-sensitive, mesh not checked) has no margin; a truth-plant
+    value that moved with the mesh is not given at all, only every mesh's."""
     if v.verdict in ("diverged", "failed"):
         return f"— ({v.verdict})"
     if v.verdict in ("not run", "n/a"):
         return v.verdict + (f" ({v.note})" if v.note else "")
+    if v.verdict == "not converged":
+        return f"not converged ({v.note})"
     text = f"{_value(claim, v.value)} — {v.verdict}"
-    text += f", {_margin_text(claim, v.value)}" if _margin_text(claim, v.value) else ""
+    if v.verdict in ("holds", "fails") and _margin_text(claim, v.value):
+        text += f", {_margin_text(claim, v.value)}"
     return text + (f" ({v.note})" if v.note else "")
 
 
@@ -76,20 +83,23 @@ def claims_view(columns) -> list[dict]:
     """Per arm: column labels, one row per claim (cells: value in display units, verdict,
     margin, note) and the verdicts for the cell colours."""
     from ..run.scenario import ARMS
-    from ..verdicts.claims import CLAIMS, SYSTEM
+    from ..verdicts.claims import CLAIMS, SYSTEM, arm_notes, mesh_row
     tables = []
     for arm in dict.fromkeys(c.arm for c in columns):
         cols = [c for c in columns if c.arm == arm]
-        rows = [{"claim": f"run of the system ({SYSTEM})", "bound": "",
+        rows = [{"claim": f"run of the system ({SYSTEM})", "bound": "", "guards": "",
                  "cells": [_run_text(c.runs.get(SYSTEM)) for c in cols],
                  "verdicts": [c.runs[SYSTEM].status if SYSTEM in c.runs else "not run"
-                              for c in cols]}]
+                              for c in cols]},
+                dict(mesh_row(cols), bound="")]
         rows += [{"claim": claim.text, "bound": _value(claim, claim.bound),
+                  "guards": claim.guards,
                   "cells": [verdict_text(claim, c.verdicts[claim.key]) for c in cols],
                   "verdicts": [c.verdicts[claim.key].verdict for c in cols]}
                  for claim in CLAIMS]
         tables.append({"arm": arm, "arm_text": ARMS.get(arm, arm),
-                       "columns": [c.label for c in cols], "rows": rows})
+                       "columns": [c.label for c in cols], "rows": rows,
+                       "notes": arm_notes(cols)})
     return tables
 
 
