@@ -14,8 +14,11 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # The main job: the paper's scenario on both plants, its claims table and the report.
+# Exit status 1 means some runs failed (e.g. Exudyn's solver on an arm already diverging):
+# they are named in the output and the report, and the demo has done its job.
 demo: $(STAMP)
-	$(BIN)/flexarm reproduce-paper --out results/paper
+	$(BIN)/flexarm reproduce-paper --out results/paper || { rc=$$?; [ $$rc -eq 1 ] || exit $$rc; \
+	  echo "make demo: done; the failed runs named above are results too (see results/paper/report)"; }
 
 # pytest exits 5 when it collects nothing: say so and fail rather than pass silently.
 test: $(STAMP)

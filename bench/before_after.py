@@ -32,8 +32,12 @@ ROOT = Path(__file__).resolve().parent.parent
 
 CLOSED_LOOP = """
 import json, sys, time
-from validation.run.loop import run_scenario
-from validation.run.scenario import scenario_from_mapping
+try:
+    from validation.run.loop import run_scenario
+    from validation.run.scenario import scenario_from_mapping
+except ImportError:  # a revision before validation/ moved into rooms
+    from validation.loop import run_scenario
+    from validation.scenario import scenario_from_mapping
 m = {"plant": {"kind": sys.argv[1]}, "observer": {"kind": "smo-paper"},
      "sensors": {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}}
 run_scenario(scenario_from_mapping({**m, "duration": 0.01, "transient": 0.0}))
