@@ -252,7 +252,7 @@ def _add_gram(A, G, B, rows, out, gb):
 @njit(cache=True)
 def mass_matrix_into(d, Q, M, ws):
     """M(Q) into ``M`` (n, n)."""
-    mass_bias_into(d, Q, Q, M, ws.f, ws)  # h gets meaningless velocities; unused here
+    mass_bias_into(d, Q, Q, M, ws.f, ws, False)
 
 
 @njit(cache=True)
@@ -265,8 +265,9 @@ def coriolis_matrix_into(d, Q, Qd, C, ws):
 
 
 @njit(cache=True, inline="always")
-def mass_bias_into(d, Q, Qd, M, h, ws):
-    """M(Q) into ``M`` and h = C(Q, Q̇) Q̇ into ``h`` (structured evaluation, see module doc).
+def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
+    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇) Q̇ into ``h`` (structured
+    evaluation, see module doc).
 
     Everything is expressed in link 2's frame (link 1's in its own), where the phases
     e^{iθ1}, e^{iα} drop out.  v is the basis-coefficient vector of the velocity-product
@@ -299,18 +300,19 @@ def mass_bias_into(d, Q, Qd, M, h, ws):
         for l in range(n1):
             M[2 + k, 2 + l] += G1[1 + k, 1 + l]
             M[0, 0] += Q[2 + k] * G1[1 + k, 1 + l] * Q[2 + l]
-    v[0] = -th1d * th1d
-    for k in range(n1):
-        v[1 + k] = -1j * th1d * th1d * Q[2 + k] - 2.0 * th1d * Qd[2 + k]
-    for b in range(1 + n1):
-        acc = 0.0 + 0.0j
-        for g in range(1 + n1):
-            acc += G1[b, g] * v[g]
-        Gv[b] = acc
-    h[0] += Gv[0].imag
-    for k in range(n1):
-        h[0] -= Q[2 + k] * Gv[1 + k].real
-        h[2 + k] += Gv[1 + k].imag
+    if with_bias:
+        v[0] = -th1d * th1d
+        for k in range(n1):
+            v[1 + k] = -1j * th1d * th1d * Q[2 + k] - 2.0 * th1d * Qd[2 + k]
+        for b in range(1 + n1):
+            acc = 0.0 + 0.0j
+            for g in range(1 + n1):
+                acc += G1[b, g] * v[g]
+            Gv[b] = acc
+        h[0] += Gv[0].imag
+        for k in range(n1):
+            h[0] -= Q[2 + k] * Gv[1 + k].real
+            h[2 + k] += Gv[1 + k].imag
 
     # ---- link 2: rows j ∈ {θ1, θ2, q_1*} → c_j e_0 + a_j [0, i, −q_2]; q_2k → i e_k;
     # basis [1, x, φ_2*]; c_j (c_hat) is the link-1 tip Jacobian in link 2's frame.
@@ -344,6 +346,8 @@ def mass_bias_into(d, Q, Qd, M, h, ws):
         for j in range(i):
             M[i, j] = M[j, i]
 
+    if not with_bias:
+        return
     # velocity-product accelerations: link-1 tip (centripetal + Coriolis) and link 2.
     v[0] = eg * (-th1d * th1d * (d.L1 + 1j * w1e) - 2.0 * th1d * w1ed)
     v[1] = -alphad * alphad
