@@ -1,8 +1,9 @@
 """The paper's claims (Section 5) as criteria that a perfect system passes and a useless
 one fails, checked on every arm, plant, sampling period and initial condition run.
 
-Each `Claim` turns a sentence of the paper into a number measured on stored runs and a
-bound, with the reason for both.  The paper's system is the PBC fed by the sign SMO
+Each `Claim` (defined with its measure in `validation.run.claim_measures`, so that a
+run's worker can compute its robustness) turns a sentence of the paper into a number
+measured on stored runs and a bound, with the reason for both.  The paper's system is the PBC fed by the sign SMO
 (run name ``pbc+smo-paper``); the disturbance claim uses the same system with a torque
 pulse (``pbc+smo-paper+disturbance``).  Runs are grouped into *columns* by what was run:
 arm, plant, control period Ts and initial condition.  A column whose run diverged says so
@@ -18,17 +19,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
 
-import numpy as np
-
-from ..run.metrics import CONVERGENCE_FRACTION, CONVERGENCE_WINDOW
+from ..run.claim_measures import CLAIMS, DISTURBED, SYSTEM, Claim
 
 __all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "SYSTEM",
            "DISTURBED", "column_key", "claims_tables", "claims_records", "write_claims",
            "cell_text"]
-
-SYSTEM, DISTURBED = "pbc+smo-paper", "pbc+smo-paper+disturbance"
 
 
 @dataclass(frozen=True)
@@ -36,128 +32,6 @@ class Verdict:
     value: float
     verdict: str  # "holds" | "fails" | "diverged" | "failed" | "not run" | "n/a"
     note: str = ""
-
-
-def _worst(metrics: dict, prefix: str):
-    """(largest value, its state) over metrics ``prefix<state>``; NaN counts as +inf."""
-    items = [(k.removeprefix(prefix), v) for k, v in metrics.items()
-             if k.startswith(prefix) and isinstance(v, float)]
-    if not items:
-        return math.nan, ""
-    state, value = max(items, key=lambda kv: math.inf if math.isnan(kv[1]) else kv[1])
-    return (math.inf if math.isnan(value) else value), state
-
-
-def _tracking(m, _):
-    return max(m["track_max_1"], m["track_max_2"]), ""
-
-
-def _vibration(m, _):
-    value = max(m["vib_rms_1"], m["vib_rms_2"])
-    return value, f"link {1 if m['vib_rms_1'] >= m['vib_rms_2'] else 2}"
-
-
-def _phase(m, _):
-    return m["rate_err_rel"], ""
-
-
-def _estimation(m, _):
-    if "est_max_theta1" not in m:
-        return math.nan, "no observer"
-    return max(m["est_max_theta1"], m["est_max_theta2"]), ""
-
-
-def _flexible_rates(m, _):
-    if "est_rms_slope_rate_1" not in m:
-        return math.nan, "no observer"
-    value, link = _worst(m, "est_rms_slope_rate_")
-    return value, f"link {link}"
-
-
-def _noise_rejection(m, _):
-    value, state = _worst(m, "est_to_noise_")
-    if not state:
-        return math.nan, "no noisy measurement"
-    return value, f"worst: {state}"
-
-
-def _convergence(m, _):
-    if "est_conv_theta1" not in m:
-        return math.nan, "no observer"
-    value, state = _worst(m, "est_conv_")
-    return value, ("never, " if math.isinf(value) else "last: ") + state
-
-
-def _disturbance(m, result):
-    starts = [d["start"] for d in result.config.get("disturbances", [])]
-    if not starts:
-        return math.nan, "no disturbance in the run"
-    after = result.time >= min(starts) - 1e-12
-    err = (result.select(["theta1", "theta2"]).astype(float)
-           - result.select(["theta1_ref", "theta2_ref"]))[:, after]
-    return float(np.abs(err).max()), f"pulse at {min(starts):g} s"
-
-
-@dataclass(frozen=True)
-class Claim:
-    key: str
-    text: str  # the paper's words, shortened
-    criterion: str  # how we measure it
-    rationale: str  # why this measure and this bound
-    bound: float
-    unit: str
-    measure: Callable  # (metrics, result) -> (value, note)
-    run: str = SYSTEM
-
-    def judge(self, value: float) -> str:
-        if isinstance(value, float) and math.isnan(value):
-            return "n/a"
-        return "holds" if value <= self.bound else "fails"
-
-
-CLAIMS = (
-    Claim("tracking", "Fig. 3: precise tracking of eq. (37) with minimal error",
-          "max |θ − θd| after the transient ≤ 0.02 rad",
-          "the paper's own yardstick (Fig. 7: 0.02 rad), 1 % of the 2 rad amplitude; a "
-          "perfect tracker gives 0", 0.02, "rad", _tracking),
-    Claim("vibration", "Fig. 4: tip vibration managed, acceptable residual vibration",
-          "RMS of the oscillatory tip deflection after the transient ≤ 0.5 mm on each link",
-          "oscillatory = high-passed at 0.8 × the first locked mode (0.51 Hz on the default "
-          "arm), which removes the quasi-static bending that tracking eq. (37) demands of "
-          "any controller (1.3 cm on link 1); 0.5 mm = 0.1 % of a link.  Over 20 s from rest "
-          "on the default arm the idealised PBC leaves 0.2 mm, the realisable PBC 1.4 mm and "
-          "rigid computed torque (no vibration damping) 3.6 mm",
-          5e-4, "m", _vibration),
-    Claim("phase_portrait", "Fig. 8: stable elliptical orbit within ±2 rad and ±1.2 rad/s",
-          "max |θ̇ − θ̇d| after the transient ≤ 5 % of the reference's peak rate",
-          "eq. (37) itself peaks at 0.4π = 1.257 rad/s, so the literal ±1.2 rad/s fails any "
-          "perfect tracker; what can be tested is that the orbit is the reference's ellipse "
-          "(angles are judged by the tracking claim)", 0.05, "(ratio)", _phase),
-    Claim("estimation", "Fig. 7: estimation errors bounded within 0.02 rad",
-          "max |θ̂ − θ| after the transient ≤ 0.02 rad",
-          "the paper's number; x̂ ≡ 0 gives up to 2 rad", 0.02, "rad", _estimation),
-    Claim("flexible_rates", "Fig. 7: flexible-mode estimation errors ~2×10⁻³ rad/s",
-          "RMS of each link's tip-slope-rate error Σφ'(L)(q̂̇ − q̇) after the transient "
-          "≤ 2e-3 rad/s",
-          "the tip-slope rate is the flexible rate in the paper's unit (rad/s), independent "
-          "of the mode normalisation; RMS rather than max, so the sign observer's discrete "
-          "band ±Ts·L_V is not what is judged", 2e-3, "rad/s", _flexible_rates),
-    Claim("noise_rejection", "Fig. 7: the design effectively rejects measurement noise",
-          "every measured state: estimation error RMS ≤ 0.9 × the raw measurement's error "
-          "RMS (after the transient)",
-          "an observer fed the noisy state must do better than passing it through (ratio 1): "
-          "it must remove at least 10 % of the measurement error", 0.9, "(ratio)",
-          _noise_rejection),
-    Claim("convergence", "Fig. 7: all errors converge rapidly to near zero",
-          f"every estimated state: the {CONVERGENCE_WINDOW:g} s windowed error RMS within "
-          f"{CONVERGENCE_FRACTION:.0%} of the state's own RMS from ≤ 1 s on",
-          "relative to each signal's scale, so x̂ ≡ 0 never converges; the observer starts "
-          "0.1 rad, 5 mm, 0.3 rad/s and 0.05 m/s off", 1.0, "s", _convergence),
-    Claim("disturbance", "Section 5: effective rejection of external perturbations",
-          "max |θ − θd| from a 1 N m, 0.2 s torque pulse on joint 1 to the end ≤ 0.02 rad",
-          "the tracking yardstick, held through the perturbation", 0.02, "rad",
-          _disturbance, run=DISTURBED),
-)
 
 
 def column_key(config: dict) -> tuple:
