@@ -251,7 +251,7 @@ class ResultStore:
             row = dict(zip(_COLUMNS, values))
             for c in _JSON_COLUMNS:
                 row[c] = json.loads(row[c])
-            row["metrics"] = {k: math.nan if v is None else v for k, v in row["metrics"].items()}
+            row["metrics"] = _metric_values(row["metrics"])
             row["config"] = row.pop("scenario")
             out.append(StoredRun(**row, store=self))
         return out
@@ -403,10 +403,22 @@ def export_row(r: StoredRun) -> dict:
     return out
 
 
+#: JSON has no infinities: a metric of ±∞ (a requirement's robustness can be: ``always``
+#: over an empty window, a claim's "never") is stored as one of these strings.
+_INFINITIES = {"inf": math.inf, "-inf": -math.inf}
+
+
 def _finite_or_none(metrics: dict) -> dict:
-    """JSON has no NaN/inf: store them as null (read back as NaN)."""
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-            for k, v in metrics.items()}
+    """JSON has no NaN/inf: NaN is stored as null (read back as NaN), ±∞ as "inf"/"-inf"
+    (read back as floats by `_metric_values`)."""
+    return {k: (None if math.isnan(v) else repr(v)) if isinstance(v, float)
+            and not math.isfinite(v) else v for k, v in metrics.items()}
+
+
+def _metric_values(stored: dict) -> dict:
+    """Metrics as read from the index: null → NaN, "inf"/"-inf" → ±∞."""
+    return {k: math.nan if v is None else _INFINITIES.get(v, v) if isinstance(v, str) else v
+            for k, v in stored.items()}
 
 
 def _format(value) -> str:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run import loop, metrics  # noqa: F401 - loaded once, before the fork
+from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, before the fork
 from ..run.results import RunResult
 
 __all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
@@ -51,10 +51,12 @@ def failed_result(scenario, exc: BaseException) -> tuple[RunResult, dict]:
 def execute_run(scenario) -> tuple[RunResult, dict]:
     """Run one scenario (in a worker; a checked `Scenario`, or a mapping to check): the
     result, with signals as float32 (what the store keeps; half the bytes to send back),
-    and its metrics computed from the float64 signals.  An unexpected exception becomes
+    and its metrics — with each requirement's robustness ``rho_<name>`` — computed from
+    the float64 signals.  An unexpected exception becomes
     a "failed" result carrying its message, so one bad run never stops a campaign."""
     from ..run.loop import run_scenario
     from ..run.metrics import all_metrics
+    from ..run.requirements import requirement_metrics
     from ..run.scenario import Scenario, scenario_from_mapping
     keep_freed_memory()
     try:
@@ -62,6 +64,7 @@ def execute_run(scenario) -> tuple[RunResult, dict]:
             scenario = scenario_from_mapping(scenario)
         result = run_scenario(scenario)
         metrics = all_metrics(result)
+        metrics |= requirement_metrics(result, metrics)
     except Exception as exc:  # noqa: BLE001 - reported as the run's failure
         return failed_result(scenario, exc)
     result.signals = result.signals.astype(np.float32)
