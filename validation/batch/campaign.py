@@ -23,8 +23,10 @@ rerunning a campaign into the same folder skips what is done (resume).
 """
 from __future__ import annotations
 
+import copy
 import itertools
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,15 +40,17 @@ from .store import ResultStore, environment, run_id
 from ..run.tomlfiles import deep_merge, load_toml
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "campaign_from_mapping", "expand",
-           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS"]
+           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "RandomAxis",
+           "random_axis", "draw_points", "set_path", "get_path", "flatten_table"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
 MAX_RUNS = 100_000
 
-_TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution"}
+_TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution",
+             "requirement", "uncertainty", "verify"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
-_SPEC_KEYS = {"scale", "uniform", "loguniform", "choices"}
+_SPEC_KEYS = {"scale", "uniform", "loguniform", "choices", "also"}
 
 
 @dataclass(frozen=True)
@@ -61,11 +65,17 @@ class PlannedRun:
 
 @dataclass(frozen=True)
 class Campaign:
+    """A campaign file: ``base`` scenario (with the file's ``[[requirement]]`` entries),
+    ``sweeps``; ``uncertainty`` and ``verify`` are read by ``flexarm verify``
+    (`validation.verdicts.verify`)."""
+
     name: str
     base: dict
     sweeps: tuple[dict, ...]
     report: dict = field(default_factory=dict)
     description: str = ""
+    uncertainty: dict = field(default_factory=dict)
+    verify: dict = field(default_factory=dict)
 
 
 # --- loading ------------------------------------------------------------------------------
@@ -81,6 +91,13 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     check_label(name, "name")
     base = data.get("scenario", {})
     check(isinstance(base, dict), "scenario", "must be a table")
+    requirements = data.get("requirement", [])
+    check(isinstance(requirements, list), "requirement",
+          "must be an array of tables ([[requirement]])")
+    if requirements:  # the file's requirements apply to every run, after the scenario's own
+        base = dict(base, requirement=[*base.get("requirement", []), *requirements])
+    for key in ("uncertainty", "verify"):
+        check(isinstance(data.get(key, {}), dict), key, "must be a table")
     sweeps = data.get("sweep", [])
     if isinstance(sweeps, dict):
         sweeps = [sweeps]
@@ -99,37 +116,82 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     check(isinstance(figures, list) and all(isinstance(f, str) for f in figures),
           "report.figures", "must be a list of run names")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
-                    description=str(data.get("description", "")))
+                    description=str(data.get("description", "")),
+                    uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}))
 
 
 # --- expansion --------------------------------------------------------------------------------
-def _flatten(table: dict, prefix: str = "") -> dict[str, object]:
+def flatten_table(table: dict, prefix: str = "") -> dict[str, object]:
     """{"a": {"b": [..]}} → {"a.b": [..]}; a table whose keys are a value spec (scale,
     uniform, ...) is a leaf."""
     out = {}
     for key, value in table.items():
         path = f"{prefix}.{key}" if prefix else key
         if isinstance(value, dict) and not (set(value) & _SPEC_KEYS):
-            out.update(_flatten(value, path))
+            out.update(flatten_table(value, path))
         else:
             out[path] = value
     return out
 
 
-def _get(data: dict, path: str):
+_SEGMENT = re.compile(r"^([^\[\]]+)((?:\[\d+\])*)$")
+
+
+def _parts(path: str) -> list:
+    """"a.b[0].c" → ["a", "b", 0, "c"]: table keys and list indices."""
+    parts: list = []
+    for segment in path.split("."):
+        match = _SEGMENT.match(segment)
+        if match is None:
+            raise KeyError(path)
+        parts.append(match.group(1))
+        parts += [int(i) for i in re.findall(r"\[(\d+)\]", match.group(2))]
+    return parts
+
+
+def get_path(data: dict, path: str):
+    """The value at a dotted path (``disturbances[0].start``); KeyError if there is none."""
     node = data
-    for part in path.split("."):
-        if not isinstance(node, dict) or part not in node:
+    for part in _parts(path):
+        if isinstance(part, int):
+            if not isinstance(node, list) or part >= len(node):
+                raise KeyError(path)
+        elif not isinstance(node, dict) or part not in node:
             raise KeyError(path)
         node = node[part]
     return node
 
 
-def _set(data: dict, path: str, value) -> None:
-    parts = path.split(".")
-    for part in parts[:-1]:
-        data = data.setdefault(part, {})
-    data[parts[-1]] = value
+def set_path(data: dict, path: str, value, resolved: dict | None = None) -> None:
+    """Set the value at a dotted path, creating tables on the way; a list indexed on the
+    way that ``data`` does not hold is copied from ``resolved`` (the resolved scenario).
+    KeyError if the path cannot exist."""
+    parts = _parts(path)
+    node = data
+    for i, (part, following) in enumerate(zip(parts[:-1], parts[1:])):
+        if isinstance(part, int):
+            if not isinstance(node, list) or part >= len(node):
+                raise KeyError(path)
+            child = node[part]
+        else:
+            child = node.get(part)
+        if isinstance(following, int) and not isinstance(child, list):
+            child = copy.deepcopy(get_path(resolved or {}, _path(parts[:i + 1])))
+        elif not isinstance(following, int) and child is None:
+            child = {}
+        if not isinstance(child, (dict, list)):
+            raise KeyError(path)
+        node[part] = child
+        node = child
+    last = parts[-1]
+    if isinstance(last, int) and (not isinstance(node, list) or last >= len(node)):
+        raise KeyError(path)
+    node[last] = value
+
+
+def _path(parts: list) -> str:
+    return "".join(f"[{p}]" if isinstance(p, int) else ("." if i else "") + p
+                   for i, p in enumerate(parts))
 
 
 def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
@@ -137,7 +199,7 @@ def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
     if isinstance(spec, dict):
         check(set(spec) == {"scale"}, where, "a grid/zip axis is a list or {scale = [...]}")
         try:
-            base_value = _get(resolved_base, path)
+            base_value = get_path(resolved_base, path)
         except KeyError:
             raise ConfigError(where, f"{path} is not a scenario field") from None
         check(isinstance(base_value, (int, float)) and not isinstance(base_value, bool), where,
@@ -152,28 +214,115 @@ def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
     return list(spec)
 
 
-def _random_values(path: str, spec, n: int, rng: np.random.Generator, where: str) -> list:
-    check(isinstance(spec, dict) and len(spec) == 1 and set(spec) <= {"uniform", "loguniform",
-                                                                       "choices"}, where,
+@dataclass(frozen=True)
+class RandomAxis:
+    """A random axis of a sweep or of an uncertainty set (`validation.verdicts.uncertainty`):
+    ``{uniform = [lo, hi]}``, ``{loguniform = [lo, hi]}`` or ``{choices = [...]}``; a
+    distribution under ``scale`` (``{scale = {uniform = [0.7, 1.3]}}``) draws a factor of
+    each field's base value; ``also = ["other.field", ...]`` gives the same draw to
+    other fields (one noise level for every sensor).  `sample` draws seeded values,
+    `from_unit` maps u ∈ [0, 1] onto the distribution (the searches), `assign` turns
+    one draw into field values."""
+
+    path: str
+    kind: str  # "uniform" | "loguniform" | "choices"
+    arg: tuple  # (low, high), or the choices
+    also: tuple[str, ...] = ()
+    base: tuple | None = None  # the fields' base values when the draw is a factor
+
+    @property
+    def paths(self) -> tuple[str, ...]:
+        return (self.path, *self.also)
+
+    def sample(self, rng: np.random.Generator, n: int) -> list:
+        """``n`` draws (the campaign's random sweeps have always drawn exactly these)."""
+        if self.kind == "choices":
+            return [self.arg[i] for i in rng.integers(0, len(self.arg), n)]
+        lo, hi = self.arg
+        if self.kind == "uniform":
+            return [float(v) for v in rng.uniform(lo, hi, n)]
+        return [float(v) for v in np.exp(rng.uniform(math.log(lo), math.log(hi), n))]
+
+    def from_unit(self, u: float):
+        """The draw at quantile-like position ``u`` ∈ [0, 1] (uniform in the axis's own
+        measure: linear, logarithmic, or equal shares of the choices)."""
+        u = min(max(float(u), 0.0), 1.0)
+        if self.kind == "choices":
+            return self.arg[min(int(u * len(self.arg)), len(self.arg) - 1)]
+        lo, hi = self.arg
+        if self.kind == "uniform":
+            return lo + (hi - lo) * u
+        return math.exp(math.log(lo) + (math.log(hi) - math.log(lo)) * u)
+
+    def assign(self, draw) -> dict:
+        """{field path: value} of one draw."""
+        if self.base is None:
+            return {p: draw for p in self.paths}
+        return {p: b * draw for p, b in zip(self.paths, self.base)}
+
+    def describe(self) -> str:
+        dist = (f"one of {list(self.arg)}" if self.kind == "choices" else
+                f"{self.kind} [{self.arg[0]:g}, {self.arg[1]:g}]")
+        what = ", ".join(self.paths)
+        return f"{what}: {'× ' if self.base is not None else ''}{dist}"
+
+
+def random_axis(path: str, spec, resolved_base: dict, where: str) -> RandomAxis:
+    """Parse one random axis (`RandomAxis`); ConfigError naming ``where``."""
+    check(isinstance(spec, dict), where, "a random axis is {uniform = [lo, hi]}, "
+                                         "{loguniform = [lo, hi]} or {choices = [...]}")
+    spec = dict(spec)
+    also = spec.pop("also", [])
+    check(isinstance(also, list) and all(isinstance(a, str) for a in also), f"{where}.also",
+          "must be a list of scenario fields")
+    scaled = "scale" in spec
+    if scaled:
+        check(set(spec) == {"scale"} and isinstance(spec["scale"], dict), where,
+              "a scaled random axis is {scale = {uniform = [lo, hi]}} (or loguniform, choices)")
+        spec = spec["scale"]
+    check(len(spec) == 1 and set(spec) <= {"uniform", "loguniform", "choices"}, where,
           "a random axis is {uniform = [lo, hi]}, {loguniform = [lo, hi]} or {choices = [...]}")
     (kind, arg), = spec.items()
     if kind == "choices":
         check(isinstance(arg, list) and arg, where, "choices must be a non-empty list")
-        return [arg[i] for i in rng.integers(0, len(arg), n)]
-    check(isinstance(arg, list) and len(arg) == 2 and all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) for v in arg) and arg[0] <= arg[1],
-        where, f"{kind} needs [low, high] with low <= high")
-    lo, hi = arg
-    if kind == "uniform":
-        return [float(v) for v in rng.uniform(lo, hi, n)]
-    check(lo > 0, where, "loguniform needs low > 0")
-    return [float(v) for v in np.exp(rng.uniform(math.log(lo), math.log(hi), n))]
+    else:
+        check(isinstance(arg, list) and len(arg) == 2 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in arg)
+            and arg[0] <= arg[1], where, f"{kind} needs [low, high] with low <= high")
+        check(kind == "uniform" or arg[0] > 0, where, "loguniform needs low > 0")
+    base = None
+    if scaled:
+        base = []
+        for p in (path, *also):
+            try:
+                value = get_path(resolved_base, p)
+            except KeyError:
+                raise ConfigError(where, f"{p} is not a scenario field") from None
+            check(isinstance(value, (int, float)) and not isinstance(value, bool), where,
+                  f"scale needs a numeric field, {p} is {value!r}")
+            base.append(value)
+        check(kind != "choices" or all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                       for v in arg), where, "scale choices must be numbers")
+        base = tuple(base)
+    return RandomAxis(path, kind, tuple(arg), tuple(also), base)
+
+
+def draw_points(axes: list[RandomAxis], samples: int, rng: np.random.Generator) -> list[dict]:
+    """``samples`` points {field path: value} drawn from ``rng``, axis by axis in order."""
+    columns = [axis.sample(rng, samples) for axis in axes]
+    points = []
+    for i in range(samples):
+        point = {}
+        for axis, column in zip(axes, columns):
+            point |= axis.assign(column[i])
+        points.append(point)
+    return points
 
 
 def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
     """Every combination of one sweep's axes: list of {path: value}."""
-    grid = _flatten(sweep.get("grid", {}))
-    zipped = _flatten(sweep.get("zip", {}))
+    grid = flatten_table(sweep.get("grid", {}))
+    zipped = flatten_table(sweep.get("zip", {}))
     random = dict(sweep.get("random", {}))
     grid_axes = [(p, _axis_values(p, v, resolved_base, f"{where}.grid.{p}"))
                  for p, v in grid.items()]
@@ -195,12 +344,11 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
               f"must be an integer in 1..{MAX_RUNS}, got {samples!r}")
         check(isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
               f"{where}.random.seed", f"must be an integer >= 0, got {seed!r}")
-        axes = _flatten(random)
+        axes = flatten_table(random)
         check(len(axes) > 0, f"{where}.random", "needs at least one axis besides samples/seed")
-        rng = np.random.default_rng(seed)
-        cols = {p: _random_values(p, v, samples, rng, f"{where}.random.{p}")
-                for p, v in sorted(axes.items())}
-        parts.append([{p: v[i] for p, v in cols.items()} for i in range(samples)])
+        parsed = [random_axis(p, v, resolved_base, f"{where}.random.{p}")
+                  for p, v in sorted(axes.items())]
+        parts.append(draw_points(parsed, samples, np.random.default_rng(seed)))
     size = math.prod(len(p) for p in parts)
     check(size <= MAX_RUNS, where, f"expands to {size} runs (at most {MAX_RUNS})")
     return [dict(itertools.chain.from_iterable(d.items() for d in combo))
@@ -234,9 +382,12 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
         for point in _sweep_points(sweep, resolved_base, where):
             data = deep_merge({}, campaign.base)
             for path, value in point.items():
-                _set(data, path, value)
+                try:
+                    set_path(data, path, value, resolved_base)
+                except KeyError:
+                    raise ConfigError(where, f"{path} is not a scenario field") from None
             # Every run is named within its campaign: "campaign/<name axis or sweep name>".
-            _set(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
+            set_path(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
             try:
                 scenario = scenario_from_mapping(data)
             except ConfigError as exc:

@@ -7,12 +7,14 @@ merged key by key, everything else replaced).
 from __future__ import annotations
 
 import copy
+import json
 import tomllib
 from pathlib import Path
 
 from ._config import ConfigError
 
-__all__ = ["load_toml", "deep_merge", "set_dotted", "parse_value"]
+__all__ = ["load_toml", "deep_merge", "set_dotted", "parse_value", "toml_value",
+           "flat_items", "toml_text"]
 
 
 def deep_merge(base: dict, override: dict) -> dict:
@@ -103,3 +105,33 @@ def parse_value(text: str):
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text
+
+
+def toml_value(v) -> str:
+    """A TOML literal of a plain value (tables inline)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(float(v)) if isinstance(v, float) else str(v)
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)  # JSON's escapes are TOML's
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def flat_items(table: dict, prefix: str = "") -> list[tuple[str, object]]:
+    """(dotted key, value) of every non-table value of ``table`` (empty tables vanish)."""
+    out = []
+    for k, v in table.items():
+        key = f"{prefix}.{k}" if prefix else k
+        out += flat_items(v, key) if isinstance(v, dict) else [(key, v)]
+    return out
+
+
+def toml_text(mapping: dict) -> str:
+    """A TOML document of ``mapping`` with dotted keys (``plant.kind = "exudyn"``) that
+    `load_toml` reads back to the same values (floats exactly: ``repr``)."""
+    return "".join(f"{key} = {toml_value(v)}\n" for key, v in flat_items(mapping))
