@@ -451,8 +451,7 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
     skipped only if its row exists, its file verifies (size and SHA-256), and it was made
     by the same code (or ``reuse_stale``); failed runs are redone with ``retry_failed``."""
     summary = CampaignSummary(planned=len(planned))
-    wanted = {r.run_id for r in planned}
-    rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
+    rows = {r.run_id: r for r in store.rows_of([r.run_id for r in planned])}
     for run in planned:  # a file whose row was lost: its metadata rebuilds the row
         path = store.runs_dir / f"{run.run_id}.npz"
         if run.run_id not in rows and path.exists():
@@ -483,11 +482,13 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
 
 def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
                  retry_failed: bool = False, reuse_stale: bool = False,
-                 progress: bool = True, only: list[PlannedRun] | None = None) -> CampaignSummary:
+                 progress: bool = True, only: list[PlannedRun] | None = None,
+                 export: bool = True) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
     stored as soon as it finishes.  On SIGINT/SIGTERM, what finished is kept and
     ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json are
-    exported at the end."""
+    exported at the end (unless ``export`` is false: a search calling this for every
+    batch exports once, when it is done)."""
     planned = only if only is not None else expand(campaign)
     store = ResultStore(out)
     store.prepare()
@@ -517,7 +518,8 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
             bar.close()
             if own:
                 runner.close()
-    store.export()
+    if export:
+        store.export()
     store.close()
     return summary
 

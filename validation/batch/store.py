@@ -256,6 +256,16 @@ class ResultStore:
             out.append(StoredRun(**row, store=self))
         return out
 
+    def rows_of(self, ids) -> list[StoredRun]:
+        """The rows of the runs ``ids`` that the index holds (queried by id, in chunks: a
+        search asking for a few runs of a large folder reads only those)."""
+        ids = list(dict.fromkeys(ids))
+        out = []
+        for i in range(0, len(ids), 500):  # SQLite's limit on parameters is 999 or more
+            chunk = tuple(ids[i:i + 500])
+            out += self.rows(where=f"run_id IN ({', '.join('?' * len(chunk))})", params=chunk)
+        return out
+
     def row(self, rid: str) -> StoredRun | None:
         found = self.rows(where="run_id = ?", params=(rid,))
         return found[0] if found else None

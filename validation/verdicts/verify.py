@@ -101,12 +101,10 @@ class _Evaluations:
             planned.append(PlannedRun(run_id(data), scenario, sweep, axes))
         unique = list({p.run_id: p for p in planned}.values())
         summary = run_campaign(self.campaign, self.out, runner=self.runner, progress=False,
-                               only=unique)
+                               only=unique, export=False)
         if summary.interrupted:
             raise Interrupted(summary.interrupted)
-        ids = tuple(p.run_id for p in unique)
-        rows = {r.run_id: r for r in self.store.rows(
-            where=f"run_id IN ({', '.join('?' * len(ids))})", params=ids)}
+        rows = {r.run_id: r for r in self.store.rows_of(p.run_id for p in unique)}
         for p in unique:
             if p.run_id not in self.seen:
                 self.seen.add(p.run_id)
@@ -114,6 +112,11 @@ class _Evaluations:
                 if rows[p.run_id].status == "failed":
                     self.failed.append(p.run_id)
         return [rows[p.run_id] for p in planned]
+
+    def finish(self) -> None:
+        """Export metrics.csv and manifest.json once (not after every batch)."""
+        self.store.export()
+        self.store.close()
 
     @property
     def simulations(self) -> dict:
@@ -150,7 +153,9 @@ def estimate(system: System, requirement: Requirement, out, *, runner, samples: 
     scenarios = [system.scenario(p, seed=s) for p, s in zip(points, noise)]  # all checked
     ev = _Evaluations(Path(out), runner, f"verify-estimate/{system.name}")
     settings = system.settings
-    chunk = max(4, 2 * getattr(runner, "workers", 1))
+    # Draws are run in order, in chunks when the sequential test may stop them early;
+    # its decision uses the draws in order, so it does not depend on the chunk size.
+    chunk = max(8, 4 * getattr(runner, "workers", 1)) if settings.sequential else samples
     rows: list = []
     decision, used = "inconclusive", 0
     while len(rows) < samples:
@@ -172,6 +177,7 @@ def estimate(system: System, requirement: Requirement, out, *, runner, samples: 
                                 for r in system.requirements},
                "runs": [r.run_id for r in rows[:n_used]],
                "simulations": ev.simulations, "failed_runs": ev.failed}
+    ev.finish()
     write_verdict(out, verdict)
     return verdict
 
@@ -341,6 +347,7 @@ def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace
                 "correction": "RBF (linear kernel + constant) of rho_truth - rho_reduced",
                 "seed": seed, "distribution": system.uncertainty.describe(),
                 "trace": trace, "failed_runs": ev.failed}
+    ev.finish()
     write_verdict(out, verdict)
     return verdict
 
@@ -391,6 +398,7 @@ def conform(system: System, out, *, runner, budget: int, seed: int, log=print) -
     verdict |= {"optimiser": f"CMA-ES (cma), IPOP restarts: {search.restarts}", "seed": seed,
                 "budget": {"truth": budget}, "distribution": system.uncertainty.describe(),
                 "trace": trace, "failed_runs": ev.failed}
+    ev.finish()
     write_verdict(out, verdict)
     return verdict
 
