@@ -63,6 +63,7 @@ class ReportData:
     notes: dict = field(default_factory=dict)
     animation: dict | None = None
     attribution: list = field(default_factory=list)
+    robust: dict | None = None
 
 
 def _table(head: list[str], rows: list[list], classes: list[str] | None = None) -> dict:
@@ -181,8 +182,10 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         raise StoreError(f"{results_dir}: no stored runs")
     damaged = store.verify(all_rows)
     stale = [r for r in all_rows if r.fingerprint != run_fingerprint(r.config)]
-    runs = [r for r in all_rows if r.run_id not in damaged and r not in stale
-            and r.sweep != "stability"]
+    from ..verdicts.verify import ROBUST_SWEEPS
+    fresh = [r for r in all_rows if r.run_id not in damaged and r not in stale]
+    # The evaluations of `flexarm verify` have their own section (robust.py), not a row each.
+    runs = [r for r in fresh if r.sweep != "stability" and r.sweep not in ROBUST_SWEEPS]
     warnings = [f"run {rid} left out: {why} (rerun the campaign to redo it)"
                 for rid, why in damaged.items()]
     if stale:
@@ -193,14 +196,18 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     names = [n for n in campaigns if n not in ("stability",)] or ["(single runs)"]
     info = [campaigns.get(n, {}) for n in names]
     wanted = [w for i in info for w in i.get("report", {}).get("figures", [])] or None
-    counts = {s: sum(r.status == s for r in runs) for s in ("ok", "diverged", "failed")}
+    counted = [r for r in fresh if r.sweep != "stability"]
+    counts = {s: sum(r.status == s for r in counted) for s in ("ok", "diverged", "failed")}
     arms = sorted({r.config.get("arm", "default") for r in runs})
-    scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in arms]
-    scope.append("plants: " + ", ".join(sorted({fig.PLANT_NAME.get(r.plant, r.plant) for r in runs})))
+    scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in
+             sorted({r.config.get("arm", "default") for r in counted})]
+    scope.append("plants: " + ", ".join(sorted({fig.PLANT_NAME.get(r.plant, r.plant)
+                                                for r in counted})))
     scope.append("control periods Ts: " + ", ".join(f"{1e3 * t:g} ms" for t in
-                                                     sorted({r.config["Ts"] for r in runs})))
+                                                     sorted({r.config["Ts"] for r in counted})))
     scope.append("initial conditions: " + ", ".join(sorted(
-        {"at rest" if _start(r.config) == "rest" else "moving with the reference" for r in runs})))
+        {"at rest" if _start(r.config) == "rest" else "moving with the reference"
+         for r in counted})))
     data = ReportData(title=", ".join(names), folder=str(store.out),
                       description=" ".join(i.get("description", "") for i in info).strip(),
                       counts=counts, scope=scope, warnings=warnings)
@@ -233,8 +240,12 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
             tasks.append(("Attribution", f"{study}: {metric}, from the ideal to the real world",
                           lambda a=a, m=metric, c=contributions: fig.waterfall(
                               a.name, m, METRICS[m][1], a.ideal_value[m], c, a.totals[m])))
+    from .robust import robust_section
+    data.robust, robust_tasks = robust_section(store, fresh)
+    tasks += robust_tasks
     data.estimation = _estimation_table(runs)
-    data.runs, data.metrics = _runs_table(runs), _metrics_table(runs)
+    if runs:  # a folder of `flexarm verify` alone has its section instead
+        data.runs, data.metrics = _runs_table(runs), _metrics_table(runs)
 
     groups, skipped = _figure_groups(runs, wanted)
     data.notes["paper_figures"] = [f"{r.name}, {fig.describe_run(r.config)}: not drawn, every "

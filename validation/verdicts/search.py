@@ -63,7 +63,7 @@ class CMASearch:
         f = [(-PENALTY if v < 0 else PENALTY) if not math.isfinite(v) else float(v)
              for v in (math.inf if v is None or math.isnan(v) else v for v in values)]
         self.es.tell(self._asked, f)
-        if min(f) < self._best - 1e-12 * max(1.0, abs(self._best)):
+        if self._best == math.inf or min(f) < self._best - 1e-12 * max(1.0, abs(self._best)):
             self._best, self._since = min(f), 0
         else:
             self._since += 1

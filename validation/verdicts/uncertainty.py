@@ -129,7 +129,11 @@ class System:
         the "reduced" / "exudyn" (truth) plant; ``seed`` replaces the noise seed."""
         data = copy.deepcopy(self.nominal)
         for path, value in point.items():
-            set_path(data, path, value)
+            try:
+                set_path(data, path, value)
+            except KeyError:
+                raise ConfigError(f"uncertainty.{path}", "is not a field of the scenario "
+                                                         f"{self.name}") from None
         if plant is not None:
             data["plant"] = plant_table(self.nominal, plant)
         if seed is not None:

@@ -273,12 +273,14 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
                     found = entry
                     break
             best_run = None
+        U = U[:reduced_budget - ev.count["reduced"]]  # the last generation may be cut
         points = [system.uncertainty.at(u) for u in U]
         rows = ev.run([(system.scenario(p, plant="reduced"), "falsify",
                         _point_axes(p, role="search")) for p in points])
         rho_r = np.array([_search_value(effective_rho(r, requirement)) for r in rows])
         corrected = rho_r + correction(U)
-        search.tell(corrected)
+        if len(U) == search.popsize:
+            search.tell(corrected)
         for u, value, rho in zip(U, corrected, rho_r):
             if math.isfinite(rho) and (best_reduced is None or rho < best_reduced[0]):
                 best_reduced = (float(rho), u)
