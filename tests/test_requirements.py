@@ -173,3 +173,26 @@ def test_the_cli_refuses_an_unknown_signal_in_one_line_writing_nothing(tmp_path)
     assert done.stderr.count("\n") == 1 and "requirement[0].formula" in done.stderr
     assert "'tau3'" in done.stderr
     assert not out.exists()
+
+
+def test_requirements_enter_the_claims_table():
+    from types import SimpleNamespace
+
+    from validation.verdicts.claims import claim_columns, claims_tables
+    scenario = scenario_from_mapping({
+        "name": "paper/pbc+smo-paper", "duration": 3.0, "transient": 1.0,
+        "observer": {"kind": "smo-paper"},
+        "requirement": [{"name": "loose", "formula": "always[1,3](abs(theta1 - theta1_ref) "
+                                                     "<= 0.5)"},
+                        {"name": "tight", "formula": "always[1,3](abs(theta1 - theta1_ref) "
+                                                     "<= 1e-6)"}]})
+    result, metrics = execute_run(scenario)
+    run = SimpleNamespace(name=scenario.name, config=result.config, status=result.status,
+                          message="", end_time=result.end_time, metrics=metrics,
+                          load=lambda: result, run_id="x")
+    (table,) = claims_tables(claim_columns([run]))
+    rows = {row["key"]: row for row in table["rows"]}
+    assert rows["rho_loose"]["verdicts"] == ["holds"]
+    assert rows["rho_tight"]["verdicts"] == ["fails"]
+    assert rows["rho_loose"]["cells"][0] == f"ρ = {metrics['rho_loose']:.3g} — holds"
+    assert rows["rho_loose"]["claim"] == "requirement loose: always[1,3](abs(theta1 - theta1_ref) <= 0.5)"

@@ -184,6 +184,15 @@ def test_a_counterexample_replays_to_the_same_robustness(tmp_path):
     assert replay["plant"]["kind"] == "exudyn"
     _, metrics = execute_run(replay)
     assert metrics["rho_track"] == pytest.approx(verdict["rho_truth"], abs=1e-12, rel=0)
+    # The report's section: the verdict, ρ against simulations, Figs. 3-4 on both plants.
+    from validation.report.report import write_report
+    _, md = write_report(tmp_path / "out", animate=False, progress=False)
+    text = md.read_text()
+    assert "## Robust verdicts" in text and "| track | claim tracking | counterexample |" in text
+    captions = [line for line in text.splitlines() if line.startswith("*")]
+    assert any("against the simulations" in c for c in captions)
+    assert any("counterexample" in c and "(Fig. 3)" in c for c in captions)
+    assert "## Runs" not in text  # the search's evaluations are not listed one by one
 
 
 HOLDS = SYSTEM.replace('{ uniform = [0.0, 4.0] }', '{ uniform = [0.0, 0.2] }').replace(

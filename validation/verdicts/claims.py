@@ -116,9 +116,37 @@ def claims_tables(columns: list[Column]) -> list[dict]:
                   "cells": [cell_text(claim, c.verdicts[claim.key]) for c in cols],
                   "verdicts": [c.verdicts[claim.key].verdict for c in cols]}
                  for claim in CLAIMS]
+        rows += _requirement_rows(cols)
         tables.append({"arm": arm, "arm_text": ARMS.get(arm, arm),
                        "columns": [c.label for c in cols], "rows": rows})
     return tables
+
+
+def _requirement_rows(cols: list[Column]) -> list[dict]:
+    """A row per ``[[requirement]]`` of the system's runs: its robustness ρ (≥ 0 holds)."""
+    from ..report.render import fmt_number
+    texts: dict[str, str] = {}
+    for c in cols:
+        for r in (c.runs[SYSTEM].config.get("requirement", []) if SYSTEM in c.runs else []):
+            texts.setdefault(r["name"], r["formula"] or f"claim {r['claim']}")
+    rows = []
+    for name, text in texts.items():
+        cells, verdicts = [], []
+        for c in cols:
+            run = c.runs.get(SYSTEM)
+            rho = run.metrics.get(f"rho_{name}") if run is not None else None
+            if run is not None and run.status != "ok":
+                verdict, cell = run.status, f"— ({run.status})"
+            elif not isinstance(rho, float) or math.isnan(rho):
+                verdict = cell = "not run" if rho is None else "n/a"
+            else:
+                verdict = "holds" if rho >= 0 else "fails"
+                cell = f"ρ = {fmt_number(rho)} — {verdict}"
+            cells.append(cell)
+            verdicts.append(verdict)
+        rows.append({"claim": f"requirement {name}: {text}", "key": f"rho_{name}",
+                     "cells": cells, "verdicts": verdicts})
+    return rows
 
 
 def _run_text(run) -> str:

@@ -51,7 +51,7 @@ from .statistics import clopper_pearson, sprt
 from .uncertainty import System
 
 __all__ = ["estimate", "falsify", "conform", "ROBUST_SWEEPS", "REDUCED_PER_TRUTH",
-           "effective_rho", "write_verdict"]
+           "effective_rho", "write_verdict", "Evaluations"]
 
 #: The sweep names the evaluations are stored under (reports keep them apart).
 ROBUST_SWEEPS = ("estimate", "falsify", "conform")
@@ -77,7 +77,7 @@ def effective_rho(row, requirement: Requirement) -> float | None:
 
 
 @dataclass
-class _Evaluations:
+class Evaluations:
     """Scenarios run on the campaign runner into ``out`` and read back from the store;
     simulations counted per plant (distinct scenarios asked for)."""
 
@@ -151,7 +151,7 @@ def estimate(system: System, requirement: Requirement, out, *, runner, samples: 
     """P(requirement holds) over ``samples`` seeded draws (module docstring)."""
     points, noise = system.uncertainty.draws(samples, seed)
     scenarios = [system.scenario(p, seed=s) for p, s in zip(points, noise)]  # all checked
-    ev = _Evaluations(Path(out), runner, f"verify-estimate/{system.name}")
+    ev = Evaluations(Path(out), runner, f"verify-estimate/{system.name}")
     settings = system.settings
     # Draws are run in order, in chunks when the sequential test may stop them early;
     # its decision uses the draws in order, so it does not depend on the chunk size.
@@ -239,7 +239,7 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
     """The truth-confirmed minimum of ρ over the set (module docstring)."""
     out = Path(out)
     u_dim = system.uncertainty.dim
-    ev = _Evaluations(out, runner, f"verify-falsify/{system.name}")
+    ev = Evaluations(out, runner, f"verify-falsify/{system.name}")
     search = CMASearch(u_dim, seed)
     correction = _Correction()
     truth: dict[tuple, dict] = {}  # point key -> {u, rho_reduced, rho_truth, row}
@@ -358,7 +358,7 @@ def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace
 def conform(system: System, out, *, runner, budget: int, seed: int, log=print) -> dict:
     """The largest disagreement between the two plants over the set (module docstring)."""
     out = Path(out)
-    ev = _Evaluations(out, runner, f"verify-conform/{system.name}")
+    ev = Evaluations(out, runner, f"verify-conform/{system.name}")
     search = CMASearch(system.uncertainty.dim, seed)
     best, trace = None, []
     while ev.count["exudyn"] < budget:
