@@ -16,6 +16,8 @@ A scenario or campaign file declares, next to its ``[[requirement]]`` entries::
     alpha = 0.05
     beta = 0.05
     sequential = true                               # stop drawing once the test decides
+    worst_case = false                              # falsify: stop at the first counterexample
+                                                    #   (true: spend the budget on the lowest ρ)
 
 Any scenario field can be uncertain — true parameters, sensor noise, a disturbance's
 amplitude and start, the reference's amplitude and frequency, the initial state and the
@@ -48,7 +50,7 @@ from .statistics import SequentialTest
 
 __all__ = ["UncertaintySet", "System", "VerifySettings", "load_systems", "plant_table"]
 
-_SETTINGS = {"level", "p0", "indifference", "alpha", "beta", "sequential"}
+_SETTINGS = {"level", "p0", "indifference", "alpha", "beta", "sequential", "worst_case"}
 
 
 @dataclass(frozen=True)
@@ -98,6 +100,7 @@ class VerifySettings:
     level: float = 0.95
     sequential: bool = True
     test: SequentialTest = SequentialTest()
+    worst_case: bool = False
 
 
 @dataclass(frozen=True)
@@ -176,9 +179,12 @@ def _settings(table: dict) -> VerifySettings:
               f"must be a number, got {value!r}")
     level = numbers.pop("level", 0.95)
     check(0 < level < 1, "verify.level", f"must be in (0, 1), got {level!r}")
-    sequential = table.get("sequential", True)
-    check(isinstance(sequential, bool), "verify.sequential", "must be true or false")
-    return VerifySettings(float(level), sequential, SequentialTest(**numbers))
+    flags = {k: table.get(k, default) for k, default in (("sequential", True),
+                                                          ("worst_case", False))}
+    for key, value in flags.items():
+        check(isinstance(value, bool), f"verify.{key}", "must be true or false")
+    return VerifySettings(float(level), flags["sequential"], SequentialTest(**numbers),
+                          flags["worst_case"])
 
 
 def _uncertainty(table: dict, nominal: dict) -> UncertaintySet:

@@ -16,8 +16,11 @@ uncertainty set, each answered in ``OUT/verdict.json``:
   interpolant of ρ_T − ρ_R over the evaluated points (a constant offset while there is
   one), so the search stops believing the reduced model where the truth plant has
   disagreed.  When a CMA-ES run stops without a candidate, its best point is confirmed
-  anyway (the truth-confirmed worst case).  A counterexample is written as a scenario
-  file that ``flexarm run --config`` replays to the same ρ.
+  anyway (the truth-confirmed worst case).  The search stops at the first counterexample
+  the truth plant confirms — or, with ``[verify] worst_case = true``, goes on to the end
+  of its budget confirming only points predicted below the lowest ρ confirmed so far
+  (the worst case, not just a case).  A counterexample is written as a scenario file
+  that ``flexarm run --config`` replays to the same ρ.
 - **conform** — maximise the disagreement between the two plants on the same scenario,
   max over time and joints of |θ_truth − θ_reduced|, with CMA-ES; every point costs one
   simulation of each plant; the difference in each requirement's ρ is reported there.
@@ -236,7 +239,8 @@ class _Correction:
 
 def falsify(system: System, requirement: Requirement, out, *, runner, budget: int,
             seed: int, log=print) -> dict:
-    """The truth-confirmed minimum of ρ over the set (module docstring)."""
+    """A truth-confirmed counterexample — or with ``[verify] worst_case``, the lowest ρ
+    the truth plant confirms within the budget — over the set (module docstring)."""
     out = Path(out)
     u_dim = system.uncertainty.dim
     ev = Evaluations(out, runner, f"verify-falsify/{system.name}")
@@ -247,8 +251,15 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
     best_run = None  # the current CMA-ES run's best (value, u, rho_reduced)
     best_reduced = None  # (rho, u) over the whole search
     trace, spurious, found = [], [], None
+    worst_case = system.settings.worst_case
+    # A point is confirmed on the truth plant when its corrected reduced ρ is below this:
+    # 0 (a counterexample); when looking for the worst case, then the lowest ρ confirmed.
+    threshold = 0.0
 
-    def confirm(u, rho_reduced):
+    def confirm(u, rho_reduced: float, predicted: float) -> bool:
+        """Run the truth plant at ``u`` (``predicted``: the corrected reduced ρ there);
+        True when the search is over."""
+        nonlocal found, threshold
         point = system.uncertainty.at(u)
         (row,) = ev.run([(system.scenario(point, plant="exudyn"), "falsify",
                           _point_axes(point, role="confirm"))])
@@ -256,22 +267,29 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
         entry = {"u": u, "point": point, "rho_reduced": rho_reduced, "rho_truth": rho_truth,
                  "row": row}
         truth[tuple(u)] = entry
-        if rho_truth is not None:
-            correction.add(u, rho_truth - rho_reduced)
         log(f"  truth plant at {_label(point)}: ρ = {rho_truth} (reduced {rho_reduced:.4g})")
-        return entry
+        if rho_truth is None:
+            return False  # the run failed: nothing learnt
+        correction.add(u, rho_truth - rho_reduced)
+        if rho_truth >= 0:
+            if predicted < 0:  # the reduced plant (corrected) said it fails: spurious
+                spurious.append(entry)
+            return False
+        if found is None or rho_truth < found["rho_truth"]:
+            found = entry
+        threshold = found["rho_truth"] if worst_case else threshold
+        return not worst_case or found["rho_truth"] == -math.inf  # nothing is worse
 
-    while ev.count["exudyn"] < budget and ev.count["reduced"] < reduced_budget:
+    done = False
+    while not done and ev.count["exudyn"] < budget and ev.count["reduced"] < reduced_budget:
         restarts = search.restarts
         U = search.ask()
         if search.restarts != restarts and best_run is not None:
-            # The previous CMA-ES run stopped without a candidate: its best point is the
-            # worst case it found; confirm it on the truth plant.
-            if tuple(best_run[1]) not in truth:
-                entry = confirm(best_run[1], best_run[2])
-                if entry["rho_truth"] is not None and entry["rho_truth"] < 0:
-                    found = entry
-                    break
+            # The previous CMA-ES run stopped: its best point is the worst case it found;
+            # confirm it on the truth plant.
+            if tuple(best_run[1]) not in truth and confirm(best_run[1], best_run[2],
+                                                           best_run[0]):
+                break
             best_run = None
         U = U[:reduced_budget - ev.count["reduced"]]  # the last generation may be cut
         points = [system.uncertainty.at(u) for u in U]
@@ -287,24 +305,18 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
             if best_run is None or value < best_run[0]:
                 best_run = (float(value), u, float(rho))
         candidates = [i for i in np.argsort(corrected, kind="stable")
-                      if corrected[i] < 0 and tuple(U[i]) not in truth]
+                      if corrected[i] < threshold and tuple(U[i]) not in truth]
         if candidates and ev.count["exudyn"] < budget:
             i = candidates[0]
-            entry = confirm(U[i], float(rho_r[i]))
-            if entry["rho_truth"] is not None and entry["rho_truth"] < 0:
-                found = entry
-            else:
-                spurious.append(entry)
+            done = confirm(U[i], float(rho_r[i]), float(corrected[i]))
         trace.append({"reduced": ev.count["reduced"], "truth": ev.count["exudyn"],
                       "best_rho_reduced": _number(best_reduced[0]) if best_reduced else None,
                       "best_rho_truth": _number(min((e["rho_truth"] for e in truth.values()
                                                      if e["rho_truth"] is not None),
                                                     default=math.inf))})
-        if found:
-            break
-    if found is None and best_run is not None and tuple(best_run[1]) not in truth \
+    if not done and best_run is not None and tuple(best_run[1]) not in truth \
             and ev.count["exudyn"] < budget:
-        confirm(best_run[1], best_run[2])  # the last run's best: the worst case found
+        confirm(best_run[1], best_run[2], best_run[0])  # the last run's best case
     return _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace,
                             budget, seed, search)
 
