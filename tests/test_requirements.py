@@ -195,4 +195,5 @@ def test_requirements_enter_the_claims_table():
     assert rows["rho_loose"]["verdicts"] == ["holds"]
     assert rows["rho_tight"]["verdicts"] == ["fails"]
     assert rows["rho_loose"]["cells"][0] == f"ρ = {metrics['rho_loose']:.3g} — holds"
-    assert rows["rho_loose"]["claim"] == "requirement loose: always[1,3](abs(theta1 - theta1_ref) <= 0.5)"
+    assert rows["rho_loose"]["claim"] == \
+        "requirement loose: always[1,3](abs(theta1 - theta1_ref) <= 0.5)"

@@ -228,3 +228,39 @@ def test_an_interrupted_search_resumes_to_the_same_answer(tmp_path):
     assert not first["found"] and first["simulations"]["reduced"] == 40
     assert first["simulations"]["truth"] >= 1 and first["worst_case"] == "worst-case.toml"
     assert second == first
+
+
+def test_an_estimate_stops_when_the_sequential_test_decides(tmp_path):
+    """A requirement that always holds and one that never does: Wald's test (p0 = 0.5 ±
+    0.1, α = β = 0.05) decides after 8 draws either way (8 × ln(0.4/0.6) crosses
+    ln(0.05/0.95)); the interval and the interface keys are in verdict.json."""
+    from validation.batch.executor import SerialRunner
+    from validation.verdicts.verify import estimate
+    head, _, _ = SYSTEM.partition("[[requirement]]")
+    path = tmp_path / "system.toml"
+    path.write_text(head + '''
+[[requirement]]
+name = "loose"
+formula = "always(abs(theta1 - theta1_ref) <= 1)"
+[[requirement]]
+name = "impossible"
+formula = "always(abs(theta1 - theta1_ref) <= -1)"
+[uncertainty]
+"true_params.Mp" = { uniform = [0.0, 1.0] }
+[verify]
+p0 = 0.5
+indifference = 0.1
+''')
+    (system,) = load_systems(path)
+    for name, decision in (("loose", "holds"), ("impossible", "fails")):
+        out = tmp_path / name
+        verdict = estimate(system, system.requirement(name), out, runner=SerialRunner(),
+                           samples=40, seed=1, log=lambda *a: None)
+        saved = json.loads((out / "verdict.json").read_text())
+        assert saved == verdict
+        assert {"requirement", "n", "failures", "p_low", "p_high", "level", "method"} <= set(saved)
+        assert saved["sequential"]["decision"] == decision and saved["n"] == 8
+        assert saved["failures"] == (0 if decision == "holds" else 8)
+        low, high = clopper_pearson(8 - saved["failures"], 8, 0.95)
+        assert (saved["p_low"], saved["p_high"]) == (low, high)
+        assert len(saved["runs"]) == 8 and len(saved["noise_seeds"]) == 8

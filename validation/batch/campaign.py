@@ -16,8 +16,12 @@ A campaign file (TOML)::
     random.samples = 8                                # random axes: N seeded draws
     random.seed = 1
     random.true_params.Mp = {uniform = [0.0, 1.0]}    # also loguniform, choices
+    random.true_params.EI1 = {scale = {uniform = [0.7, 1.3]}, also = ["true_params.EI2"]}
+    random."disturbances[0].start" = {uniform = [2.0, 18.0]}   # [i] indexes a list
 
-Within a sweep the grid, zip and random parts combine by product.  Each run's scenario is
+Within a sweep the grid, zip and random parts combine by product.  A random axis under
+``scale`` draws a factor of the base value; ``also`` gives other fields the same draw.
+The same axes declare the uncertainty sets of ``flexarm verify`` (`RandomAxis`).  Each run's scenario is
 resolved and checked before anything runs; its id is a hash of the resolved scenario, so
 rerunning a campaign into the same folder skips what is done (resume).
 """
