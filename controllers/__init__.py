@@ -6,16 +6,18 @@ trajectories (eq. 37).  All are plug-ins of one interface (`controllers._interfa
 ``update(t, y, tau, Ts) -> x_hat``.
 """
 from ._baselines import JointPD, RigidArm, RigidComputedTorque
+from ._compiled import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, CompiledLaw, compiled_form
 from ._ekf import ExtendedKalmanFilter, PositionEKF
-from ._interface import Controller, Observer
+from ._interface import Controller, Observer, ObserverFailure
 from ._lqr import GainScheduledLQR
 from ._pbc import IdealisedPBC, PassivityBasedController
-from ._reference import PaperReference, QuinticMove
+from ._reference import PaperReference, QuinticMove, ReferenceKind, reference_into
 from ._registry import CONTROLLERS, OBSERVERS, PluginError, accepted_options, resolve
 from ._smo import BoundaryLayerSMO, PaperSMO, PositionOnlySMO
 
 __all__ = ["Controller", "Observer", "PassivityBasedController", "IdealisedPBC", "PaperSMO",
            "BoundaryLayerSMO", "PositionOnlySMO", "ExtendedKalmanFilter", "PositionEKF",
            "JointPD", "RigidComputedTorque", "GainScheduledLQR", "RigidArm",
-           "PaperReference", "QuinticMove", "CONTROLLERS", "OBSERVERS", "PluginError",
-           "resolve", "accepted_options"]
+           "PaperReference", "QuinticMove", "ReferenceKind", "reference_into", "CONTROLLERS",
+           "OBSERVERS", "PluginError", "resolve", "accepted_options", "CompiledLaw",
+           "compiled_form", "CONTROLLER_SIGNATURE", "OBSERVER_SIGNATURE", "ObserverFailure"]

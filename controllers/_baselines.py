@@ -19,6 +19,7 @@ from numba import njit
 
 from reduced_model import ArmModel
 
+from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
 from ._gains import gain_vector
 
 __all__ = ["JointPD", "RigidComputedTorque", "RigidArm", "rigid_torque"]
@@ -95,6 +96,7 @@ class JointPD:
                  feedforward: bool = True) -> None:
         if not isinstance(feedforward, (bool, np.bool_)):
             raise ValueError(f"feedforward must be true or false, got {feedforward!r}")
+        self.model = model
         self.rigid = RigidArm(model) if feedforward else None
         self.kp, self.kd = gain_vector("kp", kp, 2), gain_vector("kd", kd, 2)
 
@@ -105,6 +107,26 @@ class JointPD:
         if self.rigid is not None:
             tau = tau + self.rigid.torque(theta_d, dtheta_d, ddtheta_d)
         return tau
+
+    def compiled(self, Ts: float) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`): gains and the rigid constants."""
+        ff = self.rigid.constants if self.rigid is not None else np.zeros(4)
+        return CompiledLaw.of(pd_kernel, CONTROLLER_SIGNATURE, self.model,
+                              ints=[int(self.rigid is not None)],
+                              reals=np.concatenate([self.kp, self.kd, ff]), state=np.zeros(2))
+
+
+@njit(cache=True)
+def pd_kernel(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
+    """`JointPD` compiled: ints = [feedforward], reals = [K_p, K_d, rigid constants]."""
+    n = x.shape[0] // 2
+    for i in range(2):
+        tau[i] = reals[i] * (ref[i] - x[i]) + reals[2 + i] * (ref[2 + i] - x[n + i])
+    if ints[0] == 1:
+        rigid_torque(reals[4:8], ref[0:2], ref[2:4], ref[4:6], state)
+        tau[0] += state[0]
+        tau[1] += state[1]
+    return 2
 
 
 class RigidComputedTorque:
@@ -118,6 +140,7 @@ class RigidComputedTorque:
     name = "ct"
 
     def __init__(self, model: ArmModel, *, kp=(11.1, 14.1), kd=(6.7, 7.7)) -> None:
+        self.model = model
         self.rigid = RigidArm(model)
         self.kp, self.kd = gain_vector("kp", kp, 2), gain_vector("kd", kd, 2)
 
@@ -127,3 +150,19 @@ class RigidComputedTorque:
         theta_d, dtheta_d, ddtheta_d = ref(t)
         accel = ddtheta_d + self.kd * (dtheta_d - dtheta) + self.kp * (theta_d - theta)
         return self.rigid.torque(theta, dtheta, accel)
+
+    def compiled(self, Ts: float) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`): gains and the rigid constants."""
+        return CompiledLaw.of(ct_kernel, CONTROLLER_SIGNATURE, self.model,
+                              reals=np.concatenate([self.kp, self.kd, self.rigid.constants]),
+                              state=np.zeros(2))
+
+
+@njit(cache=True)
+def ct_kernel(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
+    """`RigidComputedTorque` compiled: reals = [K_p, K_d, rigid constants]."""
+    n = x.shape[0] // 2
+    for i in range(2):
+        state[i] = ref[4 + i] + reals[2 + i] * (ref[2 + i] - x[n + i]) + reals[i] * (ref[i] - x[i])
+    rigid_torque(reals[4:8], x[0:2], x[n:n + 2], state, tau)
+    return 2

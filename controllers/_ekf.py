@@ -21,7 +21,9 @@ from reduced_model import ArmModel
 from reduced_model._kernels import (cholesky_factor_inplace, cholesky_solve_factored,
                                     rk4_advance_packed)
 
+from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
 from ._gains import gain_vector
+from ._interface import ObserverFailure
 
 __all__ = ["ExtendedKalmanFilter", "PositionEKF"]
 
@@ -30,6 +32,8 @@ _MAX_SUBSTEP = 1e-3
 #: the map's round-off is ~1e-13 on the Table 1 arm (cond M ≈ 1e4), so √ε = 1.5e-8 would
 #: leave 1e-5 errors in Φ there; 3e-7 balances round-off and truncation (both ~1e-6).
 _FD_STEP = 3e-7
+#: What it means when the update fails (H P⁻ Hᵀ + R not positive definite).
+COVARIANCE_FAILURE = "the covariance update failed (H P Hᵀ + R is not positive definite)"
 
 
 class ExtendedKalmanFilter:
@@ -157,8 +161,8 @@ class ExtendedKalmanFilter:
     def update(self, t: float, y: np.ndarray, tau: np.ndarray, Ts: float) -> np.ndarray:
         """Predict over the last period with the torque ``tau`` held (skipped on the first
         call after `reset`), then correct with ``y`` (in the order of `measured`)
-        measured at ``t``.  Returns a copy of x̂; all NaN if the covariance update
-        failed (the closed loop then ends the run as diverged)."""
+        measured at ``t``.  Returns a copy of x̂; raises `ObserverFailure` if the
+        covariance update failed (the closed loop then ends the run as diverged)."""
         self._set_period(Ts)
         y = np.asarray(y, dtype=float)
         if y.shape != (self._m,):
@@ -171,7 +175,20 @@ class ExtendedKalmanFilter:
         self._fresh = False
         if not ok:
             self._x[:] = np.nan
+            raise ObserverFailure(COVARIANCE_FAILURE)
         return self._x.copy()
+
+    def compiled(self, Ts: float) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`) at the control period ``Ts``, its
+        state (x̂, P) copied as it is now."""
+        self._set_period(Ts)
+        N, m = self._x.shape[0], self._m
+        scratch = 2 * N + 3 * N * N + N * m + m * m + m
+        return CompiledLaw.of(ekf_kernel, OBSERVER_SIGNATURE, self.model,
+                              ints=[m, self._nsub, int(self._fresh)],
+                              reals=np.concatenate([self._r, self._Qd.ravel()]),
+                              state=np.concatenate([self._x, self._P.ravel(), np.zeros(scratch)]),
+                              failure=COVARIANCE_FAILURE)
 
     def jacobian(self, x, tau, Ts: float) -> np.ndarray:
         """Φ = ∂F/∂x of the prediction map F (RK4 over ``Ts``, ``tau`` held) at ``x``,
@@ -288,3 +305,29 @@ def _ekf_update(ints, reals, wc, wr, x, P, tau, h, nsub, predict, y, r, Qd, xn, 
             P[i, j] = T2[i, j]
             P[j, i] = T2[i, j]
     return True
+
+
+@njit(cache=True)
+def ekf_kernel(t, Ts, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+    """The EKF compiled (`controllers._compiled`): ints = [m measured, RK4 sub-steps,
+    fresh], reals = [R diagonal, Q_d], state = [x̂, P, scratch]; status 1 when the
+    covariance update fails."""
+    N = x_hat.shape[0]
+    m, nsub = ints[0], ints[1]
+    x = state[:N]
+    P = state[N:N + N * N].reshape((N, N))
+    b = N + N * N
+    nn = N * N
+    ok = _ekf_update(mi, mr, wc, wr, x, P, tau, Ts / nsub, nsub, ints[2] == 0, y, reals[:m],
+                     reals[m:m + nn].reshape((N, N)), state[b:b + N], state[b + N:b + 2 * N],
+                     state[b + 2 * N:b + 2 * N + nn].reshape((N, N)),
+                     state[b + 2 * N + nn:b + 2 * N + 2 * nn].reshape((N, N)),
+                     state[b + 2 * N + 2 * nn:b + 2 * N + 3 * nn].reshape((N, N)),
+                     state[b + 2 * N + 3 * nn:b + 2 * N + 3 * nn + N * m].reshape((N, m)),
+                     state[b + 2 * N + 3 * nn + N * m:b + 2 * N + 3 * nn + N * m + m * m]
+                     .reshape((m, m)),
+                     state[b + 2 * N + 3 * nn + N * m + m * m:b + 2 * N + 3 * nn + N * m + m * m + m])
+    ints[2] = 0  # no longer fresh: later calls predict
+    for i in range(N):
+        x_hat[i] = x[i] if ok else np.nan
+    return 0 if ok else 1

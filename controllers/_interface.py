@@ -17,7 +17,13 @@ An observer is constructed the same way and has ``measured`` (the tuple of measu
 names it needs, in the order of ``y``), ``reset(x_hat0)`` and
 ``update(t, y, tau, Ts) -> x_hat`` (advance over the last period with the torque applied
 during it, then correct with ``y`` measured at ``t``; the first call after ``reset`` only
-corrects).  The state names are ``model.state_names``.
+corrects).  The state names are ``model.state_names``.  An observer that cannot go on
+(e.g. a covariance that lost positive definiteness) raises `ObserverFailure`: the run
+ends as diverged with its message.
+
+Either may also offer a compiled form, ``compiled(Ts) -> CompiledLaw``
+(`controllers._compiled`): compiled loops then call its numba kernel instead of the
+Python object.
 """
 from __future__ import annotations
 
@@ -25,7 +31,11 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Controller", "Observer"]
+__all__ = ["Controller", "Observer", "ObserverFailure"]
+
+
+class ObserverFailure(RuntimeError):
+    """The observer cannot continue; the message says why (the run ends as diverged)."""
 
 
 @runtime_checkable

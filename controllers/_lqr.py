@@ -21,6 +21,7 @@ from numba import njit
 from reduced_model import ArmModel
 
 from ._baselines import RigidArm, rigid_torque
+from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
 from ._gains import gain_vector as _weights
 
 __all__ = ["GainScheduledLQR"]
@@ -186,6 +187,15 @@ class GainScheduledLQR:
                     ddtheta_d, self._tau)
         return self._tau.copy()
 
+    def compiled(self, Ts: float) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`): the gain table (designed at this
+        law's own ``Ts``), the scheduling scale and the rigid feedforward constants."""
+        return CompiledLaw.of(lqr_kernel, CONTROLLER_SIGNATURE, self.model,
+                              ints=[self._table.shape[0]],
+                              reals=np.concatenate([[self._scale], self._ff,
+                                                    self._table.ravel()]),
+                              state=np.zeros(self._K.size))
+
 
 @njit(cache=True)
 def _interpolate_gain(table, scale, theta2, K):
@@ -221,3 +231,15 @@ def _lqr_torque(table, scale, ff, K, x, theta_d, dtheta_d, ddtheta_d, tau):
             err = x[j]
         tau[0] -= K[0, j] * err
         tau[1] -= K[1, j] * err
+
+
+@njit(cache=True)
+def lqr_kernel(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
+    """`GainScheduledLQR` compiled: ints = [grid rows + 1], reals = [scale, rigid
+    constants, gain table], state = K."""
+    N = x.shape[0]
+    rows = ints[0]
+    table = reals[5:5 + rows * 2 * N].reshape((rows, 2, N))
+    _lqr_torque(table, reals[0], reals[1:5], state.reshape((2, N)), x, ref[0:2], ref[2:4],
+                ref[4:6], tau)
+    return 2

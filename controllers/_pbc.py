@@ -25,6 +25,7 @@ from reduced_model import ArmModel
 from reduced_model._kernels import (coriolis_matrix_into, mass_matrix_into, unpack_model,
                                     unpack_workspace)
 
+from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
 from ._gains import gain_vector
 
 __all__ = ["PassivityBasedController", "IdealisedPBC"]
@@ -83,6 +84,17 @@ class PassivityBasedController:
         self.residual[:] = tau[2:]
         return tau[:2].copy()
 
+    def compiled(self, Ts: float) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`): this law's kernel and gains."""
+        return self._compiled(rows=2)
+
+    def _compiled(self, rows: int) -> CompiledLaw:
+        n = self.model.n
+        return CompiledLaw.of(pbc_kernel, CONTROLLER_SIGNATURE, self.model,
+                              ints=[rows, int(self.compensate_damping)],
+                              reals=np.concatenate([self.lam, self.kv]),
+                              state=np.zeros(2 * n * n + 5 * n))
+
 
 class IdealisedPBC(PassivityBasedController):
     """Eq. (20) with all n rows applied: the paper's idealisation (reduced plant only).
@@ -104,6 +116,10 @@ class IdealisedPBC(PassivityBasedController):
 
     def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
         return self._eq20(t, x, ref).copy()
+
+    def compiled(self, Ts: float) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`): all n rows applied."""
+        return self._compiled(rows=self.model.n)
 
 
 @njit(cache=True)
@@ -132,3 +148,24 @@ def _pbc_torque(ints, reals, wc, wr, M, C, scratch, x_hat, theta_d, dtheta_d, dd
             if with_damping:
                 acc += d.D[i, j] * Qd[j]
         tau[i] = acc - kv[i] * (de[i] + lam[i] * e[i])  # eq. (20), s from eq. (5)
+
+
+@njit(cache=True)
+def pbc_kernel(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
+    """Eq. (20) as a compiled controller (`controllers._compiled`): ints = [rows applied
+    (2: realisable, n: idealised), damping compensated], reals = [Λ, K_v], state =
+    scratch for M, C and eq. (20)'s n forces; rows beyond those applied go to
+    ``residual``."""
+    n = x.shape[0] // 2
+    M = state[:n * n].reshape((n, n))
+    C = state[n * n:2 * n * n].reshape((n, n))
+    scratch = state[2 * n * n:2 * n * n + 4 * n]
+    full = state[2 * n * n + 4 * n:2 * n * n + 5 * n]
+    _pbc_torque(mi, mr, wc, wr, M, C, scratch, x, ref[0:2], ref[2:4], ref[4:6],
+                reals[:n], reals[n:2 * n], ints[1] == 1, full)
+    rows = ints[0]
+    for i in range(rows):
+        tau[i] = full[i]
+    for i in range(rows, n):
+        residual[i - rows] = full[i]
+    return rows

@@ -45,8 +45,9 @@ import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
-from reduced_model._kernels import rk4_advance, unpack_model, unpack_workspace
+from reduced_model._kernels import rk4_advance_packed
 
+from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
 from ._gains import joint_flex_gains
 
 __all__ = ["PaperSMO", "BoundaryLayerSMO", "PositionOnlySMO"]
@@ -133,6 +134,18 @@ class _SlidingModeObserver:
         self._fresh = False
         return self._x.copy()
 
+    def compiled(self, Ts: float) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`) at the control period ``Ts``, its
+        state copied as it is now."""
+        nsub = max(1, math.ceil(Ts / _MAX_SUBSTEP - 1e-9))
+        return CompiledLaw.of(
+            smo_kernel, OBSERVER_SIGNATURE, self.model,
+            ints=[nsub, int(self._fresh), self._variant],
+            reals=np.concatenate([self.lp, self.lv, [self.boundary_layer,
+                                                     min(1.0, Ts / self.filter_time),
+                                                     self.gate]]),
+            state=np.concatenate([self._x, self._nu]))
+
 
 class PaperSMO(_SlidingModeObserver):
     """``"smo-paper"``: the paper's observer, sign injection on the full measured state
@@ -178,8 +191,7 @@ class PositionOnlySMO(_SlidingModeObserver):
 def _smo_update(ints, reals, wc, wr, x, tau, Ts, nsub, predict, y, lp, lv, variant, layer,
                 alpha, gate, nu):
     if predict:
-        rk4_advance(unpack_model(ints, reals), x, tau, Ts / nsub, nsub,
-                    unpack_workspace(ints, wc, wr))
+        rk4_advance_packed(ints, reals, wc, wr, x, tau, Ts / nsub, nsub)
     n = x.shape[0] // 2
     if variant == 2:  # position_only: step-by-step equivalent output injection
         for i in range(n):
@@ -197,3 +209,19 @@ def _smo_update(ints, reals, wc, wr, x, tau, Ts, nsub, predict, y, lp, lv, varia
             x[i] += Ts * gain * np.sign(err)
         elif gain > 0.0:
             x[i] += Ts * gain * min(max(err / (layer * Ts * gain), -1.0), 1.0)
+
+
+@njit(cache=True)
+def smo_kernel(t, Ts, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+    """Eq. (23)–(24) compiled (`controllers._compiled`): ints = [RK4 sub-steps, fresh,
+    variant], reals = [L_P, L_V, boundary layer, filter factor, gate], state = [x̂, ν̄]."""
+    N = x_hat.shape[0]
+    n = N // 2
+    x = state[:N]
+    _smo_update(mi, mr, wc, wr, x, tau, Ts, ints[0], ints[1] == 0, y, reals[:n],
+                reals[n:2 * n], ints[2], reals[2 * n], reals[2 * n + 1], reals[2 * n + 2],
+                state[N:N + n])
+    ints[1] = 0  # no longer fresh: later calls predict
+    for i in range(N):
+        x_hat[i] = x[i]
+    return 0

@@ -449,22 +449,26 @@ def rhs_into(d, x, tau, xdot, ws):
 @njit(cache=True, inline="always")
 def rk4_advance(d, x, tau, h, nsteps, ws):
     """Advance ``x`` in place by ``nsteps`` classical RK4 steps of size ``h`` with ``tau``
-    held constant (zero-order hold)."""
+    held constant (zero-order hold).
+
+    The four stages run in one loop, so the (inlined) right-hand side appears once in the
+    compiled code: a quarter of the machine code to compile, the same arithmetic in the
+    same order as the textbook form x += h/6 (k1 + 2 k2 + 2 k3 + k4)."""
     m = x.shape[0]
-    k1, k2, k3, k4, xt = ws.k1, ws.k2, ws.k3, ws.k4, ws.xt
+    k, acc, xt = ws.k1, ws.k2, ws.xt
     for _ in range(nsteps):
-        rhs_into(d, x, tau, k1, ws)
         for i in range(m):
-            xt[i] = x[i] + 0.5 * h * k1[i]
-        rhs_into(d, xt, tau, k2, ws)
+            xt[i] = x[i]
+            acc[i] = 0.0
+        for stage in range(4):
+            rhs_into(d, xt, tau, k, ws)
+            weight = 2.0 if stage == 1 or stage == 2 else 1.0
+            step = h if stage == 2 else 0.5 * h  # where the next stage is evaluated
+            for i in range(m):
+                acc[i] += weight * k[i]
+                xt[i] = x[i] + step * k[i]
         for i in range(m):
-            xt[i] = x[i] + 0.5 * h * k2[i]
-        rhs_into(d, xt, tau, k3, ws)
-        for i in range(m):
-            xt[i] = x[i] + h * k3[i]
-        rhs_into(d, xt, tau, k4, ws)
-        for i in range(m):
-            x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            x[i] += h / 6.0 * acc[i]
 
 
 @njit(cache=True)

@@ -148,21 +148,18 @@ class ReducedPlant:
         self.time = self._steps * self.h
         return self._measure()
 
-    def compiled_stepping(self, disturbances: np.ndarray) -> dict | None:
-        """What a compiled loop needs to step this plant itself (`validation._sample.
+    def compiled_stepping(self) -> dict | None:
+        """What a compiled loop needs to step this plant itself (`validation.run._sample.
         run_reduced`): the model's packed buffers, the live state, the step and the map
         to the measurement basis; None where this plant's Python path is needed — a
-        measurement that is not the plain state (gauges, quantisation, payload position)
-        or a payload force (``disturbances`` rows targeting tip_x, tip_y)."""
+        measurement that is not the plain state (gauges, quantisation, payload position)."""
         cfg = self.sensors.config
-        if (cfg.strain_gauges is not None or cfg.encoder_resolution != 0
-                or cfg.tip_position or np.any(disturbances[:, 1] >= 2)):
+        if cfg.strain_gauges is not None or cfg.encoder_resolution != 0 or cfg.tip_position:
             return None
-        n = self.model.n
         basis = np.zeros((0, 0)) if self._basis_map is None else self._basis_map
         return {"model": (*self.model.packed, *self._work), "x": self._x, "h": self.h,
                 "basis": np.ascontiguousarray(basis, dtype=float),
-                "nsteps": lambda Ts: check_sample_time(Ts, self.h), "n": n}
+                "nsteps": lambda Ts: check_sample_time(Ts, self.h)}
 
     @property
     def state_size(self) -> int:

@@ -46,7 +46,7 @@ def scenario(extra):
 def python_objects(s, monkeypatch):
     """The run with the laws called as Python objects (the plug-in path)."""
     with monkeypatch.context() as m:
-        m.setattr(loop, "pack_laws", lambda *a, **k: None)
+        m.setattr(loop, "compiled_form", lambda *a, **k: None)
         return run_scenario(s)
 
 
@@ -69,11 +69,35 @@ def test_every_path_computes_the_same_run(case, monkeypatch):
         np.testing.assert_allclose(fast.signals, other.signals, rtol=0, atol=1e-12)
     if case.startswith("diverging"):
         assert fast.status == "diverged" and "exceeds" in fast.message
+    assert fast.timings["paths"] == {"loop": "compiled", "controller": "compiled",
+                                     "observer": "compiled" if "observer" in CASES[case]
+                                     else "none"}
+
+
+def test_an_observer_failure_ends_the_run_the_same_way_on_every_path(monkeypatch):
+    """The EKF's covariance failure is a status with its message, compiled or not."""
+    from controllers import ExtendedKalmanFilter
+    reset = ExtendedKalmanFilter.reset
+
+    def broken_reset(self, x_hat0):  # a covariance that is not one: S = P + R < 0
+        out = reset(self, x_hat0)
+        self._P[:] = -np.eye(len(out))
+        return out
+
+    monkeypatch.setattr(ExtendedKalmanFilter, "reset", broken_reset)
+    s = scenario({"observer": {"kind": "ekf"}})
+    fast = run_scenario(s)
+    assert fast.timings["compiled_loop"] is True
+    for other in (python_objects(s, monkeypatch), stepped_from_python(s)):
+        assert (other.status, other.message) == (fast.status, fast.message)
+    assert fast.status == "diverged" and fast.end_time == 0.0
+    assert fast.message == ("ekf: the covariance update failed (H P Hᵀ + R is not positive "
+                            "definite) at t = 0 s")
 
 
 def test_plugins_and_payload_forces_take_the_python_path():
     s = scenario({"disturbances": [{"kind": "step", "target": "tip_y", "amplitude": 1.0}]})
     r = run_scenario(s)
     assert r.status == "ok" and r.timings["compiled_loop"] is False
-    plant = ReducedPlant()
-    assert plant.compiled_stepping(np.zeros((0, 7))) is not None
+    assert r.timings["paths"]["loop"] == "python"
+    assert ReducedPlant().compiled_stepping() is not None

@@ -8,12 +8,11 @@ from __future__ import annotations
 
 import os
 
-# One BLAS thread: the matrices here are small, and idle BLAS threads busy-wait on the
-# cores the simulation runs on.  Set before numpy is imported; a user's setting wins.
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from .batch.threads import prefer_one_thread
 
-import argparse
+prefer_one_thread()  # before numpy is imported; a user's setting wins
+
+import argparse  # noqa: E402
 import dataclasses
 import errno
 import math
@@ -25,11 +24,11 @@ import numpy as np
 
 from controllers import CONTROLLERS, OBSERVERS
 
-from .run._config import ConfigError, check
+from .run._config import ConfigError
 from .batch.executor import Interrupted, available_cores, exit_status, make_runner
 from .run.scenario import ARMS, PLANTS, Scenario, scenario_from_mapping
 from .batch.store import ResultStore, StoreError, run_id
-from .run.tomlfiles import load_toml, parse_value, set_dotted
+from .run.tomlfiles import deep_merge, load_toml, parse_value, set_dotted
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
@@ -121,7 +120,14 @@ _RUN_FLAGS = {"plant": "plant.kind", "controller": "controller.kind", "arm": "ar
 
 
 def scenario_from_args(args: argparse.Namespace) -> Scenario:
-    data = load_toml(args.config) if args.config else {}
+    data = {}
+    if args.config:
+        from .batch.campaign import load_study
+        study = load_study(args.config)
+        data = deep_merge({}, study.base)
+        if study.sweeps and any(set(s) - {"name"} for s in study.sweeps):
+            print(f"{args.config} is a campaign: run simulates its [scenario] base (use "
+                  "'flexarm campaign' for its sweeps)", file=sys.stderr)
     for attr, key in _RUN_FLAGS.items():
         value = getattr(args, attr)
         if value is not None:
@@ -183,13 +189,14 @@ def format_metrics(metrics: dict) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .batch.worker import execute_run
+    from .batch.worker import compile_kernels, execute_run
     from .run.scenario import scenario_to_mapping
     scenario = scenario_from_args(args)
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
     store = open_output(args.out or Path("results") / f"run-{rid}")
-    result, metrics = execute_run(data)
+    compile_kernels([scenario], report=lambda line: print(line, file=sys.stderr, flush=True))
+    result, metrics = execute_run(scenario)
     path = store.add(rid, result, metrics)
     store.export()
     s = scenario
@@ -307,14 +314,13 @@ def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arm
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
-    from .batch.campaign import campaign_from_mapping, expand
-    data = load_toml(args.file)
-    if "scenario" in data or "sweep" in data:
-        scenarios = [r.scenario for r in expand(campaign_from_mapping(data, source=args.file))]
-        plants, arms = args.plant, args.arm
-    else:
-        scenarios = [scenario_from_mapping(data)]
+    from .batch.campaign import expand, load_study
+    study = load_study(args.file)
+    scenarios = [r.scenario for r in expand(study)]
+    if len(scenarios) == 1:  # one scenario: its laws on both plants and both arms
         plants, arms = args.plant or list(PLANTS), args.arm or list(ARMS)
+    else:
+        plants, arms = args.plant, args.arm
     out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
     runner = _runner(args)
     with runner:
@@ -343,23 +349,14 @@ def cmd_repair(args: argparse.Namespace) -> int:
 
 
 def cmd_attribute(args: argparse.Namespace) -> int:
+    from .batch.campaign import expand, load_study
     from .verdicts.attribution import attribute, default_factors, parse_factors, write_attribution
-    from .batch.campaign import campaign_from_mapping, expand
-    data = load_toml(args.file)
-    section = data.pop("attribution", {})
-    check(isinstance(section, dict), "attribution", "must be a table")
-    for key in section:
-        check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
-    if "scenario" in data or "sweep" in data or "name" in data:
-        campaign = campaign_from_mapping(data, source=args.file)
-        systems = [(r.scenario.name.split("/")[-1], r.scenario) for r in expand(campaign)]
-        default_out = Path("results") / campaign.name
-    else:
-        scenario = scenario_from_mapping(data)
-        systems = [(Path(args.file).stem, scenario)]
-        default_out = Path("results") / f"attribution-{Path(args.file).stem}"
+    study = load_study(args.file)
+    systems = [(r.scenario.name.split("/")[-1], r.scenario) for r in expand(study)]
+    default_out = Path("results") / (study.name if study.sweeps or study.attribution
+                                     else f"attribution-{study.name}")
     names = [n.strip() for n in args.factors.split(",") if n.strip()] \
-        if args.factors is not None else section.get("factors")
+        if args.factors is not None else study.attribution.get("factors")
     if names is not None and not isinstance(names, list):
         raise ConfigError("attribution.factors", "must be a list of factor names")
     plans = [(label, s, parse_factors(names, s) if names is not None else default_factors(s))

@@ -27,7 +27,6 @@ rerunning a campaign into the same folder skips what is done (resume).
 """
 from __future__ import annotations
 
-import copy
 import itertools
 import math
 import re
@@ -41,11 +40,12 @@ from .executor import Interrupted, Runner, SerialRunner
 from .fingerprint import run_fingerprint
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .store import ResultStore, environment, run_id
-from ..run.tomlfiles import deep_merge, load_toml
+from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
-__all__ = ["Campaign", "PlannedRun", "load_campaign", "campaign_from_mapping", "expand",
+__all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
+           "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
            "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "RandomAxis",
-           "random_axis", "draw_points", "set_path", "get_path", "flatten_table"]
+           "random_axis", "draw_points", "flatten_axes"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
@@ -55,6 +55,9 @@ _TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "a
              "requirement", "uncertainty", "verify"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
 _SPEC_KEYS = {"scale", "uniform", "loguniform", "choices", "also"}
+#: Sections a scenario file may have too (``flexarm verify`` reads a scenario file's
+#: ``[uncertainty]`` and ``[verify]``; ``[[requirement]]`` is a scenario key).
+_VERIFY_KEYS = ("uncertainty", "verify")
 
 
 @dataclass(frozen=True)
@@ -69,23 +72,51 @@ class PlannedRun:
 
 @dataclass(frozen=True)
 class Campaign:
-    """A campaign file: ``base`` scenario (with the file's ``[[requirement]]`` entries),
-    ``sweeps``; ``uncertainty`` and ``verify`` are read by ``flexarm verify``
-    (`validation.verdicts.verify`)."""
+    """A base scenario (a mapping, with the file's ``[[requirement]]`` entries), its sweeps
+    and the sections of a campaign file (``uncertainty`` and ``verify`` are read by
+    ``flexarm verify``, `validation.verdicts.verify`)."""
 
     name: str
     base: dict
     sweeps: tuple[dict, ...]
     report: dict = field(default_factory=dict)
     description: str = ""
+    attribution: dict = field(default_factory=dict)
     uncertainty: dict = field(default_factory=dict)
     verify: dict = field(default_factory=dict)
 
 
 # --- loading ------------------------------------------------------------------------------
+#: Top-level keys only a campaign file has (a scenario file may have ``name``, ``include``,
+#: ``[[requirement]]``, ``[uncertainty]`` and ``[verify]``).
+CAMPAIGN_KEYS = frozenset(_TOP_KEYS - {"name", "include", "requirement", *_VERIFY_KEYS})
+
+
+def is_campaign(data: dict) -> bool:
+    """Whether a file's mapping is a campaign (it has a key of `CAMPAIGN_KEYS`) rather
+    than a scenario."""
+    return bool(CAMPAIGN_KEYS & set(data))
+
+
 def load_campaign(path: str | Path) -> Campaign:
     """Read a campaign TOML (with includes) and check its structure."""
     return campaign_from_mapping(load_toml(path), source=str(path))
+
+
+def load_study(path: str | Path) -> Campaign:
+    """A scenario file or a campaign file, read the one way every command reads them: a
+    campaign (`is_campaign`) as it is; a scenario as a campaign of that one run, named
+    after the file (the run keeps the scenario's own ``name``, if it has one)."""
+    data = load_toml(path)
+    if is_campaign(data):
+        return campaign_from_mapping(data, source=str(path))
+    label = re.sub(r"[^A-Za-z0-9._+-]", "-", Path(path).stem).lstrip(".") or "scenario"
+    sweep = {"name": data["name"]} if isinstance(data.get("name"), str) else {}
+    base = {k: v for k, v in data.items() if k not in ("name", *_VERIFY_KEYS)}
+    sections = {k: data.get(k, {}) for k in _VERIFY_KEYS}
+    for key, value in sections.items():
+        check(isinstance(value, dict), key, "must be a table")
+    return Campaign(name=label[:100], base=base, sweeps=(sweep,) if sweep else (), **sections)
 
 
 def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
@@ -100,7 +131,7 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
           "must be an array of tables ([[requirement]])")
     if requirements:  # the file's requirements apply to every run, after the scenario's own
         base = dict(base, requirement=[*base.get("requirement", []), *requirements])
-    for key in ("uncertainty", "verify"):
+    for key in _VERIFY_KEYS:
         check(isinstance(data.get(key, {}), dict), key, "must be a table")
     sweeps = data.get("sweep", [])
     if isinstance(sweeps, dict):
@@ -119,83 +150,20 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     figures = report.get("figures", [])
     check(isinstance(figures, list) and all(isinstance(f, str) for f in figures),
           "report.figures", "must be a list of run names")
+    attribution = data.get("attribution", {})
+    check(isinstance(attribution, dict), "attribution", "must be a table")
+    for key in attribution:
+        check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
-                    description=str(data.get("description", "")),
+                    description=str(data.get("description", "")), attribution=attribution,
                     uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}))
 
 
 # --- expansion --------------------------------------------------------------------------------
-def flatten_table(table: dict, prefix: str = "") -> dict[str, object]:
-    """{"a": {"b": [..]}} → {"a.b": [..]}; a table whose keys are a value spec (scale,
-    uniform, ...) is a leaf."""
-    out = {}
-    for key, value in table.items():
-        path = f"{prefix}.{key}" if prefix else key
-        if isinstance(value, dict) and not (set(value) & _SPEC_KEYS):
-            out.update(flatten_table(value, path))
-        else:
-            out[path] = value
-    return out
-
-
-_SEGMENT = re.compile(r"^([^\[\]]+)((?:\[\d+\])*)$")
-
-
-def _parts(path: str) -> list:
-    """"a.b[0].c" → ["a", "b", 0, "c"]: table keys and list indices."""
-    parts: list = []
-    for segment in path.split("."):
-        match = _SEGMENT.match(segment)
-        if match is None:
-            raise KeyError(path)
-        parts.append(match.group(1))
-        parts += [int(i) for i in re.findall(r"\[(\d+)\]", match.group(2))]
-    return parts
-
-
-def get_path(data: dict, path: str):
-    """The value at a dotted path (``disturbances[0].start``); KeyError if there is none."""
-    node = data
-    for part in _parts(path):
-        if isinstance(part, int):
-            if not isinstance(node, list) or part >= len(node):
-                raise KeyError(path)
-        elif not isinstance(node, dict) or part not in node:
-            raise KeyError(path)
-        node = node[part]
-    return node
-
-
-def set_path(data: dict, path: str, value, resolved: dict | None = None) -> None:
-    """Set the value at a dotted path, creating tables on the way; a list indexed on the
-    way that ``data`` does not hold is copied from ``resolved`` (the resolved scenario).
-    KeyError if the path cannot exist."""
-    parts = _parts(path)
-    node = data
-    for i, (part, following) in enumerate(zip(parts[:-1], parts[1:])):
-        if isinstance(part, int):
-            if not isinstance(node, list) or part >= len(node):
-                raise KeyError(path)
-            child = node[part]
-        else:
-            child = node.get(part)
-        if isinstance(following, int) and not isinstance(child, list):
-            child = copy.deepcopy(get_path(resolved or {}, _path(parts[:i + 1])))
-        elif not isinstance(following, int) and child is None:
-            child = {}
-        if not isinstance(child, (dict, list)):
-            raise KeyError(path)
-        node[part] = child
-        node = child
-    last = parts[-1]
-    if isinstance(last, int) and (not isinstance(node, list) or last >= len(node)):
-        raise KeyError(path)
-    node[last] = value
-
-
-def _path(parts: list) -> str:
-    return "".join(f"[{p}]" if isinstance(p, int) else ("." if i else "") + p
-                   for i, p in enumerate(parts))
+def flatten_axes(table: dict) -> dict[str, object]:
+    """Sweep (or uncertainty) axes by dotted key; a table whose keys are a value spec
+    (scale, uniform, …) is one axis."""
+    return flatten(table, leaf=lambda value: bool(set(value) & _SPEC_KEYS))
 
 
 def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
@@ -203,7 +171,7 @@ def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
     if isinstance(spec, dict):
         check(set(spec) == {"scale"}, where, "a grid/zip axis is a list or {scale = [...]}")
         try:
-            base_value = get_path(resolved_base, path)
+            base_value = get_dotted(resolved_base, path)
         except KeyError:
             raise ConfigError(where, f"{path} is not a scenario field") from None
         check(isinstance(base_value, (int, float)) and not isinstance(base_value, bool), where,
@@ -299,7 +267,7 @@ def random_axis(path: str, spec, resolved_base: dict, where: str) -> RandomAxis:
         base = []
         for p in (path, *also):
             try:
-                value = get_path(resolved_base, p)
+                value = get_dotted(resolved_base, p)
             except KeyError:
                 raise ConfigError(where, f"{p} is not a scenario field") from None
             check(isinstance(value, (int, float)) and not isinstance(value, bool), where,
@@ -325,8 +293,8 @@ def draw_points(axes: list[RandomAxis], samples: int, rng: np.random.Generator) 
 
 def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
     """Every combination of one sweep's axes: list of {path: value}."""
-    grid = flatten_table(sweep.get("grid", {}))
-    zipped = flatten_table(sweep.get("zip", {}))
+    grid = flatten_axes(sweep.get("grid", {}))
+    zipped = flatten_axes(sweep.get("zip", {}))
     random = dict(sweep.get("random", {}))
     grid_axes = [(p, _axis_values(p, v, resolved_base, f"{where}.grid.{p}"))
                  for p, v in grid.items()]
@@ -348,7 +316,7 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
               f"must be an integer in 1..{MAX_RUNS}, got {samples!r}")
         check(isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
               f"{where}.random.seed", f"must be an integer >= 0, got {seed!r}")
-        axes = flatten_table(random)
+        axes = flatten_axes(random)
         check(len(axes) > 0, f"{where}.random", "needs at least one axis besides samples/seed")
         parsed = [random_axis(p, v, resolved_base, f"{where}.random.{p}")
                   for p, v in sorted(axes.items())]
@@ -387,11 +355,11 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
             data = deep_merge({}, campaign.base)
             for path, value in point.items():
                 try:
-                    set_path(data, path, value, resolved_base)
-                except KeyError:
-                    raise ConfigError(where, f"{path} is not a scenario field") from None
+                    set_dotted(data, path, value, defaults=resolved_base)
+                except ConfigError as exc:
+                    raise ConfigError(where, f"{path}: {exc.message}") from None
             # Every run is named within its campaign: "campaign/<name axis or sweep name>".
-            set_path(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
+            set_dotted(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
             try:
                 scenario = scenario_from_mapping(data)
             except ConfigError as exc:

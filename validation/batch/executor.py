@@ -19,19 +19,16 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
-import sys
 import threading
 from concurrent.futures import FIRST_COMPLETED, Future, wait
 from contextlib import contextmanager
 
 from ..run._config import ConfigError, check
+from .threads import ONE_THREAD
 from .worker import execute_run, failed_result, keep_freed_memory, worker_init
 
 __all__ = ["Runner", "make_runner", "Interrupted", "available_cores", "exit_status"]
 
-#: Environment that keeps numerical libraries to one thread in each worker.
-_ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                      "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
 
 
 class Interrupted(BaseException):
@@ -134,7 +131,7 @@ class LocalPoolRunner(_PoolRunner):
         else:
             ctx = multiprocessing.get_context("forkserver")
             ctx.set_forkserver_preload(["validation.batch.worker"])  # each worker compiles or loads
-        with _environment(_ONE_THREAD):
+        with _environment(ONE_THREAD):
             executor = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
                                            initializer=worker_init)
             # Start every worker now (with "fork" the pool forks them all on the first
@@ -218,10 +215,6 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
         check(workers >= 1, "--workers", f"must be >= 1, got {workers}")
         check(workers <= cores or force, "--workers", f"{workers} workers on {cores} cores "
               "only share the cores (each costs ~300 MB); pass --force-workers to insist")
-        from .worker import kernels_cached
-        if not kernels_cached():
-            print("compiling the simulation kernels: once per machine, a minute or two ...",
-                  file=sys.stderr, flush=True)
         return SerialRunner() if workers == 1 else LocalPoolRunner(workers)
     if kind == "dask":
         address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")

@@ -20,7 +20,6 @@ import ast
 import functools
 import hashlib
 import importlib.machinery
-import sys
 import sysconfig
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path

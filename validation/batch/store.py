@@ -163,9 +163,15 @@ class ResultStore:
             db.execute("PRAGMA synchronous=NORMAL")
             db.executescript(_SCHEMA)
             db.execute("INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (str(_SCHEMA_VERSION),))
+            (schema,) = db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
         except sqlite3.DatabaseError as exc:
             raise StoreError(f"{self.index_path}: cannot open the index ({exc}); "
                              f"'flexarm repair {self.out}' rebuilds it from runs/") from None
+        if schema != str(_SCHEMA_VERSION):
+            db.close()
+            raise StoreError(f"{self.index_path}: index schema {schema}, this version reads "
+                             f"{_SCHEMA_VERSION}; 'flexarm repair {self.out}' rebuilds the index "
+                             "from the run files")
         self._db = db
         return db
 

@@ -1,16 +1,16 @@
 """What runs inside a worker: one scenario in, its result and metrics out, never an
 exception (`execute_run`); and what a worker process needs before it runs anything: the
 simulation code (models, plants, laws, the closed loop, metrics) loaded and its kernels
-compiled — not the command line and not matplotlib.  `warm_up` runs two tiny scenarios
-in the parent before the workers are forked, so numba compiles (first use on a machine)
-or loads (from its cache) each kernel once, not once per worker."""
+compiled — not the command line and not matplotlib.  `warm_up` compiles or loads the
+kernels the runs need in the parent before the workers are forked, so numba compiles
+(first use in a checkout) or loads (from its cache) each kernel once, not once per
+worker."""
 from __future__ import annotations
 
 import ctypes
 import functools
 import signal
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -18,7 +18,7 @@ from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, befor
 from ..run.results import RunResult
 
 __all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
-           "kernels_cached"]
+           "kernel_groups", "compile_kernels"]
 
 
 @functools.cache
@@ -76,19 +76,68 @@ def worker_init() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def kernels_cached() -> bool:
-    """Whether numba's cache holds the compiled sample loop (else the first run on this
-    machine compiles it: a minute or two)."""
-    return any((Path(__file__).parent.parent / "run" / "__pycache__").glob(
-        "_sample.run_reduced-*.nbi"))
+def kernel_groups(scenarios) -> list[tuple[str, object]]:
+    """The compiled code the runs of ``scenarios`` use, as (label, callable that compiles
+    or loads it) in the order a run needs them: the arm model's kernels, each distinct
+    law, the sample loop, the FE plant's readout.  Each piece is compiled once per
+    checkout (numba's cache) and loaded in well under a second afterwards."""
+    from controllers import compiled_form
+    from reduced_model import ReducedPlant
+
+    from ..run import _sample
+    from ..run.laws import build_controller, build_observer, nominal_model
+
+    def model_kernels():
+        plant = ReducedPlant()
+        plant.reset()
+        plant.step([0.0, 0.0], plant.h)
+        plant.truth_vector()
+
+    groups, seen = [("arm model (M, C, RK4, kinematics)", model_kernels)], set()
+    for s in scenarios:
+        model = nominal_model(s.nominal_params, s.model.modes_per_link)
+        for role, spec, build in (("controller", s.controller, build_controller),
+                                  ("observer", s.observer, build_observer)):
+            key = (role, spec.kind)
+            if spec.kind == "none" or key in seen:
+                continue
+            seen.add(key)
+            groups.append((f"{role} {spec.kind}", lambda b=build, s=s, m=model, r=role:
+                           compiled_form(b(s, m), r, s.Ts)))
+    groups.append(("sample loop", _sample.compile_sample_laws))
+    plants = {s.plant.kind for s in scenarios}
+    if "reduced" in plants:
+        groups.append(("reduced-plant loop", _sample.compile_run_reduced))
+    if "exudyn" in plants:
+        def fe_readout():
+            from plant_exudyn import ExudynPlant
+            ExudynPlant().reset().values  # noqa: B018 - the readout compiles on first use
+        groups.append(("FE plant readout", fe_readout))
+    return groups
 
 
-def warm_up() -> None:
-    """Compile or load every kernel a run uses: the reduced loop with the built-in laws
-    and an observer, and the Exudyn plant's readout."""
-    from ..run.loop import run_scenario
+def compile_kernels(scenarios, *, report=None) -> float:
+    """Compile or load every kernel the runs of ``scenarios`` use (`kernel_groups`),
+    telling ``report`` (a callable taking a line) about each group that took more than
+    half a second; returns the seconds spent."""
+    import time
+    total = 0.0
+    for label, build in kernel_groups(scenarios):
+        t0 = time.perf_counter()
+        build()
+        spent = time.perf_counter() - t0
+        total += spent
+        if report is not None and spent > 0.5:
+            report(f"compiled {label} in {spent:.1f} s (once per checkout)")
+    return total
+
+
+def warm_up(scenarios=None) -> None:
+    """Compile or load every kernel the runs of ``scenarios`` use (default: the PBC with
+    the paper's SMO on both plants), here in the parent before the workers fork."""
     from ..run.scenario import scenario_from_mapping
-    for plant in ("reduced", "exudyn"):
-        run_scenario(scenario_from_mapping({"duration": 0.002, "transient": 0.0,
-                                            "plant": {"kind": plant},
-                                            "observer": {"kind": "smo-paper"}}))
+    if scenarios is None:
+        scenarios = [scenario_from_mapping({"plant": {"kind": plant},
+                                            "observer": {"kind": "smo-paper"}})
+                     for plant in ("reduced", "exudyn")]
+    compile_kernels(scenarios)

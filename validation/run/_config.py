@@ -2,9 +2,11 @@
 
 Types are read from the dataclass annotations: bool, int, float, str, tuples of those
 (fixed length ``tuple[float, float]`` or variable ``tuple[float, ...]``), nested
-dataclasses, tuples of dataclasses, ``X | None``, and ``dict`` (a free table of plain
-values — numbers, strings, booleans, lists and tables — checked by whoever consumes it).  Unknown keys and values of the
-wrong type are rejected; the dataclasses' own ``__post_init__`` checks ranges.
+dataclasses, tuples of dataclasses, ``X | None``, tagged choices ``A | B`` between
+dataclasses (picked by their ``kind``), and ``dict`` (a free table of plain values —
+numbers, strings, booleans, lists and tables — checked by whoever consumes it).  Unknown
+keys (including keys the chosen kind does not take) and values of the wrong type are
+rejected; the dataclasses' own ``__post_init__`` checks ranges.
 """
 from __future__ import annotations
 
@@ -56,8 +58,10 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
     if origin in (Union, types.UnionType):
         if value is None and type(None) in args:
             return None
-        (inner,) = [a for a in args if a is not type(None)]
-        return _convert(inner, value, path)
+        members = [a for a in args if a is not type(None)]
+        if len(members) > 1:
+            return _tagged(members, value, path)
+        return _convert(members[0], value, path)
     if dataclasses.is_dataclass(tp):
         if dataclasses.is_dataclass(value) and isinstance(value, tp):
             return value
@@ -95,6 +99,30 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
             raise ConfigError(path, f"expected a table, got {_describe(value)}")
         return {k: _plain(v, f"{path}.{k}") for k, v in value.items()}
     raise TypeError(f"unsupported configuration type {tp!r} at {path}")
+
+
+def _tagged(members: list, value: Any, path: str) -> Any:
+    """A tagged choice between dataclasses (``A | B``): each has a ``kind`` field whose
+    default names it; the table's ``kind`` (default: the first member's) picks one, and
+    keys the chosen kind does not take are refused by `from_mapping`."""
+    kinds = {m.__dataclass_fields__["kind"].default: m for m in members}
+    if isinstance(value, tuple(members)):
+        return value
+    if not isinstance(value, dict):
+        raise ConfigError(path, f"expected a table, got {_describe(value)}")
+    kind = value.get("kind", next(iter(kinds)))
+    if kind not in kinds:
+        raise ConfigError(f"{path}.kind", f"must be one of {', '.join(map(repr, kinds))}, "
+                                          f"got {_describe(kind)}")
+    takes = {f.name for f in dataclasses.fields(kinds[kind])}
+    for key in value:
+        if key not in takes:
+            owners = [k for k, m in kinds.items() if key in m.__dataclass_fields__]
+            what = (f"a setting of kind {owners[0]!r}, not of kind {kind!r}" if owners
+                    else f"unknown key for kind {kind!r}")
+            raise ConfigError(f"{path}.{key}", f"{what} (kind {kind!r} takes: "
+                                               f"{', '.join(sorted(takes))})")
+    return from_mapping(kinds[kind], value, path)
 
 
 def _plain(value: Any, path: str) -> Any:

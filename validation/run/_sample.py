@@ -3,244 +3,285 @@
 `pre_sample`: the divergence bounds, the reference (eq. 37 or a quintic move), sensor
 noise, the whole-sample delay, and the recording of truth, reference and measurement.
 `post_sample`: the finite check of the torque, saturation, disturbances, and their
-recording.  Between the two the laws run: as Python objects (any plug-in) or, for the
-built-in laws, compiled (`laws`).  `run_reduced` is the whole loop for the reduced plant
-with built-in laws: one compiled call per run.  The Python loop (`validation.loop`) calls
-the same kernels once per sample, so every path computes the same sample.
+recording.  Between the two the laws run: as Python objects (any law without a compiled
+form), or compiled, through the function pointers of their compiled forms
+(`controllers._compiled`) in `sample_laws`.  `run_reduced` is the whole loop on the
+reduced plant with compiled laws: one compiled call per run.  The Python loop
+(`validation.run.loop`) calls the same kernels once per sample, so every path computes
+the same sample.
 
-Status codes returned: 0 ok; 1 state not finite; 2 |θ| beyond bounds; 3 |θ̇| beyond;
-4, 5 tip deflection of link 1, 2 beyond; 6 measurement not finite; 7 torque not finite;
-8 the observer's covariance update failed (the EKF).  ``info[0]`` holds the offending
-value.
+The kernels that take function pointers are compiled for one explicit signature
+(`compile_sample_laws`, `compile_run_reduced`) the first time a run needs them, so they
+are compiled — and cached — once, whatever the laws.  Noise is drawn in advance from the
+run's seeded generators, in the order the samples consume it (`noise_stream`): a
+generator passed to compiled code costs ~10 µs per call, a stream costs nothing.
+
+The codes the kernels return and the layout of the rows they record are defined here,
+with their meanings: `SampleStatus`, `DisturbanceKind`, `DisturbanceTarget`, `Group`.
 """
 from __future__ import annotations
 
 import functools
 import math
+from enum import IntEnum
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
-from controllers._baselines import rigid_torque
-from controllers._ekf import _ekf_update
-from controllers._lqr import _lqr_torque
-from controllers._pbc import _pbc_torque
-from controllers._smo import _smo_update
+from controllers import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, reference_into
 from reduced_model._kernels import rk4_advance_packed, tip_kinematics_packed
 
-__all__ = ["pre_sample", "post_sample", "laws", "run_reduced", "check_bounds", "OFFSETS",
-           "CONTROLLER_CODES", "OBSERVER_CODES"]
-
-#: Order of the entries of the ``off`` array: where each signal group starts in a row.
-OFFSETS = ("ref", "ref_rate", "tip_ref", "xhat", "y", "tau_cmd", "tau", "residual", "dist")
-CONTROLLER_CODES = {"pbc": 0, "pbc-idealised": 1, "pd": 2, "ct": 3, "lqr": 4}
-OBSERVER_CODES = {"none": -1, "smo-paper": 0, "smo-bl": 1, "smo-pos": 2, "ekf": 3, "ekf-pos": 3}
+__all__ = ["SampleStatus", "status_message", "DisturbanceKind", "DisturbanceTarget", "Group",
+           "signal_layout", "noise_stream", "pre_sample", "post_sample", "check_bounds",
+           "sample_laws", "run_reduced", "compile_sample_laws", "compile_run_reduced"]
 
 
-@njit(cache=True)
-def _reference(kind, spec, t, out):
-    """θ_d, θ̇_d, θ̈_d into out[0:2], out[2:4], out[4:6] (`controllers._reference`)."""
-    if kind == 0:  # eq. (37)
-        a1, a2, w1, w2 = spec[0], spec[1], spec[2], spec[3]
-        s1, c1, s2, c2 = math.sin(w1 * t), math.cos(w1 * t), math.sin(w2 * t), math.cos(w2 * t)
-        out[0], out[1] = a1 * s1, a2 * s2
-        out[2], out[3] = a1 * w1 * c1, a2 * w2 * c2
-        out[4], out[5] = -a1 * w1 * w1 * s1, -a2 * w2 * w2 * s2
-        return
-    T = spec[4]
-    tau = min(max(t / T, 0.0), 1.0)
-    s = tau ** 3 * (10 - 15 * tau + 6 * tau ** 2)
-    ds = 30 * tau ** 2 * (1 - tau) ** 2 / T if 0 < t < T else 0.0
-    dds = 60 * tau * (1 - tau) * (1 - 2 * tau) / T ** 2 if 0 < t < T else 0.0
-    for j in range(2):
-        d = spec[7 + j] - spec[5 + j]
-        out[j] = spec[5 + j] + s * d
-        out[2 + j] = ds * d
-        out[4 + j] = dds * d
+class SampleStatus(IntEnum):
+    """Why a sample ends the run (0: it does not); see `status_message`."""
+
+    OK = 0
+    STATE_NOT_FINITE = 1
+    ANGLE = 2
+    RATE = 3
+    DEFLECTION_1 = 4
+    DEFLECTION_2 = 5
+    MEASUREMENT_NOT_FINITE = 6
+    TORQUE_NOT_FINITE = 7
+    OBSERVER_FAILED = 8
+
+
+def status_message(code: int, value: float, divergence, t: float, observer: str = "") -> str:
+    """The message of a `SampleStatus` (``value``: the offending value the kernel left in
+    ``info[0]``; ``divergence``: the scenario's `DivergenceSpec`; ``observer``: what the
+    observer's failure means, "name: reason")."""
+    code = SampleStatus(code)
+    if code is SampleStatus.OK:
+        return ""
+    d = divergence
+    text = {
+        SampleStatus.STATE_NOT_FINITE: "state not finite",
+        SampleStatus.ANGLE: f"|θ| = {value:.3g} rad exceeds {d.max_angle:g} rad",
+        SampleStatus.RATE: f"|θ̇| = {value:.3g} rad/s exceeds {d.max_rate:g} rad/s",
+        SampleStatus.DEFLECTION_1: f"tip deflection of link 1 = {value:.3g} m exceeds "
+                                   f"{d.max_deflection:g} x its length",
+        SampleStatus.DEFLECTION_2: f"tip deflection of link 2 = {value:.3g} m exceeds "
+                                   f"{d.max_deflection:g} x its length",
+        SampleStatus.MEASUREMENT_NOT_FINITE: "measurement not finite",
+        SampleStatus.TORQUE_NOT_FINITE: "controller output not finite",
+        SampleStatus.OBSERVER_FAILED: observer or "the observer failed",
+    }[code]
+    return f"{text} at t = {t:.4g} s"
+
+
+class DisturbanceKind(IntEnum):
+    """Disturbance signals (`post_sample`): "step" from ``start``; "pulse" during
+    [start, start + duration); "sine" amplitude·sin(2π·frequency·(t − start));
+    "noise": Gaussian of standard deviation ``amplitude`` low-passed at ``bandwidth``."""
+
+    STEP = 0
+    PULSE = 1
+    SINE = 2
+    NOISE = 3
+
+
+class DisturbanceTarget(IntEnum):
+    """Where a disturbance acts: a joint torque [N m] or the payload [N, base frame]."""
+
+    TAU1 = 0
+    TAU2 = 1
+    TIP_X = 2
+    TIP_Y = 3
+
+
+class Group(IntEnum):
+    """The groups of signals in a recorded row, in their order (`signal_layout`)."""
+
+    TRUTH = 0  # the state [θ, q, θ̇, q̇] in the model's coordinates
+    TIPS = 1  # reduced_model's TRUTH_EXTRAS: tips, tip deflections, projection residuals
+    REF = 2
+    REF_RATE = 3
+    TIP_REF = 4
+    XHAT = 5
+    Y = 6
+    TAU_CMD = 7
+    TAU = 8
+    RESIDUAL = 9
+    DIST = 10
+
+
+def signal_layout(state_names, truth_extras, measured, has_observer: bool,
+                  residual_names) -> tuple[tuple[str, ...], np.ndarray]:
+    """The names of a row's signals and where each `Group` starts (offsets indexed by
+    `Group`; the kernels write there)."""
+    groups = {
+        Group.TRUTH: tuple(state_names),
+        Group.TIPS: tuple(truth_extras),
+        Group.REF: ("theta1_ref", "theta2_ref"),
+        Group.REF_RATE: ("theta1_dot_ref", "theta2_dot_ref"),
+        Group.TIP_REF: ("tip_ref_x", "tip_ref_y"),
+        Group.XHAT: tuple(f"xhat_{s}" for s in state_names) if has_observer else (),
+        Group.Y: tuple(f"y_{m}" for m in measured),
+        Group.TAU_CMD: ("tau1_cmd", "tau2_cmd"),
+        Group.TAU: ("tau1", "tau2"),
+        Group.RESIDUAL: tuple(f"residual_{r}" for r in residual_names),
+        Group.DIST: ("dist_tau1", "dist_tau2", "dist_tip_x", "dist_tip_y"),
+    }
+    names, offsets = [], np.zeros(len(Group), dtype=np.int64)
+    for group in Group:
+        offsets[group] = len(names)
+        names += groups[group]
+    return tuple(names), offsets
+
+
+def noise_stream(rng: np.random.Generator, shape) -> np.ndarray:
+    """Standard normal draws for the kernels, in the order they consume them (identical
+    to drawing one at a time: numba's generator and NumPy's give the same stream)."""
+    return np.ascontiguousarray(rng.standard_normal(shape))
 
 
 @njit(cache=True)
 def check_bounds(truth, n, bounds, info):
-    """0, or why the state must stop the run: [max angle, max rate, max deflection of
-    link 1, of link 2] in ``bounds``."""
+    """`SampleStatus` of the state: [max angle, max rate, max deflection of link 1, of
+    link 2] in ``bounds``; the offending value into ``info[0]``."""
     total = 0.0
     for i in range(truth.shape[0]):
         total += truth[i]
     if not math.isfinite(total):
-        return 1
+        return SampleStatus.STATE_NOT_FINITE
     angle = max(abs(truth[0]), abs(truth[1]))
     if angle > bounds[0]:
         info[0] = angle
-        return 2
+        return SampleStatus.ANGLE
     rate = max(abs(truth[n]), abs(truth[n + 1]))
     if rate > bounds[1]:
         info[0] = rate
-        return 3
+        return SampleStatus.RATE
     for i in range(2):
         w = truth[2 * n + 4 + i]
         if abs(w) > bounds[2 + i]:
             info[0] = w
-            return 4 + i
-    return 0
+            return SampleStatus.DEFLECTION_1 + i
+    return SampleStatus.OK
 
 
 @njit(cache=True)
-def pre_sample(t, truth, yv, std, noisy, dbuf, k, rng, refkind, refspec, bounds, n, lengths,
+def pre_sample(t, k, truth, yv, std, noise, dbuf, refkind, refspec, bounds, n, lengths,
                row, off, y_used, ref, info):
-    """Bounds, reference, noisy and delayed measurement, recording; the status code."""
+    """Bounds, reference, noisy and delayed measurement, recording; the `SampleStatus`
+    (the offending value into ``info[0]``).  ``noise`` holds the standard normal draws
+    of every sample (row k), or no rows when the sensors are exact."""
     for i in range(truth.shape[0]):
         row[i] = truth[i]
     code = check_bounds(truth, n, bounds, info)
-    if code != 0:
+    if code != SampleStatus.OK:
         return code
-    _reference(refkind, refspec, t, ref)
-    row[off[0]], row[off[0] + 1] = ref[0], ref[1]
-    row[off[1]], row[off[1] + 1] = ref[2], ref[3]
+    reference_into(refkind, refspec, t, ref)
+    row[off[Group.REF]], row[off[Group.REF] + 1] = ref[0], ref[1]
+    row[off[Group.REF_RATE]], row[off[Group.REF_RATE] + 1] = ref[2], ref[3]
     a1 = ref[0]
     a12 = a1 + ref[1]
-    row[off[2]] = lengths[0] * math.cos(a1) + lengths[1] * math.cos(a12)
-    row[off[2] + 1] = lengths[0] * math.sin(a1) + lengths[1] * math.sin(a12)
+    row[off[Group.TIP_REF]] = lengths[0] * math.cos(a1) + lengths[1] * math.cos(a12)
+    row[off[Group.TIP_REF] + 1] = lengths[0] * math.sin(a1) + lengths[1] * math.sin(a12)
     depth = dbuf.shape[0]
     slot = k % depth
+    noisy = noise.shape[0] > 0
     total = 0.0
     for i in range(yv.shape[0]):
-        v = yv[i] + std[i] * rng.standard_normal() if noisy else yv[i]
+        v = yv[i] + std[i] * noise[k, i] if noisy else yv[i]
         dbuf[slot, i] = v
         total += v
     if not math.isfinite(total):
-        return 6
+        return SampleStatus.MEASUREMENT_NOT_FINITE
     oldest = (k - min(k + 1, depth) + 1) % depth
     for i in range(yv.shape[0]):
         y_used[i] = dbuf[oldest, i]
-        row[off[4] + i] = y_used[i]
-    return 0
+        row[off[Group.Y] + i] = y_used[i]
+    return SampleStatus.OK
 
 
 @njit(cache=True)
-def post_sample(t, tau, n_tau, limit, dspec, dstate, rng, row, off, tau_plant, force):
+def post_sample(t, tau, n_tau, limit, dspec, dstate, dnoise, counts, row, off, tau_plant,
+                force):
     """Finite check, saturation, disturbances and recording of the law's torque ``tau``
     (its first ``n_tau`` entries); ``tau_plant`` receives what the plant gets (length
-    ``n_tau``), ``force`` the payload force.  Returns the status code.  ``tau`` itself
-    becomes the applied torque the observer sees next (saturated, no disturbance)."""
+    ``n_tau``), ``force`` the payload force.  Returns the `SampleStatus`.  ``tau``
+    itself becomes the applied torque the observer sees next (saturated, no
+    disturbance).  Noise disturbances take their draws from ``dnoise`` from
+    ``counts[0]`` on; ``counts[1]`` becomes ``n_tau`` (what the observer is told next)."""
     total = 0.0
     for i in range(n_tau):
         total += tau[i]
     if not math.isfinite(total):
-        return 7
-    row[off[5]], row[off[5] + 1] = tau[0], tau[1]
+        return SampleStatus.TORQUE_NOT_FINITE
+    row[off[Group.TAU_CMD]], row[off[Group.TAU_CMD] + 1] = tau[0], tau[1]
     if limit > 0:
         for i in range(2):
             tau[i] = min(max(tau[i], -limit), limit)
-    row[off[6]], row[off[6] + 1] = tau[0], tau[1]
+    row[off[Group.TAU]], row[off[Group.TAU] + 1] = tau[0], tau[1]
     for i in range(n_tau):
         tau_plant[i] = tau[i]
-    v0 = v1 = v2 = v3 = 0.0
+    acting = row[off[Group.DIST]:off[Group.DIST] + 4]  # indexed by DisturbanceTarget
+    acting[:] = 0.0
     for i in range(dspec.shape[0]):
         kind, target = int(dspec[i, 0]), int(dspec[i, 1])
         amp, start, duration, freq, decay = (dspec[i, 2], dspec[i, 3], dspec[i, 4],
                                              dspec[i, 5], dspec[i, 6])
         if t < start - 1e-9:
             continue
-        if kind == 0:  # step
+        if kind == DisturbanceKind.STEP:
             x = amp
-        elif kind == 1:  # pulse
+        elif kind == DisturbanceKind.PULSE:
             x = amp if t < start + duration - 1e-9 else 0.0
-        elif kind == 2:  # sine
+        elif kind == DisturbanceKind.SINE:
             x = amp * np.sin(2 * np.pi * freq * (t - start))
-        else:  # low-passed white noise of standard deviation amp
-            dstate[i] = decay * dstate[i] + np.sqrt(1 - decay * decay) * amp * rng.standard_normal()
+        else:  # DisturbanceKind.NOISE
+            dstate[i] = (decay * dstate[i]
+                         + np.sqrt(1 - decay * decay) * amp * dnoise[counts[0]])
+            counts[0] += 1
             x = dstate[i]
-        if target == 0:
-            v0 += x
-        elif target == 1:
-            v1 += x
-        elif target == 2:
-            v2 += x
-        else:
-            v3 += x
-    row[off[8]], row[off[8] + 1], row[off[8] + 2], row[off[8] + 3] = v0, v1, v2, v3
-    tau_plant[0] += v0
-    tau_plant[1] += v1
-    force[0], force[1] = v2, v3
-    return 0
+        acting[target] += x
+    tau_plant[0] += acting[DisturbanceTarget.TAU1]
+    tau_plant[1] += acting[DisturbanceTarget.TAU2]
+    force[0], force[1] = acting[DisturbanceTarget.TIP_X], acting[DisturbanceTarget.TIP_Y]
+    counts[1] = n_tau
+    return SampleStatus.OK
 
 
 @njit(cache=True)
-def laws(t, Ts, y_obs, obs_idx, last_tau, state, use_estimate, ref, row, off,
-         ccode, cm_i, cm_r, c_wc, c_wr, ci, cf, cw,
-         ocode, om_i, om_r, o_wc, o_wr, oi, of, ow, x_hat, tau):
-    """The built-in observer (code ``ocode``, −1: none) then controller (``ccode``),
-    on the state of their compiled form (`validation._compiled_laws`).  Writes the
-    estimate into ``x_hat`` and row, the torque into ``tau``; returns (status, n_tau)."""
-    N = state.shape[0]
-    n = N // 2
-    if ocode >= 0:
+def sample_laws(t, k, Ts, truth, yv, std, noise, dbuf, refkind, refspec, bounds, n,
+                lengths, row, off, y_used, ref, info, limit, dspec, dstate, dnoise, counts,
+                last_tau, x_hat, y_obs, obs_idx, has_observer, use_estimate, tau, tau_plant,
+                force, controller, c_ints, c_reals, c_state, c_mi, c_mr, c_wc, c_wr,
+                observer, o_ints, o_reals, o_state, o_mi, o_mr, o_wc, o_wr):
+    """One whole sample with compiled laws: `pre_sample`, the observer and the
+    controller through their function pointers, `post_sample`.  Returns the
+    `SampleStatus`; the torques are then in ``tau``/``tau_plant`` (``counts[1]`` of
+    them) and in ``last_tau`` (the observer's input at the next sample)."""
+    code = pre_sample(t, k, truth, yv, std, noise, dbuf, refkind, refspec, bounds, n,
+                      lengths, row, off, y_used, ref, info)
+    if code != SampleStatus.OK:
+        return code
+    N = 2 * n
+    if has_observer:
         for i in range(obs_idx.shape[0]):
-            y_obs[i] = row[off[4] + obs_idx[i]]
-        if ocode <= 2:  # sliding-mode observers
-            x = ow[:N]
-            _smo_update(om_i, om_r, o_wc, o_wr, x, last_tau, Ts, oi[1], oi[2] == 0, y_obs,
-                        of[:n], of[n:2 * n], ocode, of[2 * n], of[2 * n + 1], of[2 * n + 2],
-                        ow[N:N + n])
-        else:  # extended Kalman filter
-            m = oi[0]
-            x = ow[:N]
-            P = ow[N:N + N * N].reshape((N, N))
-            b = N + N * N
-            ok = _ekf_update(om_i, om_r, o_wc, o_wr, x, P, last_tau, Ts / oi[1], oi[1],
-                             oi[2] == 0, y_obs, of[:m], of[m:m + N * N].reshape((N, N)),
-                             ow[b:b + N], ow[b + N:b + 2 * N],
-                             ow[b + 2 * N:b + 2 * N + N * N].reshape((N, N)),
-                             ow[b + 2 * N + N * N:b + 2 * N + 2 * N * N].reshape((N, N)),
-                             ow[b + 2 * N + 2 * N * N:b + 2 * N + 3 * N * N].reshape((N, N)),
-                             ow[b + 2 * N + 3 * N * N:b + 2 * N + 3 * N * N + N * m].reshape((N, m)),
-                             ow[b + 2 * N + 3 * N * N + N * m:b + 2 * N + 3 * N * N + N * m + m * m].reshape((m, m)),
-                             ow[b + 2 * N + 3 * N * N + N * m + m * m:b + 2 * N + 3 * N * N + N * m + m * m + m])
-            if not ok:
-                for i in range(N):
-                    x[i] = np.nan
-        oi[2] = 0  # no longer fresh: later calls predict
+            y_obs[i] = y_used[obs_idx[i]]
+        failed = observer(t, Ts, y_obs, last_tau[:counts[1]], o_ints, o_reals, o_state, o_mi,
+                          o_mr, o_wc, o_wr, x_hat)
         for i in range(N):
-            x_hat[i] = x[i]
-            row[off[3] + i] = x[i]
-    xc = x_hat if use_estimate else state
-    th, dth, ddth = ref[0:2], ref[2:4], ref[4:6]
-    if ccode <= 1:  # PBC, eq. (20)
-        lam, kv = cf[:n], cf[n:2 * n]
-        M = cw[:n * n].reshape((n, n))
-        C = cw[n * n:2 * n * n].reshape((n, n))
-        scratch = cw[2 * n * n:2 * n * n + 4 * n]
-        full = cw[2 * n * n + 4 * n:2 * n * n + 5 * n]
-        _pbc_torque(cm_i, cm_r, c_wc, c_wr, M, C, scratch, xc, th, dth, ddth, lam, kv,
-                    ci[0] == 1, full)
-        if ccode == 1:
-            for i in range(n):
-                tau[i] = full[i]
-            return 0, n
-        for i in range(n - 2):
-            row[off[7] + i] = full[2 + i]
-        tau[0], tau[1] = full[0], full[1]
-        return 0, 2
-    if ccode == 2:  # joint PD (+ rigid feedforward)
-        for i in range(2):
-            tau[i] = cf[i] * (th[i] - xc[i]) + cf[2 + i] * (dth[i] - xc[n + i])
-        if ci[0] == 1:
-            ff = cw[:2]
-            rigid_torque(cf[4:8], th, dth, ddth, ff)
-            tau[0] = tau[0] + ff[0]
-            tau[1] = tau[1] + ff[1]
-        return 0, 2
-    if ccode == 3:  # rigid computed torque
-        accel = cw[:2]
-        for i in range(2):
-            accel[i] = ddth[i] + cf[2 + i] * (dth[i] - xc[n + i]) + cf[i] * (th[i] - xc[i])
-        rigid_torque(cf[4:8], xc[0:2], xc[n:n + 2], accel, tau)
-        return 0, 2
-    # gain-scheduled LQR
-    rows = ci[0]
-    table = cf[5:5 + rows * 2 * N].reshape((rows, 2, N))
-    _lqr_torque(table, cf[0], cf[1:5], cw[:2 * N].reshape((2, N)), xc, th, dth, ddth, tau)
-    return 0, 2
+            row[off[Group.XHAT] + i] = x_hat[i]
+        if failed != 0:
+            return SampleStatus.OBSERVER_FAILED
+    fed = x_hat if use_estimate else truth[:N]
+    residual = row[off[Group.RESIDUAL]:off[Group.DIST]]
+    n_tau = controller(t, fed, ref, c_ints, c_reals, c_state, c_mi, c_mr, c_wc, c_wr, tau,
+                       residual)
+    code = post_sample(t, tau, n_tau, limit, dspec, dstate, dnoise, counts, row, off,
+                       tau_plant, force)
+    if code != SampleStatus.OK:
+        return code
+    for i in range(n_tau):
+        last_tau[i] = tau[i]
+    return SampleStatus.OK
 
 
 @njit(cache=True)
@@ -270,14 +311,15 @@ def _reduced_truth(xp, basis, n, pm_i, pm_r, tips, truth):
 
 
 @njit(cache=True)
-def run_reduced(N_samples, Ts, h, nsteps, xp, pm_i, pm_r, p_wc, p_wr, basis, y_idx,
-                std, noisy, dbuf, rng, refkind, refspec, bounds, n, lengths, rows, off,
-                limit, dspec, dstate, rng2,
-                ccode, cm_i, cm_r, c_wc, c_wr, ci, cf, cw,
-                ocode, om_i, om_r, o_wc, o_wr, oi, of, ow, obs_idx, use_estimate, info):
-    """The closed loop on the reduced plant, every sample compiled: returns (samples
-    done, status code).  ``xp`` is the plant state (its own coordinates); ``basis`` maps
-    its modal coordinates to the model's (0 × 0: the same basis)."""
+def run_reduced(n_samples, Ts, h, nsteps, xp, pm_i, pm_r, p_wc, p_wr, basis, y_idx,
+                std, noise, dbuf, refkind, refspec, bounds, n, lengths, rows, off, info,
+                limit, dspec, dstate, dnoise, obs_idx, has_observer, use_estimate,
+                controller, c_ints, c_reals, c_state, c_mi, c_mr, c_wc, c_wr,
+                observer, o_ints, o_reals, o_state, o_mi, o_mr, o_wc, o_wr):
+    """The closed loop on the reduced plant, every sample compiled (`sample_laws`):
+    returns the samples done and the `SampleStatus` (the offending value in
+    ``info[0]``).  ``xp`` is the plant state (its own coordinates); ``basis`` maps its
+    modal coordinates to the model's (0 × 0: the same basis)."""
     N = 2 * n
     truth = np.zeros(N + 8)
     tips = np.zeros(6)
@@ -290,88 +332,51 @@ def run_reduced(N_samples, Ts, h, nsteps, xp, pm_i, pm_r, p_wc, p_wr, basis, y_i
     last_tau = np.zeros(N)
     tau_plant = np.zeros(N)
     force = np.zeros(2)
-    n_last = 2
-    for k in range(N_samples):
+    counts = np.array([0, 2], dtype=np.int64)
+    for k in range(n_samples):
         t = k * Ts
         _reduced_truth(xp, basis, n, pm_i, pm_r, tips, truth)
         for i in range(y_idx.shape[0]):
             yv[i] = truth[y_idx[i]]
-        row = rows[k]
-        code = pre_sample(t, truth, yv, std, noisy, dbuf, k, rng, refkind, refspec, bounds,
-                          n, lengths, row, off, y_used, ref, info)
-        if code != 0:
+        code = sample_laws(t, k, Ts, truth, yv, std, noise, dbuf, refkind, refspec, bounds,
+                           n, lengths, rows[k], off, y_used, ref, info, limit, dspec, dstate,
+                           dnoise, counts, last_tau, x_hat, y_obs, obs_idx, has_observer,
+                           use_estimate, tau, tau_plant, force,
+                           controller, c_ints, c_reals, c_state, c_mi, c_mr, c_wc, c_wr,
+                           observer, o_ints, o_reals, o_state, o_mi, o_mr, o_wc, o_wr)
+        if code != SampleStatus.OK:
             return k, code
-        code, n_tau = laws(t, Ts, y_obs, obs_idx, last_tau[:n_last], truth[:N], use_estimate,
-                           ref, row, off, ccode, cm_i, cm_r, c_wc, c_wr, ci, cf, cw,
-                           ocode, om_i, om_r, o_wc, o_wr, oi, of, ow, x_hat, tau)
-        code = post_sample(t, tau, n_tau, limit, dspec, dstate, rng2, row, off, tau_plant,
-                           force)
-        if code != 0:
-            return k, code
-        for i in range(n_tau):
-            last_tau[i] = tau[i]
-        n_last = n_tau
-        rk4_advance_packed(pm_i, pm_r, p_wc, p_wr, xp, tau_plant[:n_tau], h, nsteps)
+        rk4_advance_packed(pm_i, pm_r, p_wc, p_wr, xp, tau_plant[:counts[1]], h, nsteps)
     # the state after the last period is checked too (as the Python loop does)
     _reduced_truth(xp, basis, n, pm_i, pm_r, tips, truth)
-    return N_samples, check_bounds(truth, n, bounds, info)
+    return n_samples, check_bounds(truth, n, bounds, info)
 
 
-# --- the built-in laws' compiled form -----------------------------------------------------------
-@functools.lru_cache(maxsize=1)
-def _unused_model():
-    """Model and workspace buffers of the right types for a law that has none (the
-    compiled `laws` is typed for every branch)."""
-    from reduced_model import ArmModel
-    model = ArmModel()
-    return (*model.packed, *model.new_workspace()[0])
+# --- explicit signatures: compiled once for every law ------------------------------------------
+_f8, _i8, _b1, _c16 = types.float64, types.int64, types.boolean, types.complex128
+_V, _I, _C = types.Array(_f8, 1, "C"), types.Array(_i8, 1, "C"), types.Array(_c16, 1, "C")
+_M, _MI = types.Array(_f8, 2, "C"), types.Array(_i8, 2, "C")
+_CONTROLLER, _OBSERVER = types.FunctionType(CONTROLLER_SIGNATURE), types.FunctionType(OBSERVER_SIGNATURE)
+_LAWS = (_CONTROLLER, _I, _V, _V, _I, _V, _C, _V, _OBSERVER, _I, _V, _V, _I, _V, _C, _V)
 
 
-def pack_laws(controller, observer, Ts: float):
-    """The arguments of `laws` for a built-in controller and observer (their state
-    copied as it is now), or None if either is a plug-in (the loop then calls the
-    Python objects).  Exact classes only: a subclass may change the law."""
-    from controllers import (BoundaryLayerSMO, ExtendedKalmanFilter, GainScheduledLQR,
-                             IdealisedPBC, JointPD, PassivityBasedController, PaperSMO,
-                             PositionEKF, PositionOnlySMO, RigidComputedTorque)
-    from controllers._smo import _MAX_SUBSTEP
-    c = controller
-    kind = type(c)
-    if kind in (PassivityBasedController, IdealisedPBC):
-        n = c.model.n
-        ctrl = (int(kind is IdealisedPBC), *c.model.packed, *c._work,
-                np.array([int(c.compensate_damping)], dtype=np.int64),
-                np.concatenate([c.lam, c.kv]), np.zeros(2 * n * n + 5 * n))
-    elif kind in (JointPD, RigidComputedTorque):
-        ff = c.rigid.constants if c.rigid is not None else np.zeros(4)
-        ctrl = (2 if kind is JointPD else 3, *_unused_model(),
-                np.array([int(c.rigid is not None)], dtype=np.int64),
-                np.concatenate([c.kp, c.kd, ff]), np.zeros(2))
-    elif kind is GainScheduledLQR:
-        ctrl = (4, *_unused_model(),
-                np.array([c._table.shape[0]], dtype=np.int64),
-                np.concatenate([[c._scale], c._ff, c._table.ravel()]), np.zeros(c._K.size))
-    else:
-        return None
-    o = observer
-    kind = type(o)
-    if o is None:
-        obs = (-1, *_unused_model(), np.zeros(3, dtype=np.int64), np.zeros(1), np.zeros(1))
-    elif kind in (PaperSMO, BoundaryLayerSMO, PositionOnlySMO):
-        nsub = max(1, math.ceil(Ts / _MAX_SUBSTEP - 1e-9))
-        obs = (o._variant, *o.model.packed, *o._work,
-               np.array([0, nsub, int(o._fresh)], dtype=np.int64),
-               np.concatenate([o.lp, o.lv, [o.boundary_layer, min(1.0, Ts / o.filter_time),
-                                            o.gate]]),
-               np.concatenate([o._x, o._nu]))
-    elif kind in (ExtendedKalmanFilter, PositionEKF):
-        o._set_period(Ts)
-        N, m = o._x.shape[0], o._m
-        scratch = 2 * N + 3 * N * N + N * m + m * m + m
-        obs = (3, *o.model.packed, *o._work,
-               np.array([m, o._nsub, int(o._fresh)], dtype=np.int64),
-               np.concatenate([o._r, o._Qd.ravel()]),
-               np.concatenate([o._x, o._P.ravel(), np.zeros(scratch)]))
-    else:
-        return None
-    return ctrl + obs
+@functools.cache
+def compile_sample_laws():
+    """`sample_laws` compiled for its one signature (first use; then numba's cache)."""
+    sig = _i8(_f8, _i8, _f8, _V, _V, _V, _M, _M, _i8, _V, _V, _i8, _V, _V, _I, _V, _V, _V,
+              _f8, _M, _V, _V, _I, _V, _V, _V, _I, _b1, _b1, _V, _V, _V, *_LAWS)
+    sample_laws.compile(sig.args)
+    sample_laws.disable_compile()  # a call with other types is an error, not a new compile
+    return sample_laws
+
+
+@functools.cache
+def compile_run_reduced():
+    """`run_reduced` compiled for its one signature (first use; then numba's cache)."""
+    sig = types.Tuple((_i8, _i8))(
+        _i8, _f8, _f8, _i8, _V, _I, _V, _C, _V, _M, _I, _V, _M, _M, _i8, _V, _V, _i8, _V,
+        _M, _I, _V, _f8, _M, _V, _V, _I, _b1, _b1, *_LAWS)
+    compile_sample_laws()  # what run_reduced calls
+    run_reduced.compile(sig.args)
+    run_reduced.disable_compile()
+    return run_reduced

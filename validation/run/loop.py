@@ -3,6 +3,12 @@
 At every control instant t_k = k·Ts:  y_k (+ noise, delay) → observer → x̂_k →
 controller(t_k, x̂_k or x_k, ref) → saturation → τ_k (+ disturbances) held over
 [t_k, t_{k+1}) by the plant.  Divergence and solver failures end the run as a result.
+
+What happens at a sample is the compiled kernels of `validation.run._sample`, on every
+path: laws with a compiled form run through it (`controllers._compiled`), others as the
+Python objects they are; a plant that can step itself in compiled code (the reduced
+plant) with compiled laws runs the whole loop in one compiled call, any other plant is
+stepped from Python.  Every path computes the same numbers (tested).
 """
 from __future__ import annotations
 
@@ -12,12 +18,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers import PaperReference, QuinticMove
-from plant_exudyn import ExudynPlant
+from controllers import ObserverFailure, PaperReference, QuinticMove, compiled_form
+from controllers._compiled import no_observer
 from reduced_model import ArmModel, PlantFailure, ReducedPlant, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
-from ._sample import OFFSETS, check_bounds, laws, pack_laws, post_sample, pre_sample, run_reduced
+from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
+                      check_bounds, compile_run_reduced, compile_sample_laws, noise_stream,
+                      post_sample, pre_sample, signal_layout, status_message)
 from .laws import build_controller, build_observer, nominal_model
 from .results import RunResult
 from .scenario import Scenario, check_scenario, scenario_to_mapping
@@ -66,14 +74,15 @@ def build(scenario: Scenario) -> Setup:
     sensor_config = SensorConfig(
         encoder_resolution=sens.encoder_resolution,
         strain_gauges=(sens.gauges_link1, sens.gauges_link2) if sens.modal == "gauges" else None,
-        strain_quantity=sens.strain_quantity, modal=sens.modal != "none", rates=sens.rates,
-        tip_position=sens.tip_position)
+        strain_quantity=sens.strain_quantity or "curvature", modal=sens.modal != "none",
+        rates=sens.rates, tip_position=sens.tip_position)
     if s.plant.kind == "reduced":
         own = s.true_params == s.nominal_params and s.plant.modes_per_link == s.model.modes_per_link
         plant = ReducedPlant(s.true_params, modes_per_link=s.plant.modes_per_link,
                              step=s.plant.step, modal_basis=None if own else model.mode_shapes,
                              sensors=sensor_config)
     else:
+        from plant_exudyn import ExudynPlant  # Exudyn is loaded by the runs that use it
         plant = ExudynPlant(s.true_params, s.plant.mesh, step=s.plant.step,
                             modal_basis=model.mode_shapes, sensors=sensor_config,
                             spectral_radius=s.plant.spectral_radius,
@@ -89,30 +98,44 @@ def run_scenario(scenario: Scenario) -> RunResult:
                     reference=setup.reference, model=setup.model)
 
 
-def _signal_layout(model: ArmModel, measured: tuple[str, ...], has_observer: bool,
-                   n_residual: int):
-    states = model.state_names
-    groups = {  # "truth" then "tips" is exactly a plant's truth_vector
-        "truth": states,
-        "tips": TRUTH_EXTRAS,
-        "ref": ("theta1_ref", "theta2_ref"),
-        "ref_rate": ("theta1_dot_ref", "theta2_dot_ref"),
-        "tip_ref": ("tip_ref_x", "tip_ref_y"),
-        "xhat": tuple(f"xhat_{s}" for s in states) if has_observer else (),
-        "y": tuple(f"y_{m}" for m in measured),
-        "tau_cmd": ("tau1_cmd", "tau2_cmd"),
-        "tau": ("tau1", "tau2"),
-        "residual": (tuple(f"residual_{c}" for c in model.coordinate_names[2:])
-                     if n_residual == model.n - 2 else
-                     tuple(f"residual_{i + 1}" for i in range(n_residual))),
-        "dist": ("dist_tau1", "dist_tau2", "dist_tip_x", "dist_tip_y"),
-    }
-    names, slices, start = [], {}, 0
-    for key, group in groups.items():
-        slices[key] = slice(start, start + len(group))
-        names += group
-        start += len(group)
-    return tuple(names), slices
+class _Run:
+    """The buffers of one run that every path shares (allocated once, no per-sample
+    allocation)."""
+
+    def __init__(self, s: Scenario, model: ArmModel, reference, measured: tuple[str, ...],
+                 observer, residual_names: tuple[str, ...]) -> None:
+        n, Ts = model.n, s.Ts
+        self.n, self.N = n, int(round(s.duration / Ts))
+        seeds = np.random.SeedSequence(s.seed).spawn(2)
+        self.std = np.array([s.sensors.rate_noise if m.endswith("_dot") else
+                             s.sensors.encoder_noise if m.startswith("theta") else
+                             s.sensors.modal_noise if m.startswith("q") else 0.0
+                             for m in measured])
+        self.noise = (noise_stream(np.random.default_rng(seeds[0]), (self.N, len(measured)))
+                      if np.any(self.std > 0) else np.zeros((0, len(measured))))
+        self.dspec = _disturbance_spec(s.disturbances, Ts)
+        self.dstate = np.zeros(len(s.disturbances))
+        self.dnoise = noise_stream(np.random.default_rng(seeds[1]),
+                                   _noise_draws(self.dspec, self.N, Ts))
+        self.counts = np.array([0, 2], dtype=np.int64)  # noise draws used, torques applied
+        self.dbuf = np.zeros((s.sensors.delay + 1, len(measured)))
+        self.refkind, self.refspec = int(reference.kind), reference.spec
+        self.bounds = np.array([s.divergence.max_angle, s.divergence.max_rate,
+                                s.divergence.max_deflection * s.true_params.L1,
+                                s.divergence.max_deflection * s.true_params.L2])
+        self.lengths = np.array([s.true_params.L1, s.true_params.L2])
+        self.names, self.off = signal_layout(model.state_names, TRUTH_EXTRAS, measured,
+                                             observer is not None, residual_names)
+        self.rows = np.full((self.N, len(self.names)), np.nan)
+        self.obs_idx = (np.array([measured.index(m) for m in observer.measured], dtype=np.int64)
+                        if observer is not None else np.zeros(0, dtype=np.int64))
+        self.info = np.zeros(1)
+        self.ref = np.zeros(6)
+        self.yv, self.y_used = np.zeros(len(measured)), np.zeros(len(measured))
+        self.y_obs = np.zeros(len(self.obs_idx))
+        self.x_hat = np.zeros(2 * n)
+        self.tau, self.tau_plant, self.last_tau = np.zeros(2 * n), np.zeros(2 * n), np.zeros(2 * n)
+        self.force = np.zeros(2)
 
 
 def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
@@ -120,208 +143,224 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
     """Run the closed loop of ``scenario`` on ``plant``; never raises for divergence, a
     plant solver failure or a law that raises — those end the run with their status.
 
-    Every sample is the compiled `validation._sample` kernels: `pre_sample`, the laws,
-    `post_sample`.  Built-in laws run compiled (`pack_laws`); a plug-in runs as the
-    Python object it is.  A plant that offers compiled stepping (the reduced plant) with
-    built-in laws runs the whole loop in one compiled call; otherwise this loop steps
-    the plant from Python.  Every path computes the same numbers (tested)."""
+    Parameters
+    ----------
+    plant : Plant
+        Any object with the Plant interface (`reduced_model._plant_interface`).
+    controller, observer
+        The laws (`controllers._interface`); ``observer`` may be None.
+    scenario : Scenario
+        Timing, reference, sensors, disturbances, saturation, bounds, seed.
+    reference : optional
+        Must be the scenario's own reference if given (kept for symmetry with `build`).
+    model : ArmModel, optional
+        The nominal model the laws were built on (default: the scenario's).
+
+    Returns
+    -------
+    RunResult
+        Named signals at every sample, status, message, timings, and ``timings["paths"]``:
+        which parts ran compiled.
+    """
     s = scenario
     model = model or nominal_model(s.nominal_params, s.model.modes_per_link)
-    spec_reference = make_reference(s.reference)
-    if reference is not None and reference != spec_reference:
+    if reference is not None and reference != make_reference(s.reference):
         raise ValueError("reference must be the scenario's own (see scenario.reference)")
     n, Ts = model.n, s.Ts
-    N = int(round(s.duration / Ts))
-    seeds = np.random.SeedSequence(s.seed).spawn(2)
-    noise_rng, dist_rng = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[1])
-    refkind, refspec = _reference_spec(s.reference)
-    ref_values = np.zeros(6)
-    ref = _SampledReference(spec_reference, ref_values)
-
+    reference = make_reference(s.reference)
     # Initial state: at rest at θ_d(0), or moving with the reference ("reference").
     x0 = np.zeros(2 * n)
-    theta_d0, dtheta_d0, _ = spec_reference(0.0)
+    theta_d0, dtheta_d0, _ = reference(0.0)
     x0[:2] = theta_d0
     if s.initial_state == "reference":
         x0[n:n + 2] = dtheta_d0
     y = plant.reset(_to_plant_state(x0, plant, model))
-    names_y = y.names
-    std = np.array([s.sensors.rate_noise if m.endswith("_dot") else
-                    s.sensors.encoder_noise if m.startswith("theta") else
-                    s.sensors.modal_noise if m.startswith("q") else 0.0 for m in names_y])
-    obs_index = np.zeros(0, dtype=np.int64)
     if observer is not None:
-        missing = [m for m in observer.measured if m not in names_y]
+        missing = [m for m in observer.measured if m not in y.names]
         if missing:
-            raise ValueError(f"the observer needs {missing} but the plant measures {names_y}")
-        obs_index = np.array([names_y.index(m) for m in observer.measured], dtype=np.int64)
+            raise ValueError(f"the observer needs {missing} but the plant measures {y.names}")
         observer.reset(x0 + s.initial_estimate_error())
     residual = getattr(controller, "residual", None)  # the PBC's unrealisable forces
-    names, sl = _signal_layout(model, names_y, observer is not None,
-                               0 if residual is None else len(residual))
-    off = np.array([sl[k].start for k in OFFSETS], dtype=np.int64)
-    rows = np.full((N, len(names)), np.nan)
-    k_ = dict(std=std, noisy=bool(np.any(std > 0)),
-              dbuf=np.zeros((s.sensors.delay + 1, len(names_y))), rng=noise_rng,
-              refkind=refkind, refspec=refspec, n=n, off=off,
-              bounds=np.array([s.divergence.max_angle, s.divergence.max_rate,
-                               s.divergence.max_deflection * s.true_params.L1,
-                               s.divergence.max_deflection * s.true_params.L2]),
-              lengths=np.array([s.true_params.L1, s.true_params.L2]))
-    dspec, dstate = _disturbance_spec(s.disturbances, Ts), np.zeros(len(s.disturbances))
-    packed = pack_laws(controller, observer, Ts)
-    info = np.zeros(1)
-    wall0 = _time.perf_counter()
+    residual_names = () if residual is None else (
+        model.coordinate_names[2:] if len(residual) == n - 2 else
+        tuple(str(i + 1) for i in range(len(residual))))
+    r = _Run(s, model, reference, y.names, observer, residual_names)
+    laws = _compiled_laws(controller, observer, model, Ts)
     stepping = getattr(plant, "compiled_stepping", None)
-    fast = stepping(dspec) if packed is not None and stepping is not None else None
-    if fast is not None:
-        states = model.state_names
-        k_done, code = run_reduced(
-            N, Ts, fast["h"], fast["nsteps"](Ts), fast["x"], *fast["model"], fast["basis"],
-            np.array([states.index(m) for m in names_y], dtype=np.int64),
-            k_["std"], k_["noisy"], k_["dbuf"], noise_rng, refkind, refspec, k_["bounds"], n,
-            k_["lengths"], rows, off, s.torque_limit, dspec, dstate, dist_rng, *packed,
-            obs_index, s.uses_estimate, info)
-        timings = {"first": 0.0}  # one compiled call: no split into plant and laws
-        message = _reason(code, info[0], s.divergence, (k_done if k_done < N else N) * Ts)
-        status = "ok" if code == 0 else "diverged"
-        if k_done < N:
-            rows[k_done] = np.nan
+    payload_force = any(d.target in ("tip_x", "tip_y") for d in s.disturbances)
+    plant_form = stepping() if laws is not None and stepping is not None and not payload_force \
+        else None
+    paths = {"loop": "compiled" if plant_form is not None else "python",
+             "controller": "compiled" if laws is not None else "python",
+             "observer": ("none" if observer is None else
+                          "compiled" if laws is not None else "python")}
+    wall0 = _time.perf_counter()
+    if plant_form is not None:
+        status, message, k_done, timings = _compiled_loop(plant_form, r, s, model, laws,
+                                                          observer is not None)
     else:
-        status, message, k_done, timings = _python_loop(
-            plant, controller, observer, s, model, y, ref, ref_values, rows, k_, dspec,
-            dstate, dist_rng, obs_index, residual, packed, sl, info, N)
+        status, message, k_done, timings = _python_loop(plant, controller, observer, s,
+                                                        reference, y, r, laws,
+                                                        residual is not None)
     wall = _time.perf_counter() - wall0
     simulated = k_done * Ts
     steady = wall - timings.pop("first")
+    if k_done < r.N:
+        r.rows[k_done:] = np.nan
     return RunResult(
-        time=np.arange(k_done) * Ts, names=names, signals=np.ascontiguousarray(rows[:k_done].T),
-        status=status, message=message, end_time=simulated, config=scenario_to_mapping(s),
+        time=np.arange(k_done) * Ts, names=r.names,
+        signals=np.ascontiguousarray(r.rows[:k_done].T), status=status, message=message,
+        end_time=simulated, config=scenario_to_mapping(s),
         timings={"wall_s": wall, "startup_s": wall - steady, **timings,
                  "loop_s": wall - sum(timings.values()),
-                 "compiled_loop": fast is not None,
+                 "compiled_loop": plant_form is not None, "paths": paths,
                  # simulated time per wall second, without the first sample (kernel
                  # loading or compilation is not simulation speed)
                  "realtime_factor": (simulated - Ts) / steady if steady > 0 else math.nan})
 
 
-def _python_loop(plant, controller, observer, s, model, y, ref, ref_values, rows, k_, dspec,
-                 dstate, dist_rng, obs_index, residual, packed, sl, info, N):
-    """The loop stepping the plant from Python, one sample kernel call on each side of
-    the laws; returns (status, message, samples done, timings)."""
-    n, Ts, limit = model.n, s.Ts, s.torque_limit
+def _compiled_laws(controller, observer, model: ArmModel, Ts: float):
+    """The arguments of the laws for `sample_laws` (controller, then observer, each a
+    `CompiledLaw` without its failure text) and the observer's failure text, or None if
+    either law has no compiled form (both then run as Python objects)."""
+    c = compiled_form(controller, "controller", Ts)
+    o = no_observer(model) if observer is None else compiled_form(observer, "observer", Ts)
+    if c is None or o is None:
+        return None
+    label = getattr(observer, "name", type(observer).__name__)
+    return (*c[:-1], *o[:-1]), (f"{label}: {o.failure}" if o.failure else "")
+
+
+def _compiled_loop(plant_form: dict, r: _Run, s: Scenario, model: ArmModel, laws,
+                   has_observer: bool):
+    """The whole loop in one compiled call (`run_reduced`)."""
+    args, failure = laws
+    states = model.state_names
+    measured_idx = np.array([states.index(m.removeprefix("y_"))
+                             for m in r.names if m.startswith("y_")], dtype=np.int64)
+    k_done, code = compile_run_reduced()(
+        r.N, s.Ts, plant_form["h"], plant_form["nsteps"](s.Ts), plant_form["x"],
+        *plant_form["model"], plant_form["basis"], measured_idx, r.std, r.noise, r.dbuf,
+        r.refkind, r.refspec, r.bounds, r.n, r.lengths, r.rows, r.off, r.info,
+        s.torque_limit, r.dspec, r.dstate, r.dnoise, r.obs_idx, has_observer,
+        s.uses_estimate, *args)
+    message = status_message(code, r.info[0], s.divergence, min(k_done, r.N) * s.Ts, failure)
+    status = "ok" if code == SampleStatus.OK else "diverged"
+    return status, message, k_done, {"first": 0.0}  # one call: no split into plant and laws
+
+
+def _python_loop(plant, controller, observer, s: Scenario, reference, y, r: _Run, laws,
+                 has_residual: bool):
+    """The loop stepping the plant from Python: per sample one compiled call
+    (`sample_laws`) with compiled laws, or `pre_sample`, the Python laws, `post_sample`;
+    returns (status, message, samples done, timings)."""
+    n, N, Ts = r.n, r.N, s.Ts
     use_estimate = s.uses_estimate
-    yv = np.zeros(len(y.values))
-    y_used = np.zeros(len(y.values))
-    y_obs = np.zeros(len(obs_index))
-    x_hat = np.zeros(2 * n)
-    tau = np.zeros(2 * n)
-    tau_plant = np.zeros(2 * n)
-    force = np.zeros(2)
-    last_tau = np.zeros(2)
-    s_state, s_res, s_y = sl["truth"], sl["residual"], sl["y"]
-    t_plant = t_ctrl = t_obs = first = 0.0
+    ref = _SampledReference(reference, r.ref)
+    off = r.off
+    s_xhat = slice(off[Group.XHAT], off[Group.Y])
+    s_res = slice(off[Group.RESIDUAL], off[Group.DIST])
+    sample = compile_sample_laws() if laws is not None else None
+    args, failure = laws if laws is not None else ((), "")
+    has_observer = observer is not None
+    t_plant = t_laws = first = 0.0
     status, message, k_done = "ok", "", N
     truth = plant.truth_vector()  # [x, *TRUTH_EXTRAS]: one copy per sample
     wall0 = _time.perf_counter()
     for k in range(N):
         t = k * Ts
-        row = rows[k]
-        yv[:] = y.values
-        code = pre_sample(t, truth, yv, k_["std"], k_["noisy"], k_["dbuf"], k, k_["rng"],
-                          k_["refkind"], k_["refspec"], k_["bounds"], n, k_["lengths"], row,
-                          k_["off"], y_used, ref_values, info)
-        ref.t = t
-        if code:
-            status, message, k_done = "diverged", _reason(code, info[0], s.divergence, t), k
-            break
-        a = b = _time.perf_counter()
-        if packed is not None:
-            code, n_tau = laws(t, Ts, y_obs, obs_index, last_tau, row[s_state], use_estimate,
-                               ref_values, row, k_["off"], *packed, x_hat, tau)
-            b = _time.perf_counter()
+        row = r.rows[k]
+        r.yv[:] = y.values
+        a = _time.perf_counter()
+        if sample is not None:
+            code = sample(t, k, Ts, truth, r.yv, r.std, r.noise, r.dbuf, r.refkind, r.refspec,
+                          r.bounds, n, r.lengths, row, off, r.y_used, r.ref, r.info,
+                          s.torque_limit, r.dspec, r.dstate, r.dnoise, r.counts, r.last_tau,
+                          r.x_hat, r.y_obs, r.obs_idx, has_observer, use_estimate, r.tau,
+                          r.tau_plant, r.force, *args)
+            if code != SampleStatus.OK:
+                status, k_done = "diverged", k
+                message = status_message(code, r.info[0], s.divergence, t, failure)
+                break
         else:
+            code = pre_sample(t, k, truth, r.yv, r.std, r.noise, r.dbuf, r.refkind, r.refspec,
+                              r.bounds, n, r.lengths, row, off, r.y_used, r.ref, r.info)
+            ref.t = t
+            if code != SampleStatus.OK:
+                status, message, k_done = ("diverged",
+                                           status_message(code, r.info[0], s.divergence, t), k)
+                break
             calling = observer
             try:  # a plug-in may raise: the run fails, the campaign goes on
+                x_hat = r.x_hat
                 if observer is not None:
-                    x_hat = np.asarray(observer.update(t, row[s_y][obs_index], last_tau, Ts),
-                                       dtype=float)
-                    row[sl["xhat"]] = x_hat
-                b = _time.perf_counter()
+                    x_hat = np.asarray(observer.update(t, r.y_used[r.obs_idx],
+                                                       r.last_tau[:r.counts[1]], Ts), dtype=float)
+                    row[s_xhat] = x_hat
                 calling = controller
-                out = np.asarray(controller(t, x_hat if use_estimate else row[s_state], ref),
+                out = np.asarray(controller(t, x_hat if use_estimate else row[:2 * n], ref),
                                  dtype=float)
                 if out.shape not in ((2,), (n,)):
                     raise ValueError(f"returned torques of shape {out.shape}, expected (2,)")
+            except ObserverFailure as exc:
+                label = getattr(calling, "name", type(calling).__name__)
+                status, k_done = "diverged", k
+                message = status_message(SampleStatus.OBSERVER_FAILED, 0.0, s.divergence, t,
+                                         f"{label}: {exc}")
+                break
             except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
                 label = getattr(calling, "name", type(calling).__name__)
                 status, message, k_done = "failed", (f"{label} raised {type(exc).__name__}: "
                                                      f"{_one_line(exc)} at t = {t:.4g} s"), k
                 break
             n_tau = out.shape[0]
-            tau[:n_tau] = out
-            if residual is not None:
+            r.tau[:n_tau] = out
+            if has_residual:
                 row[s_res] = controller.residual  # read each sample: a law may rebind it
-        c = _time.perf_counter()
-        t_obs += b - a
-        t_ctrl += c - b
-        code = post_sample(t, tau, n_tau, limit, dspec, dstate, dist_rng, row, k_["off"],
-                           tau_plant, force)
-        if code:
-            status, message, k_done = "diverged", _reason(code, info[0], s.divergence, t), k
-            break
-        last_tau = tau[:n_tau].copy()
+            code = post_sample(t, r.tau, n_tau, s.torque_limit, r.dspec, r.dstate, r.dnoise,
+                               r.counts, row, off, r.tau_plant, r.force)
+            if code != SampleStatus.OK:
+                status, message, k_done = ("diverged",
+                                           status_message(code, r.info[0], s.divergence, t), k)
+                break
+            r.last_tau[:n_tau] = r.tau[:n_tau]
+        b = _time.perf_counter()
+        t_laws += b - a
         try:
-            y = plant.step(tau_plant[:n_tau], Ts,
-                           tip_force=force if force[0] or force[1] else None)
+            force = r.force if r.force[0] or r.force[1] else None
+            y = plant.step(r.tau_plant[:r.counts[1]], Ts, tip_force=force)
         except PlantFailure as exc:
             status, message, k_done = "failed", str(exc), k + 1
             break
         truth = plant.truth_vector()
-        t_plant += _time.perf_counter() - c
+        t_plant += _time.perf_counter() - b
         if k == 0:  # the first sample pays for loading or compiling the kernels
             first = _time.perf_counter() - wall0
     else:
-        code = check_bounds(truth, n, k_["bounds"], info)
-        if code:
-            status, message = "diverged", _reason(code, info[0], s.divergence, N * Ts)
-    return status, message, k_done, {"plant_s": t_plant, "controller_s": t_ctrl,
-                                     "observer_s": t_obs, "first": first}
-
-
-def _reason(code: int, value: float, spec, t: float) -> str:
-    """The message of a status code of the sample kernels (`validation._sample`)."""
-    if code == 0:
-        return ""
-    text = {1: "state not finite", 2: f"|θ| = {value:.3g} rad exceeds {spec.max_angle:g} rad",
-            3: f"|θ̇| = {value:.3g} rad/s exceeds {spec.max_rate:g} rad/s",
-            4: f"tip deflection of link 1 = {value:.3g} m exceeds {spec.max_deflection:g} x "
-               "its length",
-            5: f"tip deflection of link 2 = {value:.3g} m exceeds {spec.max_deflection:g} x "
-               "its length",
-            6: "measurement not finite", 7: "controller output not finite"}[code]
-    return f"{text} at t = {t:.4g} s"
-
-
-def _reference_spec(spec) -> tuple[int, np.ndarray]:
-    """(kind, parameters) of the scenario's reference for the sample kernel."""
-    values = [*spec.amplitude, *spec.omega, spec.move_time, *spec.start, *spec.goal]
-    return (0 if spec.kind == "paper" else 1), np.array(values, dtype=float)
-
-
-_DISTURBANCE_KINDS = {"step": 0, "pulse": 1, "sine": 2, "noise": 3}
-_TARGETS = {"tau1": 0, "tau2": 1, "tip_x": 2, "tip_y": 3}
+        code = check_bounds(truth, n, r.bounds, r.info)
+        if code != SampleStatus.OK:
+            status, message = "diverged", status_message(code, r.info[0], s.divergence, N * Ts)
+    return status, message, k_done, {"plant_s": t_plant, "laws_s": t_laws, "first": first}
 
 
 def _disturbance_spec(specs, Ts: float) -> np.ndarray:
     """The scenario's disturbances as rows [kind, target, amplitude, start, duration,
-    frequency, decay] for the sample kernel; decay = exp(−2π·bandwidth·Ts) of the
-    low-passed noise."""
+    frequency, decay] for the sample kernel (`DisturbanceKind`, `DisturbanceTarget`);
+    decay = exp(−2π·bandwidth·Ts) of the low-passed noise."""
     out = np.zeros((len(specs), 7))
     for i, d in enumerate(specs):
-        out[i] = (_DISTURBANCE_KINDS[d.kind], _TARGETS[d.target], d.amplitude, d.start,
-                  d.duration, d.frequency, np.exp(-2 * np.pi * d.bandwidth * Ts))
+        out[i] = (DisturbanceKind[d.kind.upper()], DisturbanceTarget[d.target.upper()],
+                  d.amplitude, d.start, d.duration or 0.0, d.frequency or 0.0,
+                  np.exp(-2 * np.pi * d.bandwidth * Ts) if d.bandwidth else 0.0)
     return out
+
+
+def _noise_draws(dspec: np.ndarray, n_samples: int, Ts: float) -> int:
+    """How many draws the noise disturbances take over the run: one per noise row at
+    every sample from its start (`post_sample`'s test, t ≥ start − 1e-9)."""
+    t = np.arange(n_samples) * Ts
+    return int(sum(np.count_nonzero(t >= row[3] - 1e-9) for row in dspec
+                   if row[0] == DisturbanceKind.NOISE))
 
 
 def _one_line(exc: BaseException) -> str:

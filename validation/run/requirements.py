@@ -179,14 +179,17 @@ def _variables(node) -> set[str]:
 
 
 def signal_names(scenario) -> tuple[str, ...]:
-    """The signals a run of ``scenario`` records (`validation.run.loop`'s layout): the
+    """The signals a run of ``scenario`` records (`validation.run._sample.signal_layout`): the
     model's states, tips, reference, estimates (with an observer), measurements,
     torques, the PBC's unrealisable forces (laws that have them) and disturbances."""
+    from reduced_model._plant_interface import TRUTH_EXTRAS
+
+    from ._sample import signal_layout
     from .laws import measurement_names, nominal_model
-    from .loop import _signal_layout
     model = nominal_model(scenario.nominal_params, scenario.model.modes_per_link)
-    names, _ = _signal_layout(model, measurement_names(scenario, model),
-                              scenario.observer.kind != "none", model.n - 2)
+    names, _ = signal_layout(model.state_names, TRUTH_EXTRAS,
+                             measurement_names(scenario, model),
+                             scenario.observer.kind != "none", model.coordinate_names[2:])
     return names
 
 

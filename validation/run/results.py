@@ -10,7 +10,7 @@ from __future__ import annotations
 import io
 import json
 import os
-import tempfile
+import secrets
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,8 +20,6 @@ import numpy as np
 __all__ = ["RunResult", "STATUSES", "write_atomic"]
 
 STATUSES = ("ok", "diverged", "failed")
-_UMASK = os.umask(0)
-os.umask(_UMASK)
 
 
 @dataclass
@@ -128,16 +126,18 @@ class RunResult:
 def write_atomic(path: Path, write, *, binary: bool = False, sync: bool = True) -> None:
     """Call ``write(file)`` on a temporary file next to ``path``, fsync it (unless
     ``sync`` is false: the caller verifies a checksum instead), and rename it over
-    ``path`` (atomic on POSIX): the file is either the old or the new one, whole."""
+    ``path`` (atomic on POSIX): the file is either the old or the new one, whole.  The
+    file gets the permissions the process's umask gives new files (results are for
+    sharing), without reading or changing the umask."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
         with os.fdopen(fd, "wb" if binary else "w", **({} if binary else {"encoding": "utf-8"})) as fh:
             write(fh)
             fh.flush()
             if sync:
                 os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; results are for sharing
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

@@ -8,35 +8,37 @@ combinations before anything is simulated.  Every error names the dotted key.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from controllers import ReferenceKind
 from plant_exudyn import Mesh
 from reduced_model import STRAIN_QUANTITIES, ArmParameters, validate_modes_per_link
 
 from ._config import ConfigError, check, from_mapping, to_mapping
+from ._sample import DisturbanceKind, DisturbanceTarget
 from .laws import check_laws, nominal_model
 from .requirements import Requirement, check_requirements
 
 __all__ = [
-    "Scenario", "PlantSpec", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
+    "Scenario", "PlantSpec", "ReducedPlantSpec", "ExudynPlantSpec", "with_plant", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
     "SensorSpec", "DisturbanceSpec", "DivergenceSpec", "check_scenario",
     "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "PLANTS", "ARMS",
 ]
 
-PLANTS = ("reduced", "exudyn")
 #: The arms a scenario can start from: the practical default (Table 1 + a motor-2 stator
 #: inertia of 0.01 kg m² + bending damping 2e-3 N m² s) and the paper's Table 1 exactly.
 ARMS = {"default": "practical default arm (Table 1 + stator inertia 0.01 kg m² + damping "
                    "2e-3 N m² s)",
         "table1": "the paper's Table 1 exactly (no stator inertia, no damping)"}
-REFERENCE_KINDS = ("paper", "quintic")
+REFERENCE_KINDS = tuple(k.name.lower() for k in ReferenceKind)
 MODAL_SENSORS = ("direct", "gauges", "none")
-DISTURBANCE_KINDS = ("step", "pulse", "sine", "noise")
-DISTURBANCE_TARGETS = ("tau1", "tau2", "tip_x", "tip_y")
+DISTURBANCE_KINDS = tuple(k.name.lower() for k in DisturbanceKind)
+DISTURBANCE_TARGETS = tuple(k.name.lower() for k in DisturbanceTarget)
 FEEDBACK = ("auto", "true", "estimate")
 #: Caps that keep a typo from exhausting memory or hanging a run: samples held in memory
 #: (5e6 = 83 min at 1 kHz, ~3 GB of signals) and internal plant steps per run.
@@ -58,31 +60,59 @@ def _positive(value, name, *, allow_zero=False) -> None:
     check(ok, name, f"must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
 
 
+def _modes(value) -> None:
+    try:
+        validate_modes_per_link(value)
+    except ValueError:
+        raise ConfigError("modes_per_link", f"must be two integers in 1..4, got "
+                                            f"{list(value)!r}") from None
+
+
 @dataclass(frozen=True)
-class PlantSpec:
-    """``kind``: "reduced" (the model as plant, RK4) or "exudyn" (the FE truth plant).
-    ``modes_per_link`` is the reduced plant's own model order; ``mesh``,
-    ``spectral_radius`` and ``newton_tolerance`` apply to the Exudyn plant; ``step`` [s] is
-    either's internal step."""
+class ReducedPlantSpec:
+    """``kind = "reduced"``: the paper's model as the plant (fixed-step RK4), with its own
+    ``modes_per_link`` and internal ``step`` [s]."""
 
     kind: str = "reduced"
     modes_per_link: tuple[int, int] = (2, 2)
+    step: float = 1e-3
+
+    def __post_init__(self):
+        _one_of(self.kind, ("reduced",), "kind")
+        _modes(self.modes_per_link)
+        _positive(self.step, "step")
+
+
+@dataclass(frozen=True)
+class ExudynPlantSpec:
+    """``kind = "exudyn"``: the FE truth plant — its ``mesh``, the generalised-α ``step``
+    [s] and ``spectral_radius``, and the Newton ``newton_tolerance``."""
+
+    kind: str = "exudyn"
     step: float = 1e-3
     mesh: Mesh = Mesh()
     spectral_radius: float = 0.9
     newton_tolerance: float = 1e-6
 
     def __post_init__(self):
-        _one_of(self.kind, PLANTS, "kind")
-        _positive(self.newton_tolerance, "newton_tolerance")
-        try:
-            validate_modes_per_link(self.modes_per_link)
-        except ValueError:
-            raise ConfigError("modes_per_link", f"must be two integers in 1..4, got "
-                                                f"{list(self.modes_per_link)!r}") from None
+        _one_of(self.kind, ("exudyn",), "kind")
         _positive(self.step, "step")
+        _positive(self.newton_tolerance, "newton_tolerance")
         check(0 <= self.spectral_radius <= 1, "spectral_radius",
               f"must be in [0, 1], got {self.spectral_radius!r}")
+
+
+#: A plant is a tagged choice: each kind takes only its own settings.
+PlantSpec = ReducedPlantSpec | ExudynPlantSpec
+PLANTS = ("reduced", "exudyn")
+
+
+def with_plant(plant: dict, kind: str, **settings) -> dict:
+    """A plant table of ``kind``: the settings of ``plant`` that ``kind`` takes too (the
+    step), then ``settings`` (for sweeps and studies that switch a scenario's plant)."""
+    spec = ReducedPlantSpec if kind == "reduced" else ExudynPlantSpec
+    keys = {f.name for f in dataclasses.fields(spec)}
+    return {**{k: v for k, v in plant.items() if k in keys}, **settings, "kind": kind}
 
 
 @dataclass(frozen=True)
@@ -92,11 +122,7 @@ class ModelSpec:
     modes_per_link: tuple[int, int] = (2, 2)
 
     def __post_init__(self):
-        try:
-            validate_modes_per_link(self.modes_per_link)
-        except ValueError:
-            raise ConfigError("modes_per_link", f"must be two integers in 1..4, got "
-                                                f"{list(self.modes_per_link)!r}") from None
+        _modes(self.modes_per_link)
 
 
 def _law_kind(value) -> None:
@@ -156,17 +182,34 @@ class ReferenceSpec:
         _positive(self.move_time, "move_time")
 
 
+def _only_where_used(spec, used: tuple[str, ...], defaults: dict, where: str) -> None:
+    """Settings that ``spec`` (a frozen dataclass) uses get their default when not given
+    (None); a setting it does not use must not be given: it would change nothing but the
+    run's id."""
+    for name, default in defaults.items():
+        value = getattr(spec, name)
+        if name in used and value is None:
+            object.__setattr__(spec, name, default)
+        elif name not in used:
+            check(value is None, name, f"not used {where} (drop it)")
+
+
+_GAUGE_DEFAULTS = {"gauges_link1": (0.05, 0.2, 0.35), "gauges_link2": (0.05, 0.2, 0.35),
+                   "strain_quantity": "curvature"}
+
+
 @dataclass(frozen=True)
 class SensorSpec:
     """``modal``: "direct" (q read exactly, the paper's assumption), "gauges" (q fitted
     to strain gauges at ``gauges_link1``/``gauges_link2`` [m] reading
-    ``strain_quantity``), "none" (encoders only).  Noise standard deviations are per
-    reading; ``delay`` is in whole samples."""
+    ``strain_quantity``; default three per link at 0.05, 0.2, 0.35 m reading curvature;
+    these three keys only with "gauges"), "none" (encoders only).  Noise standard
+    deviations are per reading; ``delay`` is in whole samples."""
 
     modal: str = "direct"
-    gauges_link1: tuple[float, ...] = (0.05, 0.2, 0.35)
-    gauges_link2: tuple[float, ...] = (0.05, 0.2, 0.35)
-    strain_quantity: str = "curvature"
+    gauges_link1: tuple[float, ...] | None = None
+    gauges_link2: tuple[float, ...] | None = None
+    strain_quantity: str | None = None
     rates: bool = True
     tip_position: bool = False
     encoder_resolution: float = 0.0
@@ -177,40 +220,52 @@ class SensorSpec:
 
     def __post_init__(self):
         _one_of(self.modal, MODAL_SENSORS, "modal")
-        _one_of(self.strain_quantity, tuple(STRAIN_QUANTITIES), "strain_quantity")
+        _only_where_used(self, tuple(_GAUGE_DEFAULTS) if self.modal == "gauges" else (),
+                         _GAUGE_DEFAULTS, "unless modal = 'gauges'")
+        if self.modal == "gauges":
+            _one_of(self.strain_quantity, tuple(STRAIN_QUANTITIES), "strain_quantity")
+            for name in ("gauges_link1", "gauges_link2"):
+                check(all(math.isfinite(v) and v >= 0 for v in getattr(self, name)), name,
+                      "positions must be finite and >= 0 [m]")
         for name in ("encoder_resolution", "encoder_noise", "modal_noise", "rate_noise"):
             _positive(getattr(self, name), name, allow_zero=True)
             check(getattr(self, name) <= MAX_NOISE, name,
                   f"must be <= {MAX_NOISE:g}, got {getattr(self, name)!r}")
         check(self.delay >= 0, "delay", f"must be >= 0 samples, got {self.delay!r}")
-        for name in ("gauges_link1", "gauges_link2"):
-            check(all(math.isfinite(v) and v >= 0 for v in getattr(self, name)), name,
-                  "positions must be finite and >= 0 [m]")
+
+
+#: The settings each disturbance kind uses beyond kind, target, amplitude and start.
+_DISTURBANCE_FIELDS = {"step": (), "pulse": ("duration",), "sine": ("frequency",),
+                       "noise": ("bandwidth",)}
+_DISTURBANCE_DEFAULTS = {"duration": 0.1, "frequency": 1.0, "bandwidth": 5.0}
 
 
 @dataclass(frozen=True)
 class DisturbanceSpec:
     """A disturbance on a joint torque (``tau1``, ``tau2`` [N m]) or on the payload
     (``tip_x``, ``tip_y`` [N], base frame): "step" from ``start``; "pulse" during
-    [``start``, ``start`` + ``duration``]; "sine" amplitude·sin(2π·frequency·(t − start));
-    "noise": Gaussian, standard deviation ``amplitude``, low-passed at ``bandwidth`` Hz."""
+    [``start``, ``start`` + ``duration``] (default 0.1 s); "sine"
+    amplitude·sin(2π·frequency·(t − start)) (default 1 Hz); "noise": Gaussian, standard
+    deviation ``amplitude``, low-passed at ``bandwidth`` Hz (default 5).  Each kind takes
+    only its own settings."""
 
     kind: str = "step"
     target: str = "tau1"
     amplitude: float = 0.0
     start: float = 0.0
-    duration: float = 0.1
-    frequency: float = 1.0
-    bandwidth: float = 5.0
+    duration: float | None = None
+    frequency: float | None = None
+    bandwidth: float | None = None
 
     def __post_init__(self):
         _one_of(self.kind, DISTURBANCE_KINDS, "kind")
         _one_of(self.target, DISTURBANCE_TARGETS, "target")
         check(math.isfinite(self.amplitude), "amplitude", "must be finite")
         _positive(self.start, "start", allow_zero=True)
-        _positive(self.duration, "duration")
-        _positive(self.frequency, "frequency")
-        _positive(self.bandwidth, "bandwidth")
+        _only_where_used(self, _DISTURBANCE_FIELDS[self.kind], _DISTURBANCE_DEFAULTS,
+                         f"by a {self.kind!r} disturbance")
+        for name in _DISTURBANCE_FIELDS[self.kind]:
+            _positive(getattr(self, name), name)
 
 
 @dataclass(frozen=True)
@@ -239,7 +294,7 @@ class Scenario:
 
     name: str = "paper"
     arm: str = "default"
-    plant: PlantSpec = PlantSpec()
+    plant: PlantSpec = ReducedPlantSpec()
     true_params: ArmParameters = ArmParameters()
     nominal_params: ArmParameters = ArmParameters()
     model: ModelSpec = ModelSpec()

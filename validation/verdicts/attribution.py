@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 from ..run._config import ConfigError, check
 from ..batch.campaign import Campaign, PlannedRun, run_campaign
-from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
+from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping, with_plant
 from ..batch.store import ResultStore, run_id
 
 __all__ = ["FACTORS", "METRICS", "World", "Attribution", "plan", "attribute", "shapley",
@@ -119,14 +119,15 @@ def _step_for(Ts: float, step: float) -> float:
 def _idealise(data: dict, factor: str) -> None:
     """Switch ``factor`` of the resolved scenario mapping ``data`` to its ideal level."""
     if factor == "plant":
-        data["plant"] = dict(data["plant"], kind="reduced",
-                             modes_per_link=list(data["model"]["modes_per_link"]),
-                             step=_step_for(data["Ts"], min(data["plant"]["step"], 1e-3)))
+        data["plant"] = with_plant(data["plant"], "reduced",
+                                   modes_per_link=list(data["model"]["modes_per_link"]),
+                                   step=_step_for(data["Ts"], min(data["plant"]["step"], 1e-3)))
     elif factor == "parameters":
         data["true_params"] = copy.deepcopy(data["nominal_params"])
     elif factor == "sensing":
         s = data["sensors"]
         data["sensors"] = dict(s, modal="direct" if s["modal"] == "gauges" else s["modal"],
+                               gauges_link1=None, gauges_link2=None, strain_quantity=None,
                                encoder_resolution=0.0, encoder_noise=0.0, modal_noise=0.0,
                                rate_noise=0.0, delay=0)
     elif factor == "estimation":
@@ -145,8 +146,8 @@ def _idealise(data: dict, factor: str) -> None:
 def _truncation_level(data: dict) -> None:
     """The middle of the plant sub-ladder: the reduced plant with 4+4 modes (RK4 needs
     a step ≤ 0.25 ms for its ~250 Hz top mode)."""
-    data["plant"] = dict(data["plant"], kind="reduced", modes_per_link=[4, 4],
-                         step=_step_for(data["Ts"], min(data["plant"]["step"], 2.5e-4)))
+    data["plant"] = with_plant(data["plant"], "reduced", modes_per_link=[4, 4],
+                               step=_step_for(data["Ts"], min(data["plant"]["step"], 2.5e-4)))
 
 
 @dataclass(frozen=True)

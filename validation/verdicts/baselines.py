@@ -40,7 +40,7 @@ from ..batch.fingerprint import run_fingerprint
 from ..run.results import write_atomic
 from ..run.scenario import scenario_from_mapping, scenario_to_mapping
 from ..batch.store import INDEX_NAME, ResultStore, StoreError, run_id
-from ..run.tomlfiles import flat_items, load_toml, toml_value
+from ..run.tomlfiles import flatten, load_toml, toml_value
 
 __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",
            "proposed_bounds", "write_baselines", "DEFAULT_FILE"]
@@ -272,7 +272,7 @@ def write_baselines(b: Baselines, checks: list[Check]) -> None:
              f"absolute = {b.absolute!r}", ""]
     for name, spec in b.scenarios.items():
         lines.append(f"[scenarios.{name}]")
-        lines += [f"{k} = {toml_value(v)}" for k, v in flat_items(spec)]
+        lines += [f"{k} = {toml_value(v)}" for k, v in flatten(spec).items()]
         lines.append("")
     for c in checks:
         lines.append("[[check]]")

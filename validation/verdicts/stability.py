@@ -30,7 +30,8 @@ from ..run._config import ConfigError
 from ..batch.campaign import PlannedRun, run_campaign, Campaign
 from ..batch.executor import Runner
 from ..run.laws import nominal_model
-from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
+from ..run.scenario import (arm_parameters, scenario_from_mapping, scenario_to_mapping,
+                            with_plant)
 from ..batch.store import ResultStore, run_id
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "StabilityCase", "StabilityResult",
@@ -85,7 +86,7 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
             for arm in arms or (data["arm"],):
                 base = dict(data, disturbances=[], initial_state="reference",
                             duration=DURATION, transient=DURATION / 2)
-                base["plant"] = dict(base["plant"], kind=plant)
+                base["plant"] = with_plant(base["plant"], plant)
                 base["arm"] = arm
                 params = scenario_to_mapping(arm_parameters(arm))
                 if arm != data["arm"]:  # start the parameter tables from the other arm

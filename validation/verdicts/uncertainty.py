@@ -40,12 +40,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..batch.campaign import (RandomAxis, campaign_from_mapping, draw_points, expand,
-                              flatten_table, random_axis, set_path)
+from ..batch.campaign import (RandomAxis, draw_points, expand, flatten_axes, load_study,
+                              random_axis)
 from ..run._config import ConfigError, check
 from ..run.requirements import Requirement
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
-from ..run.tomlfiles import load_toml
+from ..run.tomlfiles import set_dotted
 from .statistics import SequentialTest
 
 __all__ = ["UncertaintySet", "System", "VerifySettings", "load_systems", "plant_table"]
@@ -133,10 +133,10 @@ class System:
         data = copy.deepcopy(self.nominal)
         for path, value in point.items():
             try:
-                set_path(data, path, value)
-            except KeyError:
-                raise ConfigError(f"uncertainty.{path}", "is not a field of the scenario "
-                                                         f"{self.name}") from None
+                set_dotted(data, path, value)
+            except ConfigError as exc:
+                raise ConfigError(f"uncertainty.{path}", f"{exc.path}: {exc.message} (in "
+                                                         f"{self.name})") from None
         if plant is not None:
             data["plant"] = plant_table(self.nominal, plant)
         if seed is not None:
@@ -191,7 +191,7 @@ def _uncertainty(table: dict, nominal: dict) -> UncertaintySet:
     check(isinstance(table, dict) and table, "uncertainty",
           "needs at least one uncertain field, e.g. \"true_params.Mp\" = {uniform = [0, 1]}")
     axes = tuple(random_axis(p, spec, nominal, f"uncertainty.{p}")
-                 for p, spec in sorted(flatten_table(table).items()))
+                 for p, spec in sorted(flatten_axes(table).items()))
     fields = [p for axis in axes for p in axis.paths]
     twice = sorted({p for p in fields if fields.count(p) > 1})
     check(not twice, "uncertainty", f"{', '.join(twice)} set by more than one dimension")
@@ -200,23 +200,17 @@ def _uncertainty(table: dict, nominal: dict) -> UncertaintySet:
 
 def load_systems(path: str | Path) -> list[System]:
     """The systems of a scenario or campaign file with ``[uncertainty]`` (module
-    docstring), each checked at its nominal point and at every dimension's ends."""
-    data = load_toml(path)
-    uncertainty = data.pop("uncertainty", None)
-    settings = _settings(data.pop("verify", {}))
-    if "scenario" in data or "sweep" in data:  # a campaign: one system per run
-        campaign = campaign_from_mapping(data, source=str(path))
-        nominals = [(r.scenario.name.split("/")[-1], scenario_to_mapping(r.scenario))
-                    for r in expand(campaign)]
-    else:
-        nominal = scenario_to_mapping(scenario_from_mapping(data))
-        nominals = [(nominal["name"], nominal)]
-    check(uncertainty is not None, "uncertainty", f"{path} declares no [uncertainty]")
+    docstring; `load_study` reads either), each checked at its nominal point and at every
+    dimension's ends."""
+    campaign = load_study(path)
+    settings = _settings(campaign.verify)
+    check(bool(campaign.uncertainty), "uncertainty", f"{path} declares no [uncertainty]")
     systems = []
-    for name, nominal in nominals:
+    for run in expand(campaign):
+        name, nominal = run.scenario.name.split("/")[-1], scenario_to_mapping(run.scenario)
         check(bool(nominal["requirement"]), "requirement",
               f"{name} has no [[requirement]] to verify")
-        system = System(name, nominal, _uncertainty(uncertainty, nominal), settings)
+        system = System(name, nominal, _uncertainty(campaign.uncertainty, nominal), settings)
         for point in system.uncertainty.corners():
             for plant in ("reduced", "exudyn"):
                 system.scenario(point, plant=plant)

@@ -1,0 +1,137 @@
+"""The compiled form of a law: a numba kernel with its role's fixed signature, and the
+buffers it works on.
+
+A compiled loop (`validation.run._sample`) calls a law through a function pointer of
+the role's signature, so the loop is compiled once for every law, and each law's kernel
+is compiled — and cached by numba — on its own, the first time a run uses it.  A law
+offers its compiled form with a method ``compiled(Ts) -> CompiledLaw`` on the class that
+defines its Python form (``__call__`` for a controller, ``update`` for an observer);
+the buffers are copies, so a compiled run never changes the Python object.  Any law may
+do so, built-in or plug-in; a law without it runs as the Python object it is.
+
+Controller kernel::
+
+    n_tau = kernel(t, x, ref, ints, reals, state, model_ints, model_reals,
+                   work_complex, work_real, tau, residual)
+
+writes the torques into ``tau`` (its first ``n_tau`` entries: 2, or n for a law that
+applies generalised forces to every coordinate) and what it cannot apply into
+``residual``; ``x`` is the state it is fed, ``ref`` = [θ_d, θ̇_d, θ̈_d] (6,).
+
+Observer kernel::
+
+    status = kernel(t, Ts, y, tau, ints, reals, state, model_ints, model_reals,
+                    work_complex, work_real, x_hat)
+
+advances over the last period with ``tau`` (skipped on the first call after a reset),
+corrects with ``y`` (in the order of ``measured``) and writes the estimate into
+``x_hat``; ``status`` is 0, or non-zero when the observer failed (its `CompiledLaw.failure`
+says how).
+"""
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit, types
+from numba.experimental.function_type import _get_wrapper_address
+
+__all__ = ["CONTROLLER_SIGNATURE", "OBSERVER_SIGNATURE", "CompiledLaw", "compiled_form",
+           "LawPointer", "law_pointer", "no_observer"]
+
+_f8, _i8, _c16 = types.float64, types.int64, types.complex128
+
+
+def _vector(dtype):
+    return types.Array(dtype, 1, "C")
+
+
+#: The compiled controller's signature (module docstring).
+CONTROLLER_SIGNATURE = _i8(_f8, _vector(_f8), _vector(_f8), _vector(_i8), _vector(_f8),
+                           _vector(_f8), _vector(_i8), _vector(_f8), _vector(_c16),
+                           _vector(_f8), _vector(_f8), _vector(_f8))
+#: The compiled observer's signature (module docstring).
+OBSERVER_SIGNATURE = _i8(_f8, _f8, _vector(_f8), _vector(_f8), _vector(_i8), _vector(_f8),
+                         _vector(_f8), _vector(_i8), _vector(_f8), _vector(_c16),
+                         _vector(_f8), _vector(_f8))
+
+
+class LawPointer(types.WrapperAddressProtocol):
+    """A law's kernel as a first-class function of its role's signature: compiled loops
+    take it as an argument, so they are compiled once for every law.  It carries its
+    numba type, so passing it costs no type inference."""
+
+    def __init__(self, kernel, signature) -> None:
+        kernel.compile(signature.args)  # on first use; numba's cache keeps it
+        self._address = _get_wrapper_address(kernel, signature)
+        self._signature = signature
+        self._numba_type_ = types.FunctionType(signature)
+        self.kernel = kernel
+
+    def __wrapper_address__(self) -> int:
+        return self._address
+
+    def signature(self):
+        return self._signature
+
+
+@functools.cache
+def law_pointer(kernel, signature) -> LawPointer:
+    """The `LawPointer` of ``kernel`` (made once per process)."""
+    return LawPointer(kernel, signature)
+
+
+class CompiledLaw(NamedTuple):
+    """A law's kernel and the buffers it works on (module docstring)."""
+
+    #: The kernel as a function pointer of its role's signature.
+    pointer: LawPointer
+    #: Integer options and flags.
+    ints: np.ndarray
+    #: Gains and constants.
+    reals: np.ndarray
+    #: State and scratch (a copy of the law's own: the run changes it).
+    state: np.ndarray
+    #: The law's model, packed (`reduced_model.ArmModel.packed`), and its scratch space.
+    model_ints: np.ndarray
+    model_reals: np.ndarray
+    work_complex: np.ndarray
+    work_real: np.ndarray
+    #: What a non-zero status of an observer kernel means ("" for a controller).
+    failure: str = ""
+
+    @classmethod
+    def of(cls, kernel, signature, model, *, ints=(), reals=(), state=(), failure: str = ""):
+        """The compiled form of a law on ``model`` (an `ArmModel`): buffers converted to
+        the kernel's types, the model packed with fresh scratch space."""
+        work_complex, work_real = model.new_workspace()[0]
+        return cls(law_pointer(kernel, signature),
+                   np.ascontiguousarray(ints, dtype=np.int64),
+                   np.ascontiguousarray(reals, dtype=np.float64),
+                   np.array(state, dtype=np.float64, order="C"),  # always a copy
+                   *model.packed, work_complex, work_real, failure)
+
+
+def compiled_form(law, role: str, Ts: float) -> CompiledLaw | None:
+    """The compiled form of ``law`` (``role`` "controller" or "observer") at the control
+    period ``Ts``, or None: the law has no ``compiled`` method, or it comes from another
+    class than the law's Python form (a subclass that changes ``__call__``/``update`` but
+    not ``compiled`` must not run the parent's kernel)."""
+    method = "__call__" if role == "controller" else "update"
+    cls = type(law)
+    defining = next((c for c in cls.__mro__ if method in c.__dict__), None)
+    if defining is None or "compiled" not in defining.__dict__:
+        return None
+    return law.compiled(Ts)
+
+
+@njit(cache=True)
+def _no_observer(t, Ts, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+    return 0
+
+
+def no_observer(model) -> CompiledLaw:
+    """What fills the observer's place in a compiled loop without an observer (never
+    called: the loop knows there is none)."""
+    return CompiledLaw.of(_no_observer, OBSERVER_SIGNATURE, model)

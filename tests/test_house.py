@@ -1,0 +1,211 @@
+"""The structure of the code: the fingerprint covers everything a run loads, each setting
+belongs to what it sets, every command reads a file the same way, and the rooms of
+`validation` import each other in one direction only."""
+import ast
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from validation.batch.fingerprint import (_ROOT, code_fingerprint, plugin_sources,
+                                          result_sources, run_fingerprint)
+from validation.batch.store import run_id
+from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
+
+HELPER = "GAIN = 30.0\n"
+PLUGIN = textwrap.dedent('''
+    import numpy as np
+    from houselab.helpers import GAIN
+
+
+    class PD:
+        def __init__(self, model):
+            pass
+
+        def __call__(self, t, x, ref):
+            n = x.shape[0] // 2
+            theta_d, dtheta_d, _ = ref(t)
+            return GAIN * (theta_d - x[:2]) + 10.0 * (dtheta_d - x[n:n + 2])
+''')
+
+
+@pytest.fixture
+def plugin_package(tmp_path, monkeypatch):
+    """A plug-in package with a helper module, importable from tmp_path."""
+    package = tmp_path / "houselab"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "helpers.py").write_text(HELPER)
+    (package / "control.py").write_text(PLUGIN)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    plugin_sources.cache_clear()
+    yield package
+    plugin_sources.cache_clear()
+    for name in [m for m in sys.modules if m == "houselab" or m.startswith("houselab.")]:
+        del sys.modules[name]
+
+
+LOADED = textwrap.dedent('''
+    import json, sys
+    from validation.batch.worker import execute_run
+    for plant in ("reduced", "exudyn"):
+        result, _ = execute_run({"duration": 0.01, "transient": 0.0, "plant": {"kind": plant},
+                                 "controller": {"kind": "houselab.control:PD"},
+                                 "observer": {"kind": "smo-paper"}})
+        assert result.status == "ok", result.message
+    print(json.dumps(sorted(m.__file__ for m in list(sys.modules.values())
+                            if getattr(m, "__file__", None))))
+''')
+
+
+def test_the_fingerprint_covers_every_project_module_a_run_loads(plugin_package):
+    """Run a scenario on each plant with a plug-in in a fresh process (the worker's
+    path), collect every module it loaded: each project file is hashed into the code
+    fingerprint, each plug-in file into the run's fingerprint; the command line, the
+    store and the reports stay out (editing them leaves stored runs valid)."""
+    proc = subprocess.run([sys.executable, "-c", LOADED], capture_output=True, text=True,
+                          cwd=plugin_package.parent, timeout=600,
+                          env={**__import__("os").environ,
+                               "PYTHONPATH": f"{plugin_package.parent}:{_ROOT}"})
+    assert proc.returncode == 0, proc.stderr
+    loaded = {Path(f).resolve() for f in json.loads(proc.stdout.splitlines()[-1])}
+    packages = [_ROOT / name for name in ("reduced_model", "plant_exudyn", "controllers",
+                                          "validation")]
+    project = {p for p in loaded if any(p.is_relative_to(d) for d in packages)}
+    assert project, "nothing of the project was loaded?"
+    hashed = set(result_sources())
+    assert project <= hashed, sorted(str(p) for p in project - hashed)
+    plugin = {p for p in loaded if p.is_relative_to(plugin_package)}
+    kind = "houselab.control:PD"
+    assert plugin == set(plugin_sources(kind)) == {plugin_package / "__init__.py",
+                                                  plugin_package / "helpers.py",
+                                                  plugin_package / "control.py"}
+    for name in ("validation/cli.py", "validation/batch/store.py", "validation/report/report.py",
+                 "validation/verdicts/claims.py"):
+        assert _ROOT / name not in hashed, name
+
+
+def test_editing_a_hashed_file_changes_the_fingerprint(plugin_package, monkeypatch):
+    """The hash covers each file's content: editing any one changes it (simulated by
+    reading one file with a byte appended)."""
+    config = scenario_to_mapping(scenario_from_mapping(
+        {"controller": {"kind": "houselab.control:PD"}}))
+    before = run_fingerprint(config)
+    files = [*result_sources()[::7], *plugin_sources("houselab.control:PD")]
+    original = Path.read_bytes
+    for edited in files:
+        monkeypatch.setattr(Path, "read_bytes", lambda self, e=edited: original(self) + (
+            b"#" if self == e else b""))
+        code_fingerprint.cache_clear()
+        assert run_fingerprint(config) != before, edited
+    monkeypatch.setattr(Path, "read_bytes", original)
+    code_fingerprint.cache_clear()
+    assert run_fingerprint(config) == before
+
+
+def test_reading_a_plugins_fingerprint_imports_nothing(plugin_package):
+    """Stored runs are checked against the code without running a plug-in's module."""
+    assert "houselab" not in sys.modules and "houselab.control" not in sys.modules
+    run_fingerprint({"controller": {"kind": "houselab.control:PD"}})
+    assert "houselab" not in sys.modules and "houselab.control" not in sys.modules
+
+
+@pytest.mark.parametrize("a, b", [
+    ({"plant": {"kind": "exudyn"}},
+     {"plant": {"kind": "exudyn", "mesh": {"element": "ancf"}, "spectral_radius": 0.9}}),
+    ({"disturbances": [{"kind": "pulse", "amplitude": 1.0}]},
+     {"disturbances": [{"kind": "pulse", "amplitude": 1.0, "duration": 0.1}]}),
+    ({"sensors": {"modal": "gauges"}},
+     {"sensors": {"modal": "gauges", "strain_quantity": "curvature"}}),
+])
+def test_equal_scenarios_have_equal_run_ids(a, b):
+    """Defaults written out or left out: the same run, the same id."""
+    ma = scenario_to_mapping(scenario_from_mapping(a))
+    mb = scenario_to_mapping(scenario_from_mapping(b))
+    assert ma == mb and run_id(ma) == run_id(mb)
+
+
+def test_every_command_reads_a_scenario_file_the_same_way(tmp_path, monkeypatch):
+    """run, stability and attribute accept the same scenario file (with a ``name``, the
+    case that once drifted) and hand the same scenario to their work."""
+    from validation import cli
+    from validation.batch import worker
+    from validation.verdicts import attribution
+    path = tmp_path / "s.toml"
+    path.write_text('name = "mine"\nduration = 0.5\ntransient = 0.1\n'
+                    '[controller]\nkind = "pd"\n')
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def record(command):
+        def fake(first, *args, **kwargs):
+            scenarios = first if isinstance(first, list) else [first]
+            seen[command] = [scenario_to_mapping(getattr(s, "scenario", s)) if not
+                             isinstance(s, dict) else s for s in scenarios]
+            raise Stop
+        return fake
+
+    monkeypatch.setattr(worker, "execute_run", record("run"))
+    monkeypatch.setattr(cli, "_stability", lambda runner, scenarios, *a, **k:
+                        record("stability")(list(scenarios)))
+    monkeypatch.setattr(attribution, "attribute", record("attribute"))
+    monkeypatch.chdir(tmp_path)
+    for argv in (["run", "--config", str(path)], ["stability", str(path), "--workers", "1"],
+                 ["attribute", str(path), "--factors", "sampling", "--workers", "1"]):
+        with pytest.raises(Stop):
+            cli.main(argv)
+    run, stab, att = seen["run"][0], seen["stability"][0], seen["attribute"][0]
+    for key in ("duration", "controller", "plant", "true_params"):
+        assert run[key] == stab[key] == att[key], key
+    assert stab["name"] == att["name"] == "s/mine"
+
+
+def _module_imports(path: Path) -> set[str]:
+    """validation.* modules that ``path`` imports at module level (function-level
+    imports are lazy and cannot make a cycle at import time)."""
+    module = ".".join(path.relative_to(_ROOT).with_suffix("").parts)
+    package = module.rpartition(".")[0] if path.name != "__init__.py" else module
+    out = set()
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[:len(package.split(".")) - node.level + 1]
+                source = ".".join(base + ([node.module] if node.module else []))
+            else:
+                source = node.module or ""
+            for alias in node.names:
+                full = f"{source}.{alias.name}"
+                out.add(full if (_ROOT / Path(*full.split("."))).with_suffix(".py").exists()
+                        else source)
+        elif isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+    return {m for m in out if m.startswith("validation.") and m.count(".") >= 2}
+
+
+def test_the_rooms_have_no_import_cycle():
+    modules = {".".join(p.relative_to(_ROOT).with_suffix("").parts): p
+               for p in (_ROOT / "validation").rglob("*.py") if p.name != "__init__.py"}
+    graph = {m: _module_imports(p) & set(modules) for m, p in modules.items()}
+    state: dict[str, int] = {}
+
+    def visit(m, path):
+        if state.get(m) == 1:
+            raise AssertionError("import cycle: " + " -> ".join([*path, m]))
+        if state.get(m) == 2:
+            return
+        state[m] = 1
+        for d in sorted(graph[m]):
+            visit(d, [*path, m])
+        state[m] = 2
+
+    for m in sorted(graph):
+        visit(m, [])
+    # one run never reaches into the rooms built on it
+    for m, deps in graph.items():
+        if m.startswith("validation.run."):
+            assert all(d.startswith("validation.run.") for d in deps), (m, deps)
