@@ -360,7 +360,9 @@ def test_shipped_campaigns_expand():
     # Ts = 0.2 ms (2 plants × 2 starts × with/without the disturbance: 8).  mismatch: payload 2×4,
     # stiffness 2×3, model order 2×3, damping 2×3, FE mesh 3.  robustness: noise 2×4,
     # torque disturbances 2×5, sample time 2×4.  attribution: the PBC with each SMO.
-    assert counts == {"attribution": 3, "mismatch": 29, "paper": 100, "robustness": 26}
+    # robust: the three systems flexarm verify judges (the PBC with smo-paper, smo-bl, EKF).
+    assert counts == {"attribution": 3, "mismatch": 29, "paper": 100, "robustness": 26,
+                      "robust": 3}
 
 
 def test_identifiers_stay_text_in_the_index_and_the_export(tmp_path):

@@ -418,9 +418,13 @@ def cmd_verify(args: argparse.Namespace) -> int:
                 v = falsify(system, requirement, where, runner=runner, budget=args.budget,
                             seed=args.seed)
                 what = "counterexample" if v["found"] else "no counterexample; worst case"
-                print(f"  {requirement.name}: {what}: rho truth {v['rho_truth']}, reduced "
-                      f"{v['rho_reduced']} ({v['counterexample'] or v['worst_case']}); "
-                      f"simulations {v['simulations']}")
+                truth = (f"{v['rho_truth']:.6g}" if v["rho_truth"] is not None else
+                         f"-inf ({v.get('truth_status', 'no run')})")
+                reduced = (f"{v['rho_reduced']:.6g}" if v["rho_reduced"] is not None
+                           else "-inf (diverged)")
+                print(f"  {requirement.name}: {what}: rho truth {truth}, reduced {reduced} "
+                      f"({v['counterexample'] or v['worst_case']}); simulations "
+                      f"{v['simulations']}")
             else:
                 v = conform(system, where, runner=runner, budget=args.budget, seed=args.seed)
                 print(f"  largest |theta_truth - theta_reduced| = {v['distance']} rad "

@@ -63,9 +63,13 @@ def _rows(v: dict) -> list[list[str]]:
     sims = v["simulations"]
     if v["mode"] == "falsify":
         found = "counterexample" if v["found"] else "none found; worst case"
-        return [[v["requirement"], v["criterion"], found, fmt_number(v["rho_truth"]),
-                 fmt_number(v["rho_reduced"]), str(sims["reduced"]), str(sims["truth"]),
-                 str(len(v["spurious"]))]]
+        # null in verdict.json: −∞, a run that diverged (its status says so), or no case
+        truth = fmt_number(v["rho_truth"]) if v["rho_truth"] is not None else (
+            f"−∞ ({v['truth_status']})" if v.get("truth_status") else "—")
+        reduced = fmt_number(v["rho_reduced"]) if v["rho_reduced"] is not None else (
+            "−∞ (diverged)" if v.get("truth_status") else "—")
+        return [[v["requirement"], v["criterion"], found, truth, reduced, str(sims["reduced"]),
+                 str(sims["truth"]), str(len(v["spurious"]))]]
     return [[fmt_number(v["distance"]), str(sims["reduced"]), str(sims["truth"]),
              ", ".join(f"{k}: {fmt_number(d)}" for k, d in (v.get("rho_difference") or {}).items()
                        if d is not None)]]
