@@ -264,3 +264,29 @@ indifference = 0.1
         low, high = clopper_pearson(8 - saved["failures"], 8, 0.95)
         assert (saved["p_low"], saved["p_high"]) == (low, high)
         assert len(saved["runs"]) == 8 and len(saved["noise_seeds"]) == 8
+
+
+@pytest.mark.slow  # three searches, a Dask cluster: ~1 min
+def test_a_search_gives_the_same_verdict_on_every_runner(tmp_path):
+    """Serial, two local workers, a Dask cluster: the same seeded search, the same
+    verdict (the values come back from the store, bit-identical on every runner)."""
+    from validation.batch.executor import make_runner
+    from validation.verdicts.verify import falsify
+    path = tmp_path / "system.toml"
+    path.write_text(HOLDS)
+    (system,) = load_systems(path)
+    req = system.requirements[0]
+    verdicts = {}
+    for name, runner in (("serial", lambda: make_runner("local", 1)),
+                         ("pool", lambda: make_runner("local", 2, force=True))):
+        with runner() as r:
+            verdicts[name] = falsify(system, req, tmp_path / name, runner=r, budget=2, seed=5,
+                                     log=lambda *a: None)
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, host="127.0.0.1") as cluster:
+        with make_runner("dask", scheduler=cluster.scheduler_address) as r:
+            verdicts["dask"] = falsify(system, req, tmp_path / "dask", runner=r, budget=2,
+                                       seed=5, log=lambda *a: None)
+    assert verdicts["serial"] == verdicts["pool"] == verdicts["dask"]
+    assert verdicts["serial"]["simulations"]["reduced"] == 40
