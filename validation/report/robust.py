@@ -120,6 +120,11 @@ def _trace(v: dict) -> bytes:
         ax.set_xlabel(f"{plant} simulations")
         ax.set_ylabel(ylabel)
         ax.set_title(label, fontsize=9)
+    if v["mode"] == "falsify" and v["found"] and v["rho_truth"] is None:
+        # ρ = −∞ cannot be drawn: say where the truth plant diverged
+        axes[1].annotate(f"diverged (ρ = −∞) at truth simulation {v['simulations']['truth']}",
+                         xy=(0.98, 0.04), xycoords="axes fraction", ha="right", fontsize=8,
+                         color=fig.PLANT_STYLE["exudyn"]["color"])
     return fig.png(figure)
 
 
