@@ -197,3 +197,23 @@ def test_requirements_enter_the_claims_table():
     assert rows["rho_loose"]["cells"][0] == f"ρ = {metrics['rho_loose']:.3g} — holds"
     assert rows["rho_loose"]["claim"] == \
         "requirement loose: always[1,3](abs(theta1 - theta1_ref) <= 0.5)"
+
+
+def test_a_campaign_files_requirements_apply_to_every_run(tmp_path):
+    """Top-level [[requirement]] entries of a campaign join each run's own; a scenario
+    file with [[requirement]], [uncertainty] and [verify] stays a scenario file."""
+    from validation.batch.campaign import campaign_from_mapping, expand, load_study
+    campaign = campaign_from_mapping({
+        "name": "c", "requirement": [{"name": "b", "claim": "vibration"}],
+        "scenario": {"duration": 3.0, "requirement": [{"name": "a", "claim": "tracking"}]},
+        "sweep": [{"name": "s", "grid": {"true_params": {"Mp": [0.1, 0.2]}}}]})
+    runs = expand(campaign)
+    assert [[r.name for r in run.scenario.requirement] for run in runs] == [["a", "b"]] * 2
+    path = tmp_path / "s.toml"
+    path.write_text('duration = 3.0\n[[requirement]]\nname = "a"\nclaim = "tracking"\n'
+                    '[uncertainty]\n"true_params.Mp" = { uniform = [0.0, 1.0] }\n'
+                    '[verify]\nlevel = 0.9\n')
+    study = load_study(path)
+    assert study.uncertainty and study.verify == {"level": 0.9}
+    (run,) = expand(study)
+    assert [r.name for r in run.scenario.requirement] == ["a"]
