@@ -290,3 +290,30 @@ def test_a_search_gives_the_same_verdict_on_every_runner(tmp_path):
                                        seed=5, log=lambda *a: None)
     assert verdicts["serial"] == verdicts["pool"] == verdicts["dask"]
     assert verdicts["serial"]["simulations"]["reduced"] == 40
+
+
+@pytest.mark.slow  # a search with several truth-plant confirmations: ~30 s
+def test_a_spurious_counterexample_corrects_the_search(tmp_path, monkeypatch):
+    """A truth plant 15 mrad more forgiving than the reduced one (a planted model error):
+    the first reduced-plant counterexample is refuted (spurious), the correction learns
+    the offset, and the search goes on to a point the truth plant does fail."""
+    from validation.batch.executor import SerialRunner
+    from validation.verdicts import verify
+    offset = 0.015
+    original = verify.effective_rho
+
+    def forgiving(row, requirement):
+        rho = original(row, requirement)
+        return rho + offset if row.plant == "exudyn" and rho is not None else rho
+
+    monkeypatch.setattr(verify, "effective_rho", forgiving)
+    path = tmp_path / "system.toml"
+    path.write_text(SYSTEM)
+    (system,) = load_systems(path)
+    v = verify.falsify(system, system.requirements[0], tmp_path / "out", runner=SerialRunner(),
+                       budget=10, seed=0, log=lambda *a: None)
+    assert v["spurious"], "the planted model error was never caught"
+    assert all(s["rho_reduced"] < 0 <= s["rho_truth"] for s in v["spurious"])
+    assert v["found"] and v["rho_truth"] < 0
+    # confirmed only where the reduced plant says it fails by more than the offset
+    assert v["rho_reduced"] < -offset
