@@ -9,9 +9,10 @@ deterministic function of its seed and of the values it is told: a search resume
 stored evaluations replays the same points.
 
 Chosen over SciPy's ``differential_evolution`` and ``dual_annealing`` by measurement
-(``bench/bench_falsification.py``): on the planted counterexample CMA-ES reaches the
-failing corner in fewer reduced-plant simulations; ``dual_annealing`` evaluates one point
-at a time (no batch for the workers) and its local search differentiates numerically.
+(``bench/bench_falsification.py``, the planted counterexample, 20 seeds): CMA-ES reaches
+the failing corner in 41 reduced-plant simulations on average (20/20), differential
+evolution in 181 (20/20), dual annealing in 79 (18/20 within 400) — and dual annealing
+evaluates one point at a time, leaving the workers idle.
 """
 from __future__ import annotations
 
