@@ -199,7 +199,6 @@ HOLDS = SYSTEM.replace('{ uniform = [0.0, 4.0] }', '{ uniform = [0.0, 0.2] }').r
     '"true_params.Mp" = { uniform = [0.0, 1.0] }', '"true_params.Mp" = { uniform = [0.0, 0.2] }')
 
 
-@pytest.mark.slow  # two searches and three command-line starts: ~15-30 s
 def test_an_interrupted_search_resumes_to_the_same_answer(tmp_path):
     """SIGTERM during a search that finds nothing (it spends its whole reduced budget, 40
     simulations, and confirms its worst cases on the truth plant): exit 143, the finished runs kept; the same command then
@@ -292,7 +291,6 @@ def test_a_search_gives_the_same_verdict_on_every_runner(tmp_path):
     assert verdicts["serial"]["simulations"]["reduced"] == 40
 
 
-@pytest.mark.slow  # a search with several truth-plant confirmations: ~30 s
 def test_a_spurious_counterexample_corrects_the_search(tmp_path, monkeypatch):
     """A truth plant 15 mrad more forgiving than the reduced one (a planted model error):
     the first reduced-plant counterexample is refuted (spurious), the correction learns
