@@ -25,7 +25,8 @@ import numpy as np
 from controllers import CONTROLLERS, OBSERVERS
 
 from .run._config import ConfigError
-from .batch.executor import Interrupted, available_cores, exit_status, make_runner
+from .batch.executor import (Interrupted, available_cores, exit_status, make_runner,
+                             signals_interrupt)
 from .run.scenario import ARMS, PLANTS, Scenario, scenario_from_mapping
 from .batch.store import ResultStore, StoreError, run_id
 from .run.tomlfiles import deep_merge, load_toml, parse_value, set_dotted
@@ -401,7 +402,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
     out = Path(args.out or default)
     runner = _runner(args)
     failed = False
-    with runner:
+    # A signal between two batches of a search (not only during one) stops it: exit 143.
+    with runner, signals_interrupt():
         for system, requirement in zip(systems, requirements):
             where = out if len(systems) == 1 else out / system.name
             open_output(where)

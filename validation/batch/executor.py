@@ -27,7 +27,8 @@ from ..run._config import ConfigError, check
 from .threads import ONE_THREAD
 from .worker import execute_run, failed_result, keep_freed_memory, worker_init
 
-__all__ = ["Runner", "make_runner", "Interrupted", "available_cores", "exit_status"]
+__all__ = ["Runner", "make_runner", "Interrupted", "available_cores", "exit_status",
+           "signals_interrupt"]
 
 
 
@@ -69,7 +70,7 @@ class SerialRunner(Runner):
     """In this process, one run after another (``--workers 1``)."""
 
     def results(self, tasks):
-        with _signals_interrupt():
+        with signals_interrupt():
             for key, data in tasks:
                 yield (key, *execute_run(data))
 
@@ -83,7 +84,7 @@ class _PoolRunner(Runner):
     def results(self, tasks):
         tasks = iter(tasks)
         in_flight: dict[Future, tuple] = {}
-        with _signals_interrupt():
+        with signals_interrupt():
             try:
                 while True:
                     while len(in_flight) < 2 * self.workers:
@@ -240,8 +241,9 @@ def _environment(values: dict):
 
 
 @contextmanager
-def _signals_interrupt():
-    """SIGINT/SIGTERM raise `Interrupted` in the main thread; a second one exits now."""
+def signals_interrupt():
+    """SIGINT/SIGTERM raise `Interrupted` in the main thread; a second one exits now.
+    Nested uses (a search around its runner's batches) each handle their own span."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
