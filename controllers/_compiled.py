@@ -31,16 +31,22 @@ says how).
 from __future__ import annotations
 
 import functools
+import warnings
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit, types
+from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.experimental.function_type import _get_wrapper_address
 
 __all__ = ["CONTROLLER_SIGNATURE", "OBSERVER_SIGNATURE", "CompiledLaw", "compiled_form",
-           "LawPointer", "law_pointer", "no_observer"]
+           "LawPointer", "law_pointer", "absent"]
 
 _f8, _i8, _c16 = types.float64, types.int64, types.complex128
+# Function pointers are numba's "experimental" first-class functions (stable since 0.53,
+# tested here on every path): say it once in this docstring, not at every compilation.
+warnings.filterwarnings("ignore", "First-class function type feature is experimental",
+                        NumbaExperimentalFeatureWarning)
 
 
 def _vector(dtype):
@@ -127,11 +133,18 @@ def compiled_form(law, role: str, Ts: float) -> CompiledLaw | None:
 
 
 @njit(cache=True)
+def _no_controller(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
+    return 0
+
+
+@njit(cache=True)
 def _no_observer(t, Ts, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
     return 0
 
 
-def no_observer(model) -> CompiledLaw:
-    """What fills the observer's place in a compiled loop without an observer (never
-    called: the loop knows there is none)."""
+def absent(role: str, model) -> CompiledLaw:
+    """What fills a law's place in a compiled sample when there is no observer, or when
+    the laws run as Python objects (never called: the loop knows)."""
+    if role == "controller":
+        return CompiledLaw.of(_no_controller, CONTROLLER_SIGNATURE, model)
     return CompiledLaw.of(_no_observer, OBSERVER_SIGNATURE, model)

@@ -24,6 +24,10 @@ from ._baselines import RigidArm, rigid_torque
 from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
 from ._gains import gain_vector as _weights
 
+#: The most θ2 grid points: one per degree.  Each is one Riccati design (16 ms measured),
+#: so the largest schedule designs in ~6 s; the default 24 already interpolates the gains.
+MAX_GRID_POINTS = 360
+
 __all__ = ["GainScheduledLQR"]
 
 
@@ -111,7 +115,7 @@ class GainScheduledLQR:
     Ts : float
         Sample time [s] of the design (the loop's control period), > 0.
     grid_points : int
-        Number of θ2 grid points over one period, >= 4.
+        Number of θ2 grid points over one period, 4..`MAX_GRID_POINTS`.
     """
 
     name = "lqr"
@@ -129,8 +133,9 @@ class GainScheduledLQR:
         if not (isinstance(Ts, numbers.Real) and math.isfinite(Ts) and Ts > 0):
             raise ValueError(f"Ts must be a finite number of seconds > 0, got {Ts!r}")
         if (isinstance(grid_points, bool) or not isinstance(grid_points, numbers.Integral)
-                or grid_points < 4):
-            raise ValueError(f"grid_points must be an integer >= 4, got {grid_points!r}")
+                or not 4 <= grid_points <= MAX_GRID_POINTS):
+            raise ValueError(f"grid_points must be an integer in 4..{MAX_GRID_POINTS}, "
+                             f"got {grid_points!r}")
         self.Ts = float(Ts)
         N = int(grid_points)
         #: θ2 grid [rad]: N points over [−π, π); K(−π) = K(π).

@@ -53,6 +53,11 @@ def resolve(kind: str, builtins: dict[str, type], role: str) -> type:
             raise PluginError(f"module {module_name!r} has no {attr!r}")
     if not inspect.isclass(cls):
         raise PluginError(f"{kind!r} is not a class")
+    try:
+        inspect.signature(cls)
+    except (TypeError, ValueError):  # a builtin type (dict, type): no readable signature
+        raise PluginError(f"{kind!r}: the signature of its constructor cannot be read (a law "
+                          "is a class constructed as Cls(model, **options))") from None
     return cls
 
 

@@ -65,7 +65,8 @@ def _joint_flex(name: str, value, n_flex: int) -> np.ndarray:
 
 
 def _positive(name: str, value) -> float:
-    if isinstance(value, bool) or not (np.isfinite(value) and value > 0):
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) \
+            or not (np.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be > 0, got {value!r}")
     return float(value)
 

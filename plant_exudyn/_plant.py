@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import exudyn as exu
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.experimental import structref
 from scipy.integrate import cumulative_trapezoid
 
 from reduced_model import (ArmParameters, LinkModes, Measurement, PlantFailure, cached_model,
@@ -97,18 +98,9 @@ class ExudynPlant:
                                             newton_tolerance=newton_tolerance)
         self.solver = exu.MainSolverImplicitSecondOrder()
         self._index_state()
-        self._compiled = (*self._joint_arrays(), *self.fields[0].compiled(),
-                          *self.fields[1].compiled())
+        self._readout = new_readout(self.system.element == "ancf", *self._joint_arrays(),
+                                    *self.fields[0].compiled(), *self.fields[1].compiled())
         self.sensors = SensorModel(sensors, self.modal_basis, self)
-        # Without gauges, quantisation or payload position the measurement is a part of
-        # the truth vector: read both in one compiled call per step.
-        state_names = ("theta1", "theta2", *(f"q{i + 1}{j + 1}" for i, m in enumerate(basis)
-                                             for j in range(m.n)))
-        state_names += tuple(f"{c}_dot" for c in state_names)
-        direct = (sensors.strain_gauges is None and sensors.encoder_resolution == 0
-                  and not sensors.tip_position)
-        self._direct = (np.array([state_names.index(m) for m in self.sensors.names])
-                        if direct else None)
         self._truth = None
         self._Ts_nsteps = (None, 0)
         self._steps = 0
@@ -164,12 +156,17 @@ class ExudynPlant:
         self._steps = 0
         self.time = 0.0
         self._cache = self._truth = None
-        return self._measure()
+        return self.measure()
 
     def step(self, tau, Ts: float, tip_force=None) -> Measurement:
         """Hold joint torques ``tau`` (2,) [N m] and the payload force ``tip_force``
-        (Fx, Fy) [N, base frame] for ``Ts`` seconds; return y(t + Ts).  Raises
-        `PlantFailure` with Exudyn's message if the solver fails."""
+        (Fx, Fy) [N, base frame] for ``Ts`` seconds; return y(t + Ts) (`advance`, then
+        `measure`).  Raises `PlantFailure` with Exudyn's message if the solver fails."""
+        self.advance(tau, Ts, tip_force)
+        return self.measure()
+
+    def advance(self, tau, Ts: float, tip_force=None) -> None:
+        """`step` without the measurement (what the closed loop calls)."""
         last_Ts, nsteps = self._Ts_nsteps
         if Ts != last_Ts:
             nsteps = check_sample_time(Ts, self.h)
@@ -196,12 +193,18 @@ class ExudynPlant:
             raise PlantFailure(f"Exudyn solver failed at t = {self.solver.it.currentTime:.6g} s: "
                                f"{msg.strip()}")
         self.time = self._steps * self.h
-        return self._measure()
 
-    def _measure(self) -> Measurement:
-        if self._direct is not None:
-            return Measurement(self.time, self.sensors.names, self._truth_now()[self._direct])
+    def measure(self) -> Measurement:
+        """The measurement now."""
+        index = self.sensors.truth_index
+        if index is not None:  # the measured values are part of the truth vector
+            return Measurement(self.time, self.sensors.names, self._truth_now()[index])
         return self.sensors.measure(self.time)
+
+    def measurement_index(self) -> np.ndarray | None:
+        """Where the measurement sits in the truth vector (None: gauges, quantisation or
+        the payload position make it more than those values)."""
+        return self.sensors.truth_index
 
     def truth(self) -> TrueState:
         return true_state_from_vector(self.time, self.truth_vector())
@@ -210,15 +213,16 @@ class ExudynPlant:
         """[θ, q, θ̇, q̇ (projected), tip positions, tip deflections, projection residuals]."""
         return self._truth_now().copy()
 
+    def truth_into(self, out: np.ndarray) -> None:
+        """`truth_vector` written into ``out`` (one compiled call on Exudyn's coordinates)."""
+        sd = self.system.mbs.systemData
+        readout_into(self._readout, sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), out)
+
     def _truth_now(self) -> np.ndarray:
-        """The truth vector of the current step, read once (compiled; treat as read-only)."""
+        """The truth vector of the current step, read once (treat as read-only)."""
         if self._truth is None:
-            sd = self.system.mbs.systemData
-            m = self.state_size // 2
-            out = np.empty(2 * m + len(TRUTH_EXTRAS))
-            _truth_into(sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(),
-                        self.system.element == "ancf", *self._compiled, out)
-            self._truth = out
+            self._truth = np.empty(self.state_size + len(TRUTH_EXTRAS))
+            self.truth_into(self._truth)
         return self._truth
 
     # --- sensor primitives (see reduced_model._sensors) -------------------------------------
@@ -257,7 +261,7 @@ class ExudynPlant:
         return self._cache
 
     def _joint_arrays(self) -> tuple:
-        """Indices and reference values `_truth_into` reads the joints and tips from."""
+        """Indices and reference values `readout_into` reads the joints and tips from."""
         ancf = self.system.element == "ancf"
         slope = self._tip1_slope_idx if ancf else np.array([self._tip1_rot_idx, 0])
         slope_ref = self._tip1_slope_ref if ancf else np.array([self._tip1_rot_ref, 0.0])
@@ -340,17 +344,56 @@ class ExudynPlant:
         return natural_frequencies(self.params, self.mesh, theta=theta, joints=joints, n=n)
 
 
+# --- the truth readout, compiled -----------------------------------------------------------------
+_V, _I = types.Array(types.float64, 1, "C"), types.Array(types.int64, 1, "C")
+_M, _MI = types.Array(types.float64, 2, "C"), types.Array(types.int64, 2, "C")
+_LINK = (("idx", _MI), ("ref", _M), ("hub_idx", _I), ("hub_ref", _V), ("d", _V), ("dd", _V),
+         ("projector", _M), ("H_quad", _M), ("phi_T", _M), ("rho_w", _V))  # `LinkField.compiled`
+
+
+@structref.register
+class _ReadoutType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class Readout(structref.StructRefProxy):
+    """What `readout_into` reads the truth from Exudyn's coordinates with: the joints'
+    and tips' indices and reference values, and each link's `LinkField` arrays (one
+    structure passed by reference: a call costs ~1 µs, 27 separate arrays cost ~5)."""
+
+
+structref.define_boxing(_ReadoutType, Readout)
+_READOUT = _ReadoutType((("ancf", types.boolean), ("jidx", _I), ("jref", _V),
+                         ("tip_idx", _MI), ("tip_ref", _M),
+                         *((f"{name}1", typ) for name, typ in _LINK),
+                         *((f"{name}2", typ) for name, typ in _LINK)))
+
+
 @njit(cache=True)
-def _truth_into(u, v, ancf, jidx, jref, tip_idx, tip_ref,
-                i1, r1, h1, hr1, d1, dd1, p1, H1, f1, w1,
-                i2, r2, h2, hr2, d2, dd2, p2, H2, f2, w2, out):
+def new_readout(ancf, jidx, jref, tip_idx, tip_ref,
+                idx1, ref1, hub_idx1, hub_ref1, d1, dd1, projector1, H_quad1, phi_T1, rho_w1,
+                idx2, ref2, hub_idx2, hub_ref2, d2, dd2, projector2, H_quad2, phi_T2, rho_w2):
+    """A `Readout` of these arrays (shared, not copied)."""
+    r = structref.new(_READOUT)
+    r.ancf, r.jidx, r.jref, r.tip_idx, r.tip_ref = ancf, jidx, jref, tip_idx, tip_ref
+    r.idx1, r.ref1, r.hub_idx1, r.hub_ref1, r.d1, r.dd1 = idx1, ref1, hub_idx1, hub_ref1, d1, dd1
+    r.projector1, r.H_quad1, r.phi_T1, r.rho_w1 = projector1, H_quad1, phi_T1, rho_w1
+    r.idx2, r.ref2, r.hub_idx2, r.hub_ref2, r.d2, r.dd2 = idx2, ref2, hub_idx2, hub_ref2, d2, dd2
+    r.projector2, r.H_quad2, r.phi_T2, r.rho_w2 = projector2, H_quad2, phi_T2, rho_w2
+    return r
+
+
+@njit(cache=True)
+def readout_into(r, u, v, out):
     """The truth vector from Exudyn's ODE2 coordinates ``u`` and rates ``v``, in one
     compiled call (`ExudynPlant._joints` and `LinkField` written out)."""
-    n1, n2 = p1.shape[0], p2.shape[0]
+    n1, n2 = r.projector1.shape[0], r.projector2.shape[0]
     m = 2 + n1 + n2
+    jidx, jref = r.jidx, r.jref
     th1 = jref[0] + u[jidx[0]]
     hub2 = jref[1] + u[jidx[1]]
-    if ancf:
+    if r.ancf:
         sx, sy = jref[2] + u[jidx[2]], jref[3] + u[jidx[3]]
         sxd, syd = v[jidx[2]], v[jidx[3]]
         c, s = np.cos(th1), np.sin(th1)
@@ -364,8 +407,10 @@ def _truth_into(u, v, ancf, jidx, jref, tip_idx, tip_ref,
     e = 2 * m
     for k in range(2):
         for j in range(2):
-            out[e + 2 * k + j] = tip_ref[k, j] + u[tip_idx[k, j]]
-    out[e + 4], out[e + 6] = link_readout(u, v, ancf, i1, r1, h1, hr1, d1, dd1, p1, H1, f1, w1,
-                                          out[2:2 + n1], out[m + 2:m + 2 + n1])
-    out[e + 5], out[e + 7] = link_readout(u, v, ancf, i2, r2, h2, hr2, d2, dd2, p2, H2, f2, w2,
-                                          out[2 + n1:m], out[m + 2 + n1:2 * m])
+            out[e + 2 * k + j] = r.tip_ref[k, j] + u[r.tip_idx[k, j]]
+    out[e + 4], out[e + 6] = link_readout(u, v, r.ancf, r.idx1, r.ref1, r.hub_idx1, r.hub_ref1,
+                                          r.d1, r.dd1, r.projector1, r.H_quad1, r.phi_T1,
+                                          r.rho_w1, out[2:2 + n1], out[m + 2:m + 2 + n1])
+    out[e + 5], out[e + 7] = link_readout(u, v, r.ancf, r.idx2, r.ref2, r.hub_idx2, r.hub_ref2,
+                                          r.d2, r.dd2, r.projector2, r.H_quad2, r.phi_T2,
+                                          r.rho_w2, out[2 + n1:m], out[m + 2 + n1:2 * m])

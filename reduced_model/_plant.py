@@ -60,23 +60,23 @@ class ReducedPlant:
         self._basis_map = None if modal_basis is None else _projection(self.model.mode_shapes,
                                                                       self.modal_basis)
         self.sensors = SensorModel(sensors, self.modal_basis, self)
-        # Without gauges, quantisation, tip position or a foreign basis the measurement is
-        # the head of the state vector [θ, q, θ̇, q̇]: read it directly (a third of the
-        # per-step cost).
-        direct = (sensors.modal and sensors.strain_gauges is None
-                  and sensors.encoder_resolution == 0 and not sensors.tip_position
-                  and self._basis_map is None)
-        self._direct = (2 * n if sensors.rates else n) if direct else 0
         self._tau = np.zeros(2)
         self._Ts_nsteps = (None, 0)  # (last Ts, its number of internal steps)
         self._steps = 0  # internal steps since reset: time = steps · h without round-off drift
         self._work = self.model.new_workspace()[0]
         self.time = 0.0
 
-    def _measure(self) -> Measurement:
-        if self._direct:
-            return Measurement(self.time, self.sensors.names, self._x[:self._direct].copy())
+    def measure(self) -> Measurement:
+        """The measurement now."""
+        index = self.sensors.truth_index
+        if index is not None:  # the measured values are part of the truth vector
+            return Measurement(self.time, self.sensors.names, self.truth_vector()[index])
         return self.sensors.measure(self.time)
+
+    def measurement_index(self) -> np.ndarray | None:
+        """Where the measurement sits in the truth vector (None: gauges, quantisation or
+        the payload position make it more than those values)."""
+        return self.sensors.truth_index
 
     # --- sensor primitives (see reduced_model._sensors) ---------------------------------
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -114,10 +114,16 @@ class ReducedPlant:
             self._x[:] = x0
         self._steps = 0
         self.time = 0.0
-        return self._measure()
+        return self.measure()
 
     def step(self, tau, Ts: float, tip_force=None) -> Measurement:
-        """Hold joint torques ``tau`` (2,) [N m] for ``Ts`` seconds; return y(t + Ts).
+        """Hold joint torques ``tau`` (2,) [N m] for ``Ts`` seconds; return y(t + Ts)
+        (`advance`, then `measure`)."""
+        self.advance(tau, Ts, tip_force)
+        return self.measure()
+
+    def advance(self, tau, Ts: float, tip_force=None) -> None:
+        """Hold joint torques ``tau`` (2,) [N m] for ``Ts`` seconds.
 
         ``tau`` of length n applies generalised forces to every coordinate (the paper's
         idealised, unrealisable input); only the reduced plant accepts it.  ``tip_force``
@@ -146,7 +152,6 @@ class ReducedPlant:
         kern.rk4_advance_packed(ints, reals, wc, wr, self._x, tau_in, self.h, nsteps)
         self._steps += nsteps
         self.time = self._steps * self.h
-        return self._measure()
 
     def compiled_stepping(self) -> dict | None:
         """What a compiled loop needs to step this plant itself (`validation.run._sample.
@@ -176,18 +181,22 @@ class ReducedPlant:
 
     def truth_vector(self) -> np.ndarray:
         """[θ, q, θ̇, q̇ (q in the modal basis), tips, tip deflections, 0, 0]."""
+        out = np.empty(2 * (2 + sum(m.n for m in self.modal_basis)) + len(TRUTH_EXTRAS))
+        self.truth_into(out)
+        return out
+
+    def truth_into(self, out: np.ndarray) -> None:
+        """`truth_vector` written into ``out``."""
         n, x = self.model.n, self._x
         if self._basis_map is None:
-            out = np.empty(2 * n + len(TRUTH_EXTRAS))
             out[:2 * n] = x
         else:
-            q, q_dot = self.modal_state()
-            m = 2 + len(q)
-            out = np.empty(2 * m + len(TRUTH_EXTRAS))
-            out[:2], out[2:m], out[m:m + 2], out[m + 2:2 * m] = x[:2], q, x[n:n + 2], q_dot
+            m = 2 + self._basis_map.shape[0]
+            out[:2], out[m:m + 2] = x[:2], x[n:n + 2]
+            out[2:m] = self._basis_map @ x[2:n]
+            out[m + 2:2 * m] = self._basis_map @ x[n + 2:]
         kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-8:-2])
         out[-2:] = 0.0  # a modal field is represented exactly by its own modes
-        return out
 
 
 @functools.lru_cache(maxsize=64)

@@ -3,8 +3,12 @@
 A plant is anything with ``name``, ``state_size`` (length of the state ``reset`` takes),
 ``reset(state0) -> Measurement``, ``step(tau, Ts, tip_force=None) -> Measurement``,
 ``truth() -> TrueState`` and ``truth_vector()`` (the same numbers as one flat array
-[x, *TRUTH_EXTRAS], for the closed loop's per-sample recording).  The closed loop in
-`validation` talks to plants only through this interface.
+[x, *TRUTH_EXTRAS]).  The closed loop steps a plant without building objects per sample:
+``advance(tau, Ts, tip_force=None)`` (`step` without the measurement),
+``truth_into(out)`` (the truth vector written into ``out``), ``measure()`` (the
+measurement now) and ``measurement_index()`` (where the measurement sits in the truth
+vector when it is exactly those values, else None).  The closed loop in `validation`
+talks to plants only through this interface.
 """
 from __future__ import annotations
 
@@ -99,6 +103,14 @@ class Plant(Protocol):
     def truth(self) -> TrueState: ...
 
     def truth_vector(self) -> np.ndarray: ...
+
+    def advance(self, tau, Ts: float, tip_force=None) -> None: ...
+
+    def truth_into(self, out: np.ndarray) -> None: ...
+
+    def measure(self) -> Measurement: ...
+
+    def measurement_index(self) -> np.ndarray | None: ...
 
 
 def true_state_from_vector(time: float, v: np.ndarray) -> TrueState:

@@ -92,6 +92,14 @@ class SensorModel:
         if config.tip_position:
             names += ("tip_x", "tip_y")
         self.names = names
+        states = ("theta1", "theta2") + q_names
+        states += tuple(f"{n}_dot" for n in states)
+        direct = (config.strain_gauges is None or not config.modal) and \
+            config.encoder_resolution == 0 and not config.tip_position
+        #: Where each measured value sits in the plant's truth vector, when the measurement
+        #: is exactly those values (no gauges, no quantisation, no payload position).
+        self.truth_index = (np.array([states.index(m) for m in names], dtype=np.int64)
+                            if direct else None)
         self._samplers, self._fits = [], []
         if config.modal and config.strain_gauges is not None:
             k = STRAIN_QUANTITIES[config.strain_quantity]

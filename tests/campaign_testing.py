@@ -68,3 +68,18 @@ def campaign_toml(spec: dict) -> str:
             else:
                 lines.append(f"{key} = {value(v)}")
     return "\n".join(lines) + "\n"
+
+
+def wait_gone(group: int, timeout: float = 10.0) -> bool:
+    """Whether every process of process group ``group`` (a command started in its own
+    session, and every worker it forked) has ended within ``timeout`` seconds."""
+    import os
+    import time
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        try:
+            os.killpg(group, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.05)
+    return False

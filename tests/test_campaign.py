@@ -17,7 +17,7 @@ from campaign_testing import campaign_toml, metrics_table, stored_count
 from validation.run._config import ConfigError
 from validation.batch.campaign import campaign_from_mapping, expand, load_campaign, run_campaign
 from validation.verdicts.claims import CLAIMS, claim_columns, write_claims
-from validation.batch.executor import SerialRunner, make_runner
+from validation.batch.executor import LocalPoolRunner, SerialRunner, make_runner
 from validation.report.report import write_report
 from validation.run.results import RunResult
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
@@ -52,7 +52,7 @@ SMALL = {"name": "small", "scenario": {"duration": 0.3, "transient": 0.1,
      "sweep[0].random.true_params.Mp"),
     ({"scenario": {"duration": -1.0}}, "scenario.duration"),
     ({"sweep": [{"grid": {"nonsense.key": [1]}}]}, "nonsense"),
-    ({"scenario": {"duration": 1.0}}, "scenario.transient"),  # the default transient is 2 s
+    ({"scenario": {"duration": 1.0, "transient": 2.0}}, "scenario.transient"),
     ({"sweep": [{"grid": {"controller.options.kv_flex": [1.0]}}]}, "controller.options.kv_flex"),
     ({"name": "../elsewhere"}, "name"),  # a campaign name names a folder: never a path
     ({"name": "a/b"}, "name"),
@@ -131,8 +131,8 @@ def test_run_id_is_a_function_of_the_resolved_scenario():
 def test_runners_give_identical_metrics(tmp_path):
     c = campaign_from_mapping(SMALL)
     results = {}
-    with make_runner("local", 1) as serial:
-        assert isinstance(serial, SerialRunner)
+    with make_runner("local", 1) as serial:  # one worker process
+        assert isinstance(serial, LocalPoolRunner) and serial.workers == 1
         run_campaign(c, tmp_path / "serial", runner=serial, progress=False)
     results["serial"] = metrics_table(tmp_path / "serial")
     # Two forkserver workers; force: the test must also run on a one-core machine.
@@ -199,29 +199,6 @@ def test_resume_after_a_kill(tmp_path):
     assert files() == before  # nothing was run again
 
 
-_HALF_A_RESULT = """
-import os, struct
-from validation.batch.executor import LocalPoolRunner
-runner = LocalPoolRunner(2)
-pipe = runner.executor._result_queue._writer
-# What a worker killed while sending its result leaves: a header promising 1 MiB and a
-# few bytes of it.  The pool's manager thread now waits in recv() for the rest.
-os.write(pipe.fileno(), struct.pack("!i", 1 << 20) + b"partial")
-runner.abort()
-print("aborted")
-"""
-
-
-def test_an_abort_exits_although_a_killed_worker_left_half_a_result():
-    # Without closing the parent's end of the result pipe, the interpreter's exit joins
-    # the pool's manager thread, which never returns: the timeout would fire.  600 s
-    # covers the parent's warm-up (~1 s with cached kernels, ~4 min compiling them cold).
-    done = subprocess.run([sys.executable, "-c", _HALF_A_RESULT], capture_output=True,
-                          text=True, timeout=600)
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "aborted"
-
-
 def test_failed_runs_are_redone_only_on_request(tmp_path):
     c = campaign_from_mapping({"name": "f", "scenario": {"duration": 0.2, "transient": 0.1}})
     (run,) = expand(c)
@@ -283,6 +260,8 @@ def paper_claim_value(claim, metrics: dict, result) -> float:
         return worst("est_rms_slope_rate_")
     if claim.key == "noise_rejection":
         return worst("est_to_noise_")
+    if claim.key == "beats_zero":
+        return worst("est_to_signal_")
     if claim.key == "convergence":
         return worst("est_conv_")
     assert claim.key == "disturbance"
@@ -316,24 +295,36 @@ def test_claims_table_of_the_paper_campaign(tmp_path):
             expected = paper_claim_value(claim, run.metrics, run.load())
             # The same numbers through the same arithmetic: exact.
             assert verdict.value == expected, (col.key, claim.key)
-            # The verdict is the bound applied to the value, and every claim is judged.
-            assert verdict.verdict == ("holds" if expected <= claim.bound else "fails"), (
-                col.key, claim.key, expected)
+            # The verdict is the bound applied to the value, every claim is judged, and
+            # a truth-plant run without its mesh checks gets no verdict.
+            if col.key[1] == "exudyn":
+                assert verdict.verdict == "mesh not checked", (col.key, claim.key)
+                continue
+            judged = claim.judge(expected)
+            assert verdict.verdict in (judged, "window-sensitive"), (col.key, claim.key)
+            if claim.windowed:  # the family includes the scenario's own 2 s transient
+                assert (2.0, expected, judged) in verdict.windows, (col.key, claim.key)
         # Known outcomes with a physical reason, so that the table shows both verdicts:
-        # tracking holds (the issue's acceptance bound; measured 0.0096 / 0.0100 rad), and
-        # the sign observer cannot beat its own noisy input: its ±Ts·L chatter (1e-3 rad,
-        # 5e-4 m) is 10× and 50× the encoder and modal noise (measured estimate error /
-        # measurement error: 6 on the angles, 28 on q11).
-        assert col.verdicts["tracking"].verdict == "holds"
-        assert col.verdicts["noise_rejection"].verdict == "fails"
+        # tracking holds from a 2 s transient on (the issue's acceptance bound; measured
+        # 0.0096 / 0.0100 rad) — from rest the start-up error is still above 0.02 rad at
+        # 1 s, so the verdict is window-sensitive — and the sign observer cannot beat its
+        # own noisy input for any transient: its ±Ts·L chatter (1e-3 rad, 5e-4 m) is 10×
+        # and 50× the encoder and modal noise (measured estimate error / measurement
+        # error: 6 on the angles, 28 on q11).
+        if col.key[1] == "reduced":
+            tracking = col.verdicts["tracking"]
+            assert tracking.value <= 0.02
+            assert {T: v for T, _, v in tracking.windows}[4.0] == "holds"
+            assert col.verdicts["noise_rejection"].verdict == "fails"
     # claims.md: one table (one arm), first row the run of the system, then one row per
     # claim, each cell naming its column's verdict.
     lines = [ln for ln in table.splitlines() if ln.startswith("| ")]
     assert table.count("## Arm: ") == 1
-    body = lines[1:1 + 1 + len(CLAIMS)]  # after the header row
+    body = lines[1:1 + 2 + len(CLAIMS)]  # after the header row
     assert body[0].startswith("| run of the system")
-    for line, claim in zip(body[1:], CLAIMS):
-        cells = [c.strip() for c in line.strip().strip("|").split("|")][1:]
+    assert body[1].startswith("| truth plant under mesh refinement")
+    for line, claim in zip(body[2:], CLAIMS):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")][2:]  # claim, guards
         assert len(cells) == 2, line
         for cell, col in zip(cells, columns):
             assert cell.endswith(col.verdicts[claim.key].verdict) or \
@@ -360,9 +351,10 @@ def test_shipped_campaigns_expand():
     # Ts = 0.2 ms (2 plants × 2 starts × with/without the disturbance: 8).  mismatch: payload 2×4,
     # stiffness 2×3, model order 2×3, damping 2×3, FE mesh 3.  robustness: noise 2×4,
     # torque disturbances 2×5, sample time 2×4.  attribution: the PBC with each SMO.
+    # stator: 8 stator inertias × (PBC, PBC + sign SMO) at 0.2 ms + 4 at 1 ms.
     # robust: the three systems flexarm verify judges (the PBC with smo-paper, smo-bl, EKF).
     assert counts == {"attribution": 3, "mismatch": 29, "paper": 100, "robustness": 26,
-                      "robust": 3}
+                      "stator": 20, "robust": 3}
 
 
 def test_identifiers_stay_text_in_the_index_and_the_export(tmp_path):

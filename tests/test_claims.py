@@ -3,9 +3,12 @@
 Known-good and known-bad cases (DEVELOPERS: every criterion gets both): a perfect tracker
 passes the tracking, phase and disturbance claims and an idle one fails them; a perfect
 estimator passes every estimation claim while x̂ ≡ 0 and a pass-through of the noisy
-measurement fail; the idealised PBC passes the vibration claim from rest and rigid
-computed torque (no vibration damping) fails it.  Variants are made from one real run by
-replacing signals, so everything else (noise, deflections, metrics code) is real.
+measurement fail; a blind θ̂ = θd passes the angle claim and the noise-rejection row
+catches it; the convergence rule passes the EKF and noisy truth at 0.5σ and fails x̂ ≡ 0
+and constant biases of 0.1 rad and 5 mm; the idealised PBC passes the vibration claim
+from rest and rigid computed torque fails it; a vibration that decays across the window
+family is "window-sensitive".  Variants are made from real runs by replacing signals, so
+everything else (noise, deflections, metrics code) is real.
 """
 import dataclasses
 import math
@@ -21,7 +24,7 @@ from validation.run.results import RunResult
 from validation.run.scenario import scenario_from_mapping
 
 CLAIM = {c.key: c for c in CLAIMS}
-ESTIMATION = ("estimation", "flexible_rates", "noise_rejection", "convergence")
+ESTIMATION = ("estimation", "flexible_rates", "noise_rejection", "beats_zero", "convergence")
 NOISY = {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}
 
 
@@ -85,6 +88,18 @@ def test_a_perfect_estimator_passes_x_hat_zero_and_pass_through_fail(base_run):
     assert evaluate(CLAIM["noise_rejection"], stored(through)).value == pytest.approx(1.0)
     assert verdict("noise_rejection", through) == "fails"
     assert verdict("flexible_rates", through) == "fails"
+    # x̂ ≡ 0 scores exactly 1 on "beats x̂ ≡ 0": the strict bound fails it.
+    assert evaluate(CLAIM["beats_zero"], stored(null)).value == pytest.approx(1.0)
+
+
+def test_a_blind_estimate_passes_the_angle_claim_and_the_noise_row_catches_it(base_run):
+    """θ̂ = θd ignores the measurement: its error is the tracking error (≈ 5 mrad here,
+    inside 0.02 rad), but 50× the 1e-4 rad encoder noise."""
+    r = base_run
+    blind = replaced(r, xhat_theta1=r["theta1_ref"], xhat_theta2=r["theta2_ref"])
+    assert verdict("estimation", blind) == "holds"
+    assert verdict("noise_rejection", blind) == "fails"
+    assert "noise_rejection" in [c.key for c in CLAIMS if "blind" in c.guards]
 
 
 def test_the_paper_sign_observer_is_flagged_worse_than_its_measurement(base_run):
@@ -96,25 +111,44 @@ def test_the_paper_sign_observer_is_flagged_worse_than_its_measurement(base_run)
 
 
 @pytest.fixture(scope="module")
-def from_rest():
-    """10 s from rest on the reduced plant: the start-up kick excites the first mode,
-    which rings (ζ = 0.04 %) unless the controller damps it."""
+def ten_seconds():
+    """10 s on the reduced plant: from rest the start-up kick excites the first mode, which
+    rings (ζ = 0.04 %) unless the controller damps it; started moving with the reference
+    there is no kick."""
     out = {}
-    for kind in ("pbc-idealised", "ct"):
-        out[kind] = run_scenario(scenario_from_mapping(
-            {"duration": 10.0, "controller": {"kind": kind}}))
+    for kind, start in (("pbc-idealised", "rest"), ("ct", "rest"), ("pbc-idealised", "reference")):
+        out[kind, start] = run_scenario(scenario_from_mapping(
+            {"duration": 10.0, "controller": {"kind": kind}, "initial_state": start}))
     return out
 
 
-def test_vibration_claim_separates_damping_from_no_damping(from_rest):
-    ideal = evaluate(CLAIM["vibration"], stored(from_rest["pbc-idealised"]))
-    ct = evaluate(CLAIM["vibration"], stored(from_rest["ct"]))
+def test_vibration_claim_separates_damping_from_no_damping(ten_seconds):
+    bound = CLAIM["vibration"].bound
+    ideal = evaluate(CLAIM["vibration"], stored(ten_seconds["pbc-idealised", "reference"]))
+    ct = evaluate(CLAIM["vibration"], stored(ten_seconds["ct", "rest"]))
+    # Known good: the idealised PBC without a kick holds for every transient (measured
+    # < 1e-6 m); known bad: rigid computed torque from rest fails for every transient
+    # (measured 9.5 mm from 1 s, 5.4 mm from 2 s, 1.2 mm from 4 s: > 2 × the bound).
     assert ideal.verdict == "holds" and ct.verdict == "fails"
-    # Measured 0.30 mm vs 3.9 mm over 2-10 s: neither is at the edge of the 0.5 mm bound.
-    assert ct.value > 4 * CLAIM["vibration"].bound and ideal.value < 0.7 * CLAIM["vibration"].bound
-    # Both deflect: the quasi-static bending of the motion is not what is judged.
-    for r in from_rest.values():
-        assert all_metrics(r)["defl_late_max_1"] > 5e-3
+    assert max(x for _, x, _ in ideal.windows) < 0.1 * bound
+    assert min(x for _, x, _ in ct.windows) > 2 * bound
+    # The idealised PBC from rest damps the kick ten-fold every 2 s (measured 5.8, 0.60,
+    # 0.049 mm per window), but the 0.5 mm verdict depends on where the transient ends:
+    # it fails with a 1 s transient and holds from 2 s — window-sensitive, not "holds".
+    kicked = evaluate(CLAIM["vibration"], stored(ten_seconds["pbc-idealised", "rest"]))
+    assert kicked.verdict == "window-sensitive"
+    assert dict((T, v) for T, _, v in kicked.windows)[1.0] == "fails"
+    assert dict((T, v) for T, _, v in kicked.windows)[4.0] == "holds"
+    m = all_metrics(ten_seconds["pbc-idealised", "rest"])
+    assert m["vib_decay_1"] > math.log(5) / 2  # faster than five-fold per 2 s window
+    # Rigid CT, which has no vibration feedback, still sees its kick decay (structural
+    # damping and the loop's coupling): measured about five-fold per 2 s.
+    assert all_metrics(ten_seconds["ct", "rest"])["vib_decay_1"] > math.log(2) / 2
+    # Both runs from rest deflect: the quasi-static bending of the motion is not what is
+    # judged.  (The idealised PBC started on the reference forces the modal coordinates
+    # themselves to zero: it does not bend at all, measured 5e-6 m.)
+    for key in (("pbc-idealised", "rest"), ("ct", "rest")):
+        assert all_metrics(ten_seconds[key])["defl_late_max_1"] > 5e-3
 
 
 def test_a_diverged_run_is_a_result_with_its_reason(base_run):
@@ -126,7 +160,136 @@ def test_a_diverged_run_is_a_result_with_its_reason(base_run):
     assert [c.arm for c in columns] == ["default", "table1"]
     table = claims_tables(columns)[1]
     assert table["rows"][0]["cells"] == ["DIVERGED: " + diverged.message]
-    for claim, row in zip(CLAIMS, table["rows"][1:]):
+    assert table["rows"][1]["key"] == "mesh"  # the reduced plant has no mesh to check
+    assert table["rows"][1]["cells"] == ["— (reduced plant)"]
+    for claim, row in zip(CLAIMS, table["rows"][2:]):
         # The disturbed run is not among these runs: "not run", never a value.
         assert row["cells"] == ["— (diverged)" if claim.run == SYSTEM else "not run"]
     assert all(math.isnan(v.value) for v in columns[1].verdicts.values())
+
+
+# --- the convergence rule: known-good and known-bad ------------------------------------------
+@pytest.fixture(scope="module")
+def ekf_run():
+    """The PBC fed by the EKF (noisy full-state measurement), 6 s from rest on the reduced
+    plant; the observer starts 0.1 rad, 5 mm, 0.3 rad/s, 0.05 m/s off."""
+    return run_scenario(scenario_from_mapping({
+        "duration": 6.0, "sensors": NOISY,
+        "observer": {"kind": "ekf", "initial_error": [0.1, 5e-3, 0.3, 0.05]}}))
+
+
+def _sigma(state: str) -> float:
+    return NOISY["rate_noise"] if state.endswith("_dot") else \
+        NOISY["encoder_noise"] if state.startswith("theta") else NOISY["modal_noise"]
+
+
+def test_convergence_passes_the_ekf_and_noisy_truth(ekf_run):
+    r = ekf_run
+    states = [n.removeprefix("xhat_") for n in r.names_with("xhat_")]
+    rng = np.random.default_rng(7)
+    noisy = replaced(r, **{f"xhat_{s}": r[s] + 0.5 * _sigma(s) * rng.standard_normal(r.time.size)
+                          for s in states})
+    for run in (r, noisy):
+        v = evaluate(CLAIM["convergence"], stored(run))
+        assert v.verdict == "holds", v
+    # The EKF starts 0.1 rad off and corrects from the first samples: every state is
+    # within its tolerance over the first full 0.1 s window (measured 0 s).
+    assert evaluate(CLAIM["convergence"], stored(r)).value < 0.2
+
+
+def test_convergence_fails_x_hat_zero_and_constant_biases(ekf_run):
+    r = ekf_run
+    states = [n.removeprefix("xhat_") for n in r.names_with("xhat_")]
+    null = replaced(r, **{f"xhat_{s}": np.zeros_like(r.time) for s in states})
+    angles = replaced(r, xhat_theta1=r["theta1"] + 0.1, xhat_theta2=r["theta2"] - 0.1)
+    modal = replaced(r, **{f"xhat_{s}": r[s] + 5e-3 for s in states
+                           if s.startswith("q") and not s.endswith("_dot")})
+    for bad in (null, angles, modal):
+        v = evaluate(CLAIM["convergence"], stored(bad))
+        assert v.verdict == "fails" and math.isinf(v.value), v
+    # A single biased state is enough: 0.1 rad on θ1 alone, 5 mm on q12 alone.
+    for state, bias in (("theta1", 0.1), ("q12", 5e-3)):
+        one = replaced(r, **{f"xhat_{state}": r[state] + bias})
+        v = evaluate(CLAIM["convergence"], stored(one))
+        assert v.verdict == "fails" and v.note == f"never, {state}", v
+
+
+# --- the window family ---------------------------------------------------------------------------
+def test_a_decaying_kick_is_window_sensitive_a_steady_vibration_is_not(base_run):
+    """A 1 Hz ringing of 1.5 mm decaying at 0.5/s fails the 0.5 mm bound measured from 1 s
+    and holds from 4 s: the verdict depends on the transient.  A steady 1 mm ringing fails
+    for every transient."""
+    r = base_run
+    ring = np.sin(2 * np.pi * r.time)
+    kick = replaced(r, tip_defl1=1.5e-3 * np.exp(-0.5 * r.time) * ring + r["tip_defl1"],
+                    tip_defl2=0 * r.time)
+    steady = replaced(r, tip_defl1=1e-3 * ring, tip_defl2=0 * r.time)
+    v = evaluate(CLAIM["vibration"], stored(kick))
+    assert v.verdict == "window-sensitive", v
+    family = {T: verdict for T, _, verdict in v.windows}
+    assert family[1.0] == "fails" and family[4.0] == "holds"
+    flip = min(T for T, verdict in family.items() if verdict == "holds")
+    # The note names the transients on either side of the flip.
+    assert f"holds for transient {flip:g}" in v.note and "fails for transient 1" in v.note
+    # Each verdict of the family is the bound applied to that transient's value.
+    bound = CLAIM["vibration"].bound
+    assert all((x <= bound) == (verdict == "holds") for _, x, verdict in v.windows)
+    s = evaluate(CLAIM["vibration"], stored(steady))
+    assert s.verdict == "fails" and {x for _, _, x in s.windows} == {"fails"}
+    # The note reports the decay: the steady ringing's rate is ~0, the kick's ~0.5/s.
+    assert "decay" in v.note and "decay" in s.note
+
+
+# --- mesh convergence of the truth plant ---------------------------------------------------
+@pytest.fixture(scope="module")
+def mesh_store(tmp_path_factory):
+    """The paper's system on the truth plant, 2 s from the reference, on both arms (Table 1
+    at Ts = 0.2 ms, where its sampled loop runs; the default arm at 1 ms), stored with
+    their mesh checks (ANCF 8 and GE 32 el/link)."""
+    from validation.batch.campaign import Campaign, PlannedRun, run_campaign
+    from validation.batch.store import ResultStore, run_id
+    from validation.run.scenario import scenario_to_mapping
+    from validation.verdicts.mesh import run_checks
+    out = tmp_path_factory.mktemp("mesh")
+    planned = []
+    for arm, Ts in (("table1", 2e-4), ("default", 1e-3)):
+        s = scenario_from_mapping({
+            "name": f"t/{SYSTEM}", "arm": arm, "Ts": Ts, "duration": 2.0, "transient": 1.0,
+            "initial_state": "reference", "sensors": NOISY,
+            "plant": {"kind": "exudyn", "step": Ts},
+            "observer": {"kind": "smo-paper", "initial_error": [0.1, 5e-3, 0.3, 0.05]}})
+        planned.append(PlannedRun(run_id(scenario_to_mapping(s)), s, "t"))
+    run_campaign(Campaign("t", {}, ()), out, only=planned, progress=False)
+    summary = run_checks(ResultStore(out).rows(), out, progress=False)
+    assert summary.planned == 4 and summary.failed == 0
+    return ResultStore(out)
+
+
+@pytest.mark.slow  # six Exudyn runs, GE 32 el/link at Ts = 0.2 ms among them: ~20-30 s
+def test_mesh_check_marks_table1_not_converged_and_the_default_arm_converged(mesh_store):
+    rows = mesh_store.rows()
+    columns = {c.arm: c for c in claim_columns(rows)}
+    assert len(columns) == 2  # the check runs are checks, not columns of their own
+    table1, default = columns["table1"], columns["default"]
+    # Table 1: the tracking error moves with the mesh (measured 0.075 / 0.044 / 0.032 rad
+    # on ANCF 4 / 8 / GE 32 from 1 to 2 s): "not converged" with every mesh's value, no verdict.
+    v = table1.verdicts["tracking"]
+    assert v.verdict == "not converged"
+    assert [label for label, _ in v.meshes] == ["ANCF 4 el/link", "ANCF 8 el/link",
+                                                "GE 32 el/link"]
+    values = [x for _, x in v.meshes]
+    assert max(values) - min(values) > 0.3 * max(values)
+    for label, _ in v.meshes:
+        assert label in v.note
+    tables = {t["arm"]: t for t in claims_tables(list(columns.values()))}
+    assert tables["table1"]["rows"][1]["cells"][0].startswith("NOT CONVERGED")
+    assert any("no mesh limit" in n for n in tables["table1"]["notes"])
+    # The default arm (stator 0.01 kg m²): every judged value agrees on the three meshes.
+    for key, verdict in default.verdicts.items():
+        assert verdict.verdict not in ("not converged", "mesh not checked"), (key, verdict)
+    assert tables["default"]["rows"][1]["cells"][0].startswith("converged against")
+    assert tables["default"]["notes"] == []
+    # Without its checks a truth-plant run gets no verdict at all.
+    alone = claim_columns([r for r in rows if r.sweep != "mesh-check"])
+    assert {v.verdict for c in alone for v in c.verdicts.values()} <= {
+        "mesh not checked", "n/a", "not run"}

@@ -57,3 +57,110 @@ def test_bad_input_one_line_exit_2(tmp_path, args, text):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("flexarm: error:"), proc.stderr
     assert text in lines[0]
+
+
+def test_modes_table1_prints_the_independent_reference_without_negative_zero(capsys):
+    assert main(["modes", "--table1"]) == 0
+    out = capsys.readouterr().out
+    # DESIGN.md's independent references (converged Euler–Bernoulli FE), next to ours.
+    assert "0.6316     3.8312     6.3499    33.6650" in out
+    assert "2.2359     6.1233    31.4140    34.3020" in out
+    assert out.count("gap to reference [%]") == 2 and "-0.0000" not in out
+    assert "the paper publishes no frequencies" in out
+
+
+# --- a first hour: single runs that say what they are and reproduce what is stored --------
+NOISY = {"duration": 0.6, "transient": 0.2, "sensors": {"encoder_noise": 1e-4,
+         "modal_noise": 1e-5, "rate_noise": 1e-3},
+         "observer": {"kind": "smo-bl", "initial_error": [0.1, 5e-3, 0.3, 0.05]}}
+
+
+@pytest.fixture(scope="module")
+def stored(tmp_path_factory):
+    """A results folder with two runs of one name (two seeds) from a campaign."""
+    from validation.batch.campaign import campaign_from_mapping, run_campaign
+    out = tmp_path_factory.mktemp("stored")
+    run_campaign(campaign_from_mapping({"name": "c", "scenario": NOISY, "sweep": [
+        {"name": "noisy", "grid": {"seed": [1, 2]}}]}), out, progress=False)
+    return out
+
+
+def test_a_short_run_states_its_window(tmp_path, capsys):
+    """The default transient fits a 1 s run (half of it) and the output says so."""
+    from validation.batch.store import ResultStore
+    assert main(["run", "--duration", "1", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "metrics after the 0.5 s transient, over 0.5–1 s" in out
+    (row,) = ResultStore(tmp_path).rows()
+    assert row.metrics["transient_s"] == 0.5 and row.config["transient"] == 0.5
+    assert row.name == "pbc@reduced"  # named from what it is, not "paper"
+
+
+def test_run_help_shows_every_default(capsys):
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    for text in ("(default: 20)", "(default: 0.001)", "(default: none)", "(default: pbc)",
+                 "noise: none", "transient 2 s, or half of a run shorter than 4 s",
+                 "campaigns/base.toml", "--like"):
+        assert text in out, text
+
+
+def test_rerun_like_a_stored_run_reproduces_its_metrics(stored, tmp_path, capsys):
+    """--like reruns the stored scenario exactly (noise, seed, initial error included)
+    and gives the stored metrics to 1e-12 (the same code, the same arithmetic: any
+    difference is a scenario that was not reproduced)."""
+    from validation.batch.store import ResultStore
+    row = ResultStore(stored).rows()[0]
+    assert main(["run", "--like", f"{stored}/{row.run_id}", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert f"rerunning {row.run_id} (c/noisy, stored in {stored}) exactly" in out
+    assert "the stored metrics are reproduced" in out
+    (again,) = ResultStore(tmp_path).rows()
+    assert again.run_id == row.run_id and again.name == row.name
+    for key, value in row.metrics.items():
+        if key in ("wall_s", "startup_s", "realtime_factor") or key in row.timings:
+            continue
+        if isinstance(value, float):
+            assert again.metrics[key] == pytest.approx(value, rel=1e-12, abs=1e-300, nan_ok=True), key
+        else:
+            assert again.metrics[key] == value, key
+
+
+def test_rerun_like_with_changes_says_which(stored, tmp_path, capsys):
+    from validation.batch.store import ResultStore
+    row = ResultStore(stored).rows()[0]
+    assert main(["run", "--like", f"{stored}/{row.run_id[:6]}", "--set", "seed=7",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "with 1 change(s): seed = 7 (was " in out and "reproduced" not in out
+
+
+def test_rerun_like_an_ambiguous_name_lists_the_ids(stored, capsys):
+    assert main(["run", "--like", f"{stored}/noisy"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "2 runs of" in err and "give one's id" in err
+
+
+def test_run_config_takes_a_campaigns_scenario_base(tmp_path, capsys):
+    from validation.batch.store import ResultStore
+    camp = tmp_path / "camp.toml"
+    camp.write_text('name = "x"\n[scenario]\nduration = 0.4\n[scenario.sensors]\n'
+                    'encoder_noise = 1e-4\n[[sweep]]\nname = "s"\ngrid.seed = [1, 2]\n')
+    assert main(["run", "--config", str(camp), "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    assert "is a campaign: running its [scenario] base (its 1 sweep(s) are not run" in out
+    (row,) = ResultStore(tmp_path / "o").rows()
+    assert row.config["sensors"]["encoder_noise"] == 1e-4 and row.config["duration"] == 0.4
+
+
+def test_show_draws_the_paper_figures_of_one_run(stored, capsys):
+    from validation.batch.store import ResultStore
+    row = ResultStore(stored).rows()[0]
+    assert main(["show", f"{stored}/{row.run_id}", "--no-open"]) == 0
+    folder = stored / "show" / row.run_id
+    names = sorted(p.name for p in folder.glob("*.png"))
+    assert names == ["fig3_tracking.png", "fig4_deflections.png", "fig5-6_rates.png",
+                     "fig7_estimation_errors.png", "fig8_phase_portrait.png"]
+    assert all((folder / n).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for n in names)
+    assert str(folder / "index.html") in capsys.readouterr().out

@@ -132,7 +132,6 @@ def test_every_command_reads_a_scenario_file_the_same_way(tmp_path, monkeypatch)
     """run, stability and attribute accept the same scenario file (with a ``name``, the
     case that once drifted) and hand the same scenario to their work."""
     from validation import cli
-    from validation.batch import worker
     from validation.verdicts import attribution
     path = tmp_path / "s.toml"
     path.write_text('name = "mine"\nduration = 0.5\ntransient = 0.1\n'
@@ -150,13 +149,16 @@ def test_every_command_reads_a_scenario_file_the_same_way(tmp_path, monkeypatch)
             raise Stop
         return fake
 
-    monkeypatch.setattr(worker, "execute_run", record("run"))
     monkeypatch.setattr(cli, "_stability", lambda runner, scenarios, *a, **k:
                         record("stability")(list(scenarios)))
     monkeypatch.setattr(attribution, "attribute", record("attribute"))
     monkeypatch.chdir(tmp_path)
     for argv in (["run", "--config", str(path)], ["stability", str(path), "--workers", "1"],
                  ["attribute", str(path), "--factors", "sampling", "--workers", "1"]):
+        # the scenarios compiled for are those the run's worker gets; the others compile
+        # nothing here (their work is recorded instead)
+        monkeypatch.setattr(cli, "compile_for", record("run") if argv[0] == "run" else
+                            lambda *a, **k: None)
         with pytest.raises(Stop):
             cli.main(argv)
     run, stab, att = seen["run"][0], seen["stability"][0], seen["attribute"][0]

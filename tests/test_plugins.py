@@ -86,7 +86,8 @@ def test_a_plugin_reproduces_the_builtin_pd(plugin_dir, plant):
             ("wall_s", "startup_s", "realtime_factor")]
     assert len(keys) > 20
     for k in keys:  # the same arithmetic in another order: agreement to 1e-9
-        assert plugin[k] == pytest.approx(builtin[k], rel=1e-9, abs=1e-12), k
+        # NaN on both (a metric the 3 s run is too short for, e.g. vib_decay) agrees.
+        assert plugin[k] == pytest.approx(builtin[k], rel=1e-9, abs=1e-12, nan_ok=True), k
 
 
 def test_flexarm_run_and_a_two_worker_campaign_with_plugins(plugin_dir):

@@ -1,7 +1,10 @@
 """Reports a reader can trust: tables well formed in HTML and markdown, every section
-from stored data, diverged runs named and never drawn as data, nothing from the
-network, what was run stated."""
+from stored data, diverged runs named and never drawn as data (marked in a strip of their
+own), nothing from the network, what was run stated, every table whole on the printed
+page, and an unchanged report not rendered again."""
 import re
+import shutil
+import subprocess
 from html.parser import HTMLParser
 
 import pytest
@@ -14,32 +17,44 @@ from validation.batch.store import ResultStore
 SPEC = {"name": "rep", "description": "report test",
         "scenario": {"duration": 3.0, "transient": 1.0, "observer": {"kind": "smo-bl"},
                      "sensors": {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}},
-        "report": {"figures": ["both"]},
-        "sweep": [{"name": "both", "grid": {"plant.kind": ["reduced", "exudyn"]}},
+        "report": {"figures": ["pbc+smo-paper"]},
+        # Named as the paper's system, so that the claims and the summary are drawn.
+        "sweep": [{"name": "both", "grid": {"plant.kind": ["reduced", "exudyn"]},
+                   "zip": {"name": ["pbc+smo-paper"]}},
                   # Ts = 8 ms is beyond the sampled loop's limit (~2.8 ms): it diverges.
                   {"name": "ts", "grid": {"Ts": [5e-4, 1e-3, 8e-3], "plant.step": [5e-4]}}]}
 
 
 class Tables(HTMLParser):
-    """Every <table>: its header cells and the cell count of each body row."""
+    """Every <table>: its header cells (count and texts) and the cell count of each body
+    row."""
 
     def __init__(self):
         super().__init__()
-        self.tables, self._row, self._in_head = [], None, False
+        self.tables, self._row, self._in_head, self._th = [], None, False, None
 
     def handle_starttag(self, tag, attrs):
         if tag == "table":
-            self.tables.append({"head": 0, "rows": []})
+            self.tables.append({"head": 0, "rows": [], "headers": []})
         elif tag == "thead":
             self._in_head = True
         elif tag == "tr":
             self._row = 0
         elif tag in ("td", "th") and self._row is not None:
             self._row += 1
+            if tag == "th":
+                self._th = []
+
+    def handle_data(self, data):
+        if self._th is not None:
+            self._th.append(data)
 
     def handle_endtag(self, tag):
         if tag == "thead":
             self._in_head = False
+        elif tag == "th" and self._th is not None:
+            self.tables[-1]["headers"].append(" ".join("".join(self._th).split()))
+            self._th = None
         elif tag == "tr" and self._row is not None:
             t = self.tables[-1]
             if self._in_head:
@@ -95,9 +110,15 @@ def test_what_was_run_and_what_diverged_is_stated(report):
     assert "http://" not in body and "https://" not in body and "<script" not in body
     assert page.count("data:image/png;base64,") >= 6  # paper figures, sweeps, validity map
     assert (out / "report" / "arm.gif").stat().st_size > 10_000
+    # The window the metrics are taken over, and the summary with margins and Δ.
+    assert "metrics after the transient: 1 s of 3 s runs" in md
+    assert "## Summary" in md and "margin +" in md and "Δ " in md
+    assert "track_max" not in md and "tau_tv" not in md  # human names, not metric keys
 
 
 def test_a_diverged_run_is_never_a_data_point(report, monkeypatch):
+    """Diverged runs are crimson × marks in a strip of their own: never on the axes that
+    hold the data, so a mark can never be read as a value in the data's y-range."""
     out, _, _ = report
     rows = [r for r in ResultStore(out).rows() if r.sweep == "ts"]
     drawn = []
@@ -105,12 +126,93 @@ def test_a_diverged_run_is_never_a_data_point(report, monkeypatch):
     real_plot = figures.plt.Axes.plot
 
     def spy(ax, *args, **kw):
-        drawn.append((args, kw))
+        drawn.append((ax, args, kw))
         return real_plot(ax, *args, **kw)
     monkeypatch.setattr(figures.plt.Axes, "plot", spy)
     sweep_figures("ts", rows)
-    data_x = [x for args, kw in drawn if kw.get("label") and args and "marker" in kw
-              for x in args[0]]
-    marks = [x for args, kw in drawn if args and args[-1] == "x" for x in args[0]]
+    data = [(ax, args) for ax, args, kw in drawn if kw.get("label") and args and "marker" in kw]
+    marks = [(ax, args) for ax, args, kw in drawn if args and args[-1] == "x"]
+    data_x = [x for _, args in data for x in args[0]]
     assert 8.0 not in data_x  # Ts = 8 ms has no value...
-    assert 8.0 in marks  # ...it is marked as diverged
+    assert 8.0 in [x for _, args in marks for x in args[0]]  # ...it is marked as diverged
+    data_axes = {id(ax) for ax, _ in data}
+    assert marks and all(id(ax) not in data_axes for ax, _ in marks)
+    for ax, _ in marks:  # the strip has a y-range of its own, shown without a scale
+        assert ax.get_ylim() == (0.0, 1.0) and not ax.get_yticks().size
+
+
+def test_attribution_rule_is_whole():
+    """attribution.md states the rule for diverged worlds from its first word."""
+    from validation.verdicts.attribution import DIVERGED_RULE
+    assert DIVERGED_RULE.startswith("Worlds that diverge or fail have no metrics. Rule: ")
+    assert DIVERGED_RULE.endswith("No diverged run's metric is ever used.")
+
+
+def test_an_unchanged_report_is_not_rendered_again(report):
+    """Same runs, same code: the content key matches and nothing is written; a changed
+    input (here: the campaign's report settings) changes the key."""
+    from validation.report.report import content_key, report_is_current
+    out, _, _ = report
+    html = out / "report" / "report.html"
+    assert report_is_current(out)
+    before = html.stat().st_mtime_ns
+    write_report(out, progress=False)
+    assert html.stat().st_mtime_ns == before
+    key = content_key(out, animate=True)
+    assert content_key(out, animate=False) != key
+    store = ResultStore(out)
+    store.set_campaign("rep", {"description": "changed"})
+    store.close()
+    assert not report_is_current(out)
+
+
+CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome")
+                 if shutil.which(n)), None)
+PDFTOTEXT = shutil.which("pdftotext")
+
+
+def word_pieces(text: str) -> list[str]:
+    """The letter/digit runs of a header: what survives any line break the browser or
+    pdftotext makes inside it."""
+    return re.findall(r"\w+", text)
+
+
+@pytest.mark.skipif(not (CHROMIUM and PDFTOTEXT), reason="the print test needs chromium and "
+                    "pdftotext: apt-get install chromium poppler-utils")
+def test_the_printed_report_shows_every_column_of_every_table(report, tmp_path):
+    """Print report.html with headless Chromium, read the PDF back with
+    ``pdftotext -layout``, and find every table's header row: a line holding the first
+    word of every header cell, left to right (headers are top-aligned, so their first
+    lines share a line), with every word of every header in it or the 4 lines below.  A
+    table cut at the page's edge loses its right columns, collapsed sections that stay
+    collapsed lose their tables: either fails here."""
+    out, page, _ = report
+    pdf = tmp_path / "report.pdf"
+    subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu",
+                    "--disable-background-networking", "--no-pdf-header-footer",
+                    f"--print-to-pdf={pdf}", (out / "report" / "report.html").as_uri()],
+                   capture_output=True, timeout=180, check=True)
+    text = subprocess.run([PDFTOTEXT, "-layout", str(pdf), "-"], capture_output=True,
+                          text=True, check=True).stdout
+    lines = text.splitlines()
+    parser = Tables()
+    parser.feed(page)
+    assert len(parser.tables) >= 6
+    at = 0
+    for table in parser.tables:
+        firsts = [word_pieces(h)[0] for h in table["headers"]]
+
+        def holds_in_order(line):
+            pos = 0
+            for w in firsts:
+                pos = line.find(w, pos)
+                if pos < 0:
+                    return False
+                pos += len(w)
+            return True
+        found = next((i for i in range(at, len(lines)) if holds_in_order(lines[i])), None)
+        assert found is not None, f"no printed header row for {table['headers']}"
+        block = " ".join(lines[found:found + 5])
+        missing = [h for h in table["headers"] if not all(w in block for w in word_pieces(h))]
+        assert not missing, f"headers cut from the printed table: {missing}"
+        at = found + 1

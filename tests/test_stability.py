@@ -1,39 +1,9 @@
 """The sampled-data stability map explains why the paper's own arm diverges at 1 ms."""
 import math
+from types import SimpleNamespace
 
-import numpy as np
-import pytest
-
-from reduced_model import ArmModel, ArmParameters
 from validation.verdicts import stability
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
-
-
-@pytest.mark.parametrize("arm, params", [("default", ArmParameters()),
-                                         ("table1", ArmParameters.table1())])
-def test_predicted_limit_matches_the_joint_2_estimate(arm, params):
-    """The PBC's sampled joint-2 rate feedback K_v2 + M22 Λ2 on the joint-2 mobility
-    (M⁻¹)22 must satisfy Ts·(M⁻¹)22·G22 < 2 (explicit Euler).  The map's prediction is the
-    2×2 eigenvalue version; joint 2 dominates it (joint 1's mobility is ~1, joint 2's 91
-    or 920), so the scalar estimate agrees to a few per cent."""
-    config = scenario_to_mapping(scenario_from_mapping({"arm": arm}))
-    M = ArmModel(params).mass_matrix(np.zeros(6))
-    mobility = np.linalg.inv(M)[1, 1]
-    assert mobility == pytest.approx(91.19 if arm == "default" else 919.9, rel=1e-3)
-    scalar = 2 / (mobility * (5.0 + 3.0 * M[1, 1]))  # K_v2 = 5, Λ2 = 3 (PBC defaults)
-    predicted = stability.predicted_limit(config)
-    assert predicted == pytest.approx(scalar, rel=0.05)
-    # Finding 1 of the review: Table 1 cannot be sampled at 1 ms, the default arm can.
-    assert (predicted < 1e-3) == (arm == "table1")
-
-
-def test_predicted_limit_only_for_joint_space_laws():
-    config = scenario_to_mapping(scenario_from_mapping({"controller": {"kind": "pd"}}))
-    pd = stability.predicted_limit(config)
-    # PD: G = K_d = diag(18.1, 8.2) on the default arm's mobility (joint 2: 91).
-    assert pd == pytest.approx(2 / (91.19 * 8.2), rel=0.05)
-    plugin = dict(config, controller={"kind": "mymodule:Law", "options": {}})
-    assert math.isnan(stability.predicted_limit(plugin))
 
 
 def test_a_small_map_finds_the_table1_limit(tmp_path, monkeypatch):
@@ -47,12 +17,74 @@ def test_a_small_map_finds_the_table1_limit(tmp_path, monkeypatch):
     results, summary = stability.stability_map(cases, tmp_path, progress=False)
     by_arm = {r.case.arm: r for r in results}
     assert summary.failed == 0
-    # Table 1: stable at 0.2 ms, diverged at 1 ms (the review's finding, reproduced).
+    # Table 1: stable at 0.2 ms, diverged at 1 ms (the review's finding, reproduced); both
+    # limits are the same here, and nothing above them is good again.
     t1 = by_arm["table1"]
-    assert t1.largest_stable == 2e-4 and t1.first_unstable == 1e-3
-    assert "exceeds" in t1.reason
+    assert t1.divergence.largest == 2e-4 and t1.divergence.first_bad == 1e-3
+    assert t1.divergence.outcome == "diverged" and "exceeds" in t1.divergence.reason
+    assert t1.tracking.largest == 2e-4 and t1.non_monotone == [] and t1.failed == []
     # The default arm (stator inertia) is stable at 1 ms; its limit lies below 5 ms.
-    assert by_arm["default"].largest_stable == 1e-3 and by_arm["default"].first_unstable == 5e-3
+    default = by_arm["default"]
+    assert default.tracking.largest == 1e-3 and default.tracking.first_bad == 5e-3
     # The map can be rebuilt from the stored runs alone (what the report does).
     again = {r.case.arm: r for r in stability.load_stability(tmp_path)}
     assert again["table1"].tested == t1.tested
+
+
+def _row(status: str, track: float = 0.01, message: str = ""):
+    return SimpleNamespace(status=status, message=message,
+                           metrics={"track_max_1": track, "track_max_2": track / 2})
+
+
+def test_lost_tracking_without_divergence_is_not_called_unstable():
+    """The review's LQR case (Table 1, reduced plant): every run completes, the tracking
+    error crosses 0.1 rad at 4.46 ms and is back under it at 10 ms.  The map reports no
+    divergence up to 10 ms, tracking kept up to 3.98 ms, and the 10 ms run as a
+    non-monotone case of the tracking limit."""
+    rows = {1e-3: _row("ok", 0.03), 3.98e-3: _row("ok", 0.095), 4.46e-3: _row("ok", 0.101),
+            5e-3: _row("ok", 0.12), 1e-2: _row("ok", 0.086)}
+    tested = {Ts: stability.outcome(r) for Ts, r in rows.items()}
+    assert tested[4.46e-3][0] == "lost tracking" and tested[1e-2][0] == "stable"
+    case = stability.StabilityCase("lqr", "reduced", "table1",
+                                   scenario_to_mapping(scenario_from_mapping({"arm": "table1"})))
+    r = stability._result(case, tested)
+    assert math.isnan(r.divergence.first_bad) and r.divergence.largest == 1e-2
+    assert r.tracking.largest == 3.98e-3 and r.tracking.first_bad == 4.46e-3
+    assert r.tracking.outcome == "lost tracking" and r.tracking.non_monotone == (1e-2,)
+    assert r.non_monotone == ["kept tracking at 10 ms above the first lost tracking at 4.46 ms"]
+    row = stability.stability_rows([r])[0]
+    assert row["no_divergence"] == "10" and row["first_divergence"] == "> 10"
+    assert row["first_loss"] == "4.46 (lost tracking)" and "10 ms" in row["notes"]
+
+
+def test_a_failed_run_is_failed_not_unstable():
+    tested = {1e-3: stability.outcome(_row("ok")),
+              2e-3: stability.outcome(_row("failed", message="Exudyn solver failed at t = 0.1 s")),
+              5e-3: stability.outcome(_row("diverged", message="|θ̇| exceeds 100 rad/s"))}
+    case = stability.StabilityCase("pbc", "exudyn", "default",
+                                   scenario_to_mapping(scenario_from_mapping({})))
+    r = stability._result(case, tested)
+    # Nothing is known at 2 ms: both limits stop below it, and it is not a divergence.
+    assert r.divergence.largest == 1e-3 and r.divergence.outcome == "failed"
+    assert r.failed == [2e-3]
+    assert "FAILED at 2 ms" in stability.stability_rows([r])[0]["notes"]
+    # A failure is not bisected towards: it says nothing about where a limit lies.
+    assert stability._bisection_points(tested) == set()
+
+
+def test_a_stability_campaign_with_a_solver_failure_exits_1(tmp_path, monkeypatch, capsys):
+    """A Newton tolerance below ANCF's round-off makes Exudyn give up (as in the
+    reliability suite): the command says which run failed and exits 1."""
+    from validation.cli import main
+    monkeypatch.setattr(stability, "GRID", (1e-3,))
+    monkeypatch.setattr(stability, "BISECTIONS", 0)
+    monkeypatch.setattr(stability, "DURATION", 0.2)
+    cfg = tmp_path / "health.toml"
+    cfg.write_text("[plant]\nkind = \"exudyn\"\nnewton_tolerance = 1e-16\n")
+    status = main(["stability", str(cfg), "--plant", "exudyn", "--arm", "default",
+                   "--out", str(tmp_path / "out"), "--workers", "1", "--no-progress"])
+    assert status == 1
+    err = capsys.readouterr().err
+    assert "1 stability run(s) failed" in err and "1 ms" in err
+    text = (tmp_path / "out" / "stability.md").read_text()
+    assert "FAILED at 1 ms" in text

@@ -8,6 +8,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -182,7 +183,7 @@ def test_include_caps(tmp_path, capsys):
     for i in range(22):  # each file includes the next twice: 2^22 loads without a cache
         nxt = f'"f{i + 1}.toml"' if i < 21 else None
         (tmp_path / f"f{i}.toml").write_text(f"include = [{nxt}, {nxt}]\n" if nxt else "duration = 1.0\n")
-    for name, text in (("deep.toml", "nested too deeply"), ("zero.toml", "not a regular file"),
+    for name, text in (("deep.toml", "nested deeper than 32"), ("zero.toml", "not a regular file"),
                        ("f0.toml", "nested deeper than 16")):
         start = time.time()
         assert main(["run", "--config", str(tmp_path / name)]) == 2
@@ -220,3 +221,250 @@ def test_failed_runs_keep_the_exit_status_on_a_plain_rerun(tmp_path):
     summary = run_campaign(c, tmp_path, progress=False)
     assert summary.failed_before == [run.run_id] and summary.any_failed
     assert "1 failed earlier" in summary.line("f", tmp_path)
+
+
+# --- a store that trusts nothing it reads (issue 23) ----------------------------------------
+EVIL = '''
+import pathlib
+pathlib.Path(__file__).with_name("IMPORTED").write_text("this module was imported")
+
+
+class X:
+    """A plug-in whose import leaves a mark."""
+    def __init__(self, model):
+        pass
+
+    def __call__(self, t, x, ref):
+        n = x.shape[0] // 2
+        theta_d, dtheta_d, _ = ref(t)
+        return 30.0 * (theta_d - x[:2]) + 18.0 * (dtheta_d - x[n:n + 2])
+'''
+
+
+@pytest.fixture(scope="module")
+def healthy(tmp_path_factory):
+    """A results folder of 3 runs, one of them by the plug-in ``evilpkg.mod:X`` (its
+    package in ``work/``), and the metrics of each run."""
+    root = tmp_path_factory.mktemp("healthy")
+    (root / "work" / "evilpkg").mkdir(parents=True)
+    (root / "work" / "evilpkg" / "__init__.py").write_text("")
+    (root / "work" / "evilpkg" / "mod.py").write_text(EVIL)
+    c = campaign_from_mapping({"name": "h", "scenario": {"duration": 0.5, "transient": 0.1},
+                               "sweep": [{"zip": {"name": ["a", "b", "plugin"],
+                                                  "seed": [0, 1, 0],
+                                                  "controller.kind": ["pbc", "pbc",
+                                                                      "evilpkg.mod:X"]}}]})
+    sys.path.insert(0, str(root / "work"))
+    try:
+        run_campaign(c, root / "results", progress=False)
+    finally:
+        sys.path.remove(str(root / "work"))
+        sys.modules.pop("evilpkg.mod", None)
+        sys.modules.pop("evilpkg", None)
+    (root / "work" / "evilpkg" / "IMPORTED").unlink()
+    store = ResultStore(root / "results")
+    metrics = {r.run_id: r.metrics for r in store.rows()}
+    store.close()
+    return root, c, metrics
+
+
+@pytest.fixture()
+def folder(healthy, tmp_path):
+    """A copy of the healthy results folder (and the plug-in's work directory)."""
+    import shutil
+    root, c, metrics = healthy
+    shutil.copytree(root / "results", tmp_path / "results")
+    shutil.copytree(root / "work", tmp_path / "work")
+    return tmp_path / "results", c, metrics
+
+
+def flexarm(*args, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "validation.cli", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd)
+
+
+def one_line_error(done, status: int, *texts) -> None:
+    assert done.returncode == status, done
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("flexarm: error:"), done.stderr
+    assert all(t in lines[0] for t in texts), lines[0]
+    assert "Traceback" not in done.stdout + done.stderr
+
+
+def test_repair_adopts_a_run_file_only_under_its_own_id(folder):
+    out, c, metrics = folder
+    ids = {r.name: r.run_id for r in ResultStore(out).rows()}
+    a, b = (out / "runs" / f"{ids[name]}.npz" for name in ("h/a", "h/b"))
+    b.write_bytes(a.read_bytes())  # one run's file copied over another's
+    (out / "index.sqlite").unlink()
+    done = flexarm("repair", out)
+    assert done.returncode == 0, done.stderr
+    assert f"unreadable: 1 ({b.stem} (its scenario does not hash to its name" in done.stdout
+    rows = {r.run_id: r for r in ResultStore(out).rows()}
+    assert b.stem not in rows and a.stem in rows  # never two rows of one scenario
+    assert (out / "runs" / f"{b.name}.damaged").exists()
+    summary = run_campaign(c, out, progress=False)  # so the overwritten run is redone
+    assert (summary.skipped, summary.ok) == (2, 1)
+    assert {r.run_id: r.metrics["track_max_1"] for r in ResultStore(out).rows()} == \
+        {rid: m["track_max_1"] for rid, m in metrics.items()}
+
+
+def _index_pages_overwritten(out) -> None:
+    path = out / "index.sqlite"
+    data = bytearray(path.read_bytes())
+    middle = len(data) // 2
+    data[middle:middle + 4096] = np.random.default_rng(23).bytes(4096)
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("damage", ["random bytes mid-file", "0 bytes", "not a database"])
+def test_a_damaged_index_is_named_and_rebuilt_whatever_the_damage(folder, damage):
+    out, c, metrics = folder
+    (out / "metrics.csv").write_text((out / "metrics.csv").read_text())  # as exported
+    exported = (out / "metrics.csv").read_text()
+    if damage == "random bytes mid-file":
+        _index_pages_overwritten(out)
+    elif damage == "0 bytes":
+        (out / "index.sqlite").write_bytes(b"")
+    else:
+        (out / "index.sqlite").write_bytes(b"this is not a database" * 300)
+    cfg = out.parent / "h.toml"
+    cfg.write_text(campaign_toml({"name": "h", "scenario": {"duration": 0.5,
+                                                             "transient": 0.1}}))
+    for args in (["export", out], ["report", out, "--no-progress"],
+                 ["campaign", cfg, "--out", out, "--workers", "1", "--dry-run"]):
+        one_line_error(flexarm(*args), 2, "index", f"flexarm repair {out}")
+    assert (out / "metrics.csv").read_text() == exported  # never overwritten with less
+    done = flexarm("repair", out)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
+    assert "rebuilt: 1 (index.sqlite (unreadable; kept as index.sqlite.damaged))" in done.stdout
+    after = ResultStore(out)
+    assert {r.run_id: r.metrics for r in after.rows()} == metrics
+    assert after.verify() == {}
+
+
+def test_export_never_writes_fewer_runs_than_the_last_export_without_saying_so(folder):
+    out, c, metrics = folder
+    exported = (out / "metrics.csv").read_text()
+    victim = sorted(metrics)[0]
+    with sqlite3.connect(out / "index.sqlite") as db:  # a row lost from the index
+        db.execute("DELETE FROM runs WHERE run_id = ?", (victim,))
+    one_line_error(flexarm("export", out), 2, f"lacks 1 of the runs the last export listed "
+                                              f"(e.g. {victim})", "flexarm repair")
+    assert (out / "metrics.csv").read_text() == exported
+    done = flexarm("repair", out)  # adopts the run's file again
+    assert done.returncode == 0 and f"adopted: 1 ({victim})" in done.stdout, done
+    assert flexarm("export", out).returncode == 0
+
+
+def test_repair_skips_directories_named_like_run_files(folder):
+    out, c, metrics = folder
+    (out / "runs" / "0123456789ab.npz").mkdir()  # named like a run file
+    (out / "runs" / "not-an-id.npz").mkdir()
+    (out / "index.sqlite").unlink()
+    done = flexarm("repair", out)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
+    assert "skipped: 2 (runs/0123456789ab.npz (not a run file), runs/not-an-id.npz " \
+           "(not a run file))" in done.stdout
+    assert {r.run_id for r in ResultStore(out).rows()} == set(metrics)
+
+
+def test_run_ids_read_from_the_index_never_name_a_path(folder):
+    out, c, metrics = folder
+    victim_dir = out.parent / "victimdir"
+    victim_dir.mkdir()
+    (victim_dir / "precious.npz").write_text("precious")
+    crafted = "../../victimdir/precious"
+    with sqlite3.connect(out / "index.sqlite") as db:
+        db.execute("UPDATE runs SET run_id = ?, file = ? WHERE run_id = ?",
+                   (crafted, f"runs/{crafted}.npz", sorted(metrics)[0]))
+    for args in (["export", out], ["report", out, "--no-progress"]):
+        one_line_error(flexarm(*args), 2, repr(crafted), "is not a stored run",
+                       "flexarm repair")
+    done = flexarm("repair", out)
+    assert done.returncode == 0, done.stderr
+    assert f"dropped: 1 ({crafted!r} (not a stored run))" in done.stdout
+    assert (victim_dir / "precious.npz").read_text() == "precious"  # untouched
+    assert sorted(p.name for p in victim_dir.iterdir()) == ["precious.npz"]
+    assert {r.run_id for r in ResultStore(out).rows()} == set(metrics)  # re-adopted
+
+
+def test_reading_a_results_folder_never_imports_a_plugin(folder):
+    out, c, metrics = folder
+    work = out.parent / "work"  # the plug-in's package is importable from here
+    for args in (["report", out, "--no-progress", "--no-animation"], ["export", out],
+                 ["repair", out]):
+        done = flexarm(*args, cwd=work)
+        assert done.returncode == 0, done.stderr
+        assert not (work / "evilpkg" / "IMPORTED").exists(), args
+
+
+def _mounted(tmp_path, options: list[str], source="tmpfs") -> Path:
+    """A mount point under ``tmp_path`` (the test is skipped where mounting is not
+    allowed)."""
+    point = tmp_path / "mnt"
+    point.mkdir()
+    kind = ["-t", "tmpfs"] if source == "tmpfs" else ["--bind"]
+    done = subprocess.run(["mount", *kind, *options, source, str(point)], capture_output=True)
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount here: {done.stderr.decode().strip()}")
+    return point
+
+
+def _unmount(point) -> None:
+    subprocess.run(["umount", "-l", str(point)], check=True)  # lazy: even if still in use
+
+
+def test_a_full_disk_is_no_space_left_exit_1(folder, tmp_path):
+    import shutil
+    out, c, metrics = folder
+    point = _mounted(tmp_path, ["-o", "size=4M"])
+    try:
+        full = point / "results"
+        shutil.copytree(out, full)
+        with open(point / "filler", "wb") as fh:  # fill the disk
+            try:
+                while True:
+                    fh.write(b"\0" * 65536)
+            except OSError:
+                pass
+        cfg = tmp_path / "more.toml"
+        cfg.write_text(campaign_toml(spec("more", 2)))
+        for args in (["campaign", cfg, "--out", full, "--workers", "1", "--no-progress"],
+                     ["campaign", cfg, "--out", point / "new", "--workers", "1", "--no-progress"],
+                     ["run", "--duration", "0.5", "--set", "transient=0.1", "--out", full],
+                     ["export", full]):
+            one_line_error(flexarm(*args), 1, "no space left on the device")
+        # What is stored can still be read: the dry run lists it.
+        done = flexarm("campaign", cfg, "--out", full, "--dry-run")
+        assert done.returncode == 0 and "2 runs planned: 2 to run" in done.stdout, done
+        store = ResultStore(full)
+        assert {r.run_id for r in store.rows()} == set(metrics)
+        store.close()
+    finally:
+        _unmount(point)
+
+
+def test_a_read_only_folder_is_read_not_advised_to_repair(folder, tmp_path):
+    out, c, metrics = folder
+    point = _mounted(tmp_path, [], source=str(out))
+    try:
+        subprocess.run(["mount", "-o", "remount,ro,bind", str(point)], check=True)
+        cfg = out.parent / "h.toml"
+        cfg.write_text(campaign_toml({"name": "h", "scenario": {"duration": 0.5,
+                                                                 "transient": 0.1},
+                                      "sweep": [{"zip": {"name": ["a", "b"],
+                                                         "seed": [0, 1]}}]}))
+        done = flexarm("campaign", cfg, "--out", point, "--dry-run")
+        assert done.returncode == 0, done.stderr
+        assert "2 runs planned: 0 to run, 2 already stored" in done.stdout
+        for args in (["export", point], ["repair", point],
+                     ["campaign", cfg, "--out", point, "--workers", "1", "--retry-failed"]):
+            done = flexarm(*args)
+            one_line_error(done, 2, "read-only")
+            assert "repair " + str(point) not in done.stderr  # not the cure here
+        store = ResultStore(point)
+        assert {r.run_id: r.metrics for r in store.rows()} == metrics
+        store.close()
+    finally:
+        _unmount(point)

@@ -4,7 +4,8 @@ runs, verdicts and reports, and the ``flexarm`` command line.
 The work flows through four rooms: `validation.run` (a scenario, its laws, the closed
 loop, the result and its metrics), `validation.batch` (campaigns, where runs execute,
 the results store and the code fingerprint), `validation.verdicts` (the paper's claims,
-the stability map, attribution, regression bounds) and `validation.report`.  The public
+the stability map, attribution, regression bounds, linear validity: the ν-gap and the
+stability margin) and `validation.report`.  The public
 API is re-exported here and loaded on first use, so ``import validation`` stays cheap::
 
     from validation import run_scenario, scenario_from_mapping
@@ -27,6 +28,8 @@ _EXPORTS = {
     "campaign_from_mapping": "batch.campaign", "expand": "batch.campaign",
     "run_campaign": "batch.campaign", "make_runner": "batch.executor",
     "ResultStore": "batch.store",
+    "nu_gap": "verdicts.nugap", "stability_margin": "verdicts.nugap",
+    "reduced_linear_model": "verdicts.linear", "law_gain": "verdicts.linear",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -18,6 +18,14 @@ CAMPAIGN_BAD_RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 0\nrandom.seed = 
                       'random.true_params.Mp = {uniform = [0.0, 1.0]}\n'
 CAMPAIGN_OK = 'name = "x"\n[scenario]\nduration = 0.1\ntransient = 0.05\n'
 CAMPAIGN_PATH_NAME = 'name = "../x"\n'
+# Issue 23: errors that were tracebacks (OverflowError, RecursionError, TypeError) or did
+# not name their key.
+RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 2\nrandom.true_params.Mp = {{{}}}\n'
+CAMPAIGN_AXIS_NAME = 'name = "x"\n[[sweep]]\ngrid.name = ["../../../x", "a/b"]\n'
+BASELINE_NO_OP = ('[[check]]\nname = "c"\nmetric = "track_max_1"\nbound = 1.0\n'
+                  'scenario = "s"\n[scenarios.s]\nduration = 1.0\ntransient = 0.5\n')
+DEEP_LIST = "[" * 3000 + "]" * 3000
+DEEP_TABLE = "{a=" * 3000 + "1" + "}" * 3000
 
 # (argv, text — or texts — the single error line must contain); {tmp} is a scratch folder,
 # {out} the output folder that must not be created.
@@ -41,7 +49,7 @@ CASES = [
     (["run", "--Ts", "0.0015"], "Ts: 0.0015 s is not a whole multiple"),
     (["run", "--duration", "0"], "duration: must be > 0"),
     (["run", "--duration", "-5"], "duration: must be > 0"),
-    (["run", "--duration", "1.5"], ("transient: ", "leaves nothing")),
+    (["run", "--duration", "1.5", "--set", "transient=2"], ("transient: ", "leaves nothing")),
     (["run", "--duration", "1e4"], ("duration: ", "1e+07 samples (at most 5e+06")),
     (["run", "--set", "sensors.encoder_noise=1e4"], "sensors.encoder_noise: must be <= 1000"),
     (["run", "--name", ""], "name: must be a non-empty printable string"),
@@ -94,6 +102,30 @@ CASES = [
      "--scheduler: only for --executor dask"),
     (["campaign", "{tmp}/path-name.toml"], "name: must be a plain name"),
     (["report", "{tmp}"], "not a results folder"),
+    (["run", "--set", f"x={DEEP_LIST}"], "x: nested deeper than 32"),
+    (["run", "--set", f"controller.options.k={DEEP_TABLE}"],
+     "controller.options.k: nested deeper than 32"),
+    (["campaign", "{tmp}/uniform-inf.toml"],
+     ("sweep[0].random.true_params.Mp: uniform needs finite bounds", "[0.0, inf]")),
+    (["campaign", "{tmp}/uniform-both-inf.toml"],
+     ("sweep[0].random.true_params.Mp: uniform needs finite bounds", "[-inf, inf]")),
+    (["campaign", "{tmp}/loguniform-inf.toml"],
+     "sweep[0].random.true_params.Mp: loguniform needs finite bounds"),
+    (["campaign", "{tmp}/axis-name.toml"], ("sweep[0].grid.name: must be a plain name",
+                                            "'../../../x'")),
+    (["run", "--name", "a/b/c"], "name: must be a plain name or campaign/label"),
+    (["baseline", "check", "--file", "{tmp}/baseline-no-op.toml"],
+     "check[0].op: missing"),
+    (["run", "--observer", "smo-bl", "--set", 'observer.options.boundary_layer="x"'],
+     ("observer.options.boundary_layer: ", "got 'x'")),
+    (["run", "--controller", "builtins:type"], ("controller.kind: 'builtins:type'",
+                                                "signature")),
+    (["run", "--controller", "builtins:dict"], "controller.kind: 'builtins:dict'"),
+    (["run", "--controller", "functools:partial"], "controller.kind: 'functools:partial'"),
+    (["run", "--controller", "lqr", "--set", "controller.options.grid_points=100000000"],
+     ("controller.options.grid_points: ", "4..360")),
+    (["run", "--run-timeout", "0"], "--run-timeout: must be > 0"),
+    (["run", "--memory-limit", "10"], "--memory-limit: must be >= 1024 MiB"),
     (["baseline", "check", "--only", "no-such-check"], "no check matches"),
     (["modes", "--params", "{tmp}/broken.toml"], "invalid TOML"),
 ]
@@ -105,6 +137,10 @@ def scratch(tmp_path):
              "zip.toml": CAMPAIGN_ZIP, "unknown.toml": CAMPAIGN_UNKNOWN,
              "bad-scenario.toml": CAMPAIGN_BAD_SCENARIO, "bad-random.toml": CAMPAIGN_BAD_RANDOM,
              "ok.toml": CAMPAIGN_OK, "path-name.toml": CAMPAIGN_PATH_NAME,
+             "uniform-inf.toml": RANDOM.format("uniform = [0.0, inf]"),
+             "uniform-both-inf.toml": RANDOM.format("uniform = [-inf, inf]"),
+             "loguniform-inf.toml": RANDOM.format("loguniform = [1.0, inf]"),
+             "axis-name.toml": CAMPAIGN_AXIS_NAME, "baseline-no-op.toml": BASELINE_NO_OP,
              "a-file": "not a folder"}
     for name, text in files.items():
         (tmp_path / name).write_text(text)

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from campaign_testing import campaign_toml, metrics_table
+from campaign_testing import campaign_toml, metrics_table, stored_count
 from validation.batch.campaign import campaign_from_mapping, run_campaign
 from validation.batch.executor import SerialRunner
 from validation.run.loop import run_scenario
@@ -67,9 +67,18 @@ def _spec(n_runs: int) -> dict:
             "sweep": [{"grid": {"seed": list(range(n_runs))}}]}
 
 
+def _spec_with_a_long_last_run(n_runs: int) -> dict:
+    """``n_runs`` short runs (~50 ms each), then one 40 s run (~1 s): the campaign cannot
+    end while the short runs are being stored, however fast the machine."""
+    spec = _spec(n_runs)
+    spec["sweep"].append({"name": "long", "grid": {"duration": [40.0]}})
+    return spec
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_sigkill_at_random_moments_then_resume(seed, tmp_path):
-    spec = _spec(16)
+    n_short = 16
+    spec = _spec_with_a_long_last_run(n_short)
     cfg = tmp_path / "crash.toml"
     cfg.write_text(campaign_toml(spec))
     reference = tmp_path / "reference"
@@ -81,11 +90,15 @@ def test_sigkill_at_random_moments_then_resume(seed, tmp_path):
     for _ in range(3):  # kill it three times, at a random moment after it has started
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 text=True)
+        # The moment: once a random number of the short runs still to do are stored,
+        # plus a random part of one run (~50 ms) — inside a run, while a file is
+        # written or renamed, or while its row is committed.  The long last run keeps
+        # the campaign alive whatever that number is.
+        target = rng.randint(stored_count(out), n_short)
         start = time.time()
-        while (time.time() - start < 60 and not (out / "index.sqlite").exists()
-               and proc.poll() is None):
-            time.sleep(0.01)
-        time.sleep(rng.uniform(0.0, 0.8))
+        while time.time() - start < 300 and stored_count(out) < target and proc.poll() is None:
+            time.sleep(0.005)
+        time.sleep(rng.uniform(0.0, 0.05))
         assert proc.poll() is None, f"the campaign ended before the kill: {proc.stderr.read()}"
         proc.send_signal(signal.SIGKILL)
         proc.wait()
@@ -93,10 +106,11 @@ def test_sigkill_at_random_moments_then_resume(seed, tmp_path):
         # Written in the order: file (temporary name, then renamed), then its index row in
         # one transaction: whatever the moment of the kill, the index is readable and every
         # row has a complete file that verifies (metrics_table checks both) and loads.
-        store = ResultStore(out)
-        for row in store.rows():
-            store.load(row.run_id)  # never a truncated .npz
-        store.close()
+        if (out / "index.sqlite").exists():
+            store = ResultStore(out)
+            for row in store.rows():
+                store.load(row.run_id)  # never a truncated .npz
+            store.close()
     final = subprocess.run(cmd, capture_output=True, text=True)
     assert final.returncode == 0, final.stderr
     # Same numbers, no duplicate or missing rows.
@@ -147,3 +161,17 @@ def test_exudyn_solver_failure_is_recorded_and_nothing_stray_is_written(tmp_path
     assert len(rows) == 2 and len(failed) == 1 and failed[0].name == "health/fails"
     assert "Exudyn solver failed" in failed[0].message
     assert os.listdir(work) == []  # no solution/ or other Exudyn files in the working dir
+
+
+def test_a_diverged_run_prints_no_numpy_warnings(tmp_path):
+    """Gains of 1e300 overflow the metrics' squares and the float32 store: the run is
+    "diverged", its metrics inf or nan, and nothing but the report is printed."""
+    done = subprocess.run([sys.executable, "-m", "validation.cli", "run", "--controller", "pd",
+                           "--set", "controller.options.kp=[1e300, 1e300]", "--duration", "1",
+                           "--set", "transient=0.5", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert "diverged: " in done.stdout
+    assert "Warning" not in done.stderr + done.stdout, done.stderr
+    (row,) = ResultStore(tmp_path / "out").rows()
+    assert row.status == "diverged"

@@ -44,8 +44,8 @@ from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dott
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
            "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
-           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "RandomAxis",
-           "random_axis", "draw_points", "flatten_axes"]
+           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "run_name",
+           "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
@@ -111,7 +111,9 @@ def load_study(path: str | Path) -> Campaign:
     if is_campaign(data):
         return campaign_from_mapping(data, source=str(path))
     label = re.sub(r"[^A-Za-z0-9._+-]", "-", Path(path).stem).lstrip(".") or "scenario"
-    sweep = {"name": data["name"]} if isinstance(data.get("name"), str) else {}
+    sweep = {"name": data["name"]} if "name" in data else {}
+    if sweep:
+        check_label(sweep["name"], "name")  # names its run: the rule of every run's name
     base = {k: v for k, v in data.items() if k not in ("name", *_VERIFY_KEYS)}
     sections = {k: data.get(k, {}) for k in _VERIFY_KEYS}
     for key, value in sections.items():
@@ -143,6 +145,8 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
         for key in sweep:
             check(key in _SWEEP_KEYS, f"{where}.{key}",
                   f"unknown key (allowed: {', '.join(sorted(_SWEEP_KEYS))})")
+        if "name" in sweep:
+            check_label(sweep["name"], f"{where}.name")
     report = data.get("report", {})
     check(isinstance(report, dict), "report", "must be a table")
     for key in report:
@@ -261,6 +265,9 @@ def random_axis(path: str, spec, resolved_base: dict, where: str) -> RandomAxis:
         check(isinstance(arg, list) and len(arg) == 2 and all(
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in arg)
             and arg[0] <= arg[1], where, f"{kind} needs [low, high] with low <= high")
+        check(math.isfinite(arg[0]) and math.isfinite(arg[1])
+              and math.isfinite(arg[1] - arg[0]), where,
+              f"{kind} needs finite bounds less than 1.8e308 apart, got {arg!r}")
         check(kind == "uniform" or arg[0] > 0, where, "loguniform needs low > 0")
     base = None
     if scaled:
@@ -350,7 +357,6 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
     for i, sweep in enumerate(sweeps):
         where = f"sweep[{i}]"
         sweep_name = sweep.get("name", f"sweep{i}" if campaign.sweeps else campaign.name)
-        check(isinstance(sweep_name, str), f"{where}.name", "must be a string")
         for point in _sweep_points(sweep, resolved_base, where):
             data = deep_merge({}, campaign.base)
             for path, value in point.items():
@@ -358,8 +364,8 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
                     set_dotted(data, path, value, defaults=resolved_base)
                 except ConfigError as exc:
                     raise ConfigError(where, f"{path}: {exc.message}") from None
-            # Every run is named within its campaign: "campaign/<name axis or sweep name>".
-            set_dotted(data, "name", f"{campaign.name}/{point.get('name', sweep_name)}")
+            set_dotted(data, "name", run_name(campaign.name, point.get("name", sweep_name),
+                                              _name_axis(sweep, where)))
             try:
                 scenario = scenario_from_mapping(data)
             except ConfigError as exc:
@@ -371,6 +377,30 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
             check(len(runs) <= MAX_RUNS, "sweep", f"the campaign expands to more than "
                                                   f"{MAX_RUNS} runs")
     return list(runs.values())
+
+
+def run_name(campaign: str, label, where: str) -> str:
+    """The name of a campaign's run: ``"<campaign>/<label>"``, both plain names (letters,
+    digits, ``. _ - + @``; `check_label`) — the rule for every run name (`check_run_name`),
+    whether the label comes from a name axis or a sweep's name."""
+    check_label(label, where)
+    return f"{campaign}/{label}"
+
+
+def check_run_name(name, where: str) -> None:
+    """A run's name: a plain name, or ``"<campaign>/<label>"`` of two (`run_name`)."""
+    parts = name.split("/") if isinstance(name, str) else [name]
+    check(len(parts) <= 2, where, f"must be a plain name or campaign/label, got {name!r}")
+    for part in parts:
+        check_label(part, where)
+
+
+def _name_axis(sweep: dict, where: str) -> str:
+    """The dotted key of a sweep's name axis (for errors), or of its name."""
+    for part in ("grid", "zip", "random"):
+        if "name" in sweep.get(part, {}):
+            return f"{where}.{part}.name"
+    return f"{where}.name"
 
 
 # --- execution ----------------------------------------------------------------------------------
@@ -397,6 +427,16 @@ class CampaignSummary:
     @property
     def any_failed(self) -> bool:
         return bool(self.failed or self.failed_before)
+
+    def __add__(self, other: "CampaignSummary") -> "CampaignSummary":
+        """Two invocations' summaries as one (e.g. the rounds of a stability map)."""
+        return CampaignSummary(
+            planned=self.planned + other.planned, skipped=self.skipped + other.skipped,
+            ok=self.ok + other.ok, diverged=self.diverged + other.diverged,
+            failed=self.failed + other.failed, stale=self.stale + other.stale,
+            damaged={**self.damaged, **other.damaged},
+            failed_before=self.failed_before + other.failed_before,
+            interrupted=other.interrupted or self.interrupted)
 
     def line(self, name: str, out) -> str:
         parts = [f"{name}: {self.planned} runs"]
@@ -455,9 +495,10 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
 def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
                  retry_failed: bool = False, reuse_stale: bool = False,
                  progress: bool = True, only: list[PlannedRun] | None = None,
-                 export: bool = True) -> CampaignSummary:
+                 label: str | None = None, export: bool = True) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
-    stored as soon as it finishes.  On SIGINT/SIGTERM, what finished is kept and
+    stored as soon as it finishes; the progress bar is labelled ``label`` (default: the
+    campaign's name).  On SIGINT/SIGTERM, what finished is kept and
     ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json are
     exported at the end (unless ``export`` is false: a search calling this for every
     batch exports once, when it is done)."""
@@ -474,7 +515,7 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
         runner = runner or SerialRunner()
         env = environment()
         by_id = {r.run_id: r for r in todo}
-        bar = _progress(len(todo), campaign.name, enabled=progress)
+        bar = _progress(len(todo), label or campaign.name, enabled=progress)
         try:
             tasks = ((r.run_id, r.scenario) for r in todo)  # checked: not parsed again
             for rid, result, metrics in runner.results(tasks):

@@ -1,18 +1,26 @@
-"""Where runs execute: in this process, on a local pool of worker processes, or on a Dask
-cluster — one interface, results handed back as they finish.
+"""Where runs execute: on local worker processes or on a Dask cluster (or, for library
+callers, in this process) — one interface, results handed back as they finish.
 
 `Runner.results(tasks)` yields ``(key, result, metrics)`` as each run completes, so the
-caller stores every finished run at once (the serial runner included).  At most
-2 × workers runs are in flight, so memory stays bounded however long the campaign.  On
-SIGINT/SIGTERM the runner stops submitting, hands back what has already finished,
-terminates its workers (none is left behind) and raises `Interrupted`; a second signal
-exits at once.
+caller stores every finished run at once.  Nothing a run does can take the command
+down: every run of a local runner executes in a worker process (one for
+``--workers 1``).  A run whose worker exits, is killed or crashes (a law calling
+``os._exit``, a segfault) is handed back as a "failed" result saying what happened and
+how long after the run started, and the worker is replaced; a run past its time limit
+(`limits.default_run_timeout`, or ``run_timeout``) is killed and handed back as failed
+("no result after N s"); a worker runs under a memory limit (`limits`) and dies with
+this process.  On SIGINT/SIGTERM the runner stops submitting, hands back what has
+already finished, kills its workers (none is left behind) and raises `Interrupted`; a
+second signal exits at once.
 
 Local workers are started once and reused for every run, forked from a process that has
 already loaded the simulation code and its compiled kernels, each limited to one BLAS
-thread (two workers on two cores would otherwise busy-wait on each other's cores).
-Every process that runs or stores runs keeps its freed memory for the next run
-(`keep_freed_memory`).
+thread (two workers on two cores would otherwise busy-wait on each other's cores);
+a replacement is forked the same way.  Each worker has its own pipe, so this process
+always knows which run a worker holds.  (`concurrent.futures.ProcessPoolExecutor` cannot
+say that: one dead worker breaks the whole pool and every run in flight with it, and a
+run that hangs cannot be stopped alone.)  Every process that runs or stores runs keeps
+its freed memory for the next run (`keep_freed_memory`).
 """
 from __future__ import annotations
 
@@ -20,16 +28,18 @@ import multiprocessing
 import os
 import signal
 import threading
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+import time
 from contextlib import contextmanager
+from multiprocessing import connection
 
 from ..run._config import ConfigError, check
+from .limits import (MIN_MEMORY_MIB, RUN_TIMEOUT_BASE, default_memory_limit,
+                     default_run_timeout)
 from .threads import ONE_THREAD
-from .worker import execute_run, failed_result, keep_freed_memory, worker_init
+from .worker import execute_run, failed_result, keep_freed_memory, serve
 
-__all__ = ["Runner", "make_runner", "Interrupted", "available_cores", "exit_status",
-           "signals_interrupt"]
-
+__all__ = ["Runner", "SerialRunner", "LocalPoolRunner", "DaskRunner", "make_runner",
+           "Interrupted", "available_cores", "exit_status", "signals_interrupt"]
 
 
 class Interrupted(BaseException):
@@ -67,7 +77,9 @@ class Runner:
 
 
 class SerialRunner(Runner):
-    """In this process, one run after another (``--workers 1``)."""
+    """In this process, one run after another: for library callers and tests (a run that
+    exits the process or crashes takes this process with it; the command line never
+    uses it)."""
 
     def results(self, tasks):
         with signals_interrupt():
@@ -75,102 +87,219 @@ class SerialRunner(Runner):
                 yield (key, *execute_run(data))
 
 
-class _PoolRunner(Runner):
-    """A `concurrent.futures` executor with a bounded number of runs in flight."""
+def _run_timeout(data, run_timeout: float | None) -> float:
+    """The wall-time limit of the run of ``data`` (a `Scenario` or its mapping)."""
+    if run_timeout is not None:
+        return run_timeout
+    from ..run.scenario import Scenario, scenario_from_mapping
+    try:
+        scenario = data if isinstance(data, Scenario) else scenario_from_mapping(data)
+    except ValueError:  # a mapping that is no scenario: its worker says so at once
+        return RUN_TIMEOUT_BASE
+    return default_run_timeout(scenario)
 
-    def __init__(self, executor, workers: int) -> None:
-        self.executor, self.workers = executor, workers
 
-    def results(self, tasks):
-        tasks = iter(tasks)
-        in_flight: dict[Future, tuple] = {}
-        with signals_interrupt():
-            try:
-                while True:
-                    while len(in_flight) < 2 * self.workers:
-                        task = next(tasks, None)
-                        if task is None:
-                            break
-                        key, data = task
-                        in_flight[self.executor.submit(execute_run, data)] = (key, data)
-                    if not in_flight:
-                        return
-                    done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
-                    for future in done:
-                        yield self._collect(future, in_flight.pop(future))
-            except Interrupted:
-                finished = [f for f in in_flight if f.done() and not f.cancelled()]
-                self.abort()
-                for future in finished:  # keep what finished before the signal
-                    yield self._collect(future, in_flight.pop(future))
-                raise
-
-    @staticmethod
-    def _collect(future: Future, task) -> tuple:
-        key, data = task
+def _death(exitcode: int | None) -> str:
+    """What a worker's exit code says happened to it."""
+    if exitcode is None:
+        return "the worker stopped answering during the run"
+    if exitcode < 0:
         try:
-            return (key, *future.result())
-        except Exception as exc:  # noqa: BLE001 - the worker itself died: a failed run
-            return (key, *failed_result(data, exc))
+            name = f" ({signal.Signals(-exitcode).name})"
+        except ValueError:
+            name = ""
+        oom = "; the system kills with it when memory runs out" \
+            if -exitcode == signal.SIGKILL else ""
+        return f"the worker was killed by signal {-exitcode}{name} during the run{oom}"
+    return f"the worker exited with status {exitcode} during the run"
 
-    def abort(self) -> None:
-        self.executor.shutdown(wait=False, cancel_futures=True)
+
+class _Worker:
+    """One worker process (`worker.serve`), the parent's end of its pipe, and the run it
+    holds: ``task`` (key, scenario), when it started and its deadline."""
+
+    def __init__(self, ctx, memory_mib: int | None, warm: bool) -> None:
+        parent_end, child_end = ctx.Pipe()
+        self.process = ctx.Process(target=serve, name="flexarm-worker", daemon=True,
+                                   args=(child_end, os.getpid(), memory_mib, warm))
+        self.process.start()
+        child_end.close()  # the worker's death is then end-of-file here
+        self.conn = parent_end
+        self.task: tuple | None = None
+        self.started = self.deadline = 0.0
+        self.timeout = 0.0
+
+    def give(self, task, timeout: float) -> bool:
+        """Send ``task`` to the worker; False if it has died."""
+        try:
+            self.conn.send(task[1])
+        except OSError:
+            return False
+        self.task, self.timeout = task, timeout
+        self.started = time.monotonic()
+        self.deadline = self.started + timeout
+        return True
+
+    def kill(self) -> None:
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join()
+        self.conn.close()
+
+    def stop(self) -> None:
+        """End an idle worker: ask it to leave, kill it if it does not."""
+        try:
+            self.conn.send(None)
+        except OSError:
+            pass
+        self.process.join(timeout=5)
+        self.kill()
 
 
-class LocalPoolRunner(_PoolRunner):
-    """``workers`` processes started once and reused for every run.  On Linux they are
-    forked from this process, which has already imported and compiled everything they
-    need (started at once, before any other thread exists here); elsewhere a forkserver
-    that preloads the simulation code (not the CLI, not matplotlib) forks them."""
+class LocalPoolRunner(Runner):
+    """``workers`` processes started once and reused for every run (module docstring).
+    On Linux (and wherever "fork" exists) they are forked from this process, which has
+    already imported and compiled everything they need; elsewhere each spawned worker
+    loads the simulation code and its kernels before its first run."""
 
-    def __init__(self, workers: int) -> None:
-        from concurrent.futures import ProcessPoolExecutor
-        if "fork" in multiprocessing.get_all_start_methods():
+    def __init__(self, workers: int, *, run_timeout: float | None = None,
+                 memory_limit: int | None = None) -> None:
+        self.workers, self.run_timeout = workers, run_timeout
+        self.memory_limit = memory_limit if memory_limit is not None else \
+            default_memory_limit(workers)
+        self._warm = "fork" in multiprocessing.get_all_start_methods()
+        if self._warm:
             from .worker import warm_up
             warm_up()  # compiled once here, inherited by every forked worker
-            ctx = multiprocessing.get_context("fork")
-        else:
-            ctx = multiprocessing.get_context("forkserver")
-            ctx.set_forkserver_preload(["validation.batch.worker"])  # each worker compiles or loads
-        with _environment(ONE_THREAD):
-            executor = ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
-                                           initializer=worker_init)
-            # Start every worker now (with "fork" the pool forks them all on the first
-            # submit, before its manager thread exists).
-            executor.submit(int).result()
-        super().__init__(executor, workers)
+        self._ctx = multiprocessing.get_context("fork" if self._warm else "spawn")
+        self._pool: list[_Worker | None] = [None] * workers
+        for i in range(workers):  # all now, before any other thread exists here
+            self._worker(i)
 
-    def abort(self) -> None:
-        processes = list((getattr(self.executor, "_processes", None) or {}).values())
-        results_pipe = getattr(self.executor, "_result_queue", None)  # shutdown clears it
-        self._aborted = True
-        super().abort()
-        for p in processes:  # do not wait for runs in progress: end them
-            if p.is_alive():
-                p.kill()
-        for p in processes:
-            p.join(timeout=5)
-        if results_pipe is not None and not any(p.is_alive() for p in processes):
-            # A worker killed while sending a result leaves half a message in the pipe;
-            # the pool's manager thread would wait for the rest forever (and the exit
-            # with it), since this process still holds a write end.  Closing it gives
-            # that thread end-of-file.  (Private attribute, like ``_processes``.)
-            results_pipe._writer.close()
-        if multiprocessing.get_start_method(allow_none=True) != "fork":
-            from multiprocessing import forkserver
-            forkserver._forkserver._stop()  # and the server that forked them (private
-            # API, the one the standard library's own tests use; nothing public stops it)
+    def _worker(self, i: int) -> _Worker:
+        """Worker ``i``, started anew if it has died (or never started)."""
+        w = self._pool[i]
+        if w is None or (w.task is None and not w.process.is_alive()):
+            if w is not None:
+                w.kill()
+            with _environment(ONE_THREAD):
+                w = self._pool[i] = _Worker(self._ctx, self.memory_limit, self._warm)
+        return w
+
+    def results(self, tasks):
+        with signals_interrupt():
+            try:
+                yield from self._results(iter(tasks))
+            finally:  # left early (an error or a signal): end the runs still in flight
+                self._kill_busy()
+
+    def _results(self, tasks):
+        pending, unstarted = self._dispatch(tasks, True)
+        yield from unstarted
+        while True:
+            busy = [w for w in self._pool if w is not None and w.task is not None]
+            if not busy:
+                return
+            try:
+                ready = connection.wait(
+                    [w.conn for w in busy] + [w.process.sentinel for w in busy],
+                    timeout=max(0.0, min(w.deadline for w in busy) - time.monotonic()))
+            except Interrupted:
+                yield from self._finished(busy)  # keep what finished before the signal
+                raise
+            outcomes = [o for o in (self._outcome(w, ready) for w in busy) if o is not None]
+            # The next runs start before the caller stores these: it stores while they run.
+            pending, unstarted = self._dispatch(tasks, pending)
+            yield from outcomes
+            yield from unstarted
+
+    def _dispatch(self, tasks, pending: bool) -> tuple[bool, list]:
+        """Give each idle worker its next task (a new worker if it died while idle):
+        whether tasks remain, and the failed results of tasks no new worker would take
+        (one that dies as it starts)."""
+        unstarted = []
+        for i in range(self.workers):
+            if not pending:
+                break
+            if self._pool[i] is not None and self._pool[i].task is not None:
+                continue
+            task = next(tasks, None)
+            if task is None:
+                return False, unstarted
+            timeout = _run_timeout(task[1], self.run_timeout)
+            for _ in range(2):
+                if self._worker(i).give(task, timeout):
+                    break
+                self._pool[i].kill()  # died while idle: a new one takes the run
+                self._pool[i] = None
+            else:
+                unstarted.append((task[0], *failed_result(
+                    task[1], "no worker process could be started for the run")))
+        return pending, unstarted
+
+    def _outcome(self, w: _Worker, ready) -> tuple | None:
+        """The result of ``w``'s run if it has one: what the worker sent, or a failed
+        result if the worker died or ran out of time (then it is replaced)."""
+        key, data = w.task
+        if w.conn in ready or w.process.sentinel in ready:
+            try:
+                if w.conn.poll():
+                    result = w.conn.recv()
+                    w.task = None
+                    return (key, *result)
+            except (EOFError, OSError):
+                pass  # died while sending
+            elapsed = time.monotonic() - w.started
+            w.kill()
+            message = f"{_death(w.process.exitcode)}, {elapsed:.3g} s after the run started"
+        elif time.monotonic() >= w.deadline:
+            w.kill()
+            message = f"no result after {w.timeout:g} s (the run was stopped; " \
+                      "--run-timeout sets the limit)"
+        else:
+            return None
+        self._pool[self._pool.index(w)] = None  # replaced when next needed
+        return (key, *failed_result(data, message))
+
+    @staticmethod
+    def _finished(busy: list[_Worker]):
+        """The results already sent by ``busy`` workers (read without waiting for runs
+        still in progress)."""
+        for w in busy:
+            try:
+                if w.conn.poll():
+                    key = w.task[0]
+                    result = w.conn.recv()
+                    w.task = None
+                    yield (key, *result)
+            except (EOFError, OSError):
+                pass
+
+    def _kill_busy(self) -> None:
+        for i, w in enumerate(self._pool):
+            if w is not None and w.task is not None:
+                w.kill()
+                self._pool[i] = None
 
     def close(self) -> None:
-        if not getattr(self, "_aborted", False):
-            self.executor.shutdown(wait=True, cancel_futures=True)
+        self._kill_busy()
+        for w in self._pool:
+            if w is not None:
+                w.stop()
+        self._pool = [None] * self.workers
 
 
-class DaskRunner(_PoolRunner):
+class DaskRunner(Runner):
     """Runs on a Dask cluster; workers must be able to import this package (and any
-    plug-in module)."""
+    plug-in module).  At most one run per worker thread is in flight, so a run starts
+    when it is submitted: a run without a result ``run_timeout`` after its submission
+    (default `limits.default_run_timeout`) is recorded as failed and cancelled, and the
+    Dask worker running it restarted (if it has a nanny).  The workers' memory limit is
+    the cluster's own (``dask worker --memory-limit``).  Every worker loads the
+    simulation code and its kernels when the runner starts."""
 
-    def __init__(self, address: str, timeout: float = 10.0) -> None:
+    def __init__(self, address: str, timeout: float = 10.0, *,
+                 run_timeout: float | None = None) -> None:
         try:
             from distributed import Client
         except ImportError:
@@ -187,28 +316,85 @@ class DaskRunner(_PoolRunner):
             client.close()
             raise ConfigError("--scheduler", f"{address} has no workers (waited {timeout:g} s); "
                                              "start some with 'dask worker " + address + "'") from None
-        self.client = client
-        workers = max(1, sum(w.get("nthreads", 1) for w in
-                             client.scheduler_info()["workers"].values()))
-        super().__init__(client.get_executor(pure=False), workers)
+        self.client, self.run_timeout = client, run_timeout
+        self.workers = max(1, sum(w.get("nthreads", 1) for w in
+                                  client.scheduler_info()["workers"].values()))
+        from .worker import warm_up
+        client.run(warm_up)  # load the kernels now: not within the first runs' limits
 
-    def abort(self) -> None:
-        super().abort()
-        self.client.close()
+    def results(self, tasks):
+        from distributed import wait
+        tasks = iter(tasks)
+        in_flight: dict = {}  # future -> (key, data, timeout, deadline)
+        with signals_interrupt():
+            try:
+                while True:
+                    while len(in_flight) < self.workers:
+                        task = next(tasks, None)
+                        if task is None:
+                            break
+                        key, data = task
+                        timeout = _run_timeout(data, self.run_timeout)
+                        future = self.client.submit(execute_run, data, pure=False)
+                        in_flight[future] = (key, data, timeout, time.monotonic() + timeout)
+                    if not in_flight:
+                        return
+                    nearest = min(d for *_, d in in_flight.values())
+                    try:
+                        wait(list(in_flight), timeout=max(0.01, nearest - time.monotonic()),
+                             return_when="FIRST_COMPLETED")
+                    except TimeoutError:
+                        pass
+                    for future in [f for f in in_flight if f.done()]:
+                        yield self._collect(future, in_flight.pop(future))
+                    now = time.monotonic()
+                    for future in [f for f, (*_, d) in in_flight.items() if d <= now]:
+                        key, data, timeout, _ = in_flight.pop(future)
+                        self._stop(future)
+                        yield (key, *failed_result(data, f"no result after {timeout:g} s (the "
+                                                         "run was stopped; --run-timeout sets "
+                                                         "the limit)"))
+            except Interrupted:
+                finished = [f for f in in_flight if f.done()]
+                self.client.cancel(list(in_flight), force=True)
+                for future in finished:  # keep what finished before the signal
+                    yield self._collect(future, in_flight.pop(future))
+                raise
+
+    @staticmethod
+    def _collect(future, task) -> tuple:
+        key, data, *_ = task
+        try:
+            return (key, *future.result())
+        except Exception as exc:  # noqa: BLE001 - the Dask worker itself died: a failed run
+            return (key, *failed_result(data, exc))
+
+    def _stop(self, future) -> None:
+        """Cancel a run past its limit and restart the Dask worker running it (a thread
+        cannot be stopped; its process can, if a nanny watches it)."""
+        running = [w for w, keys in self.client.processing().items() if future.key in keys]
+        self.client.cancel([future], force=True)
+        if running:
+            try:
+                self.client.restart_workers(running, raise_for_error=False)
+            except Exception:  # noqa: BLE001 - no nanny: the thread finishes on its own
+                pass
 
     def close(self) -> None:
-        try:
-            self.executor.shutdown()
-        finally:
-            self.client.close()
+        self.client.close()
 
 
 def make_runner(kind: str = "local", workers: int | None = None, scheduler: str | None = None,
-                *, force: bool = False) -> Runner:
-    """A runner: "local" (``workers`` processes, default the cores; 1 = this process) or
-    "dask" (the cluster at ``scheduler`` or $DASK_SCHEDULER_ADDRESS).  More local workers
-    than cores are refused unless ``force`` (they only share the cores)."""
+                *, force: bool = False, run_timeout: float | None = None,
+                memory_limit: int | None = None) -> Runner:
+    """A runner: "local" (``workers`` processes, default the cores) or "dask" (the
+    cluster at ``scheduler`` or $DASK_SCHEDULER_ADDRESS).  More local workers than cores
+    are refused unless ``force`` (they only share the cores).  ``run_timeout`` [s] limits
+    every run (default: derived from each run, `limits.default_run_timeout`);
+    ``memory_limit`` [MiB] each local worker (default `limits.default_memory_limit`)."""
     keep_freed_memory()  # this process stores the runs (and forks the local workers)
+    check(run_timeout is None or run_timeout > 0, "--run-timeout",
+          f"must be > 0 s, got {run_timeout!r}")
     if kind == "local":
         check(scheduler is None, "--scheduler", "only for --executor dask")
         cores = available_cores()
@@ -216,13 +402,18 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
         check(workers >= 1, "--workers", f"must be >= 1, got {workers}")
         check(workers <= cores or force, "--workers", f"{workers} workers on {cores} cores "
               "only share the cores (each costs ~300 MB); pass --force-workers to insist")
-        return SerialRunner() if workers == 1 else LocalPoolRunner(workers)
+        check(memory_limit is None or memory_limit >= MIN_MEMORY_MIB, "--memory-limit",
+              f"must be >= {MIN_MEMORY_MIB} MiB (an idle worker takes ~650 MiB of address "
+              f"space), got {memory_limit}")
+        return LocalPoolRunner(workers, run_timeout=run_timeout, memory_limit=memory_limit)
     if kind == "dask":
         address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
         check(bool(address), "--scheduler", "the dask executor needs --scheduler "
                                             "tcp://HOST:PORT or DASK_SCHEDULER_ADDRESS")
         check(workers is None, "--workers", "the Dask cluster decides its workers")
-        return DaskRunner(address)
+        check(memory_limit is None, "--memory-limit", "the Dask workers have their own "
+                                                      "(dask worker --memory-limit)")
+        return DaskRunner(address, run_timeout=run_timeout)
     raise ConfigError("--executor", f"must be 'local' or 'dask', got {kind!r}")
 
 
@@ -240,24 +431,29 @@ def _environment(values: dict):
                 os.environ[k] = v
 
 
+#: Signals received while `signals_interrupt` is in force (shared by nested uses).
+_received: list[int] = []
+
+
+def _on_signal(signum, frame):
+    if _received:  # the second signal: end the workers and this process now
+        for child in multiprocessing.active_children():
+            child.kill()
+        os._exit(exit_status(signum))
+    _received.append(signum)
+    raise Interrupted(signum)
+
+
 @contextmanager
 def signals_interrupt():
     """SIGINT/SIGTERM raise `Interrupted` in the main thread; a second one exits now.
-    Nested uses (a search around its runner's batches) each handle their own span."""
-    if threading.current_thread() is not threading.main_thread():
+    Nested uses share the first one's state (a second signal is a second signal)."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is _on_signal):
         yield
         return
-    received: list[int] = []
-
-    def handler(signum, frame):
-        if received:  # the second signal: end the workers and this process now
-            for child in multiprocessing.active_children():
-                child.kill()
-            os._exit(exit_status(signum))
-        received.append(signum)
-        raise Interrupted(signum)
-
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    _received.clear()
+    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
@@ -268,4 +464,3 @@ def signals_interrupt():
 def exit_status(signum: int) -> int:
     """The shell's convention: 128 + the signal number (130 for SIGINT, 143 SIGTERM)."""
     return 128 + signum
-

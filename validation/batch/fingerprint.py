@@ -98,7 +98,10 @@ def _walk(start: list[str], inside) -> dict[str, Path]:
         found[name] = path
         parent = name.rpartition(".")[0]
         todo.append(parent)  # a package's __init__ runs before its modules
-        todo.extend(_imports(path, name))
+        try:
+            todo.extend(_imports(path, name))
+        except (SyntaxError, ValueError, OSError):
+            pass  # a file Python cannot parse imports nothing (and runs nothing); hashed
     return found
 
 

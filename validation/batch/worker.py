@@ -1,24 +1,28 @@
 """What runs inside a worker: one scenario in, its result and metrics out, never an
-exception (`execute_run`); and what a worker process needs before it runs anything: the
-simulation code (models, plants, laws, the closed loop, metrics) loaded and its kernels
-compiled — not the command line and not matplotlib.  `warm_up` compiles or loads the
-kernels the runs need in the parent before the workers are forked, so numba compiles
-(first use in a checkout) or loads (from its cache) each kernel once, not once per
-worker."""
+exception (`execute_run`); the loop of a worker process (`serve`); and what a worker
+needs before it runs anything: the simulation code (models, plants, laws, the closed
+loop, metrics) loaded and its kernels compiled — not the command line and not
+matplotlib.  `warm_up` compiles or loads the kernels the runs need in the parent before
+the workers are forked, so numba compiles (first use in a checkout) or loads (from its
+cache) each kernel once, not once per worker."""
 from __future__ import annotations
 
 import ctypes
 import functools
 import signal
 import sys
+import time
 
 import numpy as np
 
 from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, before the fork
 from ..run.results import RunResult
 
-__all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
-           "kernel_groups", "compile_kernels"]
+__all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "serve",
+           "warm_up", "kernel_groups"]
+
+#: The memory limit this process runs under [MiB] (set by `worker_init`; None: none).
+_memory_limit: int | None = None
 
 
 @functools.cache
@@ -37,54 +41,106 @@ def keep_freed_memory() -> None:
         mallopt(-3, 32 << 20)  # M_MMAP_THRESHOLD (glibc's largest on 64-bit)
 
 
-def failed_result(scenario, exc: BaseException) -> tuple[RunResult, dict]:
-    """The "failed" result of ``scenario`` (a `Scenario` or its mapping) that raised ``exc``."""
+def failed_result(scenario, exc: BaseException | str) -> tuple[RunResult, dict]:
+    """The "failed" result of ``scenario`` (a `Scenario` or its mapping) that raised
+    ``exc`` (or ended as the message ``exc`` says)."""
     from ..run.scenario import Scenario, scenario_to_mapping
     config = scenario_to_mapping(scenario) if isinstance(scenario, Scenario) else scenario
-    text = str(exc).strip().splitlines()
-    message = f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+    message = exc if isinstance(exc, str) else describe(exc)
     return (RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)), status="failed",
                       message=message, config=config),
             {"status": "failed", "end_time": 0.0})
 
 
+def describe(exc: BaseException) -> str:
+    """One line saying what ``exc`` means for a run."""
+    if isinstance(exc, SystemExit):
+        return f"the run called sys.exit({exc.code!r})"
+    if isinstance(exc, KeyboardInterrupt):  # workers ignore SIGINT: raised by the code
+        return "KeyboardInterrupt raised during the run (not a Ctrl-C)"
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+
+
+def _over_memory(message: str) -> str:
+    """``message`` of a run that ran out of memory, saying which limit it exceeded."""
+    if _memory_limit is None or "MemoryError" not in message:
+        return message
+    return f"exceeded the memory limit of {_memory_limit} MiB ({message})"
+
+
 def execute_run(scenario) -> tuple[RunResult, dict]:
     """Run one scenario (in a worker; a checked `Scenario`, or a mapping to check): the
     result, with signals as float32 (what the store keeps; half the bytes to send back),
-    and its metrics — with each requirement's robustness ``rho_<name>`` — computed from
-    the float64 signals.  An unexpected exception becomes
-    a "failed" result carrying its message, so one bad run never stops a campaign."""
+    and its metrics — with each requirement's robustness ``rho_<name>`` — computed
+    from the float64 signals.  Whatever the run raises —
+    including `SystemExit` and `KeyboardInterrupt` from a law — becomes a "failed"
+    result carrying its message, so one bad run never stops a campaign; a run out of
+    memory says which limit it exceeded."""
     from ..run.loop import run_scenario
     from ..run.metrics import all_metrics
     from ..run.requirements import requirement_metrics
     from ..run.scenario import Scenario, scenario_from_mapping
     keep_freed_memory()
+    started = time.perf_counter()
     try:
         if not isinstance(scenario, Scenario):
             scenario = scenario_from_mapping(scenario)
         result = run_scenario(scenario)
-        metrics = all_metrics(result)
-        metrics |= requirement_metrics(result, metrics)
-    except Exception as exc:  # noqa: BLE001 - reported as the run's failure
-        return failed_result(scenario, exc)
-    result.signals = result.signals.astype(np.float32)
+        # A diverged run's last samples may be huge: their squares overflow to inf and
+        # beyond float32 they are stored as inf, as they should; no warning to print.
+        with np.errstate(over="ignore", invalid="ignore"):
+            metrics = all_metrics(result)
+            metrics |= requirement_metrics(result, metrics)
+            result.signals = result.signals.astype(np.float32)
+    except (Exception, SystemExit, KeyboardInterrupt) as exc:  # noqa: BLE001 - the run's failure
+        return failed_result(scenario, _over_memory(
+            f"{describe(exc)}, {time.perf_counter() - started:.3g} s after the run started"))
+    if result.status == "failed":
+        result.message = _over_memory(result.message)
     return result, metrics
 
 
-def worker_init() -> None:
-    # The parent decides what a Ctrl-C means (stop, keep what finished, end the workers).
+def worker_init(parent: int, memory_mib: int | None) -> None:
+    """Prepare a worker process forked by ``parent``: it ignores Ctrl-C (the parent
+    decides what a Ctrl-C means: stop, keep what finished, end the workers), dies with
+    its parent, and runs under a memory limit of ``memory_mib`` MiB (None: none)."""
+    global _memory_limit
+    from .limits import die_with_parent, limit_memory
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    die_with_parent(parent)
+    if memory_mib is not None:
+        limit_memory(memory_mib)
+        _memory_limit = memory_mib
+
+
+def serve(conn, parent: int, memory_mib: int | None, warm: bool) -> None:
+    """A worker process's life: receive a scenario on ``conn``, send back
+    ``execute_run``'s (result, metrics); until it receives None or the parent's end
+    closes.  ``warm``: the kernels are loaded already (forked from a warmed parent)."""
+    worker_init(parent, memory_mib)
+    if not warm:
+        warm_up()
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):
+            return
+        if task is None:
+            return
+        conn.send(execute_run(task))
 
 
 def kernel_groups(scenarios) -> list[tuple[str, object]]:
     """The compiled code the runs of ``scenarios`` use, as (label, callable that compiles
     or loads it) in the order a run needs them: the arm model's kernels, each distinct
-    law, the sample loop, the FE plant's readout.  Each piece is compiled once per
-    checkout (numba's cache) and loaded in well under a second afterwards."""
+    law, the closed loop on each plant (the sample kernels, the FE plant's readout).
+    Each piece is compiled once per checkout (numba's cache) and loaded in well under a
+    second afterwards."""
     from controllers import compiled_form
     from reduced_model import ReducedPlant
 
-    from ..run import _sample
     from ..run.laws import build_controller, build_observer, nominal_model
 
     def model_kernels():
@@ -104,40 +160,34 @@ def kernel_groups(scenarios) -> list[tuple[str, object]]:
             seen.add(key)
             groups.append((f"{role} {spec.kind}", lambda b=build, s=s, m=model, r=role:
                            compiled_form(b(s, m), r, s.Ts)))
-    groups.append(("sample loop", _sample.compile_sample_laws))
-    plants = {s.plant.kind for s in scenarios}
-    if "reduced" in plants:
-        groups.append(("reduced-plant loop", _sample.compile_run_reduced))
-    if "exudyn" in plants:
-        def fe_readout():
-            from plant_exudyn import ExudynPlant
-            ExudynPlant().reset().values  # noqa: B018 - the readout compiles on first use
-        groups.append(("FE plant readout", fe_readout))
+    for plant in sorted({s.plant.kind for s in scenarios}):
+        example = next(s for s in scenarios if s.plant.kind == plant)
+        groups.append((f"closed loop on the {plant} plant", lambda e=example: _short_run(e)))
     return groups
 
 
-def compile_kernels(scenarios, *, report=None) -> float:
-    """Compile or load every kernel the runs of ``scenarios`` use (`kernel_groups`),
-    telling ``report`` (a callable taking a line) about each group that took more than
-    half a second; returns the seconds spent."""
-    import time
-    total = 0.0
-    for label, build in kernel_groups(scenarios):
-        t0 = time.perf_counter()
-        build()
-        spent = time.perf_counter() - t0
-        total += spent
-        if report is not None and spent > 0.5:
-            report(f"compiled {label} in {spent:.1f} s (once per checkout)")
-    return total
+def _short_run(scenario) -> None:
+    """Two samples of ``scenario`` (compiles what its loop needs)."""
+    from ..run.loop import run_scenario
+    from ..run.scenario import scenario_from_mapping, scenario_to_mapping
+    data = scenario_to_mapping(scenario)
+    data.update(duration=(scenario.sensors.delay + 2) * scenario.Ts, transient=0.0)
+    run_scenario(scenario_from_mapping(data))
 
 
 def warm_up(scenarios=None) -> None:
-    """Compile or load every kernel the runs of ``scenarios`` use (default: the PBC with
-    the paper's SMO on both plants), here in the parent before the workers fork."""
-    from ..run.scenario import scenario_from_mapping
+    """Compile or load, silently, every kernel the runs of ``scenarios`` use (default: the
+    PBC with the paper's SMO on both plants), e.g. in a process before it forks workers
+    (`validation.batch.compiling` does it with progress)."""
     if scenarios is None:
-        scenarios = [scenario_from_mapping({"plant": {"kind": plant},
-                                            "observer": {"kind": "smo-paper"}})
-                     for plant in ("reduced", "exudyn")]
-    compile_kernels(scenarios)
+        _warm_up_default()
+    else:
+        for _, build in kernel_groups(scenarios):
+            build()
+
+
+@functools.cache  # once per process: every runner it starts forks from the same state
+def _warm_up_default() -> None:
+    from ..run.scenario import scenario_from_mapping
+    warm_up([scenario_from_mapping({"plant": {"kind": plant}, "observer": {"kind": "smo-paper"}})
+             for plant in ("reduced", "exudyn")])

@@ -10,7 +10,17 @@ import math
 
 import jinja2
 
-__all__ = ["environment", "render", "fmt_number", "md_cell"]
+__all__ = ["environment", "render", "fmt_number", "md_cell", "display_unit"]
+
+#: SI unit → (factor, unit) a reader expects for the small values a report shows.
+_DISPLAY = {"rad": (1e3, "mrad"), "m": (1e3, "mm"), "rad/s": (1e3, "mrad/s"),
+            "m/s": (1e3, "mm/s")}
+
+
+def display_unit(unit: str) -> tuple[float, str]:
+    """(factor, unit) to show a value given in ``unit``: mrad for rad, mm for m, the
+    same for rates; any other unit unchanged (factor 1)."""
+    return _DISPLAY.get(unit, (1.0, unit))
 
 
 def fmt_number(value, digits: int = 3) -> str:

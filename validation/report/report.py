@@ -2,16 +2,26 @@
 
 ``write_report(results_dir)`` assembles the report as data — tables of values and
 figures — and renders it through two templates: ``report/report.html`` (self-contained:
-figures embedded, no network) and ``report/report.md`` (figures in ``report/figures/``),
-plus ``report/arm.gif``.  Sections: what was run; the paper's claims (if the folder holds
-the paper's system); the sampled-data stability map (if ``stability/`` holds one);
-estimation against the measurement; runs; metrics; the paper's figures; sweeps; the
-reduced model's validity map; the animation.  Runs whose file fails verification or that
-were made by other code are left out and named.
+figures embedded, no network; a print stylesheet keeps every table on the page) and
+``report/report.md`` (figures in ``report/figures/``), plus ``report/arm.gif``.
+Sections: what was run; the summary (each claim, its margin and the truth plant's
+difference from the reduced one; the main metrics of every system run on both plants);
+the paper's claims (if the folder holds the paper's system); the sampled-data stability
+map (if ``stability/`` holds one); attribution; estimation against the measurement;
+runs; metrics; the paper's figures; sweeps; the reduced model's validity map (with the
+linear analysis of ``validity/`` if `flexarm validity` wrote one); the animation.  Runs whose file fails verification or that were made by other code are
+left out and named.
+
+A report is rendered again only when what it shows can have changed: its *content key*
+hashes the stored runs it reads (ids, checksums, whether each is fresh), the campaigns'
+report settings, the stability map's runs, the code and library versions that draw it,
+and the options; an unchanged key leaves the report as it is.
 """
 from __future__ import annotations
 
 import base64
+import functools
+import hashlib
 import json
 import math
 from dataclasses import dataclass, field
@@ -20,17 +30,25 @@ from pathlib import Path
 from reduced_model import ArmParameters
 
 from . import figures as fig
+from . import linear_figures
+from .drawing import draw_all
 from ..batch.fingerprint import run_fingerprint
 from .render import fmt_number, render
+from .robust import robust_section
 from ..run.results import write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
+from ..verdicts.mesh import MESH_SWEEP, is_check
+from ..verdicts.validity import gap_rows, load_validity, table_rows
 
-__all__ = ["write_report", "report_data"]
+__all__ = ["write_report", "report_data", "content_key", "report_is_current", "figure_group",
+           "claim_bounds",
+           "paper_figure_tasks"]
 
 #: Axes shown in their own columns (not repeated among the swept values).
 _OWN_COLUMNS = {"name", "arm", "plant.kind", "initial_state", "Ts", "controller.kind",
                 "observer.kind"}
+_KEY_FILE = ".content-key"
 
 
 @dataclass
@@ -53,8 +71,12 @@ class ReportData:
     counts: dict
     scope: list
     warnings: list = field(default_factory=list)
+    summary: list | None = None
+    pairs: dict | None = None
     claims: list | None = None
     claims_criteria: list = field(default_factory=list)
+    claim_notes: list = field(default_factory=list)
+    mesh: dict | None = None
     stability: dict | None = None
     estimation: dict | None = None
     runs: dict | None = None
@@ -63,6 +85,7 @@ class ReportData:
     notes: dict = field(default_factory=dict)
     animation: dict | None = None
     attribution: list = field(default_factory=list)
+    validity: dict | None = None
     robust: dict | None = None
 
 
@@ -93,11 +116,12 @@ def _runs_table(runs) -> dict:
     return _table(head, rows, [r.status for r in runs])
 
 
-_METRICS = [("track_max_1", "max |e₁| [rad]", 1), ("track_max_2", "max |e₂| [rad]", 1),
-            ("rate_err_rel", "rate error / peak", 1), ("vib_rms_1", "vibration 1 [mm]", 1e3),
-            ("vib_rms_2", "vibration 2 [mm]", 1e3), ("defl_max_1", "max defl. 1 [mm]", 1e3),
-            ("tau_max_1", "max |τ₁| [N m]", 1), ("tau_tv_1", "TV τ₁ [N m/s]", 1),
-            ("tau_tv_2", "TV τ₂ [N m/s]", 1), ("realtime_factor", "real-time factor", 1),
+#: (metric key, column head, factor from SI to the unit in the head).
+_METRICS = [("track_max_1", "max |e₁| [mrad]", 1e3), ("track_max_2", "max |e₂| [mrad]", 1e3),
+            ("rate_err_rel", "rate error / peak rate", 1), ("vib_rms_1", "vibration 1 [mm]", 1e3),
+            ("vib_rms_2", "vibration 2 [mm]", 1e3), ("defl_max_1", "max deflection 1 [mm]", 1e3),
+            ("tau_max_1", "max |τ₁| [N m]", 1), ("tau_tv_1", "τ₁ variation [N m/s]", 1),
+            ("tau_tv_2", "τ₂ variation [N m/s]", 1), ("realtime_factor", "real-time factor", 1),
             ("wall_s", "wall [s]", 1), ("startup_s", "first sample [s]", 1)]
 
 
@@ -114,44 +138,143 @@ def _metrics_table(runs) -> dict:
     return _table(head, rows, [r.status for r in runs])
 
 
+@functools.lru_cache(maxsize=64)
+def _observer_inputs(observer_json: str, params_json: str, modes: tuple) -> frozenset:
+    """The states an observer is fed (its ``measured``), built like the run built it (from
+    its stored scenario, which was checked when it ran)."""
+    from ..run._config import from_mapping
+    from ..run.laws import build_observer, nominal_model
+    from ..run.scenario import Scenario
+    scenario = from_mapping(Scenario, {"observer": json.loads(observer_json),
+                                       "nominal_params": json.loads(params_json),
+                                       "model": {"modes_per_link": list(modes)}})
+    model = nominal_model(scenario.nominal_params, scenario.model.modes_per_link)
+    return frozenset(build_observer(scenario, model).measured)
+
+
+def _fed(run) -> frozenset:
+    c = run.config
+    try:
+        return _observer_inputs(json.dumps(c["observer"], sort_keys=True),
+                                json.dumps(c["nominal_params"], sort_keys=True),
+                                tuple(c["model"]["modes_per_link"]))
+    except (ValueError, ImportError):  # a plug-in no longer importable: nothing marked
+        return frozenset()
+
+
 def _estimation_table(runs) -> dict | None:
+    """Two tables, one row per observed run: the error / measurement ratio per state
+    (flagged), and each state's error, measurement error and signal RMS."""
     observed = [r for r in runs if r.status == "ok" and "est_rms_theta1" in r.metrics]
     if not observed:
         return None
     states = [k.removeprefix("est_rms_") for k in observed[0].metrics
               if k.startswith("est_rms_") and not k.startswith("est_rms_slope")]
-    head = ["name", "arm", "plant", "Ts [ms]", "start", "observer"] + \
-        [fig.state_label(s) for s in states] + ["worse than the measurement"]
+    ident = ["name", "arm", "plant", "Ts [ms]", "start", "observer"]
+    head = ident + [fig.state_label(s) for s in states] + ["worse than the measurement it is fed",
+                                                           "worse than x̂ ≡ 0"]
+    detail_head = ident + [f"{fig.state_label(s)} [{fig.state_display(s)[1]}]" for s in states]
     rows, detail = [], []
     for r in observed:
-        m = r.metrics
-        cells = []
+        m, fed = r.metrics, _fed(r)
+        cells, values = [], []
         for s in states:
             ratio = m.get(f"est_to_noise_{s}")
-            cells.append("—" if not isinstance(ratio, float) or math.isnan(ratio) else
-                         fmt_number(ratio, 2) + (" ⚠" if ratio > 1 else ""))
-            detail.append([*_identity(r), r.config["observer"]["kind"], fig.state_label(s),
-                           fig.state_unit(s), m.get(f"est_rms_{s}"), m.get(f"noise_rms_{s}"),
-                           m.get(f"signal_rms_{s}"), m.get(f"est_to_noise_{s}"),
-                           m.get(f"est_to_signal_{s}")])
-        worse = " ".join(fig.state_label(s) for s in (m.get("est_worse") or "").split())
-        rows.append([*_identity(r), r.config["observer"]["kind"], *cells, worse or "none"])
-    detail_head = ["name", "arm", "plant", "Ts [ms]", "start", "observer", "state", "unit",
-                   "error RMS", "measurement error RMS", "signal RMS", "error / measurement",
-                   "error / signal"]
+            zero = m.get(f"est_to_signal_{s}")
+            zero = " ⊘" if isinstance(zero, float) and zero >= 1 else ""
+            if not isinstance(ratio, float) or math.isnan(ratio):
+                cells.append("—" + zero)
+            elif s not in fed:
+                cells.append(fmt_number(ratio, 2) + " †" + zero)
+            else:
+                cells.append(fmt_number(ratio, 2) + (" ⚠" if ratio > 1 else "") + zero)
+            scale = fig.state_display(s)[0]
+            rms = [m.get(f"{k}_rms_{s}") for k in ("est", "noise", "signal")]
+            values.append(" / ".join(fmt_number(scale * v) if isinstance(v, float) else "—"
+                                     for v in rms) + ("" if s in fed else " †"))
+        worse = " ".join(fig.state_label(s) for s in (m.get("est_worse") or "").split()
+                         if s in fed)
+        zero = " ".join(fig.state_label(s) for s in (m.get("est_worse_zero") or "").split())
+        ident_cells = [*_identity(r), r.config["observer"]["kind"]]
+        rows.append([*ident_cells, *cells, worse or "none", zero or "none"])
+        detail.append([*ident_cells, *values])
     return {"compact": _table(head, rows), "detail": _table(detail_head, detail)}
 
 
+def _mesh_table(runs) -> dict | None:
+    """Closed-loop mesh convergence of the truth-plant runs that have checks: per run, its
+    verdict and the values that moved (compact); each judged value (a claim's measure) on
+    every mesh (detail)."""
+    from ..verdicts.claims import mesh_rows
+    from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
+    rows = sorted(mesh_rows(runs), key=lambda r: (r.run.name, _swept(r.run),
+                                                  r.run.config["Ts"]))
+    if not rows:
+        return None
+    labels = list(dict.fromkeys(label for r in rows for label, _ in r.values))
+
+    def text(v, unit):
+        if isinstance(v, str):
+            return v
+        return "never" if math.isinf(v) else f"{fmt_number(v)} {unit}".strip()
+    detail, detail_classes, per_run = [], [], {}
+    for r in rows:
+        by_label = dict(r.values)
+        unit = r.claim.unit if r.claim else ""
+        values = [text(by_label[label], unit) if label in by_label else "" for label in labels]
+        verdict = {True: "converged" if r.claim else "same outcome on every mesh",
+                   False: "not converged", None: "check not run"}[r.converged]
+        detail.append([*_identity(r.run)[:2], *_identity(r.run)[3:], _swept(r.run),
+                       r.claim.key if r.claim else "run status", *values, verdict])
+        detail_classes.append({True: "holds", False: "fails", None: ""}[r.converged])
+        per_run.setdefault(r.run.run_id, (r.run, []))[1].append((r, values))
+    compact, classes = [], []
+    for run, items in per_run.values():
+        moved = [f"{r.claim.key if r.claim else 'status'} ({', '.join(v)})"
+                 for r, v in items if r.converged is False]
+        missing = any(r.converged is None for r, _ in items)
+        verdict = ("not converged" if moved else "check not run" if missing else
+                   "converged" if run.status == "ok" else f"{run.status} on every mesh")
+        compact.append([*_identity(run)[:2], *_identity(run)[3:], _swept(run), verdict,
+                        "; ".join(moved) or "—"])
+        classes.append("fails" if moved else "" if missing else "holds")
+    head = ["name", "arm", "Ts [ms]", "start", "swept values"]
+    return {"compact": _table(head + ["verdict", f"moved ({', '.join(labels)})"], compact,
+                              classes),
+            "detail": _table(head + ["judged value", *labels, "verdict"], detail,
+                             detail_classes),
+            "tolerance": f"|a − b| ≤ {MESH_RTOL:.0%} of the larger value + {MESH_ATOL:.0%} "
+                         "of the claim's bound"}
+
+
+def _group_key(r) -> tuple:
+    """Runs drawn together in the paper's figures: the same name, arm, Ts, initial
+    condition and swept values except the plant (truth and reduced overlaid)."""
+    return (r.name, _key(r.config.get("arm")), r.config["Ts"], r.config.get("initial_state"),
+            _key({k: v for k, v in r.axes.items() if k not in ("plant.kind",)}))
+
+
+def _order(rs) -> list:
+    plants = {"exudyn": 0, "reduced": 1}
+    return sorted(rs, key=lambda r: plants.get(r.plant, 2))
+
+
+def figure_group(row, rows) -> list:
+    """The runs among ``rows`` drawn with ``row`` (itself, and the same scenario on the
+    other plant when the folder holds it), truth plant first."""
+    key = _group_key(row)
+    same = [r for r in rows if _group_key(r) == key and r.run_id != row.run_id
+            and {k: v for k, v in r.config.items() if k != "plant"}
+            == {k: v for k, v in row.config.items() if k != "plant"}]
+    return _order([row, *same])
+
+
 def _figure_groups(runs, wanted: list[str] | None):
-    """Runs drawn together as the paper's figures: the same name and the same swept
-    values except the plant (truth and reduced overlaid)."""
     groups: dict[tuple, list] = {}
     for r in runs:
         if r.status == "failed":
             continue
-        key = (r.name, _key(r.config.get("arm")), r.config["Ts"], r.config.get("initial_state"),
-               _key({k: v for k, v in r.axes.items() if k not in ("plant.kind",)}))
-        groups.setdefault(key, []).append(r)
+        groups.setdefault(_group_key(r), []).append(r)
     if wanted:
         chosen = [k for k in groups if any(k[0] == w or k[0].endswith("/" + w) for w in wanted)]
     else:
@@ -161,43 +284,44 @@ def _figure_groups(runs, wanted: list[str] | None):
     chosen.sort(key=lambda k: (k[0], order.get(json.loads(k[1]), 9), -k[2], order.get(k[3], 9), k[4]))
     drawable = [k for k in chosen if any(r.status == "ok" for r in groups[k])]
     skipped = [k for k in chosen if k not in drawable]
-    plants = {"exudyn": 0, "reduced": 1}
-    return ([sorted(groups[k], key=lambda r: plants.get(r.plant, 2)) for k in drawable],
-            [groups[k][0] for k in skipped])
+    return [_order(groups[k]) for k in drawable], [groups[k][0] for k in skipped]
 
 
 def _key(value) -> str:
     return json.dumps(value, sort_keys=True)
 
 
-def report_data(results_dir, *, animate: bool = True, progress: bool = True,
-                animation_path: Path | None = None) -> ReportData:
-    """Everything the report shows, as data (figures as PNG bytes)."""
-    from tqdm import tqdm
+def claim_bounds() -> dict:
+    """The claims' bounds, by claim key (SI units)."""
+    from ..verdicts.claims import CLAIMS
+    return {c.key: c.bound for c in CLAIMS}
 
-    from ..verdicts.claims import CLAIMS, claim_columns, claims_tables
-    store = ResultStore(results_dir)
+
+def _included(store: ResultStore):
+    """(rows, runs to report, warnings, evaluations of `flexarm verify`): runs whose file
+    verifies and that this code made (mesh-check runs are in ``rows``: they check the
+    runs, they are not reported as runs; the evaluations of a verdict over uncertainty
+    have their own section, `robust_section`, not a row each)."""
+    from ..verdicts.verify import ROBUST_SWEEPS
     all_rows = store.rows()
     if not all_rows:
-        raise StoreError(f"{results_dir}: no stored runs")
+        raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
     stale = [r for r in all_rows if r.fingerprint != run_fingerprint(r.config)]
-    from ..verdicts.verify import ROBUST_SWEEPS
     fresh = [r for r in all_rows if r.run_id not in damaged and r not in stale]
-    # The evaluations of `flexarm verify` have their own section (robust.py), not a row each.
-    runs = [r for r in fresh if r.sweep != "stability" and r.sweep not in ROBUST_SWEEPS]
+    runs = [r for r in fresh if r.sweep != "stability" and not is_check(r)
+            and r.sweep not in ROBUST_SWEEPS]
+    evaluations = [r for r in fresh if r.sweep in ROBUST_SWEEPS]
     warnings = [f"run {rid} left out: {why} (rerun the campaign to redo it)"
                 for rid, why in damaged.items()]
     if stale:
         warnings.append(f"{len(stale)} run(s) left out: made by other code than this "
                         f"installation ({', '.join(r.run_id for r in stale[:8])}"
                         f"{', …' if len(stale) > 8 else ''}); rerun the campaign to refresh them")
-    campaigns = store.campaigns()
-    names = [n for n in campaigns if n not in ("stability",)] or ["(single runs)"]
-    info = [campaigns.get(n, {}) for n in names]
-    wanted = [w for i in info for w in i.get("report", {}).get("figures", [])] or None
-    counted = [r for r in fresh if r.sweep != "stability"]
-    counts = {s: sum(r.status == s for r in counted) for s in ("ok", "diverged", "failed")}
+    return all_rows, runs, warnings, evaluations
+
+
+def _scope(runs) -> list[str]:
     arms = sorted({r.config.get("arm", "default") for r in runs})
     scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in
              sorted({r.config.get("arm", "default") for r in counted})]
@@ -206,18 +330,49 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     scope.append("control periods Ts: " + ", ".join(f"{1e3 * t:g} ms" for t in
                                                      sorted({r.config["Ts"] for r in counted})))
     scope.append("initial conditions: " + ", ".join(sorted(
-        {"at rest" if _start(r.config) == "rest" else "moving with the reference"
-         for r in counted})))
-    data = ReportData(title=", ".join(names), folder=str(store.out),
-                      description=" ".join(i.get("description", "") for i in info).strip(),
-                      counts=counts, scope=scope, warnings=warnings)
+        {"at rest" if _start(r.config) == "rest" else "moving with the reference" for r in runs})))
+    windows = sorted({(r.config["transient"], r.config["duration"]) for r in runs})
+    scope.append("metrics after the transient: " + ", ".join(
+        f"{t:g} s of {d:g} s runs" for t, d in windows[:6]) + (", …" if len(windows) > 6 else "")
+        + " (maxima of deflection and torque, torque variation: the whole run)")
+    return scope
 
-    columns = claim_columns(runs)
+
+def report_data(results_dir, *, animate: bool = True, progress: bool = True,
+                animation_path: Path | None = None) -> ReportData:
+    """Everything the report shows, as data (figures as PNG bytes)."""
+    from ..verdicts.claims import CLAIMS, claim_columns
+    from .summary import NOTE_MEANING, claims_view, pairs_table, summary_view
+    store = ResultStore(results_dir)
+    all_rows, runs, warnings, evaluations = _included(store)
+    fresh_ids = {r.run_id for r in runs}
+    checks = [r for r in all_rows if is_check(r) and r.run_id not in fresh_ids
+              and r.fingerprint == run_fingerprint(r.config)]
+    damaged_checks = store.verify(checks)
+    checks = [r for r in checks if r.run_id not in damaged_checks]
+    campaigns = store.campaigns()
+    names = [n for n in campaigns if n not in ("stability", MESH_SWEEP)] or ["(single runs)"]
+    info = [campaigns.get(n, {}) for n in names]
+    wanted = [w for i in info for w in i.get("report", {}).get("figures", [])] or None
+    counted = runs + evaluations
+    counts = {s: sum(r.status == s for r in counted) for s in ("ok", "diverged", "failed")}
+    data = ReportData(title=", ".join(names), folder=str(store.out),
+                      description="; ".join(i["description"] for i in info
+                                            if i.get("description")),
+                      counts=counts, scope=_scope(counted), warnings=warnings)
+    bounds = claim_bounds()
+
+    columns = claim_columns(runs + checks)
+    data.mesh = _mesh_table(runs + checks)
     if columns:
-        data.claims = claims_tables(columns)
+        data.summary = summary_view(columns)
+        data.claims = claims_view(columns)
         data.claims_criteria = [{"text": c.text, "criterion": c.criterion,
                                  "bound": f"{fmt_number(c.bound)} {c.unit}",
                                  "rationale": c.rationale} for c in CLAIMS]
+        data.claim_notes = [f"{c.text.split(':')[0]} ({c.key.replace('_', ' ')}): "
+                            f"{NOTE_MEANING[c.key]}" for c in CLAIMS if c.key in NOTE_MEANING]
+    data.pairs = pairs_table(runs, fig.describe_run)
     stability_dir = store.out / "stability"
     tasks = []
     if ResultStore(stability_dir).exists():
@@ -226,22 +381,28 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         if results:
             rows = stability_rows(results)
             data.stability = {"table": _table(
-                ["case", "plant", "arm", "largest stable Ts [ms]", "first unstable Ts [ms]",
-                 "predicted [ms]", "why the first unstable one is"],
-                [[r["case"], r["plant"], r["arm"], r["largest"], r["unstable"], r["predicted"],
-                  r["reason"]] for r in rows])}
+                ["case", "plant", "arm", "no divergence up to [ms]", "first divergence [ms]",
+                 "keeps tracking up to [ms]", "first loss [ms]", "predicted [ms]",
+                 "monotone?", "mesh", "why the first bad one is"],
+                [[r["case"], r["plant"], r["arm"], r["no_divergence"], r["first_divergence"],
+                  r["tracking"], r["first_loss"], r["predicted"], r["notes"], r["mesh"],
+                  r["reason"]] for r in rows],
+                ["failed" if "FAILED" in r["notes"] else "" for r in rows])}
             tasks.append(("Stability map", "sampled-data stability map: tested control periods "
                           "per case, plant and arm", lambda: fig.stability_chart(results)))
     for study, spec in campaigns.get("attribution", {}).get("studies", {}).items():
-        from ..verdicts.attribution import METRICS, attribution_from_store, study_view
+        from ..verdicts.attribution import attribution_from_store, study_view
         a = attribution_from_store(store.out, study, tuple(spec["factors"]))
-        data.attribution.append(study_view(a))
-        for metric, contributions in a.contributions.items():
-            tasks.append(("Attribution", f"{study}: {metric}, from the ideal to the real world",
-                          lambda a=a, m=metric, c=contributions: fig.waterfall(
-                              a.name, m, METRICS[m][1], a.ideal_value[m], c, a.totals[m])))
-    from .robust import robust_section
-    data.robust, robust_tasks = robust_section(store, fresh)
+        view = study_view(a)
+        data.attribution.append(view)
+        for m in view["metrics"]:
+            key, scale = m["key"], m["scale"]
+            contributions = {f: scale * v for f, v in a.contributions[key].items()}
+            tasks.append(("Attribution", f"{study}: {m['metric']}, from the ideal to the real "
+                          "world", lambda a=a, m=m, c=contributions, s=scale: fig.waterfall(
+                              a.name, m["metric"], m["unit"], s * a.ideal_value[m["key"]], c,
+                              s * a.totals[m["key"]])))
+    data.robust, robust_tasks = robust_section(store, evaluations)
     tasks += robust_tasks
     data.estimation = _estimation_table(runs)
     if runs:  # a folder of `flexarm verify` alone has its section instead
@@ -251,14 +412,23 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     data.notes["paper_figures"] = [f"{r.name}, {fig.describe_run(r.config)}: not drawn, every "
                                    f"run of it {r.status} ({r.message})" for r in skipped]
     for group in groups:
-        tasks += _paper_figure_tasks(group)
+        tasks += paper_figure_tasks(group, bounds)
     by_sweep: dict[str, list] = {}
     for r in runs:
         if r.sweep and r.axes:
             by_sweep.setdefault(r.sweep, []).append(r)
+    sweep_bounds = {"track_max": bounds["tracking"], "vib_rms": bounds["vibration"],
+                    "est_theta": bounds["estimation"]}
     for sweep, rs in by_sweep.items():
-        tasks.append(("Sweeps", None, lambda sweep=sweep, rs=rs: fig.sweep_figures(sweep, rs)))
-    for arm in arms:
+        tasks.append(("Sweeps", None, lambda sweep=sweep, rs=rs: fig.sweep_figures(
+            sweep, rs, sweep_bounds)))
+    validity = load_validity(store.out / "validity")
+    if validity:
+        data.validity = {"cases": _table(*table_rows(validity)),
+                         "gaps": _table(*gap_rows(validity))}
+        tasks.append(("Validity of the reduced model", None,
+                      lambda: linear_figures.validity_figures(validity)))
+    for arm in sorted({r.config.get("arm", "default") for r in runs}):
         example = next(r for r in runs if r.config.get("arm", "default") == arm)
         params = ArmParameters.from_mapping(example.config["true_params"])
         modes = tuple(example.config["model"]["modes_per_link"])
@@ -266,14 +436,15 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       f"validity map, {arm} arm: reduced model vs FE frequencies over θ₂ and "
                       "their relative gap",
                       lambda p=params, m=modes, a=arm: fig.validity_map(p, m, f"{a} arm")))
-    for section, caption, make in tqdm(tasks, desc="report figures", unit="fig",
-                                       disable=not progress):
-        made = make()
+    makes = [make for _, _, make in tasks]
+    if animate and groups and animation_path is not None:
+        makes.append(lambda: _animation(groups[0], animation_path))
+    drawn = draw_all(makes, stores=[store], progress=progress)
+    for (section, caption, _), made in zip(tasks, drawn):
         items = made if isinstance(made, list) else [(caption, made)]
         data.figures += [Figure(section, c, p) for c, p in items]
-    if animate and groups and animation_path is not None:
-        data.animation = {"caption": _animation(groups[0], animation_path),
-                          "file": animation_path.name}
+    if len(drawn) > len(tasks):
+        data.animation = {"caption": drawn[-1], "file": animation_path.name}
     return data
 
 
@@ -281,17 +452,24 @@ def _loaded(group):
     return [(r, r.load()) for r in group]
 
 
-def _paper_figure_tasks(group) -> list:
-    """The paper's figures of one group; runs that diverged or failed are named in the
-    title, not drawn (their last samples before leaving the bounds are not data)."""
-    gone = [r for r in group if r.status != "ok"]
+def _title(group) -> str:
+    head = next(r for r in group if r.status == "ok")
+    swept = _swept(head)
+    return f"{head.name} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})" + "".join(
+        f"; {fig.PLANT_NAME.get(r.plant, r.plant)} {r.status.upper()}: {r.message}"
+        for r in group if r.status != "ok")
+
+
+def paper_figure_tasks(group, bounds: dict | None = None) -> list:
+    """The paper's figures of one group as (section, caption, draw) tasks; runs that
+    diverged or failed are named in the title, not drawn (their last samples before
+    leaving the bounds are not data).  ``bounds``: the claims' bounds by claim key."""
+    from ..run.metrics import vibration_cutoff
+    bounds = bounds or {}
+    title = _title(group)
     group = [r for r in group if r.status == "ok"]
     head = group[0]
-    swept = _swept(head)
-    title = f"{head.name} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})" + "".join(
-        f"; {fig.PLANT_NAME.get(r.plant, r.plant)} {r.status.upper()}: {r.message}" for r in gone)
-    transient = float(head.config.get("transient", 2.0))
-    from ..run.metrics import vibration_cutoff
+    transient = float(head.config["transient"])
     cutoff = vibration_cutoff(ArmParameters.from_mapping(head.config["true_params"]))
     cache = {}
 
@@ -300,16 +478,18 @@ def _paper_figure_tasks(group) -> list:
             cache["r"] = _loaded(group)
         return cache["r"]
     tasks = [("Paper figures", f"{title}: joint tracking (Fig. 3)",
-              lambda: fig.tracking(results(), title, transient)),
+              lambda: fig.tracking(results(), title, transient, bounds.get("tracking"))),
              ("Paper figures", f"{title}: tip deflections and vibration (Fig. 4)",
-              lambda: fig.deflections(results(), title, transient, cutoff))]
+              lambda: fig.deflections(results(), title, transient, cutoff,
+                                      bounds.get("vibration")))]
     if head.config["observer"]["kind"] != "none":
         tasks += [("Paper figures", f"{title}: true vs estimated rates (Figs. 5–6)",
                    lambda: fig.rates(results(), title, transient)),
                   ("Paper figures", f"{title}: estimation errors (Fig. 7)",
-                   lambda: fig.estimation_errors(results(), title, transient))]
+                   lambda: fig.estimation_errors(results(), title, transient,
+                                                 bounds.get("estimation")))]
     tasks.append(("Paper figures", f"{title}: phase portrait (Fig. 8)",
-                  lambda: fig.phase_portrait(results(), title)))
+                  lambda: fig.phase_portrait(results(), title, bounds.get("phase_portrait"))))
     return tasks
 
 
@@ -318,23 +498,80 @@ def _animation(group, path: Path) -> str:
     head = group[0]
     params = ArmParameters.from_mapping(head.config["nominal_params"])
     model = nominal_model(params, tuple(head.config["model"]["modes_per_link"]))
-    swept = _swept(head)
-    title = f"{head.name} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})"
-    return fig.animation(_loaded(group), params, model, title, path)
+    return fig.animation(_loaded([r for r in group if r.status == "ok"]), params, model,
+                         _title(group), path)
 
 
-def write_report(results_dir, *, animate: bool = True, progress: bool = True) -> tuple[Path, Path]:
-    """Write report.html and report.md for ``results_dir``; returns their paths."""
+# --- the content key -------------------------------------------------------------------------
+@functools.lru_cache(maxsize=1)
+def _drawing_code() -> str:
+    """A hash of the code and libraries that turn stored runs into a report."""
+    from importlib.metadata import version
+    h = hashlib.sha256()
+    root = Path(__file__).resolve().parents[2]
+    for package in ("validation", "reduced_model", "plant_exudyn", "controllers"):
+        for path in sorted((root / package).rglob("*")):
+            if path.suffix in (".py", ".j2") and "__pycache__" not in path.parts:
+                h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    for name in ("matplotlib", "jinja2", "numpy", "scipy", "exudyn"):
+        h.update(f"{name}={version(name)}".encode())
+    return h.hexdigest()
+
+
+def _rows_digest(store: ResultStore) -> list:
+    if not store.exists():
+        return []
+    return sorted([r.run_id, r.sha256, r.size, r.status, r.name, r.sweep, r.axes,
+                   r.fingerprint == run_fingerprint(r.config)] for r in store.rows())
+
+
+def content_key(results_dir, *, animate: bool) -> str:
+    """The hash of everything a report of ``results_dir`` shows (module docstring)."""
+    store = ResultStore(results_dir)
+    validity = store.out / "validity" / "validity.json"
+    parts = {"runs": _rows_digest(store), "campaigns": store.campaigns(),
+             "stability": _rows_digest(ResultStore(store.out / "stability")),
+             "validity": hashlib.sha256(validity.read_bytes()).hexdigest()
+             if validity.is_file() else "",
+             "code": _drawing_code(), "animate": animate}
+    text = json.dumps(parts, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _paths(results_dir) -> tuple[Path, Path, Path]:
+    out = ResultStore(results_dir).out / "report"
+    return out / "report.html", out / "report.md", out / _KEY_FILE
+
+
+def report_is_current(results_dir, *, animate: bool = True) -> bool:
+    """Whether the report of ``results_dir`` exists and shows what the folder holds now
+    (the same content key)."""
+    html_path, md_path, key_path = _paths(results_dir)
+    return (html_path.is_file() and md_path.is_file() and key_path.is_file()
+            and key_path.read_text().strip() == content_key(results_dir, animate=animate))
+
+
+def write_report(results_dir, *, animate: bool = True, progress: bool = True,
+                 force: bool = False) -> tuple[Path, Path]:
+    """Write report.html and report.md for ``results_dir``, unless they are current
+    (`report_is_current`; ``force`` renders anyway); returns their paths."""
     store = ResultStore(results_dir)
     if not store.exists():
         raise StoreError(f"{results_dir}: not a results folder (no index.sqlite)")
-    out = store.out / "report"
+    html_path, md_path, key_path = _paths(results_dir)
+    if not force and report_is_current(results_dir, animate=animate):
+        return html_path, md_path
+    out = html_path.parent
+    key = content_key(results_dir, animate=animate)
     try:
         (out / "figures").mkdir(parents=True, exist_ok=True)
+        key_path.unlink(missing_ok=True)  # written last: a report cut short is redone
     except OSError as exc:
         raise StoreError(f"{out}: cannot write the report ({exc.strerror or exc})") from None
     data = report_data(results_dir, animate=animate, progress=progress,
                        animation_path=out / "arm.gif")
+    for old in (out / "figures").glob("fig*.png"):
+        old.unlink()
     for i, f in enumerate(data.figures):
         f.file = f"figures/fig{i:02d}.png"
         (out / f.file).write_bytes(f.png)
@@ -343,9 +580,9 @@ def write_report(results_dir, *, animate: bool = True, progress: bool = True) ->
     gif = None
     if data.animation:
         gif = "data:image/gif;base64," + base64.b64encode((out / "arm.gif").read_bytes()).decode()
-    html_path, md_path = out / "report.html", out / "report.md"
     page = render("report.html.j2", d=data, sections=sections, gif=gif)
     write_atomic(html_path, lambda fh: fh.write(page))
     text = render("report.md.j2", d=data, sections=sections)
     write_atomic(md_path, lambda fh: fh.write(text))
+    write_atomic(key_path, lambda fh: fh.write(key + "\n"))
     return html_path, md_path

@@ -40,12 +40,12 @@ def check(condition: bool, path: str, message: str) -> None:
 
 
 def check_label(name: Any, path: str) -> None:
-    """A name that also names a folder: letters, digits and ``. _ - +``, not starting with
-    a dot — never a path (no ``/``, no ``..``), never empty, no control characters."""
+    """A name that also names a folder: letters, digits and ``. _ - + @``, not starting
+    with a dot — never a path (no ``/``, no ``..``), never empty, no control characters."""
     ok = (isinstance(name, str) and 0 < len(name) <= 100 and not name.startswith(".")
-          and all(c.isalnum() or c in "._-+" for c in name) and name.isascii())
-    check(ok, path, f"must be a plain name (letters, digits, '.', '_', '-', '+'; not a path), "
-                    f"got {name!r}")
+          and all(c.isalnum() or c in "._-+@" for c in name) and name.isascii())
+    check(ok, path, f"must be a plain name (letters, digits, '.', '_', '-', '+', '@'; not a "
+                    f"path), got {name!r}")
 
 
 def _describe(value: Any) -> str:

@@ -19,13 +19,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers import ObserverFailure, PaperReference, QuinticMove, compiled_form
-from controllers._compiled import no_observer
+from controllers._compiled import absent
 from reduced_model import ArmModel, PlantFailure, ReducedPlant, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
 from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
-                      check_bounds, compile_run_reduced, compile_sample_laws, noise_stream,
-                      post_sample, pre_sample, signal_layout, status_message)
+                      check_bounds, new_context, noise_stream, post_sample, pre_sample,
+                      run_reduced, sample_laws, signal_layout, status_message)
 from .laws import build_controller, build_observer, nominal_model
 from .results import RunResult
 from .scenario import Scenario, check_scenario, scenario_to_mapping
@@ -99,11 +99,12 @@ def run_scenario(scenario: Scenario) -> RunResult:
 
 
 class _Run:
-    """The buffers of one run that every path shares (allocated once, no per-sample
-    allocation)."""
+    """The buffers of one run, shared by every path and held by its `SampleContext`
+    (allocated once: no allocation per sample)."""
 
     def __init__(self, s: Scenario, model: ArmModel, reference, measured: tuple[str, ...],
-                 observer, residual_names: tuple[str, ...]) -> None:
+                 observer, residual_names: tuple[str, ...], laws, truth_size: int,
+                 y_idx: np.ndarray) -> None:
         n, Ts = model.n, s.Ts
         self.n, self.N = n, int(round(s.duration / Ts))
         seeds = np.random.SeedSequence(s.seed).spawn(2)
@@ -111,31 +112,34 @@ class _Run:
                              s.sensors.encoder_noise if m.startswith("theta") else
                              s.sensors.modal_noise if m.startswith("q") else 0.0
                              for m in measured])
-        self.noise = (noise_stream(np.random.default_rng(seeds[0]), (self.N, len(measured)))
-                      if np.any(self.std > 0) else np.zeros((0, len(measured))))
-        self.dspec = _disturbance_spec(s.disturbances, Ts)
-        self.dstate = np.zeros(len(s.disturbances))
-        self.dnoise = noise_stream(np.random.default_rng(seeds[1]),
-                                   _noise_draws(self.dspec, self.N, Ts))
-        self.counts = np.array([0, 2], dtype=np.int64)  # noise draws used, torques applied
-        self.dbuf = np.zeros((s.sensors.delay + 1, len(measured)))
-        self.refkind, self.refspec = int(reference.kind), reference.spec
-        self.bounds = np.array([s.divergence.max_angle, s.divergence.max_rate,
-                                s.divergence.max_deflection * s.true_params.L1,
-                                s.divergence.max_deflection * s.true_params.L2])
-        self.lengths = np.array([s.true_params.L1, s.true_params.L2])
+        noise = (noise_stream(np.random.default_rng(seeds[0]), (self.N, len(measured)))
+                 if np.any(self.std > 0) else np.zeros((0, len(measured))))
+        dspec = _disturbance_spec(s.disturbances, Ts)
+        dnoise = noise_stream(np.random.default_rng(seeds[1]), _noise_draws(dspec, self.N, Ts))
         self.names, self.off = signal_layout(model.state_names, TRUTH_EXTRAS, measured,
                                              observer is not None, residual_names)
         self.rows = np.full((self.N, len(self.names)), np.nan)
         self.obs_idx = (np.array([measured.index(m) for m in observer.measured], dtype=np.int64)
                         if observer is not None else np.zeros(0, dtype=np.int64))
-        self.info = np.zeros(1)
-        self.ref = np.zeros(6)
+        self.info, self.ref = np.zeros(1), np.zeros(6)
+        self.bounds = np.array([s.divergence.max_angle, s.divergence.max_rate,
+                                s.divergence.max_deflection * s.true_params.L1,
+                                s.divergence.max_deflection * s.true_params.L2])
+        self.truth = np.zeros(truth_size)
         self.yv, self.y_used = np.zeros(len(measured)), np.zeros(len(measured))
-        self.y_obs = np.zeros(len(self.obs_idx))
         self.x_hat = np.zeros(2 * n)
         self.tau, self.tau_plant, self.last_tau = np.zeros(2 * n), np.zeros(2 * n), np.zeros(2 * n)
         self.force = np.zeros(2)
+        self.counts = np.array([0, 2], dtype=np.int64)  # noise draws used, torques applied
+        (controller, observer_law), self.failure = laws
+        self.context = new_context(
+            n, Ts, int(reference.kind), reference.spec, self.bounds,
+            np.array([s.true_params.L1, s.true_params.L2]), self.info, self.truth, y_idx,
+            self.yv, self.std, noise, np.zeros((s.sensors.delay + 1, len(measured))),
+            self.y_used, self.ref, self.off, float(s.torque_limit), dspec,
+            np.zeros(len(s.disturbances)), dnoise, self.counts, observer is not None,
+            s.uses_estimate, self.obs_idx, np.zeros(len(self.obs_idx)), self.x_hat, self.tau,
+            self.tau_plant, self.force, self.last_tau, *controller[:-1], *observer_law[:-1])
 
 
 def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
@@ -184,24 +188,26 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
     residual_names = () if residual is None else (
         model.coordinate_names[2:] if len(residual) == n - 2 else
         tuple(str(i + 1) for i in range(len(residual))))
-    r = _Run(s, model, reference, y.names, observer, residual_names)
     laws = _compiled_laws(controller, observer, model, Ts)
     stepping = getattr(plant, "compiled_stepping", None)
     payload_force = any(d.target in ("tip_x", "tip_y") for d in s.disturbances)
     plant_form = stepping() if laws is not None and stepping is not None and not payload_force \
         else None
+    direct = plant.measurement_index()  # the measurement's place in the truth, or None
+    y_idx = np.zeros(0, dtype=np.int64) if direct is None else direct
+    r = _Run(s, model, reference, y.names, observer, residual_names,
+             laws or _absent_laws(model), 2 * n + len(TRUTH_EXTRAS), y_idx)
     paths = {"loop": "compiled" if plant_form is not None else "python",
              "controller": "compiled" if laws is not None else "python",
              "observer": ("none" if observer is None else
                           "compiled" if laws is not None else "python")}
     wall0 = _time.perf_counter()
     if plant_form is not None:
-        status, message, k_done, timings = _compiled_loop(plant_form, r, s, model, laws,
-                                                          observer is not None)
+        status, message, k_done, timings = _compiled_loop(plant_form, r, s)
     else:
         status, message, k_done, timings = _python_loop(plant, controller, observer, s,
-                                                        reference, y, r, laws,
-                                                        residual is not None)
+                                                        reference, r, laws is not None,
+                                                        residual is not None, direct is None)
     wall = _time.perf_counter() - wall0
     simulated = k_done * Ts
     steady = wall - timings.pop("first")
@@ -220,127 +226,131 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
 
 
 def _compiled_laws(controller, observer, model: ArmModel, Ts: float):
-    """The arguments of the laws for `sample_laws` (controller, then observer, each a
-    `CompiledLaw` without its failure text) and the observer's failure text, or None if
-    either law has no compiled form (both then run as Python objects)."""
+    """The compiled forms of the laws (controller, observer) and what the observer's
+    failure means ("name: reason"), or None if either law has none (both then run as
+    the Python objects they are)."""
     c = compiled_form(controller, "controller", Ts)
-    o = no_observer(model) if observer is None else compiled_form(observer, "observer", Ts)
+    o = absent("observer", model) if observer is None else compiled_form(observer, "observer", Ts)
     if c is None or o is None:
         return None
     label = getattr(observer, "name", type(observer).__name__)
-    return (*c[:-1], *o[:-1]), (f"{label}: {o.failure}" if o.failure else "")
+    return (c, o), (f"{label}: {o.failure}" if o.failure else "")
 
 
-def _compiled_loop(plant_form: dict, r: _Run, s: Scenario, model: ArmModel, laws,
-                   has_observer: bool):
+def _absent_laws(model: ArmModel):
+    """The context's law slots when the laws run as Python objects (never called)."""
+    return (absent("controller", model), absent("observer", model)), ""
+
+
+def _compiled_loop(plant_form: dict, r: _Run, s: Scenario):
     """The whole loop in one compiled call (`run_reduced`)."""
-    args, failure = laws
-    states = model.state_names
-    measured_idx = np.array([states.index(m.removeprefix("y_"))
-                             for m in r.names if m.startswith("y_")], dtype=np.int64)
-    k_done, code = compile_run_reduced()(
-        r.N, s.Ts, plant_form["h"], plant_form["nsteps"](s.Ts), plant_form["x"],
-        *plant_form["model"], plant_form["basis"], measured_idx, r.std, r.noise, r.dbuf,
-        r.refkind, r.refspec, r.bounds, r.n, r.lengths, r.rows, r.off, r.info,
-        s.torque_limit, r.dspec, r.dstate, r.dnoise, r.obs_idx, has_observer,
-        s.uses_estimate, *args)
-    message = status_message(code, r.info[0], s.divergence, min(k_done, r.N) * s.Ts, failure)
+    k_done, code = run_reduced(r.context, r.rows, plant_form["h"], plant_form["nsteps"](s.Ts),
+                               plant_form["x"], *plant_form["model"], plant_form["basis"])
+    message = status_message(code, r.info[0], s.divergence, min(k_done, r.N) * s.Ts, r.failure)
     status = "ok" if code == SampleStatus.OK else "diverged"
     return status, message, k_done, {"first": 0.0}  # one call: no split into plant and laws
 
 
-def _python_loop(plant, controller, observer, s: Scenario, reference, y, r: _Run, laws,
-                 has_residual: bool):
-    """The loop stepping the plant from Python: per sample one compiled call
-    (`sample_laws`) with compiled laws, or `pre_sample`, the Python laws, `post_sample`;
-    returns (status, message, samples done, timings)."""
-    n, N, Ts = r.n, r.N, s.Ts
-    use_estimate = s.uses_estimate
-    ref = _SampledReference(reference, r.ref)
-    off = r.off
-    s_xhat = slice(off[Group.XHAT], off[Group.Y])
-    s_res = slice(off[Group.RESIDUAL], off[Group.DIST])
-    sample = compile_sample_laws() if laws is not None else None
-    args, failure = laws if laws is not None else ((), "")
-    has_observer = observer is not None
+def _python_loop(plant, controller, observer, s: Scenario, reference, r: _Run,
+                 compiled_laws: bool, has_residual: bool, measure: bool):
+    """The loop stepping the plant from Python: per sample the plant's truth (and, unless
+    it is part of the truth, its measurement), then one compiled call (`sample_laws`)
+    with compiled laws, or `pre_sample`, the Python laws, `post_sample`; returns (status,
+    message, samples done, timings)."""
+    n, N, Ts, ctx, rows = r.n, r.N, s.Ts, r.context, r.rows
+    laws = None if compiled_laws else _PythonLaws(controller, observer, s, reference, r,
+                                                  has_residual)
     t_plant = t_laws = first = 0.0
     status, message, k_done = "ok", "", N
-    truth = plant.truth_vector()  # [x, *TRUTH_EXTRAS]: one copy per sample
+    plant.truth_into(r.truth)
     wall0 = _time.perf_counter()
     for k in range(N):
         t = k * Ts
-        row = r.rows[k]
-        r.yv[:] = y.values
+        row = rows[k]
+        if measure:
+            r.yv[:] = plant.measure().values
         a = _time.perf_counter()
-        if sample is not None:
-            code = sample(t, k, Ts, truth, r.yv, r.std, r.noise, r.dbuf, r.refkind, r.refspec,
-                          r.bounds, n, r.lengths, row, off, r.y_used, r.ref, r.info,
-                          s.torque_limit, r.dspec, r.dstate, r.dnoise, r.counts, r.last_tau,
-                          r.x_hat, r.y_obs, r.obs_idx, has_observer, use_estimate, r.tau,
-                          r.tau_plant, r.force, *args)
-            if code != SampleStatus.OK:
-                status, k_done = "diverged", k
-                message = status_message(code, r.info[0], s.divergence, t, failure)
-                break
-        else:
-            code = pre_sample(t, k, truth, r.yv, r.std, r.noise, r.dbuf, r.refkind, r.refspec,
-                              r.bounds, n, r.lengths, row, off, r.y_used, r.ref, r.info)
-            ref.t = t
-            if code != SampleStatus.OK:
-                status, message, k_done = ("diverged",
-                                           status_message(code, r.info[0], s.divergence, t), k)
-                break
-            calling = observer
-            try:  # a plug-in may raise: the run fails, the campaign goes on
-                x_hat = r.x_hat
-                if observer is not None:
-                    x_hat = np.asarray(observer.update(t, r.y_used[r.obs_idx],
-                                                       r.last_tau[:r.counts[1]], Ts), dtype=float)
-                    row[s_xhat] = x_hat
-                calling = controller
-                out = np.asarray(controller(t, x_hat if use_estimate else row[:2 * n], ref),
-                                 dtype=float)
-                if out.shape not in ((2,), (n,)):
-                    raise ValueError(f"returned torques of shape {out.shape}, expected (2,)")
-            except ObserverFailure as exc:
-                label = getattr(calling, "name", type(calling).__name__)
-                status, k_done = "diverged", k
-                message = status_message(SampleStatus.OBSERVER_FAILED, 0.0, s.divergence, t,
-                                         f"{label}: {exc}")
-                break
-            except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
-                label = getattr(calling, "name", type(calling).__name__)
-                status, message, k_done = "failed", (f"{label} raised {type(exc).__name__}: "
-                                                     f"{_one_line(exc)} at t = {t:.4g} s"), k
-                break
-            n_tau = out.shape[0]
-            r.tau[:n_tau] = out
-            if has_residual:
-                row[s_res] = controller.residual  # read each sample: a law may rebind it
-            code = post_sample(t, r.tau, n_tau, s.torque_limit, r.dspec, r.dstate, r.dnoise,
-                               r.counts, row, off, r.tau_plant, r.force)
-            if code != SampleStatus.OK:
-                status, message, k_done = ("diverged",
-                                           status_message(code, r.info[0], s.divergence, t), k)
-                break
-            r.last_tau[:n_tau] = r.tau[:n_tau]
+        try:
+            code = sample_laws(ctx, t, k, row) if laws is None else laws.sample(t, k, row)
+        except _LawRaised as exc:
+            status, message, k_done = exc.status, exc.message, k
+            break
+        if code != SampleStatus.OK:
+            status, k_done = "diverged", k
+            message = status_message(code, r.info[0], s.divergence, t, r.failure)
+            break
         b = _time.perf_counter()
         t_laws += b - a
         try:
             force = r.force if r.force[0] or r.force[1] else None
-            y = plant.step(r.tau_plant[:r.counts[1]], Ts, tip_force=force)
+            plant.advance(r.tau_plant[:r.counts[1]], Ts, tip_force=force)
         except PlantFailure as exc:
             status, message, k_done = "failed", str(exc), k + 1
             break
-        truth = plant.truth_vector()
+        plant.truth_into(r.truth)
         t_plant += _time.perf_counter() - b
         if k == 0:  # the first sample pays for loading or compiling the kernels
             first = _time.perf_counter() - wall0
     else:
-        code = check_bounds(truth, n, r.bounds, r.info)
+        code = check_bounds(r.truth, n, r.bounds, r.info)
         if code != SampleStatus.OK:
             status, message = "diverged", status_message(code, r.info[0], s.divergence, N * Ts)
     return status, message, k_done, {"plant_s": t_plant, "laws_s": t_laws, "first": first}
+
+
+class _LawRaised(Exception):
+    """A law raised: the run ends with ``status`` ("failed", or "diverged" for an
+    observer that failed) and ``message``."""
+
+    def __init__(self, status: str, message: str) -> None:
+        super().__init__(message)
+        self.status, self.message = status, message
+
+
+class _PythonLaws:
+    """The laws as the Python objects they are, between `pre_sample` and `post_sample`
+    (every law without a compiled form, every plug-in)."""
+
+    def __init__(self, controller, observer, s: Scenario, reference, r: _Run,
+                 has_residual: bool) -> None:
+        self.controller, self.observer, self.r = controller, observer, r
+        self.Ts, self.n, self.use_estimate = s.Ts, r.n, s.uses_estimate
+        self.divergence = s.divergence
+        self.ref = _SampledReference(reference, r.ref)
+        self.s_xhat = slice(r.off[Group.XHAT], r.off[Group.Y])
+        self.s_res = slice(r.off[Group.RESIDUAL], r.off[Group.DIST]) if has_residual else None
+
+    def sample(self, t: float, k: int, row: np.ndarray) -> int:
+        r = self.r
+        code = pre_sample(r.context, t, k, row)
+        if code != SampleStatus.OK:
+            return code
+        self.ref.t = t
+        calling = self.observer
+        try:  # a plug-in may raise: the run fails, the campaign goes on
+            x_hat = r.x_hat
+            if self.observer is not None:
+                x_hat = np.asarray(self.observer.update(t, r.y_used[r.obs_idx],
+                                                        r.last_tau[:r.counts[1]], self.Ts),
+                                   dtype=float)
+                row[self.s_xhat] = x_hat
+            calling = self.controller
+            out = np.asarray(self.controller(t, x_hat if self.use_estimate else
+                                             r.truth[:2 * self.n], self.ref), dtype=float)
+            if out.shape not in ((2,), (self.n,)):
+                raise ValueError(f"returned torques of shape {out.shape}, expected (2,)")
+        except ObserverFailure as exc:
+            label = getattr(calling, "name", type(calling).__name__)
+            raise _LawRaised("diverged", status_message(
+                SampleStatus.OBSERVER_FAILED, 0.0, self.divergence, t, f"{label}: {exc}")) from None
+        except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
+            label = getattr(calling, "name", type(calling).__name__)
+            raise _LawRaised("failed", f"{label} raised {type(exc).__name__}: "
+                                       f"{_one_line(exc)} at t = {t:.4g} s") from None
+        r.tau[:out.shape[0]] = out
+        if self.s_res is not None:
+            row[self.s_res] = self.controller.residual  # read each sample: it may be rebound
+        return post_sample(r.context, t, out.shape[0], row)
 
 
 def _disturbance_spec(specs, Ts: float) -> np.ndarray:

@@ -28,6 +28,7 @@ __all__ = [
     "Scenario", "PlantSpec", "ReducedPlantSpec", "ExudynPlantSpec", "with_plant", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
     "SensorSpec", "DisturbanceSpec", "DivergenceSpec", "check_scenario",
     "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "PLANTS", "ARMS",
+    "DEFAULT_TRANSIENT", "default_transient",
 ]
 
 #: The arms a scenario can start from: the practical default (Table 1 + a motor-2 stator
@@ -48,6 +49,15 @@ MAX_PLANT_STEPS = 2e8
 #: measured at all.
 MAX_NOISE = 1e3
 INITIAL_STATES = ("rest", "reference")
+#: The default transient [s] after which metrics are taken; a run shorter than twice this
+#: is measured over its second half (`default_transient`).
+DEFAULT_TRANSIENT = 2.0
+
+
+def default_transient(duration: float) -> float:
+    """The transient of a scenario that does not set one: 2 s, or half of a run shorter
+    than 4 s (so that ``flexarm run --duration 1`` measures its last 0.5 s)."""
+    return min(DEFAULT_TRANSIENT, duration / 2)
 
 
 def _one_of(value, allowed, name) -> None:
@@ -290,7 +300,8 @@ class Scenario:
     controller's and observer's model (they differ only if a scenario says so).
     ``feedback``: the state the controller sees — "true", "estimate" (the observer's),
     or "auto" (the estimate when there is an observer).  ``torque_limit`` [N m] saturates
-    each joint (0: none).  ``transient`` [s]: metrics of tracking start after it."""
+    each joint (0: none).  ``transient`` [s]: metrics start after it; unset, it is
+    `default_transient` of the duration (2 s, or half of a run shorter than 4 s)."""
 
     name: str = "paper"
     arm: str = "default"
@@ -310,7 +321,7 @@ class Scenario:
     initial_state: str = "rest"
     seed: int = 0
     divergence: DivergenceSpec = DivergenceSpec()
-    transient: float = 2.0
+    transient: float | None = None
     #: ``[[requirement]]`` entries: each run carries their robustness as ``rho_<name>``.
     requirement: tuple[Requirement, ...] = ()
 
@@ -323,6 +334,8 @@ class Scenario:
         _positive(self.Ts, "Ts")
         _positive(self.duration, "duration")
         _positive(self.torque_limit, "torque_limit", allow_zero=True)
+        if self.transient is None:  # resolved here, so the stored scenario holds the number
+            object.__setattr__(self, "transient", default_transient(self.duration))
         _positive(self.transient, "transient", allow_zero=True)
         check(self.seed >= 0, "seed", f"must be >= 0, got {self.seed!r}")
 

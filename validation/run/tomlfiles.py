@@ -2,7 +2,9 @@
 
 ``include = "base.toml"`` (or a list) names files, relative to the including file, whose
 contents are merged first; the including file's own keys then override them (tables are
-merged key by key, everything else replaced).
+merged key by key, everything else replaced).  Values nested deeper than
+`MAX_NESTING` lists or tables are refused as they are read, naming their key, so that
+nothing downstream recurses into them.
 """
 from __future__ import annotations
 
@@ -15,7 +17,11 @@ from pathlib import Path
 from ._config import ConfigError
 
 __all__ = ["load_toml", "deep_merge", "set_dotted", "get_dotted", "flatten", "parse_value",
-           "toml_value", "toml_text"]
+           "check_nesting", "MAX_NESTING", "toml_value", "toml_text"]
+
+#: The deepest nesting of lists and tables a value may have (a campaign's deepest,
+#: ``sweep.zip.controller.options = [{gains = [[...]]}]``, has 6).
+MAX_NESTING = 32
 
 
 def deep_merge(base: dict, override: dict) -> dict:
@@ -40,10 +46,23 @@ def load_toml(path: str | Path) -> dict:
     however often it is included; chains deeper than `MAX_INCLUDE_DEPTH`, more than
     `MAX_INCLUDED_FILES` files or files over 1 MiB are refused."""
     cache: dict[Path, dict] = {}
-    try:
-        return _load(Path(path), (), cache)
-    except RecursionError:
-        raise ConfigError("", f"{path}: nested too deeply") from None
+    return _load(Path(path), (), cache)
+
+
+def check_nesting(value, where: str = "") -> None:
+    """`ConfigError` naming the key if ``value`` nests lists or tables deeper than
+    `MAX_NESTING` (checked without recursion)."""
+    todo = [(value, where, 0)]
+    while todo:
+        item, path, depth = todo.pop()
+        if depth > MAX_NESTING:
+            raise ConfigError(path, f"nested deeper than {MAX_NESTING} lists or tables")
+        if isinstance(item, dict):
+            # The key path grows only over the first levels: enough to find the value.
+            todo.extend((v, f"{path}.{k}" if path and depth < 4 else (path or k), depth + 1)
+                        for k, v in item.items())
+        elif isinstance(item, list):
+            todo.extend((v, path, depth + 1) for v in item)
 
 
 def _read(path: Path) -> dict:
@@ -57,11 +76,19 @@ def _read(path: Path) -> dict:
     if len(raw) > MAX_FILE_BYTES:
         raise ConfigError("", f"{path}: larger than {MAX_FILE_BYTES >> 20} MiB")
     try:
-        return tomllib.loads(raw.decode("utf-8"))
+        data = tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:
         raise ConfigError("", f"{path}: not UTF-8 text") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError("", f"{path}: invalid TOML ({exc})") from None
+    except RecursionError:
+        raise ConfigError("", f"{path}: a value nested deeper than {MAX_NESTING} lists or "
+                              "tables") from None
+    try:
+        check_nesting(data)
+    except ConfigError as exc:
+        raise ConfigError(exc.path, f"{exc.message} (in {path})") from None
+    return data
 
 
 def _load(path: Path, seen: tuple[Path, ...], cache: dict) -> dict:
@@ -171,12 +198,17 @@ def flatten(table: dict, prefix: str = "", *, leaf=lambda value: False) -> dict[
     return out
 
 
-def parse_value(text: str):
-    """A TOML literal ("0.5", "[8, 8]", "true", '"ancf"'), or the text itself."""
+def parse_value(text: str, key: str = ""):
+    """A TOML literal ("0.5", "[8, 8]", "true", '"ancf"'), or the text itself; a value
+    nested deeper than `MAX_NESTING` is a `ConfigError` naming ``key``."""
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text
+    except RecursionError:
+        raise ConfigError(key, f"nested deeper than {MAX_NESTING} lists or tables") from None
+    check_nesting(value, key)
+    return value
 
 
 def toml_value(v) -> str:

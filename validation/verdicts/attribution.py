@@ -42,8 +42,13 @@ from ..batch.campaign import Campaign, PlannedRun, run_campaign
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping, with_plant
 from ..batch.store import ResultStore, run_id
 
-__all__ = ["FACTORS", "METRICS", "World", "Attribution", "plan", "attribute", "shapley",
-           "attribution_from_store", "write_attribution", "parse_factors"]
+__all__ = ["FACTORS", "METRICS", "METRIC_NAMES", "DIVERGED_RULE", "World", "Attribution",
+           "plan", "attribute", "shapley", "attribution_from_store", "write_attribution",
+           "parse_factors"]
+
+#: The rule for worlds without a value: the module docstring's paragraph on them, whole.
+DIVERGED_RULE = " ".join(next(p for p in __doc__.split("\n\n")
+                              if p.startswith("Worlds that diverge")).split())
 
 #: What each factor switches from its real level (the scenario's) to its ideal one.
 FACTORS = {
@@ -68,6 +73,14 @@ METRICS = {
     "est_rms_theta_dot": (lambda m: _group(m, "theta", True), "rad/s"),
     "est_rms_q_dot": (lambda m: _group(m, "q", True), "m/s"),
     "tau_tv": (lambda m: m["tau_tv_1"] + m["tau_tv_2"], "N m/s"),
+}
+#: What a reader calls each metric (tables, waterfalls, attribution.md).
+METRIC_NAMES = {
+    "track_max": "tracking error, max", "track_rms": "tracking error, RMS",
+    "vib_rms": "vibration RMS", "est_rms_theta": "angle estimation error, RMS",
+    "est_rms_q": "modal-position estimation error, RMS",
+    "est_rms_theta_dot": "angle-rate estimation error, RMS",
+    "est_rms_q_dot": "modal-rate estimation error, RMS", "tau_tv": "torque variation",
 }
 MAX_FACTORS = 7
 _SUB_LADDER = ("plant: modes left out", "plant: beyond assumed modes")
@@ -370,26 +383,29 @@ def write_attribution(atts: list[Attribution], out) -> str:
     out = Path(out)
     write_atomic(out / "attribution.csv", lambda fh: fh.write(buf.getvalue()))
     text = render("attribution.md.j2", studies=[study_view(a) for a in atts], factors=FACTORS,
-                  rule=__doc__.split("Worlds that diverge")[1].strip())
+                  rule=DIVERGED_RULE)
     write_atomic(out / "attribution.md", lambda fh: fh.write(text))
     return text
 
 
 def study_view(att: Attribution) -> dict:
-    """Data for the templates: per metric, one row per factor (and the sub-ladder)."""
-    from ..report.render import fmt_number
+    """Data for the templates: per metric (by its human name, in the unit a reader
+    expects: mrad, mm), one row per factor (and the sub-ladder)."""
+    from ..report.render import display_unit, fmt_number
     metrics = []
     for metric, contributions in att.contributions.items():
         total = att.totals[metric]
-        unit = METRICS[metric][1]
-        rows = [[f, fmt_number(v), f"{100 * v / total:.1f}" if total and math.isfinite(v)
+        scale, unit = display_unit(METRICS[metric][1])
+        num = lambda v: fmt_number(None if v is None else scale * v)  # noqa: E731
+        rows = [[f, num(v), f"{100 * v / total:.1f}" if total and math.isfinite(v)
                  else "—"] for f, v in contributions.items()]
-        ladder = " → ".join(f"{f}: {fmt_number(v)}" for f, v in att.ladder.get(metric, []))
+        ladder = " → ".join(f"{f}: {num(v)}" for f, v in att.ladder.get(metric, []))
         pair, value = att.interaction.get(metric, (None, math.nan))
-        metrics.append({"metric": metric, "unit": unit, "rows": rows,
-                        "real": fmt_number(att.real_value.get(metric)),
-                        "ideal": fmt_number(att.ideal_value.get(metric)),
-                        "total": fmt_number(total), "ladder": ladder,
-                        "interaction": f"{pair[0]} × {pair[1]}: {fmt_number(value)}" if pair else ""})
+        metrics.append({"metric": METRIC_NAMES.get(metric, metric), "key": metric, "unit": unit,
+                        "scale": scale, "rows": rows,
+                        "real": num(att.real_value.get(metric)),
+                        "ideal": num(att.ideal_value.get(metric)),
+                        "total": num(total), "ladder": ladder,
+                        "interaction": f"{pair[0]} × {pair[1]}: {num(value)}" if pair else ""})
     return {"name": att.name, "factors": [f for f in att.factors],
             "destabilising": att.destabilising, "diverging": att.diverging, "metrics": metrics}

@@ -110,9 +110,14 @@ def load_baselines(path: str | Path = DEFAULT_FILE) -> Baselines:
     checks, names = [], set()
     for i, raw in enumerate(data.get("check", [])):
         where = f"check[{i}]"
+        check(isinstance(raw, dict), where, "must be a table ([[check]])")
         for key in raw:
             check(key in _CHECK_KEYS, f"{where}.{key}",
                   f"unknown key (allowed: {', '.join(sorted(_CHECK_KEYS))})")
+        for key in ("name", "op", "bound"):
+            check(key in raw, f"{where}.{key}", "missing (a check needs name, op and bound)")
+        check(isinstance(raw["bound"], (int, float)) and not isinstance(raw["bound"], bool),
+              f"{where}.bound", f"must be a number, got {raw['bound']!r}")
         metric = raw.get("metric", "gap")
         metric = (metric,) if isinstance(metric, str) else tuple(metric)
         c = Check(**{**raw, "metric": metric, "bound": float(raw.get("bound", math.nan))})

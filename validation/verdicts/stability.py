@@ -1,23 +1,33 @@
-"""The sampled-data stability map: the largest control period Ts at which each controller
-(+ observer) stays stable, per plant and per arm.
+"""The sampled-data stability map: per controller (+ observer), plant and arm, the largest
+control period Ts at which the loop does not diverge and, separately, the largest at which
+it keeps tracking.
 
 A design made in continuous time (the paper's) meets the real arm through a sampler and
 a zero-order hold.  For each case this module runs short closed loops on a grid of Ts
-(`GRID`, 0.1–10 ms), finds the largest grid value below which every run was stable, and
-refines it by bisection on a log scale between that value and the next (unstable) one.
+(`GRID`, 0.1–10 ms) and refines each limit by bisection on a log scale between its last
+good and first bad grid value.  Runs start moving with the reference (no start-up kick)
+and last `DURATION` seconds.  Each run has one *outcome*:
 
-A run is *stable* if it completes without diverging and still tracks: max |θ − θ_d| over
-its second half ≤ `TRACKING_LIMIT` (0.1 rad, five times the paper's 0.02 rad yardstick:
-a loop that rings up slowly is caught even if it has not crossed the divergence bounds).
-Runs start moving with the reference (no start-up kick) and last `DURATION` seconds.
+- ``stable``: completed, max |θ − θ_d| over its second half ≤ `TRACKING_LIMIT` (0.1 rad,
+  five times the paper's 0.02 rad yardstick: a loop that rings up slowly is caught even if
+  it has not crossed the divergence bounds);
+- ``lost tracking``: completed without diverging, beyond the tracking limit;
+- ``diverged``: left the divergence bounds (a result of the loop);
+- ``failed``: the plant's solver or a law gave up — no verdict about stability at all;
+  the stability command exits 1 when a case has one.
 
-The *predicted* limit explains what the map finds for the built-in joint-space laws: a
-sampled rate feedback −G θ̇ on a plant of instantaneous mobility W (the joint block of
-M⁻¹, flexible coupling included) is stable only if Ts·λ_max(W G) < 2, the stability
-bound of the explicit Euler step it amounts to.  The joint-2 mobility of the paper's
-Table-1 arm is 920 rad/(N m s²) — the motor-2 reaction acts on the link-1 tip, which has
-almost no rotary inertia — against 91 with a 0.01 kg m² stator; G is K_d for PD,
-M_θθ K_d for computed torque, M_θθ Λ + K_v for the PBC.
+Two limits, each a claim about every tested Ts at or below it: the largest Ts with **no
+divergence** and the largest Ts that **keeps tracking**.  A failed run ends a limit's
+scan (nothing is known there).  Each limit is monotone in what it claims; a tested Ts
+above a limit that nevertheless did not diverge (or kept tracking) is reported as a
+*non-monotone* case, never smoothed over.  On the truth plant the runs that define the
+limits are repeated on the check meshes (`validation.verdicts.mesh`); a limit whose
+outcomes differ between meshes is "not converged".
+
+The *predicted* limit is the exact zero-order-hold eigenvalue analysis of the case's own
+linearised sampled loop (`validation.verdicts.sampled`): the law linearised from its
+object (every gain it applies) at points of the reference, the plant linearised there —
+the reduced model, or the FE arm with the case's mesh.
 """
 from __future__ import annotations
 
@@ -26,22 +36,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..run._config import ConfigError
 from ..batch.campaign import PlannedRun, run_campaign, Campaign
 from ..batch.executor import Runner
-from ..run.laws import nominal_model
 from ..run.scenario import (arm_parameters, scenario_from_mapping, scenario_to_mapping,
                             with_plant)
 from ..batch.store import ResultStore, run_id
+from .sampled import predicted_period
 
-__all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "StabilityCase", "StabilityResult",
-           "cases_from_scenarios", "stability_map", "load_stability", "predicted_limit",
-           "is_stable", "stability_rows", "write_stability"]
+__all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "OUTCOMES", "StabilityCase", "StabilityResult",
+           "cases_from_scenarios", "stability_map", "load_stability", "outcome",
+           "stability_rows", "write_stability"]
 
 GRID = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
 DURATION = 2.0
 TRACKING_LIMIT = 0.1
 BISECTIONS = 3
+OUTCOMES = ("stable", "lost tracking", "diverged", "failed")
 _MAX_PLANT_STEP = 1e-3
 
 
@@ -53,14 +63,28 @@ class StabilityCase:
     base: dict  # a resolved scenario mapping (Ts and plant step are set per run)
 
 
+@dataclass(frozen=True)
+class Limit:
+    """One limit of a case: the largest Ts at or below which every tested run was good
+    (NaN if the smallest was not), the first Ts that was not (NaN if none), its outcome
+    and why, and the tested Ts above ``first_bad`` that were good again."""
+
+    largest: float
+    first_bad: float
+    outcome: str
+    reason: str
+    non_monotone: tuple[float, ...] = ()
+
+
 @dataclass
 class StabilityResult:
     case: StabilityCase
-    tested: dict  # Ts -> (stable, reason)
-    largest_stable: float  # NaN if even the smallest Ts failed
-    first_unstable: float  # NaN if every Ts was stable
-    reason: str  # why the first unstable run was not stable
+    tested: dict  # Ts -> (outcome, detail)
+    divergence: Limit  # good = did not diverge (stable or lost tracking)
+    tracking: Limit  # good = stable
     predicted: float  # NaN when no prediction exists for the law
+    mesh: str = ""  # truth plant: the mesh check of the runs defining the limits
+    mesh_converged: bool | None = None  # None: reduced plant, or not checked
 
     @property
     def controller(self) -> str:
@@ -69,6 +93,21 @@ class StabilityResult:
     @property
     def observer(self) -> str:
         return self.case.base["observer"]["kind"]
+
+    @property
+    def failed(self) -> list[float]:
+        """The tested Ts whose run failed (the solver or a law gave up)."""
+        return [Ts for Ts, (o, _) in self.tested.items() if o == "failed"]
+
+    @property
+    def non_monotone(self) -> list[str]:
+        """Every tested Ts that contradicts a limit, in words."""
+        out = []
+        for limit, good in ((self.divergence, "no divergence"), (self.tracking, "kept tracking")):
+            for Ts in limit.non_monotone:
+                out.append(f"{good} at {1e3 * Ts:.3g} ms above the first {limit.outcome} "
+                           f"at {1e3 * limit.first_bad:.3g} ms")
+        return out
 
 
 def _label(config: dict) -> str:
@@ -96,7 +135,9 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
                 label = _label(base)
                 key = (label, _options_key(base), plant, arm)
                 base["name"] = f"stability/{label}"
-                cases.setdefault(key, StabilityCase(label, plant, arm, base))
+                if key not in cases:  # resolved: every setting of its plant written out
+                    resolved = scenario_to_mapping(scenario_from_mapping(base))
+                    cases[key] = StabilityCase(label, plant, arm, resolved)
     return list(cases.values())
 
 
@@ -111,14 +152,34 @@ def _scenario_at(case: StabilityCase, Ts: float) -> dict:
     return data
 
 
-def is_stable(row) -> tuple[bool, str]:
-    """(stable?, why not) of a stored stability run (module docstring)."""
-    if row.status != "ok":
-        return False, row.message or row.status
+def outcome(row) -> tuple[str, str]:
+    """(outcome, detail) of a stored stability run (module docstring)."""
+    if row.status in ("diverged", "failed"):
+        return row.status, row.message or row.status
     worst = max(row.metrics.get("track_max_1", math.inf), row.metrics.get("track_max_2", math.inf))
     if not worst <= TRACKING_LIMIT:
-        return False, f"max |θ − θd| = {worst:.3g} rad over the second half"
-    return True, ""
+        return "lost tracking", f"max |θ − θd| = {worst:.3g} rad over the second half"
+    return "stable", f"max |θ − θd| = {worst:.3g} rad over the second half"
+
+
+_GOOD = {"divergence": ("stable", "lost tracking"), "tracking": ("stable",)}
+
+
+def _limit(tested: dict, good: tuple[str, ...]) -> Limit:
+    """Scan the tested Ts upwards: the last good one before the first that is not
+    (module docstring), and the good ones above it."""
+    largest = first_bad = math.nan
+    outcome_, reason = "", ""
+    for Ts in sorted(tested):
+        o, detail = tested[Ts]
+        if o in good:
+            largest = Ts
+        else:
+            first_bad, outcome_, reason = Ts, o, detail
+            break
+    above = () if math.isnan(first_bad) else tuple(
+        Ts for Ts in sorted(tested) if Ts > first_bad and tested[Ts][0] in good)
+    return Limit(largest, first_bad, outcome_, reason, above)
 
 
 def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
@@ -128,102 +189,134 @@ def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
                                                    "arm": case.arm})
 
 
+def _bisection_points(tested: dict) -> set[float]:
+    """The next Ts to test: the geometric middle of each limit's bracket whose upper end
+    is a real outcome of the loop (a failure says nothing about where the limit is)."""
+    points = set()
+    for good in _GOOD.values():
+        limit = _limit(tested, good)
+        if not (math.isnan(limit.largest) or math.isnan(limit.first_bad)) \
+                and limit.outcome != "failed":
+            points.add(float(np.sqrt(limit.largest * limit.first_bad)))
+    return points
+
+
 def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = None,
-                  progress: bool = True) -> tuple[list[StabilityResult], object]:
+                  progress: bool = True, mesh_check: bool = True
+                  ) -> tuple[list[StabilityResult], object]:
     """Run the grid and the bisections for every case into the results folder ``out``
-    (resumable like any campaign); returns the results and the last campaign summary."""
+    (resumable like any campaign; the progress bar names the round: grid, bisection k/3,
+    mesh check), then, with ``mesh_check``, the truth-plant runs that define the limits on
+    the check meshes; returns the results and the summary of every round together."""
     campaign = Campaign(name="stability", base={}, sweeps=(),
                         description="sampled-data stability map")
-    tested: dict[int, dict[float, tuple[bool, str]]] = {i: {} for i in range(len(cases))}
+    tested: dict[int, dict[float, tuple[str, str]]] = {i: {} for i in range(len(cases))}
     store = ResultStore(out)
 
-    def run(points: list[tuple[int, float]]):
+    def run(points: list[tuple[int, float]], label: str):
         planned = {(i, Ts): _planned(cases[i], Ts) for i, Ts in points}
         summary = run_campaign(campaign, out, runner=runner, progress=progress,
-                               only=list(planned.values()))
+                               only=list(planned.values()), label=label)
         if summary.interrupted:
             return summary
         rows = {r.run_id: r for r in store.rows()}
         for (i, Ts), p in planned.items():
-            tested[i][Ts] = is_stable(rows[p.run_id])
+            tested[i][Ts] = outcome(rows[p.run_id])
         return summary
 
-    summary = run([(i, Ts) for i in range(len(cases)) for Ts in GRID])
-    for _ in range(BISECTIONS):
+    summary = run([(i, Ts) for i in range(len(cases)) for Ts in GRID], "stability: grid")
+    for round_ in range(1, BISECTIONS + 1):
         if summary.interrupted:
             break
-        points = []
-        for i in range(len(cases)):
-            lo, hi = _bracket(tested[i])
-            if not (math.isnan(lo) or math.isnan(hi)):
-                points.append((i, float(np.sqrt(lo * hi))))
+        points = [(i, Ts) for i in range(len(cases)) for Ts in sorted(_bisection_points(tested[i]))]
         if not points:
             break
-        summary = run(points)
-    return [_result(case, tested[i]) for i, case in enumerate(cases)], summary
+        summary = summary + run(points, f"stability: bisection {round_}/{BISECTIONS}")
+    if mesh_check and not summary.interrupted:
+        rows = {r.run_id: r for r in store.rows()}
+        defining = [rows[_planned(case, Ts).run_id] for i, case in enumerate(cases)
+                    if case.plant == "exudyn" for Ts in _defining(tested[i])]
+        if defining:
+            from .mesh import run_checks
+            summary = summary + run_checks(defining, out, runner=runner, progress=progress)
+    if summary.interrupted:
+        return [], summary
+    return load_stability(out, cases=cases), summary
 
 
-def _result(case: StabilityCase, tested: dict) -> StabilityResult:
-    lo, hi = _bracket(tested)
-    reason = tested[hi][1] if not math.isnan(hi) else ""
-    return StabilityResult(case, dict(sorted(tested.items())), lo, hi, reason,
-                           predicted_limit(case.base))
+def _defining(tested: dict) -> list[float]:
+    """The tested Ts that define a case's limits (each limit's last good and first bad;
+    a failed run defines nothing: it has no outcome to compare)."""
+    out = set()
+    for good in _GOOD.values():
+        limit = _limit(tested, good)
+        out |= {Ts for Ts in (limit.largest, limit.first_bad)
+                if not math.isnan(Ts) and tested[Ts][0] != "failed"}
+    return sorted(out)
 
 
-def load_stability(out, *, fresh_only: bool = False) -> list[StabilityResult]:
+def _mesh_check(tested: dict, rows_at: dict, by_id: dict) -> tuple[str, bool | None]:
+    """(text, converged?) of the mesh check of a truth-plant case: the outcome of every
+    run defining a limit must be the same on every check mesh."""
+    from .mesh import checks_of
+    moved, missing, labels = [], False, {}
+    for Ts in _defining(tested):
+        row = rows_at.get(Ts)
+        if row is None:
+            continue
+        for label, other in checks_of(row, by_id).items():
+            labels[label] = None
+            if other is None:
+                missing = True
+            elif outcome(other)[0] != tested[Ts][0]:
+                moved.append(f"at {1e3 * Ts:.3g} ms {tested[Ts][0]}, {label} "
+                             f"{outcome(other)[0]}")
+    if moved:
+        return "not converged: " + "; ".join(moved), False
+    if missing or not labels:
+        return "not checked", None
+    return "converged against " + ", ".join(labels), True
+
+
+def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[StabilityResult]:
     """The stability map of a results folder, rebuilt from its stored runs (with
-    ``fresh_only``, from the runs made by this code only)."""
+    ``fresh_only``, from the runs made by this code only; with ``cases``, those cases
+    only)."""
     from ..batch.fingerprint import run_fingerprint
-    groups: dict[tuple, tuple[StabilityCase, dict]] = {}
-    for row in ResultStore(out).rows(where="sweep = 'stability'"):
+    groups: dict[tuple, tuple[StabilityCase, dict, dict]] = {}
+    all_rows = ResultStore(out).rows()
+    by_id = {r.run_id: r for r in all_rows}
+    wanted = None if cases is None else {
+        (c.label, _options_key(c.base), c.plant, c.arm) for c in cases}
+    for row in all_rows:
+        if row.sweep != "stability":
+            continue
         if fresh_only and row.fingerprint != run_fingerprint(row.config):
             continue
         c = row.config
         key = (_label(c), _options_key(c), c["plant"]["kind"], c["arm"])
+        if wanted is not None and key not in wanted:
+            continue
         case = StabilityCase(key[0], key[2], key[3], c)
-        groups.setdefault(key, (case, {}))[1][float(c["Ts"])] = is_stable(row)
+        _, tested, rows_at = groups.setdefault(key, (case, {}, {}))
+        tested[float(c["Ts"])] = outcome(row)
+        rows_at[float(c["Ts"])] = row
     order = {"default": 0, "table1": 1, "reduced": 0, "exudyn": 1}
     keys = sorted(groups, key=lambda k: (k[0], order.get(k[2], 9), order.get(k[3], 9)))
-    return [_result(*groups[k]) for k in keys]
+    results = []
+    for k in keys:
+        case, tested, rows_at = groups[k]
+        result = _result(case, tested)
+        if case.plant == "exudyn":
+            result.mesh, result.mesh_converged = _mesh_check(tested, rows_at, by_id)
+        results.append(result)
+    return results
 
 
-def _bracket(tested: dict[float, tuple[bool, str]]) -> tuple[float, float]:
-    """(largest Ts below which everything tested was stable, the smallest unstable Ts)."""
-    lo, hi = math.nan, math.nan
-    for Ts in sorted(tested):
-        if tested[Ts][0]:
-            lo = Ts
-        else:
-            hi = Ts
-            break
-    return lo, hi
-
-
-def predicted_limit(config: dict) -> float:
-    """2 / λ_max(W G) for the built-in joint-space laws (module docstring); NaN else."""
-    from reduced_model import ArmParameters
-    kind, opts = config["controller"]["kind"], config["controller"].get("options", {})
-    params = ArmParameters.from_mapping(config["nominal_params"])
-    model = nominal_model(params, tuple(config["model"]["modes_per_link"]))
-    M = model.mass_matrix(np.zeros(model.n))
-    W = np.linalg.inv(M)[:2, :2]
-    Mtt = M[:2, :2]
-    try:
-        from controllers import CONTROLLERS, accepted_options
-        defaults = accepted_options(CONTROLLERS[kind]) if kind in CONTROLLERS else {}
-        get = lambda k: np.broadcast_to(np.asarray(opts.get(k, defaults[k]), float), (2,))  # noqa: E731
-        if kind == "pd":
-            G = np.diag(get("kd"))
-        elif kind == "ct":
-            G = Mtt @ np.diag(get("kd"))
-        elif kind in ("pbc", "pbc-idealised"):
-            G = Mtt @ np.diag(get("lambda_joint")) + np.diag(get("kv_joint"))
-        else:
-            return math.nan
-    except (KeyError, ValueError, ConfigError):
-        return math.nan
-    lam = np.max(np.abs(np.linalg.eigvals(W @ G)))
-    return float(2.0 / lam) if lam > 0 else math.inf
+def _result(case: StabilityCase, tested: dict) -> StabilityResult:
+    tested = dict(sorted(tested.items()))
+    return StabilityResult(case, tested, _limit(tested, _GOOD["divergence"]),
+                           _limit(tested, _GOOD["tracking"]), predicted_period(case.base))
 
 
 def stability_rows(results: list[StabilityResult]) -> list[dict]:
@@ -232,16 +325,32 @@ def stability_rows(results: list[StabilityResult]) -> list[dict]:
 
     def ms(v):
         return "—" if math.isnan(v) else fmt_number(1e3 * v)
+
+    def largest(limit: Limit) -> str:
+        return ms(limit.largest) if not math.isnan(limit.largest) else \
+            f"< {fmt_number(1e3 * GRID[0])}"
+
+    def first(limit: Limit) -> str:
+        if math.isnan(limit.first_bad):
+            return f"> {fmt_number(1e3 * GRID[-1])}"
+        return f"{ms(limit.first_bad)} ({limit.outcome})"
     rows = []
     for r in results:
-        largest = ms(r.largest_stable) if not math.isnan(r.largest_stable) else \
-            f"< {fmt_number(1e3 * GRID[0])}"
-        unstable = ms(r.first_unstable) if not math.isnan(r.first_unstable) else \
-            f"> {fmt_number(1e3 * GRID[-1])}"
+        notes = r.non_monotone + [f"FAILED at {1e3 * Ts:.3g} ms: {r.tested[Ts][1]}"
+                                  for Ts in r.failed]
         rows.append({"case": r.case.label, "plant": r.case.plant, "arm": r.case.arm,
-                     "largest": largest, "unstable": unstable, "predicted": ms(r.predicted),
-                     "reason": r.reason, "largest_s": r.largest_stable,
-                     "first_unstable_s": r.first_unstable, "predicted_s": r.predicted})
+                     "no_divergence": largest(r.divergence),
+                     "first_divergence": first(r.divergence),
+                     "tracking": largest(r.tracking), "first_loss": first(r.tracking),
+                     "predicted": ms(r.predicted),
+                     "reason": r.divergence.reason if r.divergence.reason == r.tracking.reason
+                     else "; ".join(x for x in (r.tracking.reason, r.divergence.reason) if x),
+                     "mesh": r.mesh or "— (reduced plant)",
+                     "notes": "; ".join(notes) or "monotone",
+                     "no_divergence_s": r.divergence.largest,
+                     "first_divergence_s": r.divergence.first_bad,
+                     "tracking_s": r.tracking.largest, "first_loss_s": r.tracking.first_bad,
+                     "predicted_s": r.predicted, "failed_s": " ".join(f"{Ts:g}" for Ts in r.failed)})
     return rows
 
 
@@ -259,7 +368,8 @@ def write_stability(results: list[StabilityResult], out) -> str:
                   limit=f"{TRACKING_LIMIT:g}")
     out = Path(out)
     write_atomic(out / "stability.md", lambda fh: fh.write(text))
-    keys = ["case", "plant", "arm", "largest_s", "first_unstable_s", "predicted_s", "reason"]
+    keys = ["case", "plant", "arm", "no_divergence_s", "first_divergence_s", "tracking_s",
+            "first_loss_s", "predicted_s", "failed_s", "mesh", "notes", "reason"]
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore", lineterminator="\n")
     writer.writeheader()

@@ -1,0 +1,197 @@
+"""The FE arm linearised about a configuration, as a python-control `StateSpace` (the
+truth plant's counterpart of the reduced model's linearisation of eq. 1–3).
+
+Exudyn linearises its own equations: ``mbs.ComputeLinearizedSystem`` with
+``projectIntoConstraintNullspace=True`` returns M, K, D in the nullspace of the constraint
+Jacobian at the configuration (u = Nᵀ z), so the joints and clamps are exact.  Around it:
+
+- inputs: the generalised forces of unit torques τ1 (hub 1) and τ2 (hub 2, with the
+  reaction −τ2 on the link-1 tip), read as the change of Exudyn's own ODE2 right-hand
+  side when the loads are set — the same loads the plant applies;
+- outputs: the plant's own readout (`_plant.readout_into`: θ, the modal coordinates q
+  projected on ``modal_basis``, their rates, the tip deflections), linearised by central
+  differences in the ODE2 coordinates (step 1e-6; the rates are linear in the ODE2
+  velocities, so their columns are exact differences);
+- states: the mass-normalised modes Φ of the undamped FE arm (Φᵀ M Φ = I, Φᵀ K Φ = Ω²),
+  η and η̇, so A = [[0, I], [−Ω², −Φᵀ D Φ]] and the undamped natural frequencies are
+  √Ω² / 2π on the diagonal.
+
+Rigid-body modes.  The free arm turns about joint 1 and folds about joint 2 at no cost;
+Exudyn's numerical Jacobian leaves those two modes at ~1e-4 Hz (ω² ~ 1e-6 against 190
+s⁻² for the first bending mode) instead of 0, and their eigenvectors carry 1e-8 of
+deformation.  A spurious spring would put the double pole of each joint at ±j6e-4 rad/s
+instead of s = 0 and flip the sign of the response below it, and a rigid mode that the
+tip deflections see at 1e-8 puts a double pole at s = 0 into τ → tip deflection — either
+of which the ν-gap reports as a distance of 1.  So the rigid modes are set exactly: their
+directions are the joint rotations of the exact node placement, with Ω² = 0 and no
+damping, and the flexible modes are solved on their M-orthogonal complement (after
+checking that K is four orders of magnitude smaller on them than on the first bending
+mode).
+"""
+from __future__ import annotations
+
+import control
+import exudyn as exu
+import numpy as np
+import scipy.linalg
+
+from reduced_model import ArmParameters, LinkModes
+from reduced_model._plant_interface import TRUTH_EXTRAS
+
+from ._build import Mesh
+from ._plant import ExudynPlant, readout_into, simulation_settings
+
+__all__ = ["linear_model", "output_names"]
+
+_FD_STEP = 1e-6  # m, rad or slope: central differences of a smooth readout, error ~1e-10
+_RIGID_RATIO = 1e-4  # a "rigid" mode's ω² must be below this × the first flexible one's
+
+
+def output_names(modal_basis: tuple[LinkModes, LinkModes]) -> tuple[str, ...]:
+    """θ, q (in ``modal_basis``), their rates, then the tip deflections: the names the
+    linear models of both plants give their outputs."""
+    coords = ("theta1", "theta2", *(f"q{i + 1}{j + 1}" for i, m in enumerate(modal_basis)
+                                    for j in range(m.n)))
+    return coords + tuple(f"{c}_dot" for c in coords) + ("tip_defl1", "tip_defl2")
+
+
+def linear_model(params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
+                 theta=(0.0, 0.0), Ts: float | None = None,
+                 modal_basis: tuple[LinkModes, LinkModes] | None = None) -> control.StateSpace:
+    """The FE arm linearised about rest at joint angles ``theta`` (module docstring).
+
+    Parameters
+    ----------
+    params : ArmParameters
+        The arm (default: `ArmParameters()`).
+    mesh : Mesh
+        Element type and elements per link.
+    theta : (float, float)
+        θ1, θ2 [rad] of the configuration (θ2 relative to the link-1 tip tangent).
+    Ts : float, optional
+        If given, the exact zero-order-hold discretisation at this period [s].
+    modal_basis : (LinkModes, LinkModes), optional
+        Mode shapes the deflection is projected on for the q outputs (default: the reduced
+        model of ``params`` with 2 modes per link, as `ExudynPlant`).
+
+    Returns
+    -------
+    control.StateSpace
+        Inputs ``tau1``, ``tau2`` [N m]; outputs `output_names` (deviations from the
+        configuration: rad, m, rad/s, m/s); states ``eta1…`` (FE modes, the first two
+        rigid) and their rates.  Continuous, or discrete with ``dt = Ts``.
+    """
+    params = params if params is not None else ArmParameters()
+    plant = ExudynPlant(params, mesh, modal_basis=modal_basis)
+    n = plant.state_size // 2
+    x0 = np.zeros(2 * n)
+    x0[:2] = np.asarray(theta, dtype=float)
+    plant.reset(x0)  # the nodes placed exactly at θ: the configuration linearised about
+    mbs = plant.system.mbs
+    settings = simulation_settings(step=1e-3)
+    settings.staticSolver.verboseMode = 0
+    M, K, D, _, N = mbs.ComputeLinearizedSystem(settings, projectIntoConstraintNullspace=True,
+                                                returnConstraintNullspace=True)
+    u0 = np.asarray(mbs.systemData.GetODE2Coordinates(exu.ConfigurationType.Initial), float)
+    F = _input_forces(plant, settings)
+    Cu, Cv = _output_jacobians(plant, u0)
+
+    Phi, omega2 = _modes(K, M, N @ _rigid_motions(plant, x0[:n]))
+    Dm = Phi.T @ D @ Phi
+    if np.abs(Dm[:2]).max() > 1e-6 * np.abs(Dm).max():
+        raise ArithmeticError("the FE damping acts on a rigid-body mode")
+    Dm[:2, :] = 0.0
+    Dm[:, :2] = 0.0
+    k = len(omega2)
+    A = np.block([[np.zeros((k, k)), np.eye(k)], [-np.diag(omega2), -Dm]])
+    B = np.vstack([np.zeros((k, 2)), Phi.T @ N @ F])
+    C = np.hstack([Cu @ N.T @ Phi, Cv @ N.T @ Phi])
+    states = [f"eta{i + 1}" for i in range(k)]
+    sys_ = control.ss(A, B, C, np.zeros((C.shape[0], 2)), inputs=["tau1", "tau2"],
+                      outputs=list(output_names(plant.modal_basis)),
+                      states=states + [f"{s}_dot" for s in states],
+                      name=f"fe_{mesh.element}_{mesh.elements_per_link[0]}_"
+                           f"{mesh.elements_per_link[1]}")
+    return sys_ if Ts is None else control.sample_system(sys_, Ts, method="zoh",
+                                                         name=sys_.name + "_zoh")
+
+
+def _rigid_motions(plant: ExudynPlant, Q0: np.ndarray) -> np.ndarray:
+    """ODE2 displacement directions (size, 2) of turning joint 1 and joint 2 at Q0: central
+    differences of the exact node placement (`ExudynPlant._node_displacements`); for a
+    rotation the difference quotient is parallel to the derivative, so no deformation
+    enters."""
+    columns = []
+    for j in range(2):
+        step = np.zeros(len(Q0))
+        step[j] = _FD_STEP
+        columns.append((plant._node_displacements(Q0 + step)
+                        - plant._node_displacements(Q0 - step)) / (2 * _FD_STEP))
+    return np.column_stack(columns)
+
+
+def _modes(K: np.ndarray, M: np.ndarray, rigid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mass-normalised modes Φ (rigid first) and Ω² of (K, M) in nullspace coordinates,
+    with the rigid subspace ``rigid`` (nullspace coordinates, 2 columns) set exactly:
+    Ω² = 0 there, and the flexible modes solved on its M-orthogonal complement (module
+    docstring).  Exudyn's K gives the rigid motions ω² ~ 1e-6 s⁻² (against 190 for the
+    first bending mode); a larger value means they are not rigid: ArithmeticError."""
+    spurious = np.abs(rigid.T @ K @ rigid).max() / np.abs(rigid.T @ M @ rigid).max()
+    first = scipy.linalg.eigh(K, M, eigvals_only=True, subset_by_index=[2, 2])[0]
+    if spurious > _RIGID_RATIO * first:
+        raise ArithmeticError(f"joint rotations are not rigid-body modes of the FE arm "
+                              f"(ω² = {spurious:.3g} next to {first:.4g} s⁻²)")
+    gram = rigid.T @ M @ rigid
+    vals, vecs = np.linalg.eigh(gram)
+    rigid_modes = rigid @ (vecs / np.sqrt(vals)) @ vecs.T  # Φ_rᵀ M Φ_r = I
+    complement = scipy.linalg.null_space((M @ rigid).T)  # zᵀ M Φ_r = 0
+    omega2, V = scipy.linalg.eigh(complement.T @ K @ complement, complement.T @ M @ complement)
+    return (np.hstack([rigid_modes, complement @ V]),
+            np.concatenate([[0.0, 0.0], omega2]))
+
+
+def _input_forces(plant: ExudynPlant, settings) -> np.ndarray:
+    """Generalised forces (ODE2 size, 2) of unit torques τ1 and τ2 as the plant applies
+    them (`ExudynPlant.step`), from Exudyn's own right-hand side."""
+    mbs = plant.system.mbs
+    solver = exu.MainSolverStatic()
+    solver.InitializeSolver(mbs, settings)
+    size = mbs.systemData.ODE2Size()
+
+    def rhs(t1: float, t2: float) -> np.ndarray:
+        l1, l2, l2r = plant.system.loads
+        mbs.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])
+        mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
+        mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
+        solver.ComputeODE2RHS(mbs)
+        return np.array(solver.GetSystemResidual())[:size]
+
+    r0 = rhs(0.0, 0.0)
+    forces = np.column_stack([rhs(1.0, 0.0) - r0, rhs(0.0, 1.0) - r0])
+    rhs(0.0, 0.0)
+    return forces
+
+
+def _output_jacobians(plant: ExudynPlant, u0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """∂y/∂u (central differences) and ∂y/∂v (exact: y is linear in v) of the plant's
+    readout at displacements ``u0`` and rest, for the outputs of `output_names`."""
+    m = plant.state_size // 2
+    keep = np.r_[0:2 * m, 2 * m + TRUTH_EXTRAS.index("tip_defl1"),
+                 2 * m + TRUTH_EXTRAS.index("tip_defl2")]
+    out = np.empty(2 * m + len(TRUTH_EXTRAS))
+
+    def read(u, v):
+        readout_into(plant._readout, u, v, out)
+        return out[keep].copy()
+
+    size = len(u0)
+    rest = np.zeros(size)
+    y0 = read(u0, rest)
+    Cu, Cv = np.empty((len(keep), size)), np.empty((len(keep), size))
+    for j in range(size):
+        e = np.zeros(size)
+        e[j] = _FD_STEP
+        Cu[:, j] = (read(u0 + e, rest) - read(u0 - e, rest)) / (2 * _FD_STEP)
+        e[j] = 1.0
+        Cv[:, j] = read(u0, e) - y0
+    return Cu, Cv

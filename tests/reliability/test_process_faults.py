@@ -1,0 +1,231 @@
+"""A campaign outlives its worst run: whatever a plug-in law does to the process that
+runs it — exit, crash, hang, hoard memory, raise KeyboardInterrupt — the run is recorded
+as failed with what happened, the other runs complete, the command exits 1 without a
+traceback, and no process is left behind; serially (one worker process) and with two
+workers.
+
+One campaign holds every fault and is run once per worker count (module fixtures); each
+fault is then its own test on the stored results."""
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from campaign_testing import wait_gone
+from validation.batch.store import ResultStore
+
+FAULTS = textwrap.dedent('''
+    """Laws that misbehave from t = 0.1 s on, written for the tests."""
+    import ctypes
+    import os
+    import sys
+    import time
+
+    import numpy as np
+
+    _hoard = []
+
+
+    class Fault:
+        def __init__(self, model, *, fault="none"):
+            self.fault = fault
+
+        def __call__(self, t, x, ref):
+            if t >= 0.1:
+                if self.fault == "sys.exit":
+                    sys.exit(0)
+                if self.fault == "os._exit":
+                    os._exit(0)
+                if self.fault == "segfault":
+                    ctypes.string_at(0)
+                if self.fault == "KeyboardInterrupt":
+                    raise KeyboardInterrupt
+                if self.fault == "sleep":
+                    while True:
+                        time.sleep(1.0)
+                if self.fault == "hoard":  # 64 MiB more at every sample
+                    _hoard.append(np.ones(8 << 20))
+            n = x.shape[0] // 2
+            theta_d, dtheta_d, _ = ref(t)
+            return 30.0 * (theta_d - x[:2]) + 18.0 * (dtheta_d - x[n:n + 2])
+''')
+
+#: fault -> what the run's stored message must contain.
+EXPECTED = {
+    "sys.exit": "the run called sys.exit(0)",
+    "os._exit": "the worker exited with status 0 during the run",
+    "segfault": "the worker was killed by signal 11 (SIGSEGV) during the run",
+    "KeyboardInterrupt": "KeyboardInterrupt raised during the run (not a Ctrl-C)",
+    "sleep": "no result after 8 s",
+    "hoard": "exceeded the memory limit of 2048 MiB",
+}
+GOOD_RUNS = 4
+#: Far beyond the ~0.05 s a healthy 0.5 s run takes, even on a busy machine.
+RUN_TIMEOUT = "8"
+#: An idle worker takes ~650 MiB of address space; the hoarding law passes 2 GiB in ~25
+#: samples.
+MEMORY_LIMIT = "2048"
+
+
+def campaign_text() -> str:
+    names = ", ".join(f'"{f.replace("_", "").replace(".", "-")}"' for f in EXPECTED)
+    return textwrap.dedent(f'''
+        name = "faults"
+        [scenario]
+        duration = 0.5
+        transient = 0.1
+        [[sweep]]
+        name = "good"
+        grid.seed = {list(range(GOOD_RUNS // 2))}
+        [[sweep]]
+        name = "bad"
+        zip.name = [{names}]
+        zip.controller.kind = [{", ".join('"faultlaws:Fault"' for _ in EXPECTED)}]
+        zip.controller.options = [{", ".join(f'{{fault = "{f}"}}' for f in EXPECTED)}]
+        [[sweep]]
+        name = "good-after"
+        grid.seed = {list(range(GOOD_RUNS // 2, GOOD_RUNS))}
+    ''')
+
+
+def flexarm(cwd, *args, **kw):
+    """The CLI in its own session (its process group holds it and every worker)."""
+    return subprocess.Popen([sys.executable, "-m", "validation.cli", *args], cwd=cwd,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, **kw)
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory):
+    path = tmp_path_factory.mktemp("lab")
+    (path / "faultlaws.py").write_text(FAULTS)
+    (path / "faults.toml").write_text(campaign_text())
+    return path
+
+
+@pytest.fixture(scope="module", params=["1", "2"], ids=["serial", "2-workers"])
+def campaign(request, lab):
+    """The fault campaign run by the CLI: (workers, exit status, stdout, stderr, rows by
+    name, whether its process group was gone after it)."""
+    out = lab / f"out-{request.param}"
+    proc = flexarm(lab, "campaign", "faults.toml", "--out", str(out), "--workers",
+                   request.param, "--force-workers", "--no-progress",
+                   "--run-timeout", RUN_TIMEOUT, "--memory-limit", MEMORY_LIMIT)
+    stdout, stderr = proc.communicate(timeout=600)
+    gone = wait_gone(proc.pid)
+    store = ResultStore(out)
+    rows = {}
+    for r in store.rows():
+        rows.setdefault(r.name, []).append(r)
+    store.close()
+    return request.param, proc.returncode, stdout, stderr, rows, gone
+
+
+def test_the_campaign_outlives_every_fault(campaign):
+    workers, status, stdout, stderr, rows, gone = campaign
+    assert status == 1, stderr  # some runs failed
+    assert "Traceback" not in stdout + stderr, stderr
+    total = GOOD_RUNS + len(EXPECTED)
+    assert f"faults: {total} runs; ran {total}: {GOOD_RUNS} ok, 0 diverged, " \
+           f"{len(EXPECTED)} failed" in stdout, stdout
+    good = rows["faults/good"] + rows["faults/good-after"]
+    assert len(good) == GOOD_RUNS and all(r.status == "ok" for r in good)
+    assert gone, "a worker outlived the campaign"
+
+
+@pytest.mark.parametrize("fault", list(EXPECTED))
+def test_a_fault_is_a_failed_run_saying_what_happened(campaign, fault):
+    workers, status, stdout, stderr, rows, gone = campaign
+    (row,) = rows[f"faults/{fault.replace('_', '').replace('.', '-')}"]
+    assert row.status == "failed"
+    assert EXPECTED[fault] in row.message, row.message
+    # ... and when: the simulated time (the loop caught it), the wall time into the run
+    # (the worker caught it or died), or the limit that stopped it.
+    assert any(when in row.message for when in ("at t = ", "s after the run started",
+                                                  "no result after"))
+    assert row.config["controller"]["options"] == {"fault": fault}
+
+
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_workers_die_with_a_killed_campaign(lab, workers, tmp_path):
+    out = tmp_path / "out"
+    cfg = tmp_path / "hang.toml"
+    cfg.write_text('name = "hang"\n[scenario]\nduration = 0.5\ntransient = 0.1\n'
+                   'controller = { kind = "faultlaws:Fault", options = { fault = "sleep" } }\n'
+                   '[[sweep]]\ngrid.seed = [0, 1, 2]\n')
+    proc = flexarm(lab, "campaign", str(cfg), "--out", str(out), "--workers", workers,
+                   "--force-workers", "--no-progress")
+    deadline = time.time() + 300  # the workers exist once the index does
+    while time.time() < deadline and not (out / "index.sqlite").exists():
+        time.sleep(0.05)
+    time.sleep(1.0)  # every worker is now inside a run that never ends
+    assert proc.poll() is None, proc.communicate()
+    workers_pids = subprocess.run(["pgrep", "-g", str(proc.pid)], capture_output=True,
+                                  text=True).stdout.split()
+    assert len(workers_pids) == 1 + int(workers)  # the campaign and its workers
+    proc.kill()
+    proc.communicate()
+    assert wait_gone(proc.pid), "a worker outlived its killed parent"
+
+
+def test_sys_exit_in_the_plugin_run_by_flexarm_run_is_not_success(lab, tmp_path):
+    proc = flexarm(lab, "run", "--controller", "faultlaws:Fault", "--set",
+                   'controller.options.fault="sys.exit"', "--duration", "0.5", "--set",
+                   "transient=0.1", "--out", str(tmp_path / "out"))
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 1 and "Traceback" not in stderr, stderr
+    assert "failed: the run called sys.exit(0)" in stdout
+    (row,) = ResultStore(tmp_path / "out").rows()
+    assert row.status == "failed" and "sys.exit(0)" in row.message
+    assert wait_gone(proc.pid)
+
+
+@pytest.mark.parametrize("where", ["__init__", "module"])
+def test_sys_exit_or_keyboard_interrupt_while_checking_a_plugin(lab, tmp_path, where):
+    """Checking a scenario constructs its laws here (and imports their modules): code
+    that exits or raises KeyboardInterrupt there ends the command with status 1 and one
+    line, never 0, and writes nothing."""
+    (tmp_path / "checklaws.py").write_text(textwrap.dedent(f'''
+        import sys
+        if {where == "module"!r}:
+            sys.exit(0)
+        class Exits:
+            def __init__(self, model):
+                sys.exit(0)
+        class Interrupts:
+            def __init__(self, model):
+                raise KeyboardInterrupt
+    '''))
+    kinds = ["checklaws:Exits"] + (["checklaws:Interrupts"] if where == "__init__" else [])
+    for kind in kinds:
+        proc = flexarm(tmp_path, "run", "--controller", kind, "--duration", "0.5",
+                       "--set", "transient=0.1", "--out", str(tmp_path / "out"))
+        _, stderr = proc.communicate(timeout=300)
+        assert proc.returncode == 1, stderr
+        lines = stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("flexarm: error:"), stderr
+        assert ("sys.exit(0)" if "Exits" in kind else "KeyboardInterrupt") in lines[0]
+        assert not (tmp_path / "out").exists()
+
+
+def test_a_run_past_its_time_limit_is_stopped_on_dask(lab, monkeypatch, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    from validation.batch.campaign import campaign_from_mapping, run_campaign
+    from validation.batch.executor import make_runner
+    monkeypatch.syspath_prepend(str(lab))  # the Dask workers find the plug-in module
+    spec = {"name": "dask", "scenario": {"duration": 0.5, "transient": 0.1},
+            "sweep": [{"zip": {"name": ["hangs", "runs"],
+                               "controller.kind": ["faultlaws:Fault", "pd"],
+                               "controller.options": [{"fault": "sleep"}, {}]}}]}
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None, host="127.0.0.1") as cluster:
+        with make_runner("dask", scheduler=cluster.scheduler_address, run_timeout=5) as dask:
+            summary = run_campaign(campaign_from_mapping(spec), tmp_path, runner=dask,
+                                   progress=False)
+    rows = {r.name: r for r in ResultStore(tmp_path).rows()}
+    assert (summary.ok, summary.failed) == (1, 1), {n: r.message for n, r in rows.items()}
+    assert rows["dask/hangs"].status == "failed"
+    assert "no result after 5 s" in rows["dask/hangs"].message
+    assert rows["dask/runs"].status == "ok"

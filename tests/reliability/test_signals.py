@@ -1,0 +1,90 @@
+"""A Ctrl-C stops any command at any moment — while it starts, checks, runs or writes a
+report: one line, exit status 130, no traceback, no process left behind."""
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from campaign_testing import wait_gone
+
+HANGS = textwrap.dedent('''
+    import time
+
+    class Hangs:
+        """A law that never returns: a command running it only ends when stopped."""
+        def __init__(self, model):
+            pass
+
+        def __call__(self, t, x, ref):
+            while True:
+                time.sleep(1.0)
+''')
+
+
+def interrupt(cwd, args, *, after: float = 0.0, once=None) -> subprocess.CompletedProcess:
+    """Start the CLI in its own session, send SIGINT ``after`` seconds later (or as soon
+    as ``once()`` holds), and wait for it to end."""
+    proc = subprocess.Popen([sys.executable, "-m", "validation.cli", *args], cwd=cwd,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    start = time.time()
+    while once is not None and not once() and time.time() - start < 300:
+        time.sleep(0.01)
+    time.sleep(after)
+    assert proc.poll() is None, f"ended before the signal: {proc.communicate()}"
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert wait_gone(proc.pid), "a process outlived the interrupted command"
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
+
+
+def assert_interrupted(done):
+    assert done.returncode == 130, done.stderr
+    assert "Traceback" not in done.stderr + done.stdout, done.stderr
+    lines = done.stderr.strip().splitlines()
+    # "flexarm: interrupted", and from a campaign how many finished runs it kept.
+    assert len(lines) <= 2 and lines[-1].startswith("flexarm: interrupted"), done.stderr
+
+
+@pytest.fixture()
+def lab(tmp_path):
+    (tmp_path / "hanglaws.py").write_text(HANGS)
+    return tmp_path
+
+
+# 0.1 s: the interpreter imports the libraries; 2 s: the scenario is checked, the worker
+# started, or the run under way (the run never ends, so every moment is before the end).
+@pytest.mark.parametrize("after", [0.1, 2.0])
+def test_ctrl_c_stops_flexarm_run(lab, after):
+    done = interrupt(lab, ["run", "--controller", "hanglaws:Hangs", "--duration", "0.5",
+                           "--set", "transient=0.1", "--out", str(lab / "out")], after=after)
+    assert_interrupted(done)
+
+
+@pytest.mark.parametrize("after", [0.1, 2.0])
+def test_ctrl_c_stops_a_campaign_while_it_starts(lab, after):
+    (lab / "c.toml").write_text('name = "c"\n[scenario]\nduration = 0.5\ntransient = 0.1\n'
+                                'controller.kind = "hanglaws:Hangs"\n'
+                                '[[sweep]]\ngrid.seed = [0, 1, 2, 3]\n')
+    done = interrupt(lab, ["campaign", "c.toml", "--out", str(lab / "out"), "--workers", "1",
+                           "--no-progress"], after=after)
+    assert_interrupted(done)
+
+
+def test_ctrl_c_stops_a_report_being_written(lab):
+    from validation.batch.campaign import campaign_from_mapping, run_campaign
+    results = lab / "results"
+    run_campaign(campaign_from_mapping({"name": "r", "scenario": {"duration": 0.5,
+                                                                 "transient": 0.1},
+                                        "sweep": [{"grid": {"seed": [0, 1]}}]}),
+                 results, progress=False)
+    figures = results / "report" / "figures"
+    # Once its figures folder exists the report is being drawn (figures are written at
+    # the end, with the tables): the signal lands mid-way.
+    done = interrupt(lab, ["report", str(results), "--no-progress"],
+                     once=figures.is_dir)
+    assert_interrupted(done)
+    assert not (results / "report" / "report.html").exists()

@@ -1,0 +1,116 @@
+"""A plug-in's code fingerprint covers the project-local modules it imports — helpers
+imported by name, from a package, relatively — so editing a helper makes the stored runs
+stale; the fingerprint is found without importing anything."""
+import json
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.executor import SerialRunner
+from validation.batch.fingerprint import plugin_sources, run_fingerprint
+from validation.batch.store import ResultStore
+from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
+
+LAW = textwrap.dedent('''
+    """A PD law whose gains live in helper modules."""
+    import pathlib
+
+    import numpy as np
+
+    import labgains
+    from labpkg.tuning import KD
+    from labpkg import shapes
+
+    pathlib.Path(__file__).with_name("IMPORTED").write_text("imported")
+
+
+    class HelperPD:
+        def __init__(self, model):
+            pass
+
+        def __call__(self, t, x, ref):
+            n = x.shape[0] // 2
+            theta_d, dtheta_d, _ = ref(t)
+            return shapes.scaled(labgains.KP * (theta_d - x[:2]) + KD * (dtheta_d - x[n:n + 2]))
+''')
+FILES = {
+    "lablaw.py": LAW,
+    "labgains.py": "KP = 30.0\n",
+    "labpkg/__init__.py": "",
+    "labpkg/tuning.py": "from .limits import CAP\nKD = min(18.0, CAP)\n",
+    "labpkg/limits.py": "CAP = 100.0\n",
+    "labpkg/shapes.py": "def scaled(tau):\n    return 1.0 * tau\n",
+    "unrelated.py": "X = 1\n",
+}
+
+
+@pytest.fixture()
+def lab(tmp_path, monkeypatch):
+    for name, text in FILES.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for module in ("lablaw", "labgains", "labpkg", "labpkg.tuning", "labpkg.limits",
+                   "labpkg.shapes"):
+        monkeypatch.delitem(sys.modules, module, raising=False)
+    plugin_sources.cache_clear()
+    yield tmp_path
+    plugin_sources.cache_clear()
+
+
+CONFIG = {"duration": 1.0, "transient": 0.5, "controller": {"kind": "lablaw:HelperPD"}}
+
+
+def test_the_fingerprint_covers_every_local_module_the_plugin_imports(lab):
+    files = {p.relative_to(lab).as_posix() for p in plugin_sources("lablaw:HelperPD")}
+    # Its own module, its helpers by name, from a package, relatively and transitively,
+    # and the package's __init__ — not numpy, not the standard library, not a file it
+    # does not import.
+    assert files == {"lablaw.py", "labgains.py", "labpkg/__init__.py", "labpkg/tuning.py",
+                     "labpkg/limits.py", "labpkg/shapes.py"}
+    assert not (lab / "IMPORTED").exists() and "lablaw" not in sys.modules  # not imported
+
+
+@pytest.mark.parametrize("edited, changes", [
+    ("labgains.py", True), ("labpkg/tuning.py", True), ("labpkg/limits.py", True),
+    ("labpkg/shapes.py", True), ("labpkg/__init__.py", True), ("unrelated.py", False)])
+def test_editing_a_helper_changes_the_fingerprint(lab, edited, changes):
+    config = json.loads(json.dumps(scenario_to_mapping(scenario_from_mapping(CONFIG))))
+    before = run_fingerprint(config)
+    (lab / edited).write_text((lab / edited).read_text() + "# edited\n")
+    assert (run_fingerprint(config) != before) == changes
+
+
+def test_a_run_made_before_a_helper_edit_is_stale_and_redone(lab, tmp_path):
+    campaign = campaign_from_mapping({"name": "helper", "scenario": CONFIG})
+    out = tmp_path / "out"
+    first = run_campaign(campaign, out, runner=SerialRunner(), progress=False)
+    assert first.ok == 1
+    (row,) = ResultStore(out).rows()
+    again = run_campaign(campaign, out, runner=SerialRunner(), progress=False)
+    assert (again.skipped, again.done) == (1, 0)  # same code: reused
+    (lab / "labgains.py").write_text("KP = 60.0\n")  # a new gain, in the helper only
+    for module in ("lablaw", "labgains"):
+        sys.modules.pop(module, None)  # this process runs the edited code too
+    edited = run_campaign(campaign, out, runner=SerialRunner(), progress=False)
+    assert edited.stale == [row.run_id] and edited.ok == 1
+    (redone,) = ResultStore(out).rows()
+    assert redone.fingerprint != row.fingerprint
+    # The stored result is the edited law's: twice the stiffness, another tracking error.
+    assert not np.isclose(redone.metrics["track_max_1"], row.metrics["track_max_1"],
+                          rtol=1e-3)
+
+
+def test_a_helper_python_cannot_parse_is_hashed_not_followed(lab):
+    (lab / "oldhelper.py").write_text("print 'python 2'\n")
+    (lab / "lablaw.py").write_text(LAW + "\ntry:\n    import oldhelper\nexcept SyntaxError:\n"
+                                         "    oldhelper = None\n")
+    files = {p.relative_to(lab).as_posix() for p in plugin_sources("lablaw:HelperPD")}
+    assert "oldhelper.py" in files  # no SyntaxError out of the fingerprint
+    config = json.loads(json.dumps(scenario_to_mapping(scenario_from_mapping(CONFIG))))
+    before = run_fingerprint(config)
+    (lab / "oldhelper.py").write_text("print 'python 2, edited'\n")
+    assert run_fingerprint(config) != before

@@ -1,0 +1,92 @@
+"""`flexarm validity`: bad input refused in one line; the analysis written as data, tables
+and figures; the report's validity section drawn from what was stored."""
+import json
+import math
+
+import pytest
+
+from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.cli import main
+from validation.report.report import write_report
+from validation.verdicts.validity import CHANNELS, load_validity, write_validity
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["validity", "{tmp}/missing.toml"], "missing.toml"),
+    (["validity", "{tmp}/bad.toml"], "duration"),
+    (["validity", "{tmp}/ok.toml", "--stability", "{tmp}"], "--stability"),
+    (["validity", "{tmp}/ok.toml", "--arm", "paper"], "--arm: invalid choice"),
+])
+def test_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, argv, text):
+    (tmp_path / "bad.toml").write_text("duration = -1.0\n")
+    (tmp_path / "ok.toml").write_text("duration = 5.0\n")
+    out = tmp_path / "out"
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv] + ["--out", str(out)]
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse's own errors exit here, with the same rules
+        status = exc.code
+    assert status == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("flexarm: error:") and text in err[0]
+    assert not out.exists()
+
+
+def synthetic_analysis() -> dict:
+    """A validity analysis as `validity_analysis` returns it, with made-up numbers."""
+    f = [0.1, 1.0, 10.0, 100.0]
+    curve = {f"{i}->{o}": [1.0, 0.1, 0.01, 0.001] for i, o in CHANNELS}
+    arm = {"arm": "default", "Ts": 1e-3, "modes": [2, 2],
+           "mesh": {"element": "ancf", "elements_per_link": [4, 4], "axial_stiffness": 1e7},
+           "frequencies_hz": f,
+           "responses": [{"theta2": t, "reduced": curve, "fe": curve} for t in (0.0, 1.0, 2.0, 3.0)],
+           "gaps": [{"theta2": t, "theta": 0.1, "theta_peak_hz": 3.0, "tip": 0.2,
+                     "tip_peak_hz": 30.0, "pbc_loop": math.nan, "pbc_loop_peak_hz": math.nan}
+                    for t in (0.0, 1.0)]}
+    case = {"case": "pbc", "plant": "exudyn", "arm": "default", "predicted_s": 2.7e-3,
+            "predicted_theta2": 0.0, "note": "FE linearisation, ancf 4+4 elements",
+            "mesh": "ancf 4+4", "predicted_fine_s": 2.71e-3, "mesh_fine": "ancf 8+8",
+            "certified_s": 7e-4, "certificate": [{"Ts": 7e-4, "nu_gap": 0.47, "margin": 0.51,
+                                                  "certified": True}],
+            "largest_stable_s": 3.5e-3, "first_unstable_s": 4e-3, "in_bracket": "no",
+            "sound": "yes", "conservatism": 0.2, "evidence": "truth plant with step Ts/200: "
+                                                               "0.97×: ok, 1.05×: diverged",
+            "seconds": 1.0}
+    return {"arms": [arm], "cases": [case], "timings": {"everything [s]": 1.0},
+            "stability": "", "certify_periods": [7e-4], "points": 5}
+
+
+def test_written_analysis_reads_back_and_is_reported(tmp_path):
+    out = tmp_path / "res"
+    spec = {"name": "v", "scenario": {"duration": 0.2, "transient": 0.1}}
+    run_campaign(campaign_from_mapping(spec), out, progress=False)
+    data = synthetic_analysis()
+    text = write_validity(data, out / "validity")
+    assert "| pbc | exudyn | default | 2.7 | ancf 4+4 | 2.71 | 0.7 | 3.5 | 4 | no | yes | 0.2 |" \
+        in text
+    back = load_validity(out / "validity")
+    assert back["cases"][0]["certified_s"] == 7e-4
+    assert math.isnan(back["arms"][0]["gaps"][0]["pbc_loop"])  # not computed stays empty
+    assert sorted(p.name for p in (out / "validity" / "figures").iterdir()) == \
+        ["validity00.png", "validity01.png", "validity02.png"]
+    html_path, md_path = write_report(out, animate=False, progress=False)
+    html, md = html_path.read_text(), md_path.read_text()
+    for page in (html, md):
+        assert "predicted, certified, measured" in page
+        assert "ν-gap between the reduced model and the FE arm over θ₂" in page
+        assert "0.97×: ok, 1.05×: diverged" in page
+
+
+@pytest.mark.slow
+def test_validity_of_a_scenario_end_to_end(tmp_path, capsys):
+    """The PBC on the reduced plant of the default arm: the whole analysis, written."""
+    (tmp_path / "s.toml").write_text('[controller]\nkind = "pbc"\n')
+    out = tmp_path / "out"
+    assert main(["validity", str(tmp_path / "s.toml"), "--arm", "default", "--plant",
+                 "reduced", "--out", str(out), "--no-progress"]) == 0
+    data = json.loads((out / "validity" / "validity.json").read_text())
+    (row,) = data["cases"]
+    assert row["predicted_s"] == pytest.approx(3.051e-3, rel=1e-3)
+    assert 0 < row["certified_s"] < row["predicted_s"]
+    gaps = data["arms"][0]["gaps"]
+    assert len(gaps) == 7 and all(0 < g["theta"] < 1 for g in gaps)

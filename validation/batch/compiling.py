@@ -1,0 +1,90 @@
+"""Compile the simulation kernels group by group and say how far it got.
+
+numba compiles a kernel on its first call and caches the machine code in the
+``__pycache__`` folders next to the sources, that is, in this checkout: a fresh clone (or
+a changed kernel source) compiles again, once.  A cold compile takes minutes on a small
+machine, so `compile_groups` runs the groups a command needs — (label, callable that
+compiles or loads the group) pairs, as `validation.batch.worker.kernel_groups` lists them
+— and reports each group that had to compile as it finishes, with an estimate of the
+time left: the remaining groups' compile times measured on a reference machine
+(`REFERENCE_SECONDS`), scaled by how fast this machine has been so far.  Groups that only
+load from the cache are silent.
+
+This module is not on a run's import path: editing it leaves stored runs valid
+(`validation.batch.fingerprint`).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from typing import Callable, TextIO
+
+__all__ = ["compile_groups", "compile_for", "REFERENCE_SECONDS", "COMPILE_NOTE"]
+
+#: What the first progress line says about where the compiled code is kept.
+COMPILE_NOTE = "once per checkout: numba keeps the machine code in its __pycache__ folders"
+
+#: Cold compile time [s] of each group, by the label `kernel_groups` gives it, measured
+#: on the reference machine (2 cores shared with other work: load average ~8); laws that
+#: share a compiled kernel with one compiled before them load in well under a second.  A
+#: group not listed counts as the mean of those that are.
+REFERENCE_SECONDS = {
+    "arm model (M, C, RK4, kinematics)": 22.0,
+    "controller pbc": 8.0, "controller pbc-idealised": 0.5, "controller pd": 0.5,
+    "controller ct": 0.5, "controller lqr": 3.0,
+    "observer smo-paper": 8.0, "observer smo-bl": 0.5, "observer smo-pos": 0.5,
+    "observer ekf": 22.0, "observer ekf-pos": 0.5,
+    "closed loop on the exudyn plant": 8.0, "closed loop on the reduced plant": 8.0,
+}
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.1f} min"
+
+
+def compile_groups(groups: list[tuple[str, Callable[[], object]]], *,
+                   stream: TextIO | None = sys.stderr, quiet_below: float = 0.5,
+                   reference: dict[str, float] | None = None,
+                   clock: Callable[[], float] = time.perf_counter) -> dict[str, float]:
+    """Compile (or load) each group in order; return {label: seconds}.
+
+    A group that takes more than ``quiet_below`` seconds compiled: the first such group
+    is preceded by a line saying what is happening, and each is followed by a line with
+    its time and the estimated time left, the ``reference`` times (default
+    `REFERENCE_SECONDS`) of the groups still to come scaled by (time taken by the
+    compiled groups) / (their reference time).  ``stream=None`` compiles silently.
+    """
+    reference = REFERENCE_SECONDS if reference is None else reference
+    mean = sum(reference.values()) / len(reference) if reference else 1.0
+    expected = [reference.get(label, mean) for label, _ in groups]
+    taken, spent, spent_reference, announced = {}, 0.0, 0.0, False
+    for i, (label, build) in enumerate(groups):
+        start = clock()
+        build()
+        taken[label] = clock() - start
+        if taken[label] <= quiet_below or stream is None:
+            continue
+        if not announced:
+            print(f"compiling the simulation kernels ({COMPILE_NOTE}): {len(groups)} groups, "
+                  f"about {_duration(sum(expected[i:]))} on a busy 2-core machine", file=stream,
+                  flush=True)
+            announced = True
+        spent += taken[label]
+        spent_reference += expected[i]
+        left = sum(expected[i + 1:]) * spent / spent_reference
+        tail = f"; at most about {_duration(left)} left" if i + 1 < len(groups) else ""
+        print(f"  [{i + 1}/{len(groups)}] {label}: {_duration(taken[label])}{tail}",
+              file=stream, flush=True)
+    return taken
+
+
+def compile_for(scenarios, *, stream: TextIO | None = sys.stderr) -> dict[str, float]:
+    """Compile or load here, with progress on ``stream``, the kernels the runs of
+    ``scenarios`` use (`validation.batch.worker.kernel_groups`), before a local runner
+    forks its workers: they inherit them, and compiling is not counted in the runs' time
+    limits.  Compiling executes two samples of a run, so runs of plug-in laws (whose code
+    may exit, crash or hang) are left out: their workers compile what they need within
+    the run (its time limit allows for it)."""
+    from .worker import kernel_groups
+    trusted = [s for s in scenarios if ":" not in s.controller.kind and ":" not in s.observer.kind]
+    return compile_groups(kernel_groups(trusted), stream=stream) if trusted else {}

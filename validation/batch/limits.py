@@ -1,0 +1,111 @@
+"""The limits every run executes under: a time limit derived from what the run simulates,
+a memory limit per worker process, and workers that die with the process that started
+them.
+
+The default time limit is ``60 s + 10 × (1 ms per control sample + the plant's cost per
+internal step × steps)``, the plant's cost being 0.1 ms per step for the reduced plant and
+0.25 ms + 0.03 ms per finite element for the Exudyn plant.  These per-step costs are
+1.6–5× what was measured on the development machine (2 cores: 20 µs per sample for a
+2+2-mode reduced run with compiled laws, 100 µs with a Python plug-in law or the 4+4
+EKF; Exudyn 0.31, 0.68 and 2.1 ms per step with 8, 32 and 128 ANCF elements), and the
+factor 10 covers a machine that is slower or busy: no healthy run comes near its limit
+(a 20 s paper run on the truth plant: 5 s measured, limit 358 s; a 0.5 s reduced run:
+0.01 s measured, limit 66 s).
+
+The default memory limit of a worker is three quarters of the machine's memory (or of
+the container's, if that is smaller) shared among the workers, at least
+`MIN_MEMORY_MIB`: all workers at their limits still leave the machine a quarter.  It
+limits the worker's address space (``RLIMIT_AS``); an allocation beyond it fails with
+`MemoryError` in the worker, which records the run as failed.
+"""
+from __future__ import annotations
+
+import ctypes
+import math
+import os
+import signal
+import sys
+from pathlib import Path
+
+__all__ = ["default_run_timeout", "default_memory_limit", "machine_memory",
+           "limit_memory", "die_with_parent", "MIN_MEMORY_MIB"]
+
+#: Wall time every run may take before its first sample (building the laws, Exudyn
+#: assembling its mesh, a worker compiling a kernel on its first use in a checkout) [s].
+RUN_TIMEOUT_BASE = 60.0
+#: How many times the pessimistic estimate of a run's wall time its limit is.
+RUN_TIMEOUT_FACTOR = 10.0
+#: Pessimistic wall time per control sample: observer, controller and recording; a
+#: Python plug-in law costs ~0.1 ms [s].
+SAMPLE_COST = 1e-3
+#: Pessimistic wall time per internal step of the reduced plant (RK4 of 2n states) [s].
+REDUCED_STEP_COST = 1e-4
+#: Pessimistic wall time per internal step of the Exudyn plant: a constant and a part
+#: proportional to the number of beam elements [s].
+EXUDYN_STEP_COST = 2.5e-4
+EXUDYN_ELEMENT_COST = 3e-5
+#: The smallest memory limit a worker can run under: an idle worker's address space,
+#: with the simulation code and Exudyn loaded, is ~650 MiB.
+MIN_MEMORY_MIB = 1024
+#: The share of the machine's memory all workers together may use by default.
+MEMORY_SHARE = 0.75
+
+
+def default_run_timeout(scenario) -> float:
+    """The default wall-time limit of one run [s], whole seconds (module docstring)."""
+    plant = scenario.plant
+    samples = scenario.duration / scenario.Ts
+    steps = scenario.duration / plant.step
+    if plant.kind == "exudyn":
+        step_cost = EXUDYN_STEP_COST + EXUDYN_ELEMENT_COST * sum(plant.mesh.elements_per_link)
+    else:
+        step_cost = REDUCED_STEP_COST
+    return float(math.ceil(RUN_TIMEOUT_BASE + RUN_TIMEOUT_FACTOR
+                           * (samples * SAMPLE_COST + steps * step_cost)))
+
+
+def machine_memory() -> int:
+    """Bytes of memory this process may use: the machine's, or its control group's
+    limit if that is smaller (a container)."""
+    total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    try:  # cgroup v2: "max" or a number of bytes
+        text = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+    except OSError:
+        return total
+    return min(total, int(text)) if text.isdigit() else total
+
+
+def default_memory_limit(workers: int) -> int:
+    """The default memory limit of each of ``workers`` worker processes [MiB]."""
+    return max(MIN_MEMORY_MIB, int(MEMORY_SHARE * machine_memory() / workers) >> 20)
+
+
+def limit_memory(mib: int) -> None:
+    """Limit this process's address space to ``mib`` MiB (an allocation beyond it raises
+    `MemoryError`)."""
+    import resource
+    limit = mib << 20
+    hard = resource.getrlimit(resource.RLIMIT_AS)[1]
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+
+
+def die_with_parent(parent: int) -> None:
+    """End this process with SIGKILL when ``parent`` (the process that forked it) dies:
+    no worker outlives a killed campaign.  Linux: the kernel's parent-death signal;
+    elsewhere a thread that watches the parent."""
+    if sys.platform.startswith("linux"):
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL))
+        if os.getppid() != parent:  # the parent died before the signal was armed
+            os._exit(1)
+        return
+    import threading
+    import time
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os.kill(os.getpid(), signal.SIGKILL)
+    threading.Thread(target=watch, daemon=True, name="watch-parent").start()

@@ -1,0 +1,270 @@
+"""Predicted and certified sampled-data stability of a stability-map case: the exact
+zero-order-hold eigenvalues of the law's own linearised loop, and the ν-gap certificate.
+
+A case (a resolved scenario mapping, as `validation.verdicts.stability` builds them) is
+linearised at `POINTS` points of its run: at time t on the reference, the law is
+linearised about the reference state x_d(t) = [θ_d, 0, θ̇_d, 0] (`linear.law_gain`: every
+gain it applies, from the law object itself, built exactly as a run builds it), and the
+plant about rest at its configuration [θ_d(t), 0] (frozen time: the plant's
+velocity-dependent Coriolis terms, second order in the reference rates of at most 1.3
+rad/s, are left out).  A law with an option ``Ts`` (the LQR) is rebuilt at every period.
+
+- **Predicted**: the largest Ts below which the sampled loop is stable at every point
+  (`linear.largest_stable_period`), on the linearisation of the case's own plant — the
+  reduced model, or the FE arm with the case's mesh (`plant_exudyn.linear_model`).  For a
+  case with an observer the prediction is that of its controller fed the true state: an
+  observer's internal state is not reachable through the plug-in interface (and the sign
+  SMO is not differentiable), so the observer is not in the predicted loop.
+- **Certified**: at a period Ts, δν(K P_red, K P_FE) < b(K P_red, I) at every point, with
+  (P_red, P_FE) the ZOH models of the reduced and the FE arm from the torques to the state
+  the law reads, and K the law's gain: the loop broken at the plant input, where the
+  certificate of `validation.verdicts.nugap` says that the loop u = −K x closed around the
+  FE arm is stable.  Broken there, the plant K P is dimensionless (torque to torque
+  command) and weighted by the law itself; broken at the 2n outputs, the ν-gap would mix
+  radians, metres and their rates and depend on their units (in SI units b ≤ 1/√(1 +
+  σ_max(K)²) ≈ 0.03 for these laws, which certifies nothing).  The certified period is the
+  largest Ts below which every tested period is certified.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+from dataclasses import dataclass
+
+import control
+import numpy as np
+
+from controllers import CONTROLLERS, PluginError, accepted_options, resolve
+from reduced_model import cached_model
+
+from ..run._config import ConfigError
+from ..run.laws import build_controller, nominal_model
+from ..run.loop import make_reference
+from ..run.scenario import scenario_from_mapping
+from .linear import (NotLinearisable, closed_loop_matrix, growth_rate, largest_stable_period,
+                     law_gain, reduced_linear_model)
+from .nugap import FactorisationError, as_statespace, gap_detail, margin_detail
+
+__all__ = ["POINTS", "Prediction", "CertificateRow", "predicted_period", "prediction",
+           "certificate", "certified_period", "case_mesh"]
+
+#: Operating points per case, evenly spread over its run.
+POINTS = 5
+#: The scan of the predicted period [s]: 0.01 µs (the FE Table-1 arm's limits are µs)
+#: to 0.1 s.
+_SCAN = (1e-8, 0.1, 49)
+_PREDICTION_RTOL = 1e-3
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Largest stable period ``period`` [s] (inf: stable up to 0.1 s; 0: unstable even at
+    0.01 µs; NaN: no prediction), the θ2 [rad] of the operating point that limits it, and
+    a ``note`` (what the prediction leaves out, or why there is none)."""
+
+    period: float
+    theta2: float
+    note: str
+
+
+@dataclass(frozen=True)
+class CertificateRow:
+    """At period ``Ts`` [s]: the largest ν-gap and the smallest margin over the operating
+    points (b = 0: the loop on the reduced model is unstable; δν NaN: not computable), and
+    whether every point is certified (δν < b at that point)."""
+
+    Ts: float
+    nu_gap: float
+    margin: float
+    certified: bool
+
+
+class _Case:
+    """The linearisation of one case (module docstring)."""
+
+    def __init__(self, config: dict) -> None:
+        self.scenario = s = scenario_from_mapping(config)
+        self.model = nominal_model(s.nominal_params, s.model.modes_per_link)
+        self.reference = make_reference(s.reference)
+        self.names = list(self.model.state_names)
+        n = self.model.n
+        self.points = []
+        for t in np.linspace(0.0, s.duration, POINTS):
+            theta, rate, _ = self.reference(float(t))
+            x = np.zeros(2 * n)
+            x[:2], x[n:n + 2] = theta, rate
+            self.points.append((float(t), x))
+        try:
+            accepted = accepted_options(resolve(s.controller.kind, CONTROLLERS, "controller"))
+        except PluginError:
+            accepted = None
+        self.per_period = (accepted is not None and "Ts" in accepted
+                           and "Ts" not in s.controller.options)
+        self._gains: dict = {}
+
+    def gains(self, Ts: float) -> list[np.ndarray] | None:
+        """The law's gain at every point when run at period Ts (None if the law cannot be
+        built at that period)."""
+        key = Ts if self.per_period else None
+        if key not in self._gains:
+            scenario = dataclasses.replace(self.scenario, Ts=Ts) if self.per_period \
+                else self.scenario
+            try:
+                law = build_controller(scenario, self.model)
+            except (ConfigError, ValueError):
+                self._gains[key] = None
+            else:
+                self._gains[key] = [law_gain(law, x, t, self.reference, shared=(self.model,))
+                                    for t, x in self.points]
+        return self._gains[key]
+
+    def theta(self, point: int) -> np.ndarray:
+        return self.points[point][1][:2]
+
+    def reduced_plant(self, point: int, *, nominal: bool = False,
+                      forces: bool = False) -> control.StateSpace:
+        """The reduced plant of the case (``nominal``: the law's own model) linearised at
+        a point, its q outputs in the law's modal basis (as `ReducedPlant` reports them)."""
+        s = self.scenario
+        own = nominal or (s.true_params == s.nominal_params
+                          and tuple(s.plant.modes_per_link) == self.model.modes_per_link)
+        model = self.model if own else cached_model(s.true_params, tuple(s.plant.modes_per_link))
+        return reduced_linear_model(model, theta=self.theta(point),
+                                    modal_basis=None if own else self.model.mode_shapes,
+                                    generalised_forces=forces)
+
+    def fe_plant(self, point: int, mesh) -> control.StateSpace:
+        from plant_exudyn import linear_model
+        return linear_model(self.scenario.true_params, mesh, theta=self.theta(point),
+                            modal_basis=self.model.mode_shapes)
+
+
+@functools.lru_cache(maxsize=128)
+def _case(config_json: str) -> _Case:
+    return _Case(json.loads(config_json))
+
+
+def _key(config: dict) -> str:
+    return json.dumps(config, sort_keys=True)
+
+
+def case_mesh(config: dict):
+    """The FE mesh of a case (its own for an Exudyn plant, else the default `Mesh`)."""
+    from plant_exudyn import Mesh
+    mesh = config.get("plant", {}).get("mesh")
+    if not mesh:
+        return Mesh()
+    return Mesh(element=mesh["element"], elements_per_link=tuple(mesh["elements_per_link"]),
+                axial_stiffness=mesh["axial_stiffness"])
+
+
+@functools.lru_cache(maxsize=256)
+def _prediction(config_json: str) -> Prediction:
+    config = json.loads(config_json)
+    try:
+        case = _case(config_json)
+    except (ConfigError, ValueError) as exc:
+        return Prediction(math.nan, math.nan, f"the case does not build: {exc}")
+    plant_kind = case.scenario.plant.kind
+    try:
+        K0 = case.gains(case.scenario.Ts)
+    except NotLinearisable as exc:
+        return Prediction(math.nan, math.nan, f"{case.scenario.controller.kind}: {exc}")
+    except Exception as exc:  # noqa: BLE001 - a plug-in law may raise anything: no prediction
+        return Prediction(math.nan, math.nan, f"{case.scenario.controller.kind} raised "
+                          f"{type(exc).__name__} while being linearised: {exc}")
+    if K0 is None:
+        return Prediction(math.nan, math.nan, "the law does not build at the case's Ts")
+    forces = K0[0].shape[0] > 2
+    if forces and plant_kind != "reduced":
+        return Prediction(math.nan, math.nan, "the law applies forces on the modal "
+                          "coordinates: the FE arm has two actuators")
+    notes = []
+    if case.scenario.observer.kind != "none":
+        notes.append(f"the controller fed the true state ({case.scenario.observer.kind} "
+                     "not in the loop)")
+    mesh = case_mesh(config) if plant_kind == "exudyn" else None
+    limit, where = math.inf, math.nan
+    for i in range(len(case.points)):
+        plant = case.fe_plant(i, mesh) if mesh is not None else \
+            case.reduced_plant(i, forces=forces)
+
+        def growth(Ts, i=i, plant=plant):
+            gains = case.gains(Ts)
+            if gains is None:
+                return math.inf
+            return growth_rate(closed_loop_matrix(control.sample_system(plant, Ts), gains[i],
+                                                  case.names), Ts)
+
+        value = largest_stable_period(growth, low=_SCAN[0], high=_SCAN[1], points=_SCAN[2],
+                                      rtol=_PREDICTION_RTOL)
+        if value < limit:
+            limit, where = value, float(case.theta(i)[1])
+    return Prediction(limit, where, "; ".join(notes))
+
+
+def prediction(config: dict) -> Prediction:
+    """The predicted largest stable period of a stability-map case on the linearisation
+    of its own plant (module docstring), with the θ2 that limits it and a note."""
+    return _prediction(_key(config))
+
+
+def predicted_period(config: dict) -> float:
+    """`prediction`'s period [s] alone (NaN when there is none)."""
+    return prediction(config).period
+
+
+def certificate(config: dict, periods, *, mesh=None) -> list[CertificateRow]:
+    """The ν-gap certificate of a case's law against the FE arm (``mesh``; default: the
+    case's own mesh, or the default `Mesh` for a reduced-plant case) at ``periods`` [s]
+    in increasing order, up to the first that is not certified (module docstring).
+    Empty for a law that cannot be certified (forces on the modal coordinates, an
+    observer in the loop, not linearisable)."""
+    case = _case(_key(config))
+    if case.scenario.observer.kind != "none":
+        return []
+    mesh = mesh if mesh is not None else case_mesh(config)
+    reduced = [case.reduced_plant(i, nominal=True)[case.names, :]
+               for i in range(len(case.points))]
+    fe = [case.fe_plant(i, mesh)[case.names, :] for i in range(len(case.points))]
+    rows = []
+    for Ts in sorted(periods):
+        try:
+            gains = case.gains(Ts)
+        except NotLinearisable:
+            return []
+        if gains is None:
+            rows.append(CertificateRow(Ts, math.nan, 0.0, False))
+            continue
+        if gains[0].shape[0] > 2:
+            return []
+        gaps, margins = [], []
+        for P_red, P_fe, K in zip(reduced, fe, gains):
+            gain = as_statespace(K)
+            loop_red = gain * control.sample_system(P_red, Ts)
+            margins.append(margin_detail(loop_red, np.eye(2)).value)
+            try:
+                gaps.append(gap_detail(loop_red, gain * control.sample_system(P_fe, Ts)).value)
+            except FactorisationError:
+                gaps.append(math.nan)  # no ν-gap: not certified
+
+        rows.append(CertificateRow(Ts, float(np.max(gaps)), min(margins),
+                                   all(g < b for g, b in zip(gaps, margins))))
+        if not rows[-1].certified:
+            break  # the certified period ends here (`certified_period`)
+    return rows
+
+
+def certified_period(rows: list[CertificateRow]) -> float:
+    """The largest tested Ts below which every tested period is certified (0 if the
+    smallest is not; NaN without rows)."""
+    if not rows:
+        return math.nan
+    best = 0.0
+    for row in sorted(rows, key=lambda r: r.Ts):
+        if not row.certified:
+            break
+        best = row.Ts
+    return best

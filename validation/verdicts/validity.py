@@ -1,0 +1,298 @@
+"""Is the reduced model (the paper's eq. 1–3, 2 assumed modes per link) good enough to
+design a controller on?  Frequency responses of both plants, the ν-gap over θ2, and per
+stability-map case the predicted, certified and measured largest stable control period.
+
+Per arm (`arm_validity`): on a θ2 grid (θ1 = 0), the reduced model and the FE arm
+linearised (`reduced_linear_model`, `plant_exudyn.linear_model`, the FE modes projected
+on the reduced model's mode shapes), their frequency responses τ → θ and τ → tip
+deflection, and δν of three views of the pair: τ → θ (what the encoders see), τ → tip
+deflections, and the PBC's loop broken at the plant input at the scenario's Ts (what
+feedback with the paper's law sees, `sampled`).  A view whose coprime factorisation
+cannot be computed (`nugap.FactorisationError`: on Table 1's arm, which has no damping at
+all, the undamped FE modes that two outputs barely see) is left empty, not guessed;
+where it is computed there, δν = 1 — two undamped plants whose resonances differ are as
+far apart as feedback can tell.
+
+Per case (`case_rows`): the predicted period on the linearisation of the case's plant —
+for the truth plant, on the case's mesh and on a mesh twice as fine, since a truth-plant
+number is a fact about the arm only if it survives refinement (with no stator inertia,
+Table 1's FE joint-2 mobility grows as elements³) — the certified period, and the
+measured bracket of the stability map if one is stored.  Where the FE prediction lies
+below the truth plant's measured bracket, the truth plant is run again at 0.97× and
+1.05× the prediction with an integration step of Ts/200 (`STEP_CHECK`): the stability
+map steps Exudyn at up to 1 ms, which under-resolves the FE modes above ~50 Hz that carry
+part of the joint mobility, so that its measured limit can be a property of the step.
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import math
+import time
+from pathlib import Path
+
+import control
+import numpy as np
+
+from reduced_model import ArmModel
+
+from ..run.scenario import scenario_from_mapping
+from .linear import law_gain, reduced_linear_model
+from .nugap import as_statespace, gap_detail
+from .sampled import POINTS, case_mesh, certificate, certified_period, prediction
+from .stability import _label, _options_key, load_stability
+
+__all__ = ["THETA2", "FREQUENCIES_HZ", "CERTIFY_PERIODS", "STEP_CHECK", "arm_validity",
+           "case_rows", "validity_analysis", "write_validity", "load_validity"]
+
+#: θ2 grid [rad] of the ν-gap map and the frequency responses.
+THETA2 = tuple(float(t) for t in np.linspace(0.0, np.pi, 7))
+#: Frequencies [Hz] of the frequency responses.
+FREQUENCIES_HZ = tuple(float(f) for f in np.logspace(-1, np.log10(300.0), 400))
+#: Control periods [s] at which the certificate is evaluated.
+CERTIFY_PERIODS = (1e-4, 2e-4, 3e-4, 5e-4, 7e-4, 1e-3, 1.5e-3, 2e-3, 3e-3, 5e-3, 1e-2)
+#: The truth plant rerun around an FE prediction: factors of the prediction, steps per Ts.
+STEP_CHECK = ((0.97, 1.05), 200)
+#: (input, output) channels of the frequency responses.
+CHANNELS = (("tau1", "theta1"), ("tau2", "theta2"), ("tau1", "tip_defl1"),
+            ("tau2", "tip_defl2"))
+_GAP_VIEWS = ("theta", "tip", "pbc_loop")
+
+
+def arm_validity(config: dict) -> dict:
+    """The frequency responses and ν-gaps over `THETA2` of the arm of ``config`` (a
+    resolved scenario mapping: its true parameters, FE mesh, model order and Ts), as
+    JSON-able data (module docstring)."""
+    from controllers import PassivityBasedController
+    from plant_exudyn import linear_model
+    s = scenario_from_mapping(config)
+    model = ArmModel(s.true_params, s.model.modes_per_link)
+    mesh = case_mesh(config)
+    names = list(model.state_names)
+    w = 2 * np.pi * np.asarray(FREQUENCIES_HZ)
+    pbc = PassivityBasedController(model)
+    responses, gaps = [], []
+    for theta2 in THETA2:
+        red = reduced_linear_model(model, theta=(0.0, theta2))
+        fe = linear_model(s.true_params, mesh, theta=(0.0, theta2),
+                          modal_basis=model.mode_shapes)
+        entry = {"theta2": theta2}
+        for label, P in (("reduced", red), ("fe", fe)):
+            H = P(1j * w)  # (outputs, inputs, frequencies)
+            entry[label] = {f"{i}->{o}": np.abs(H[P.output_labels.index(o),
+                                                  P.input_labels.index(i)]).tolist()
+                            for i, o in CHANNELS}
+        responses.append(entry)
+        x = np.zeros(2 * model.n)
+        x[1] = theta2  # the PBC holding the arm at rest at θ2
+
+        def hold(t, x=x):
+            return x[:2].copy(), np.zeros(2), np.zeros(2)
+        gain = as_statespace(law_gain(pbc, x, 0.0, hold, shared=(model,)))
+        views = {"theta": (red[["theta1", "theta2"], :], fe[["theta1", "theta2"], :]),
+                 "tip": (red[["tip_defl1", "tip_defl2"], :],
+                         fe[["tip_defl1", "tip_defl2"], :]),
+                 "pbc_loop": (gain * control.sample_system(red[names, :], s.Ts),
+                              gain * control.sample_system(fe[names, :], s.Ts))}
+        row = {"theta2": theta2}
+        for view, (a, b) in views.items():
+            try:
+                detail = gap_detail(a, b)
+            except ArithmeticError:  # FactorisationError: shown as not computed
+                row[view] = row[f"{view}_peak_hz"] = math.nan
+                continue
+            row[view], row[f"{view}_peak_hz"] = detail.value, detail.frequency / (2 * np.pi)
+        gaps.append(row)
+    return {"arm": s.arm, "Ts": s.Ts, "modes": list(s.model.modes_per_link),
+            "mesh": dataclasses.asdict(mesh), "frequencies_hz": list(FREQUENCIES_HZ),
+            "responses": responses, "gaps": gaps}
+
+
+def _refined(config: dict) -> dict:
+    """``config`` with the FE mesh refined twice."""
+    mesh = dataclasses.asdict(case_mesh(config))
+    mesh["elements_per_link"] = [2 * n for n in mesh["elements_per_link"]]
+    return dict(config, plant=dict(config["plant"], mesh=mesh))
+
+
+def _mesh_text(config: dict) -> str:
+    m = case_mesh(config)
+    return f"{m.element} {m.elements_per_link[0]}+{m.elements_per_link[1]}"
+
+
+def _step_check(config: dict, period: float) -> str:
+    """The truth plant at `STEP_CHECK` multiples of ``period`` with a fine step."""
+    from ..run.loop import run_scenario
+    factors, steps = STEP_CHECK
+    out = []
+    for f in factors:
+        Ts = f * period
+        data = dict(config, Ts=Ts, plant=dict(config["plant"], step=Ts / steps))
+        result = run_scenario(scenario_from_mapping(data))
+        out.append(f"{f:g}×: {result.status}")
+    return f"truth plant with step Ts/{steps}: " + ", ".join(out)
+
+
+def case_rows(cases, stability=(), *, progress=None) -> list[dict]:
+    """One row per stability-map case (module docstring); ``stability`` holds the
+    measured `StabilityResult` of the cases, matched by case."""
+    measured = {(_label(r.case.base), _options_key(r.case.base), r.case.plant, r.case.arm): r
+                for r in stability}
+    certificates: dict = {}
+    rows = []
+    for case in cases:
+        base = case.base
+        started = time.perf_counter()
+        own = prediction(base)
+        row = {"case": case.label, "plant": case.plant, "arm": case.arm,
+               "predicted_s": own.period, "predicted_theta2": own.theta2,
+               "note": own.note, "mesh": "", "predicted_fine_s": math.nan, "mesh_fine": ""}
+        if case.plant == "exudyn":
+            row["mesh"], row["mesh_fine"] = _mesh_text(base), _mesh_text(_refined(base))
+            row["predicted_fine_s"] = prediction(_refined(base)).period
+        key = (_options_key(base), case.arm, _mesh_text(base))
+        if key not in certificates:
+            cert = certificate(base, CERTIFY_PERIODS)
+            certificates[key] = (certified_period(cert), cert)
+        row["certified_s"], cert = certificates[key]
+        row["certificate"] = [dataclasses.asdict(c) for c in cert]
+        result = measured.get((case.label, _options_key(base), case.plant, case.arm))
+        row.update(_against_measured(row, result, base))
+        row["seconds"] = time.perf_counter() - started
+        rows.append(row)
+        if progress:
+            progress(row)
+    return rows
+
+
+def _against_measured(row: dict, result, base: dict) -> dict:
+    """The measured bracket, whether the prediction lies in it, the soundness and the
+    conservatism of the certificate, and the fine-step check of the truth plant."""
+    out = {"largest_stable_s": math.nan, "first_unstable_s": math.nan, "in_bracket": "",
+           "sound": "", "conservatism": math.nan, "evidence": ""}  # why a prediction
+    # misses its bracket, as measured
+    if result is None:
+        return out
+    # A linear stability prediction is about divergence: it is set against the map's
+    # no-divergence limit (a loss of tracking is not an instability).
+    lo, hi = result.divergence.largest, result.divergence.first_bad
+    out["largest_stable_s"], out["first_unstable_s"] = lo, hi
+    p = row["predicted_s"]
+    if not math.isnan(p):
+        out["in_bracket"] = "yes" if ((math.isnan(lo) or p >= lo) and
+                                      (math.isnan(hi) or p < hi)) else "no"
+        if out["in_bracket"] == "no" and result.divergence.outcome == "failed":
+            out["evidence"] = ("the measured bracket ends at a solver failure, not a "
+                               "divergence: it says nothing about the limit")
+    c = row["certified_s"]
+    if row["plant"] == "exudyn" and c == 0:
+        out["sound"], out["conservatism"] = "nothing certified", 0.0
+    elif row["plant"] == "exudyn" and not math.isnan(c):
+        unstable = [Ts for Ts, (o, _) in result.tested.items() if Ts <= c and o == "diverged"]
+        out["sound"] = "yes" if not unstable else f"NO: unstable at {min(unstable):g} s"
+        if lo > 0:
+            out["conservatism"] = c / lo
+    if (row["plant"] == "exudyn" and base["observer"]["kind"] == "none"
+            and math.isfinite(p) and p >= min(result.tested) and not math.isnan(lo) and p < lo):
+        out["evidence"] = _step_check(base, p)
+    return out
+
+
+def validity_analysis(cases, *, stability_dir=None, progress=None) -> dict:
+    """The whole analysis of `flexarm validity` as JSON-able data: per arm of ``cases``
+    (`arm_validity`), per case (`case_rows`), the timings."""
+    timings = {}
+    stability = []
+    if stability_dir is not None:  # runs made by other code are stale: left out
+        stability = load_stability(stability_dir, fresh_only=True)
+    arms = {}
+    for case in cases:  # an FE case carries the mesh; any case carries the arm
+        if case.arm not in arms or case.plant == "exudyn":
+            arms[case.arm] = case.base
+    started = time.perf_counter()
+    per_arm = [arm_validity(config) for config in arms.values()]
+    timings["frequency responses and ν-gap over θ2 [s]"] = time.perf_counter() - started
+    started = time.perf_counter()
+    rows = case_rows(cases, stability, progress=progress)
+    timings["predictions, certificates and checks [s]"] = time.perf_counter() - started
+    return {"arms": per_arm, "cases": rows, "timings": timings,
+            "stability": str(stability_dir) if stability_dir else "",
+            "certify_periods": list(CERTIFY_PERIODS), "points": POINTS}
+
+
+def _ms(value: float) -> str:
+    from ..report.render import fmt_number
+    if isinstance(value, float) and math.isinf(value):
+        return "> 100" if value > 0 else "−∞"
+    return "—" if value is None or math.isnan(value) else fmt_number(1e3 * value)
+
+
+def table_rows(data: dict) -> tuple[list[str], list[list[str]]]:
+    """(header, rows) of the case table (values as text, periods in ms)."""
+    from ..report.render import fmt_number
+    head = ["case", "plant", "arm", "predicted [ms]", "FE mesh", "predicted, mesh ×2 [ms]",
+            "certified [ms]", "measured: no divergence up to [ms]", "first divergence [ms]",
+            "in bracket", "certificate sound", "certified / measured", "notes"]
+    rows = []
+    for r in data["cases"]:
+        notes = "; ".join(n for n in (r["note"], r["evidence"]) if n)
+        rows.append([r["case"], r["plant"], r["arm"], _ms(r["predicted_s"]), r["mesh"],
+                     _ms(r["predicted_fine_s"]) if r["mesh_fine"] else "",
+                     _ms(r["certified_s"]) if r["certificate"] else "n/a",
+                     _ms(r["largest_stable_s"]), _ms(r["first_unstable_s"]), r["in_bracket"],
+                     r["sound"], fmt_number(r["conservatism"]), notes])
+    return head, rows
+
+
+def gap_rows(data: dict) -> tuple[list[str], list[list[str]]]:
+    """(header, rows) of the ν-gap over θ2 table."""
+    from ..report.render import fmt_number
+    head = ["arm", "θ₂ [rad]", "δν τ→θ", "peak [Hz]", "δν τ→tip", "peak [Hz]",
+            "δν PBC loop at Ts", "peak [Hz]"]
+    rows = []
+    for arm in data["arms"]:
+        for g in arm["gaps"]:
+            rows.append([arm["arm"], fmt_number(g["theta2"])] +
+                        [fmt_number(g[k]) for v in _GAP_VIEWS for k in (v, f"{v}_peak_hz")])
+    return head, rows
+
+
+def write_validity(data: dict, out) -> str:
+    """Write ``out``/validity.json (the data), validity.md, validity.csv (the cases),
+    nugap.csv (ν-gap over θ2) and the figures (figures/*.png); return the markdown."""
+    from ..report.linear_figures import validity_figures
+    from ..report.render import render
+    from ..run.results import write_atomic
+    out = Path(out)
+    (out / "figures").mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "validity.json", lambda fh: json.dump(data, fh, indent=1))
+    head, rows = table_rows(data)
+    ghead, grows = gap_rows(data)
+    figures = validity_figures(data)
+    files = []
+    for i, (caption, png) in enumerate(figures):
+        name = f"figures/validity{i:02d}.png"
+        write_atomic(out / name, lambda fh, png=png: fh.write(png), binary=True)
+        files.append({"caption": caption, "file": name})
+    text = render("validity.md.j2", head=head, rows=rows, ghead=ghead, grows=grows,
+                  figures=files, timings=data["timings"], points=data["points"],
+                  periods=", ".join(f"{1e3 * t:g}" for t in data["certify_periods"]))
+    write_atomic(out / "validity.md", lambda fh: fh.write(text))
+    for name, (h, r) in (("validity.csv", (head, rows)), ("nugap.csv", (ghead, grows))):
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        writer.writerow(h)
+        writer.writerows(r)
+        write_atomic(out / name, lambda fh, text=buf.getvalue(): fh.write(text))
+    return text
+
+
+def load_validity(folder) -> dict | None:
+    """The stored analysis of a validity folder (validity.json), or None."""
+    path = Path(folder) / "validity.json"
+    if not path.is_file():
+        return None
+    return json.loads(path.read_text(encoding="utf-8"))
+
