@@ -156,8 +156,8 @@ def test_every_stored_run_carries_its_requirements_robustness(tmp_path):
     # A window beyond a 3 s run: always of nothing holds (+∞), eventually of nothing fails.
     assert metrics["rho_vacuous"] == math.inf and metrics["rho_never"] == -math.inf
     store = ResultStore(tmp_path)
-    store.add("r", result, metrics)
-    row = store.row("r")
+    store.add("0123456789ab", result, metrics)
+    row = store.row("0123456789ab")
     assert row.metrics["rho_vacuous"] == math.inf and row.metrics["rho_never"] == -math.inf
     assert row.metrics["rho_track"] == metrics["rho_track"]
 

@@ -323,12 +323,10 @@ def _included(store: ResultStore):
 
 def _scope(runs) -> list[str]:
     arms = sorted({r.config.get("arm", "default") for r in runs})
-    scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in
-             sorted({r.config.get("arm", "default") for r in counted})]
-    scope.append("plants: " + ", ".join(sorted({fig.PLANT_NAME.get(r.plant, r.plant)
-                                                for r in counted})))
+    scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in arms]
+    scope.append("plants: " + ", ".join(sorted({fig.PLANT_NAME.get(r.plant, r.plant) for r in runs})))
     scope.append("control periods Ts: " + ", ".join(f"{1e3 * t:g} ms" for t in
-                                                     sorted({r.config["Ts"] for r in counted})))
+                                                     sorted({r.config["Ts"] for r in runs})))
     scope.append("initial conditions: " + ", ".join(sorted(
         {"at rest" if _start(r.config) == "rest" else "moving with the reference" for r in runs})))
     windows = sorted({(r.config["transient"], r.config["duration"]) for r in runs})
