@@ -463,7 +463,9 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
     skipped only if its row exists, its file verifies (size and SHA-256), and it was made
     by the same code (or ``reuse_stale``); failed runs are redone with ``retry_failed``."""
     summary = CampaignSummary(planned=len(planned))
-    rows = {r.run_id: r for r in store.rows_of([r.run_id for r in planned])}
+    wanted = {r.run_id for r in planned}
+    # Every row is read (not only the wanted ones): a damaged index shows on any page.
+    rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
     for run in planned:  # a file whose row was lost: its metadata rebuilds the row
         path = store.runs_dir / f"{run.run_id}.npz"
         if run.run_id not in rows and path.exists():
