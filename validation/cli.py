@@ -309,6 +309,11 @@ def format_metrics(metrics: dict) -> str:
         lines.append(f"  {'estimate worse than the measurement':<44} {metrics['est_worse']}")
     if metrics.get("est_worse_zero"):
         lines.append(f"  {'estimate worse than x̂ ≡ 0':<44} {metrics['est_worse_zero']}")
+    for key, value in metrics.items():  # the requirements' robustness (rho >= 0 holds)
+        if key.startswith("rho_") and isinstance(value, float) and not math.isnan(value):
+            verdict = "holds" if value >= 0 else "fails"
+            lines.append(f"  {'requirement ' + key.removeprefix('rho_') + ': rho':<44} "
+                         f"{value:.6g} ({verdict})")
     return "\n".join(lines)
 
 
@@ -671,6 +676,61 @@ def cmd_attribute(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- flexarm verify --------------------------------------------------------------------------
+def cmd_verify(args: argparse.Namespace) -> int:
+    from .verdicts.uncertainty import load_systems
+    from .verdicts.verify import conform, estimate, falsify
+    systems = load_systems(args.file)
+    if args.system is not None:
+        names = [s.name for s in systems]
+        if args.system not in names:
+            raise ConfigError("--system", f"no system {args.system!r} in {args.file} "
+                                          f"(systems: {', '.join(names)})")
+        systems = [s for s in systems if s.name == args.system]
+    # The requirement of each system, checked before anything runs (estimate reports every
+    # requirement; its headline is the named one or the first).
+    requirements = [s.requirement(args.requirement) if args.mode == "falsify" or args.requirement
+                    else s.requirements[0] for s in systems]
+    default = Path("results") / f"verify-{Path(args.file).stem}-{args.mode}"
+    out = Path(args.out or default)
+    # The kernels of every system's laws, on both plants, before the workers fork.
+    runner = _runner(args, [s.scenario({}, plant=plant) for s in systems
+                            for plant in ("reduced", "exudyn")])
+    failed = False
+    # A signal between two batches of a search (not only during one) stops it: exit 143.
+    with runner, signals_interrupt():
+        for system, requirement in zip(systems, requirements):
+            where = out if len(systems) == 1 else out / system.name
+            open_output(where)
+            print(f"{system.name}: {args.mode} over {', '.join(system.uncertainty.describe())}")
+            if args.mode == "estimate":
+                v = estimate(system, requirement, where, runner=runner, samples=args.samples,
+                             seed=args.seed)
+                for r in v["requirements"].values():
+                    print(f"  {r['requirement']}: {r['n'] - r['failures']}/{r['n']} hold, "
+                          f"P(holds) in [{r['p_low']:.3f}, {r['p_high']:.3f}] at "
+                          f"{r['level']:g} (Clopper-Pearson); sequential test: "
+                          f"{r['sequential']['decision']}")
+            elif args.mode == "falsify":
+                v = falsify(system, requirement, where, runner=runner, budget=args.budget,
+                            seed=args.seed)
+                what = "counterexample" if v["found"] else "no counterexample; worst case"
+                truth = (f"{v['rho_truth']:.6g}" if v["rho_truth"] is not None else
+                         f"-inf ({v.get('truth_status', 'no run')})")
+                reduced = (f"{v['rho_reduced']:.6g}" if v["rho_reduced"] is not None
+                           else "-inf (diverged)")
+                print(f"  {requirement.name}: {what}: rho truth {truth}, reduced {reduced} "
+                      f"({v['counterexample'] or v['worst_case']}); simulations "
+                      f"{v['simulations']}")
+            else:
+                v = conform(system, where, runner=runner, budget=args.budget, seed=args.seed)
+                print(f"  largest |theta_truth - theta_reduced| = {v['distance']} rad "
+                      f"({v['scenario']}); simulations {v['simulations']}")
+            failed |= bool(v["failed_runs"])
+            print(f"  verdict: {where / 'verdict.json'}")
+    return EXIT_FAILED if failed else 0
+
+
 # --- flexarm baseline -----------------------------------------------------------------------
 def _baseline_rows(args) -> tuple:
     from .verdicts.baselines import evaluate, load_baselines
@@ -932,6 +992,30 @@ def build_parser() -> argparse.ArgumentParser:
                           "mesh convergence, shown by the report)")
     _add_execution(att)
     att.set_defaults(func=cmd_attribute)
+
+    ver = sub.add_parser("verify", help="verdicts over uncertainty: P(holds), the worst case "
+                                        "(falsification on both plants), where the reduced "
+                                        "model stops being valid")
+    ver.add_argument("file", metavar="FILE", help="a scenario or campaign file with [uncertainty] "
+                                                  "and [[requirement]]")
+    ver.add_argument("--mode", required=True, choices=("estimate", "falsify", "conform"),
+                     help="estimate: P(holds) over seeded draws; falsify: the truth-confirmed "
+                          "minimum of rho; conform: the largest disagreement of the two plants")
+    ver.add_argument("--requirement", metavar="NAME",
+                     help="the requirement (default: the only one; estimate reports all)")
+    ver.add_argument("--system", metavar="NAME",
+                     help="one system of a campaign file (default: each, into OUT/NAME)")
+    ver.add_argument("--samples", type=_int_in(1, 100_000), default=59, metavar="N",
+                     help="estimate: draws at most (default 59: no failure certifies P >= 0.95 "
+                          "at 95 %% one-sided)")
+    ver.add_argument("--budget", type=_int_in(1, 100_000), default=50, metavar="N",
+                     help="falsify, conform: truth-plant simulations at most (default 50)")
+    ver.add_argument("--seed", type=_int_in(0, 2**63 - 1), default=0, metavar="N",
+                     help="seed of the draws and of the search (default 0)")
+    ver.add_argument("--out", metavar="DIR",
+                     help="results folder (default results/verify-<file>-<mode>)")
+    _add_execution(ver)
+    ver.set_defaults(func=cmd_verify)
 
     base = sub.add_parser("baseline", help="error-bound regression checks (baselines.toml)")
     bsub = base.add_subparsers(dest="action", required=True, parser_class=_Parser)

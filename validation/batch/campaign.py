@@ -16,8 +16,12 @@ A campaign file (TOML)::
     random.samples = 8                                # random axes: N seeded draws
     random.seed = 1
     random.true_params.Mp = {uniform = [0.0, 1.0]}    # also loguniform, choices
+    random.true_params.EI1 = {scale = {uniform = [0.7, 1.3]}, also = ["true_params.EI2"]}
+    random."disturbances[0].start" = {uniform = [2.0, 18.0]}   # [i] indexes a list
 
-Within a sweep the grid, zip and random parts combine by product.  Each run's scenario is
+Within a sweep the grid, zip and random parts combine by product.  A random axis under
+``scale`` draws a factor of the base value; ``also`` gives other fields the same draw.
+The same axes declare the uncertainty sets of ``flexarm verify`` (`RandomAxis`).  Each run's scenario is
 resolved and checked before anything runs; its id is a hash of the resolved scenario, so
 rerunning a campaign into the same folder skips what is done (resume).
 """
@@ -36,20 +40,24 @@ from .executor import Interrupted, Runner, SerialRunner
 from .fingerprint import run_fingerprint
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .store import ResultStore, environment, run_id
-from ..run.tomlfiles import deep_merge, flatten, load_toml, set_dotted
+from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
            "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
            "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "run_name",
-           "check_run_name"]
+           "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
 MAX_RUNS = 100_000
 
-_TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution"}
+_TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution",
+             "requirement", "uncertainty", "verify"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
-_SPEC_KEYS = {"scale", "uniform", "loguniform", "choices"}
+_SPEC_KEYS = {"scale", "uniform", "loguniform", "choices", "also"}
+#: Sections a scenario file may have too (``flexarm verify`` reads a scenario file's
+#: ``[uncertainty]`` and ``[verify]``; ``[[requirement]]`` is a scenario key).
+_VERIFY_KEYS = ("uncertainty", "verify")
 
 
 @dataclass(frozen=True)
@@ -64,7 +72,9 @@ class PlannedRun:
 
 @dataclass(frozen=True)
 class Campaign:
-    """A base scenario (a mapping), its sweeps and the sections of a campaign file."""
+    """A base scenario (a mapping, with the file's ``[[requirement]]`` entries), its sweeps
+    and the sections of a campaign file (``uncertainty`` and ``verify`` are read by
+    ``flexarm verify``, `validation.verdicts.verify`)."""
 
     name: str
     base: dict
@@ -72,11 +82,14 @@ class Campaign:
     report: dict = field(default_factory=dict)
     description: str = ""
     attribution: dict = field(default_factory=dict)
+    uncertainty: dict = field(default_factory=dict)
+    verify: dict = field(default_factory=dict)
 
 
 # --- loading ------------------------------------------------------------------------------
-#: Top-level keys only a campaign file has (a scenario file may have ``name``, ``include``).
-CAMPAIGN_KEYS = frozenset(_TOP_KEYS - {"name", "include"})
+#: Top-level keys only a campaign file has (a scenario file may have ``name``, ``include``,
+#: ``[[requirement]]``, ``[uncertainty]`` and ``[verify]``).
+CAMPAIGN_KEYS = frozenset(_TOP_KEYS - {"name", "include", "requirement", *_VERIFY_KEYS})
 
 
 def is_campaign(data: dict) -> bool:
@@ -101,8 +114,11 @@ def load_study(path: str | Path) -> Campaign:
     sweep = {"name": data["name"]} if "name" in data else {}
     if sweep:
         check_label(sweep["name"], "name")  # names its run: the rule of every run's name
-    base = {k: v for k, v in data.items() if k != "name"}
-    return Campaign(name=label[:100], base=base, sweeps=(sweep,) if sweep else ())
+    base = {k: v for k, v in data.items() if k not in ("name", *_VERIFY_KEYS)}
+    sections = {k: data.get(k, {}) for k in _VERIFY_KEYS}
+    for key, value in sections.items():
+        check(isinstance(value, dict), key, "must be a table")
+    return Campaign(name=label[:100], base=base, sweeps=(sweep,) if sweep else (), **sections)
 
 
 def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
@@ -112,6 +128,13 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     check_label(name, "name")
     base = data.get("scenario", {})
     check(isinstance(base, dict), "scenario", "must be a table")
+    requirements = data.get("requirement", [])
+    check(isinstance(requirements, list), "requirement",
+          "must be an array of tables ([[requirement]])")
+    if requirements:  # the file's requirements apply to every run, after the scenario's own
+        base = dict(base, requirement=[*base.get("requirement", []), *requirements])
+    for key in _VERIFY_KEYS:
+        check(isinstance(data.get(key, {}), dict), key, "must be a table")
     sweeps = data.get("sweep", [])
     if isinstance(sweeps, dict):
         sweeps = [sweeps]
@@ -136,23 +159,15 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     for key in attribution:
         check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
-                    description=str(data.get("description", "")), attribution=attribution)
+                    description=str(data.get("description", "")), attribution=attribution,
+                    uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}))
 
 
 # --- expansion --------------------------------------------------------------------------------
-def _flatten(table: dict) -> dict[str, object]:
-    """Sweep axes by dotted key; a table whose keys are a value spec (scale, uniform, …)
-    is one axis."""
+def flatten_axes(table: dict) -> dict[str, object]:
+    """Sweep (or uncertainty) axes by dotted key; a table whose keys are a value spec
+    (scale, uniform, …) is one axis."""
     return flatten(table, leaf=lambda value: bool(set(value) & _SPEC_KEYS))
-
-
-def _get(data: dict, path: str):
-    node = data
-    for part in path.split("."):
-        if not isinstance(node, dict) or part not in node:
-            raise KeyError(path)
-        node = node[part]
-    return node
 
 
 def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
@@ -160,7 +175,7 @@ def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
     if isinstance(spec, dict):
         check(set(spec) == {"scale"}, where, "a grid/zip axis is a list or {scale = [...]}")
         try:
-            base_value = _get(resolved_base, path)
+            base_value = get_dotted(resolved_base, path)
         except KeyError:
             raise ConfigError(where, f"{path} is not a scenario field") from None
         check(isinstance(base_value, (int, float)) and not isinstance(base_value, bool), where,
@@ -175,30 +190,118 @@ def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
     return list(spec)
 
 
-def _random_values(path: str, spec, n: int, rng: np.random.Generator, where: str) -> list:
-    check(isinstance(spec, dict) and len(spec) == 1 and set(spec) <= {"uniform", "loguniform",
-                                                                       "choices"}, where,
+@dataclass(frozen=True)
+class RandomAxis:
+    """A random axis of a sweep or of an uncertainty set (`validation.verdicts.uncertainty`):
+    ``{uniform = [lo, hi]}``, ``{loguniform = [lo, hi]}`` or ``{choices = [...]}``; a
+    distribution under ``scale`` (``{scale = {uniform = [0.7, 1.3]}}``) draws a factor of
+    each field's base value; ``also = ["other.field", ...]`` gives the same draw to
+    other fields (one noise level for every sensor).  `sample` draws seeded values,
+    `from_unit` maps u ∈ [0, 1] onto the distribution (the searches), `assign` turns
+    one draw into field values."""
+
+    path: str
+    kind: str  # "uniform" | "loguniform" | "choices"
+    arg: tuple  # (low, high), or the choices
+    also: tuple[str, ...] = ()
+    base: tuple | None = None  # the fields' base values when the draw is a factor
+
+    @property
+    def paths(self) -> tuple[str, ...]:
+        return (self.path, *self.also)
+
+    def sample(self, rng: np.random.Generator, n: int) -> list:
+        """``n`` draws (the campaign's random sweeps have always drawn exactly these)."""
+        if self.kind == "choices":
+            return [self.arg[i] for i in rng.integers(0, len(self.arg), n)]
+        lo, hi = self.arg
+        if self.kind == "uniform":
+            return [float(v) for v in rng.uniform(lo, hi, n)]
+        return [float(v) for v in np.exp(rng.uniform(math.log(lo), math.log(hi), n))]
+
+    def from_unit(self, u: float):
+        """The draw at quantile-like position ``u`` ∈ [0, 1] (uniform in the axis's own
+        measure: linear, logarithmic, or equal shares of the choices)."""
+        u = min(max(float(u), 0.0), 1.0)
+        if self.kind == "choices":
+            return self.arg[min(int(u * len(self.arg)), len(self.arg) - 1)]
+        lo, hi = self.arg
+        if self.kind == "uniform":
+            return lo + (hi - lo) * u
+        return math.exp(math.log(lo) + (math.log(hi) - math.log(lo)) * u)
+
+    def assign(self, draw) -> dict:
+        """{field path: value} of one draw."""
+        if self.base is None:
+            return {p: draw for p in self.paths}
+        return {p: b * draw for p, b in zip(self.paths, self.base)}
+
+    def describe(self) -> str:
+        dist = (f"one of {list(self.arg)}" if self.kind == "choices" else
+                f"{self.kind} [{self.arg[0]:g}, {self.arg[1]:g}]")
+        what = ", ".join(self.paths)
+        return f"{what}: {'× ' if self.base is not None else ''}{dist}"
+
+
+def random_axis(path: str, spec, resolved_base: dict, where: str) -> RandomAxis:
+    """Parse one random axis (`RandomAxis`); ConfigError naming ``where``."""
+    check(isinstance(spec, dict), where, "a random axis is {uniform = [lo, hi]}, "
+                                         "{loguniform = [lo, hi]} or {choices = [...]}")
+    spec = dict(spec)
+    also = spec.pop("also", [])
+    check(isinstance(also, list) and all(isinstance(a, str) for a in also), f"{where}.also",
+          "must be a list of scenario fields")
+    scaled = "scale" in spec
+    if scaled:
+        check(set(spec) == {"scale"} and isinstance(spec["scale"], dict), where,
+              "a scaled random axis is {scale = {uniform = [lo, hi]}} (or loguniform, choices)")
+        spec = spec["scale"]
+    check(len(spec) == 1 and set(spec) <= {"uniform", "loguniform", "choices"}, where,
           "a random axis is {uniform = [lo, hi]}, {loguniform = [lo, hi]} or {choices = [...]}")
     (kind, arg), = spec.items()
     if kind == "choices":
         check(isinstance(arg, list) and arg, where, "choices must be a non-empty list")
-        return [arg[i] for i in rng.integers(0, len(arg), n)]
-    check(isinstance(arg, list) and len(arg) == 2 and all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) for v in arg) and arg[0] <= arg[1],
-        where, f"{kind} needs [low, high] with low <= high")
-    lo, hi = arg
-    check(math.isfinite(lo) and math.isfinite(hi) and math.isfinite(hi - lo), where,
-          f"{kind} needs finite bounds less than 1.8e308 apart, got {arg!r}")
-    if kind == "uniform":
-        return [float(v) for v in rng.uniform(lo, hi, n)]
-    check(lo > 0, where, "loguniform needs low > 0")
-    return [float(v) for v in np.exp(rng.uniform(math.log(lo), math.log(hi), n))]
+    else:
+        check(isinstance(arg, list) and len(arg) == 2 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in arg)
+            and arg[0] <= arg[1], where, f"{kind} needs [low, high] with low <= high")
+        check(math.isfinite(arg[0]) and math.isfinite(arg[1])
+              and math.isfinite(arg[1] - arg[0]), where,
+              f"{kind} needs finite bounds less than 1.8e308 apart, got {arg!r}")
+        check(kind == "uniform" or arg[0] > 0, where, "loguniform needs low > 0")
+    base = None
+    if scaled:
+        base = []
+        for p in (path, *also):
+            try:
+                value = get_dotted(resolved_base, p)
+            except KeyError:
+                raise ConfigError(where, f"{p} is not a scenario field") from None
+            check(isinstance(value, (int, float)) and not isinstance(value, bool), where,
+                  f"scale needs a numeric field, {p} is {value!r}")
+            base.append(value)
+        check(kind != "choices" or all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                       for v in arg), where, "scale choices must be numbers")
+        base = tuple(base)
+    return RandomAxis(path, kind, tuple(arg), tuple(also), base)
+
+
+def draw_points(axes: list[RandomAxis], samples: int, rng: np.random.Generator) -> list[dict]:
+    """``samples`` points {field path: value} drawn from ``rng``, axis by axis in order."""
+    columns = [axis.sample(rng, samples) for axis in axes]
+    points = []
+    for i in range(samples):
+        point = {}
+        for axis, column in zip(axes, columns):
+            point |= axis.assign(column[i])
+        points.append(point)
+    return points
 
 
 def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
     """Every combination of one sweep's axes: list of {path: value}."""
-    grid = _flatten(sweep.get("grid", {}))
-    zipped = _flatten(sweep.get("zip", {}))
+    grid = flatten_axes(sweep.get("grid", {}))
+    zipped = flatten_axes(sweep.get("zip", {}))
     random = dict(sweep.get("random", {}))
     grid_axes = [(p, _axis_values(p, v, resolved_base, f"{where}.grid.{p}"))
                  for p, v in grid.items()]
@@ -220,12 +323,11 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
               f"must be an integer in 1..{MAX_RUNS}, got {samples!r}")
         check(isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
               f"{where}.random.seed", f"must be an integer >= 0, got {seed!r}")
-        axes = _flatten(random)
+        axes = flatten_axes(random)
         check(len(axes) > 0, f"{where}.random", "needs at least one axis besides samples/seed")
-        rng = np.random.default_rng(seed)
-        cols = {p: _random_values(p, v, samples, rng, f"{where}.random.{p}")
-                for p, v in sorted(axes.items())}
-        parts.append([{p: v[i] for p, v in cols.items()} for i in range(samples)])
+        parsed = [random_axis(p, v, resolved_base, f"{where}.random.{p}")
+                  for p, v in sorted(axes.items())]
+        parts.append(draw_points(parsed, samples, np.random.default_rng(seed)))
     size = math.prod(len(p) for p in parts)
     check(size <= MAX_RUNS, where, f"expands to {size} runs (at most {MAX_RUNS})")
     return [dict(itertools.chain.from_iterable(d.items() for d in combo))
@@ -258,7 +360,10 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
         for point in _sweep_points(sweep, resolved_base, where):
             data = deep_merge({}, campaign.base)
             for path, value in point.items():
-                set_dotted(data, path, value)
+                try:
+                    set_dotted(data, path, value, defaults=resolved_base)
+                except ConfigError as exc:
+                    raise ConfigError(where, f"{path}: {exc.message}") from None
             set_dotted(data, "name", run_name(campaign.name, point.get("name", sweep_name),
                                               _name_axis(sweep, where)))
             try:
@@ -359,6 +464,7 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
     by the same code (or ``reuse_stale``); failed runs are redone with ``retry_failed``."""
     summary = CampaignSummary(planned=len(planned))
     wanted = {r.run_id for r in planned}
+    # Every row is read (not only the wanted ones): a damaged index shows on any page.
     rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
     for run in planned:  # a file whose row was lost: its metadata rebuilds the row
         path = store.runs_dir / f"{run.run_id}.npz"
@@ -391,12 +497,13 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
 def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
                  retry_failed: bool = False, reuse_stale: bool = False,
                  progress: bool = True, only: list[PlannedRun] | None = None,
-                 label: str | None = None) -> CampaignSummary:
+                 label: str | None = None, export: bool = True) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
     stored as soon as it finishes; the progress bar is labelled ``label`` (default: the
     campaign's name).  On SIGINT/SIGTERM, what finished is kept and
     ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json are
-    exported at the end."""
+    exported at the end (unless ``export`` is false: a search calling this for every
+    batch exports once, when it is done)."""
     planned = only if only is not None else expand(campaign)
     store = ResultStore(out)
     store.prepare()
@@ -426,7 +533,8 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
             bar.close()
             if own:
                 runner.close()
-    store.export()
+    if export:
+        store.export()
     store.close()
     return summary
 

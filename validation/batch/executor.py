@@ -39,7 +39,7 @@ from .threads import ONE_THREAD
 from .worker import execute_run, failed_result, keep_freed_memory, serve
 
 __all__ = ["Runner", "SerialRunner", "LocalPoolRunner", "DaskRunner", "make_runner",
-           "Interrupted", "available_cores", "exit_status"]
+           "Interrupted", "available_cores", "exit_status", "signals_interrupt"]
 
 
 class Interrupted(BaseException):

@@ -375,12 +375,22 @@ class ResultStore:
                 raise ValueError("its id must be 12 hex digits and its file runs/<id>.npz")
             for c in _JSON_COLUMNS:
                 row[c] = _json_table(row[c])
-            row["metrics"] = {k: math.nan if v is None else v for k, v in row["metrics"].items()}
+            row["metrics"] = _metric_values(row["metrics"])
         except (ValueError, TypeError, AttributeError) as exc:
             raise StoreError(f"{self.index_path}: row {str(rid)[:40]!r} is not a stored run "
                              f"({exc}); 'flexarm repair {self.out}' drops it") from None
         row["config"] = row.pop("scenario")
         return StoredRun(**row, store=self)
+
+    def rows_of(self, ids) -> list[StoredRun]:
+        """The rows of the runs ``ids`` that the index holds (queried by id, in chunks: a
+        search asking for a few runs of a large folder reads only those)."""
+        ids = list(dict.fromkeys(ids))
+        out = []
+        for i in range(0, len(ids), 500):  # SQLite's limit on parameters is 999 or more
+            chunk = tuple(ids[i:i + 500])
+            out += self.rows(where=f"run_id IN ({', '.join('?' * len(chunk))})", params=chunk)
+        return out
 
     def row(self, rid: str) -> StoredRun | None:
         found = self.rows(where="run_id = ?", params=(rid,))
@@ -630,10 +640,22 @@ def export_row(r: StoredRun) -> dict:
     return out
 
 
+#: JSON has no infinities: a metric of ±∞ (a requirement's robustness can be: ``always``
+#: over an empty window, a claim's "never") is stored as one of these strings.
+_INFINITIES = {"inf": math.inf, "-inf": -math.inf}
+
+
 def _finite_or_none(metrics: dict) -> dict:
-    """JSON has no NaN/inf: store them as null (read back as NaN)."""
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-            for k, v in metrics.items()}
+    """JSON has no NaN/inf: NaN is stored as null (read back as NaN), ±∞ as "inf"/"-inf"
+    (read back as floats by `_metric_values`)."""
+    return {k: (None if math.isnan(v) else repr(v)) if isinstance(v, float)
+            and not math.isfinite(v) else v for k, v in metrics.items()}
+
+
+def _metric_values(stored: dict) -> dict:
+    """Metrics as read from the index: null → NaN, "inf"/"-inf" → ±∞."""
+    return {k: math.nan if v is None else _INFINITIES.get(v, v) if isinstance(v, str) else v
+            for k, v in stored.items()}
 
 
 def _format(value) -> str:

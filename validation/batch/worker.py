@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from ..run import loop, metrics  # noqa: F401 - loaded once, before the fork
+from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, before the fork
 from ..run.results import RunResult
 
 __all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "serve",
@@ -72,12 +72,14 @@ def _over_memory(message: str) -> str:
 def execute_run(scenario) -> tuple[RunResult, dict]:
     """Run one scenario (in a worker; a checked `Scenario`, or a mapping to check): the
     result, with signals as float32 (what the store keeps; half the bytes to send back),
-    and its metrics computed from the float64 signals.  Whatever the run raises —
+    and its metrics — with each requirement's robustness ``rho_<name>`` — computed
+    from the float64 signals.  Whatever the run raises —
     including `SystemExit` and `KeyboardInterrupt` from a law — becomes a "failed"
     result carrying its message, so one bad run never stops a campaign; a run out of
     memory says which limit it exceeded."""
     from ..run.loop import run_scenario
     from ..run.metrics import all_metrics
+    from ..run.requirements import requirement_metrics
     from ..run.scenario import Scenario, scenario_from_mapping
     keep_freed_memory()
     started = time.perf_counter()
@@ -89,6 +91,7 @@ def execute_run(scenario) -> tuple[RunResult, dict]:
         # beyond float32 they are stored as inf, as they should; no warning to print.
         with np.errstate(over="ignore", invalid="ignore"):
             metrics = all_metrics(result)
+            metrics |= requirement_metrics(result, metrics)
             result.signals = result.signals.astype(np.float32)
     except (Exception, SystemExit, KeyboardInterrupt) as exc:  # noqa: BLE001 - the run's failure
         return failed_result(scenario, _over_memory(

@@ -34,6 +34,7 @@ from . import linear_figures
 from .drawing import draw_all
 from ..batch.fingerprint import run_fingerprint
 from .render import fmt_number, render
+from .robust import robust_section
 from ..run.results import write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
@@ -85,6 +86,7 @@ class ReportData:
     animation: dict | None = None
     attribution: list = field(default_factory=list)
     validity: dict | None = None
+    robust: dict | None = None
 
 
 def _table(head: list[str], rows: list[list], classes: list[str] | None = None) -> dict:
@@ -296,22 +298,27 @@ def claim_bounds() -> dict:
 
 
 def _included(store: ResultStore):
-    """(rows, runs to report, warnings): runs whose file verifies and that this code made
-    (mesh-check runs are in ``rows``: they check the runs, they are not reported as runs)."""
+    """(rows, runs to report, warnings, evaluations of `flexarm verify`): runs whose file
+    verifies and that this code made (mesh-check runs are in ``rows``: they check the
+    runs, they are not reported as runs; the evaluations of a verdict over uncertainty
+    have their own section, `robust_section`, not a row each)."""
+    from ..verdicts.verify import ROBUST_SWEEPS
     all_rows = store.rows()
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
     stale = [r for r in all_rows if r.fingerprint != run_fingerprint(r.config)]
-    runs = [r for r in all_rows if r.run_id not in damaged and r not in stale
-            and r.sweep != "stability" and not is_check(r)]
+    fresh = [r for r in all_rows if r.run_id not in damaged and r not in stale]
+    runs = [r for r in fresh if r.sweep != "stability" and not is_check(r)
+            and r.sweep not in ROBUST_SWEEPS]
+    evaluations = [r for r in fresh if r.sweep in ROBUST_SWEEPS]
     warnings = [f"run {rid} left out: {why} (rerun the campaign to redo it)"
                 for rid, why in damaged.items()]
     if stale:
         warnings.append(f"{len(stale)} run(s) left out: made by other code than this "
                         f"installation ({', '.join(r.run_id for r in stale[:8])}"
                         f"{', …' if len(stale) > 8 else ''}); rerun the campaign to refresh them")
-    return all_rows, runs, warnings
+    return all_rows, runs, warnings, evaluations
 
 
 def _scope(runs) -> list[str]:
@@ -335,7 +342,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     from ..verdicts.claims import CLAIMS, claim_columns
     from .summary import NOTE_MEANING, claims_view, pairs_table, summary_view
     store = ResultStore(results_dir)
-    all_rows, runs, warnings = _included(store)
+    all_rows, runs, warnings, evaluations = _included(store)
     fresh_ids = {r.run_id for r in runs}
     checks = [r for r in all_rows if is_check(r) and r.run_id not in fresh_ids
               and r.fingerprint == run_fingerprint(r.config)]
@@ -345,11 +352,12 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     names = [n for n in campaigns if n not in ("stability", MESH_SWEEP)] or ["(single runs)"]
     info = [campaigns.get(n, {}) for n in names]
     wanted = [w for i in info for w in i.get("report", {}).get("figures", [])] or None
-    counts = {s: sum(r.status == s for r in runs) for s in ("ok", "diverged", "failed")}
+    counted = runs + evaluations
+    counts = {s: sum(r.status == s for r in counted) for s in ("ok", "diverged", "failed")}
     data = ReportData(title=", ".join(names), folder=str(store.out),
                       description="; ".join(i["description"] for i in info
                                             if i.get("description")),
-                      counts=counts, scope=_scope(runs), warnings=warnings)
+                      counts=counts, scope=_scope(counted), warnings=warnings)
     bounds = claim_bounds()
 
     columns = claim_columns(runs + checks)
@@ -392,8 +400,11 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                           "world", lambda a=a, m=m, c=contributions, s=scale: fig.waterfall(
                               a.name, m["metric"], m["unit"], s * a.ideal_value[m["key"]], c,
                               s * a.totals[m["key"]])))
+    data.robust, robust_tasks = robust_section(store, evaluations)
+    tasks += robust_tasks
     data.estimation = _estimation_table(runs)
-    data.runs, data.metrics = _runs_table(runs), _metrics_table(runs)
+    if runs:  # a folder of `flexarm verify` alone has its section instead
+        data.runs, data.metrics = _runs_table(runs), _metrics_table(runs)
 
     groups, skipped = _figure_groups(runs, wanted)
     data.notes["paper_figures"] = [f"{r.name}, {fig.describe_run(r.config)}: not drawn, every "

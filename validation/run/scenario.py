@@ -22,6 +22,7 @@ from reduced_model import STRAIN_QUANTITIES, ArmParameters, validate_modes_per_l
 from ._config import ConfigError, check, from_mapping, to_mapping
 from ._sample import DisturbanceKind, DisturbanceTarget
 from .laws import check_laws, nominal_model
+from .requirements import Requirement, check_requirements
 
 __all__ = [
     "Scenario", "PlantSpec", "ReducedPlantSpec", "ExudynPlantSpec", "with_plant", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
@@ -321,6 +322,8 @@ class Scenario:
     seed: int = 0
     divergence: DivergenceSpec = DivergenceSpec()
     transient: float | None = None
+    #: ``[[requirement]]`` entries: each run carries their robustness as ``rho_<name>``.
+    requirement: tuple[Requirement, ...] = ()
 
     def __post_init__(self):
         check(isinstance(self.name, str) and self.name.strip() != "" and self.name.isprintable(),
@@ -406,6 +409,7 @@ def check_scenario(s: Scenario) -> None:
             check(np.linalg.matrix_rank(basis) >= modes, key,
                   f"gauges at {list(gauges)} cannot tell the link's {modes} modes apart "
                   "(coincident, or at nodes of a mode)")
+    check_requirements(s)
 
 
 def arm_parameters(arm: str) -> ArmParameters:

@@ -9,13 +9,15 @@ nothing downstream recurses into them.
 from __future__ import annotations
 
 import copy
+import json
+import re
 import tomllib
 from pathlib import Path
 
 from ._config import ConfigError
 
-__all__ = ["load_toml", "deep_merge", "set_dotted", "flatten", "parse_value", "check_nesting",
-           "MAX_NESTING"]
+__all__ = ["load_toml", "deep_merge", "set_dotted", "get_dotted", "flatten", "parse_value",
+           "check_nesting", "MAX_NESTING", "toml_value", "toml_text"]
 
 #: The deepest nesting of lists and tables a value may have (a campaign's deepest,
 #: ``sweep.zip.controller.options = [{gains = [[...]]}]``, has 6).
@@ -112,17 +114,75 @@ def _load(path: Path, seen: tuple[Path, ...], cache: dict) -> dict:
     return copy.deepcopy(cache[resolved])
 
 
-def set_dotted(data: dict, key: str, value) -> None:
-    """data[a][b][c] = value for key "a.b.c" (creating tables on the way)."""
-    parts = key.split(".")
-    if not all(parts):
-        raise ConfigError(key, "not a valid dotted key")
-    for i, part in enumerate(parts[:-1]):
-        node = data.setdefault(part, {})
-        if not isinstance(node, dict):
-            raise ConfigError(".".join(parts[:i + 1]), "is a value, not a table")
-        data = node
-    data[parts[-1]] = value
+_SEGMENT = re.compile(r"^([^\[\]]+)((?:\[\d+\])*)$")
+
+
+def _parts(key: str) -> list:
+    """"a.b[0].c" → ["a", "b", 0, "c"]: table keys and list indices."""
+    parts: list = []
+    for segment in key.split("."):
+        match = _SEGMENT.match(segment)
+        if match is None:
+            raise ConfigError(key, "not a valid dotted key")
+        parts.append(match.group(1))
+        parts += [int(i) for i in re.findall(r"\[(\d+)\]", match.group(2))]
+    return parts
+
+
+def _key(parts: list) -> str:
+    return "".join(f"[{p}]" if isinstance(p, int) else ("." if i else "") + p
+                   for i, p in enumerate(parts))
+
+
+def get_dotted(data: dict, key: str):
+    """The value at a dotted key (``disturbances[0].start``); KeyError if there is none."""
+    node = data
+    for part in _parts(key):
+        if isinstance(part, int) and isinstance(node, list) and part < len(node):
+            node = node[part]
+        elif isinstance(part, str) and isinstance(node, dict) and part in node:
+            node = node[part]
+        else:
+            raise KeyError(key)
+    return node
+
+
+def set_dotted(data: dict, key: str, value, *, defaults: dict | None = None) -> None:
+    """data[a][b][c] = value for key "a.b.c" (creating tables on the way); ``[i]`` indexes
+    a list (``disturbances[0].amplitude``), copied from ``defaults`` (e.g. the resolved
+    scenario) when ``data`` does not hold it."""
+    parts = _parts(key)
+    node = data
+    for i, (part, following) in enumerate(zip(parts[:-1], parts[1:])):
+        where = _key(parts[:i + 1])
+        child = _child(node, part, where)
+        if isinstance(following, int) and not isinstance(child, list):
+            try:
+                child = copy.deepcopy(get_dotted(defaults or {}, where))
+            except KeyError:
+                raise ConfigError(where, "is not a list here") from None
+            if not isinstance(child, list):
+                raise ConfigError(where, "is not a list")
+        elif not isinstance(following, int) and not isinstance(child, dict):
+            if child is not None:
+                raise ConfigError(where, "is a list: index it, e.g. [0]"
+                                  if isinstance(child, list) else "is a value, not a table")
+            child = {}
+        node[part] = child
+        node = child
+    _child(node, parts[-1], key)  # the place exists (a list element) or can (a table key)
+    node[parts[-1]] = value
+
+
+def _child(node, part, where: str):
+    """node[part]: a list element that must exist, or a table's key (None if absent)."""
+    if isinstance(part, int):
+        if not isinstance(node, list) or part >= len(node):
+            raise ConfigError(where, "no such list element")
+        return node[part]
+    if not isinstance(node, dict):
+        raise ConfigError(where, "is inside a list: index it, e.g. [0]")
+    return node.get(part)
 
 
 def flatten(table: dict, prefix: str = "", *, leaf=lambda value: False) -> dict[str, object]:
@@ -149,3 +209,27 @@ def parse_value(text: str, key: str = ""):
         raise ConfigError(key, f"nested deeper than {MAX_NESTING} lists or tables") from None
     check_nesting(value, key)
     return value
+
+
+def toml_value(v) -> str:
+    """A TOML literal of a plain value (tables inline)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(float(v)) if isinstance(v, float) else str(v)
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)  # JSON's escapes are TOML's
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):  # None: a key the table's kind does not use (TOML has no null)
+        return "{ " + ", ".join(f"{k} = {toml_value(x)}" for k, x in v.items()
+                                if x is not None) + " }"
+    raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def toml_text(mapping: dict) -> str:
+    """A TOML document of ``mapping`` with dotted keys (``plant.kind = "exudyn"``) that
+    `load_toml` reads back to the same values (floats exactly: ``repr``); None (a key
+    its table's kind does not use) is left out."""
+    return "".join(f"{key} = {toml_value(v)}\n" for key, v in flatten(mapping).items()
+                   if v is not None)

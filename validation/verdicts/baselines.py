@@ -40,7 +40,7 @@ from ..batch.fingerprint import run_fingerprint
 from ..run.results import write_atomic
 from ..run.scenario import scenario_from_mapping, scenario_to_mapping
 from ..batch.store import INDEX_NAME, ResultStore, StoreError, run_id
-from ..run.tomlfiles import flatten, load_toml
+from ..run.tomlfiles import flatten, load_toml, toml_value
 
 __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",
            "proposed_bounds", "write_baselines", "DEFAULT_FILE"]
@@ -271,27 +271,13 @@ def proposed_bounds(rows: list[dict], baselines: Baselines) -> dict[str, dict]:
 
 
 # --- writing --------------------------------------------------------------------------------
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(float(v)) if isinstance(v, float) else str(v)
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
-    raise TypeError(f"cannot write {v!r} as TOML")
-
-
 def write_baselines(b: Baselines, checks: list[Check]) -> None:
     """Rewrite the baselines file (atomically) with ``checks``."""
     lines = [b.header.rstrip("\n"), "", "[policy]", f"relative = {b.relative!r}",
              f"absolute = {b.absolute!r}", ""]
     for name, spec in b.scenarios.items():
         lines.append(f"[scenarios.{name}]")
-        lines += [f"{k} = {_toml_value(v)}" for k, v in flatten(spec).items()]
+        lines += [f"{k} = {toml_value(v)}" for k, v in flatten(spec).items()]
         lines.append("")
     for c in checks:
         lines.append("[[check]]")
@@ -304,7 +290,7 @@ def write_baselines(b: Baselines, checks: list[Check]) -> None:
                 continue
             if key == "metric":
                 value = value[0] if len(value) == 1 else list(value)
-            lines.append(f"{key} = {_toml_value(value)}")
+            lines.append(f"{key} = {toml_value(value)}")
         lines.append("")
     text = "\n".join(lines).lstrip("\n")
     write_atomic(b.path, lambda fh: fh.write(text))

@@ -1,0 +1,259 @@
+"""Requirements of a run and their quantitative robustness ρ (ρ > 0 holds, ρ < 0 fails).
+
+A scenario's ``[[requirement]]`` entries name either a built-in claim of the paper
+(``claim = "tracking"``: ρ = bound − value, in the claim's unit, see
+`validation.run.claim_measures`) or a Signal Temporal Logic formula over the run's named
+signals (``formula = "always[2,20](abs(theta1 - theta1_ref) <= 0.02)"``: ρ is the
+formula's robustness at t = 0 in the signals' unit).  The worker computes every
+requirement's ρ with the metrics (`requirement_metrics`: the metric ``rho_<name>``), so
+that campaigns, verdicts over uncertainty, reports and regression bounds all read the
+same number from the results store.
+
+Formulas are RTAMT's discrete-time offline STL (Ničković & Yamaguchi, RTAMT, 2020): the
+field's reference monitor, with the standard quantitative semantics (``x <= c`` has
+robustness c − x, ``and``/``always`` take the minimum, ``or``/``eventually`` the
+maximum, time bounds in seconds and whole multiples of Ts; a window that reaches past
+the end of the run sees only the samples it has — ``always`` of nothing is +∞).  RTAMT
+evaluates a bounded ``always``/``eventually`` (and the past ``historically``/``once``)
+by a minimum over each window in Python, O(n·w): 3.0 s for ``always[2,20]`` on a 20 s
+run at 1 kHz.  `_SlidingWindowVisitor` computes the same minima with SciPy's
+sliding-window filter, O(n): 0.045 s, identical values (tests/test_requirements.py
+compares both on random signals).
+
+Every check happens before anything runs: an unknown claim, a formula that does not
+parse, a signal the run will not record and a time bound that is not a multiple of Ts
+are `ConfigError`\\ s naming the requirement's key.
+"""
+from __future__ import annotations
+
+import contextlib
+import functools
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._config import ConfigError, check, check_label
+from .claim_measures import CLAIMS, claim_by_key
+
+__all__ = ["Requirement", "check_requirements", "requirement_metrics", "robustness",
+           "signal_names", "RHO_PREFIX"]
+
+#: The metric holding a requirement's robustness is ``RHO_PREFIX + name``.
+RHO_PREFIX = "rho_"
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """One ``[[requirement]]``: a ``name`` (its metric is ``rho_<name>``) and either
+    ``claim`` (a built-in claim's key) or ``formula`` (STL over the run's signals)."""
+
+    name: str
+    claim: str = ""
+    formula: str = ""
+
+    def __post_init__(self):
+        check_label(self.name, "name")
+        check(bool(self.claim) != bool(self.formula), "name",
+              f"requirement {self.name!r} needs either claim = \"<claim>\" or formula = "
+              "\"<STL>\" (exactly one)")
+        if self.claim:
+            keys = [c.key for c in CLAIMS]
+            check(self.claim in keys, "claim", f"unknown claim {self.claim!r} (claims: "
+                                               f"{', '.join(keys)})")
+        else:
+            _parse(self.formula, ())  # syntax only: the signals are checked per scenario
+
+    @property
+    def metric(self) -> str:
+        return RHO_PREFIX + self.name
+
+    @property
+    def unit(self) -> str:
+        return claim_by_key(self.claim).unit if self.claim else "(signal unit)"
+
+    @property
+    def text(self) -> str:
+        return f"claim {self.claim}" if self.claim else self.formula
+
+
+# --- STL through RTAMT ------------------------------------------------------------------------
+@functools.cache
+def _spec_factory():
+    """A function making an empty RTAMT offline specification whose bounded temporal
+    operators use SciPy's sliding-window extremes (module docstring); RTAMT is imported
+    on first use."""
+    from rtamt.semantics.abstract_discrete_time_offline_interpreter import \
+        discrete_time_offline_interpreter_factory
+    from rtamt.semantics.stl.discrete_time.offline.ast_visitor import \
+        StlDiscreteTimeOfflineAstVisitor
+    from rtamt.spec.abstract_specification import AbstractOfflineSpecification
+    from rtamt.syntax.ast.parser.stl.specification_parser import StlAst
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d
+
+    def window(sample, first: int, last: int, fill: float, extreme) -> list:
+        """out[i] = extreme of sample[i + first .. i + last], ``fill`` outside the run."""
+        x = np.asarray(sample, dtype=float)
+        n, width = x.size, last - first + 1
+        front, back = max(0, -first), max(0, last)
+        padded = np.concatenate([np.full(front, fill), x, np.full(back, fill)])
+        centred = extreme(padded, size=width, mode="constant", cval=fill)
+        return centred[np.arange(n) + front + first + width // 2].tolist()
+
+    class _SlidingWindowVisitor(StlDiscreteTimeOfflineAstVisitor):
+        def _samples(self, node) -> tuple[int, int]:
+            begin, end = self.time_unit_transformer(node)  # checked multiples of Ts
+            return int(begin), int(end)
+
+        def visitTimedAlways(self, node, *args, **kwargs):
+            b, e = self._samples(node)
+            return window(self.visit(node.children[0], *args, **kwargs), b, e, math.inf,
+                          minimum_filter1d)
+
+        def visitTimedEventually(self, node, *args, **kwargs):
+            b, e = self._samples(node)
+            return window(self.visit(node.children[0], *args, **kwargs), b, e, -math.inf,
+                          maximum_filter1d)
+
+        def visitTimedHistorically(self, node, *args, **kwargs):
+            b, e = self._samples(node)
+            return window(self.visit(node.children[0], *args, **kwargs), -e, -b, math.inf,
+                          minimum_filter1d)
+
+        def visitTimedOnce(self, node, *args, **kwargs):
+            b, e = self._samples(node)
+            return window(self.visit(node.children[0], *args, **kwargs), -e, -b, -math.inf,
+                          maximum_filter1d)
+
+    def make_spec():
+        interpreter = discrete_time_offline_interpreter_factory(_SlidingWindowVisitor)()
+        return AbstractOfflineSpecification(StlAst(), interpreter)
+
+    return make_spec
+
+
+@contextlib.contextmanager
+def _quiet():
+    """RTAMT logs a warning through the root logger for every undeclared variable; the
+    error that follows is ours to word (one line)."""
+    previous = logging.root.manager.disable
+    logging.disable(logging.WARNING)
+    try:
+        yield
+    finally:
+        logging.disable(previous)
+
+
+@functools.lru_cache(maxsize=256)
+def _parse(formula: str, variables: tuple[str, ...], Ts: float = 1e-3):
+    """A parsed RTAMT specification of ``formula`` over ``variables`` sampled every
+    ``Ts`` seconds, and the variables it uses.  ConfigError ("formula") for a syntax
+    error, KeyError(name) for a variable not among ``variables``."""
+    check(isinstance(formula, str) and formula.strip() != "", "formula",
+          "must be a non-empty STL formula")
+    from rtamt.exception.exception import RTAMTException
+    spec = _spec_factory()()
+    for name in variables:
+        spec.declare_var(name, "float")
+    spec.spec = formula
+    # The period in whole nanoseconds: RTAMT checks time bounds as exact fractions of it.
+    spec.set_sampling_period(int(round(Ts * 1e9)), "ns", 0.1)
+    with _quiet():
+        try:
+            spec.parse()
+        except RTAMTException as exc:
+            text = " ".join(str(exc).replace("RTAMT Exception:", "").split())
+            raise ConfigError("formula", f"{formula!r} does not parse: {text}") from None
+        except KeyError as exc:
+            if not variables:
+                return None, ()  # a syntax check only: names are checked per scenario
+            raise
+    return spec, tuple(sorted(_variables(spec.ast.specs[0])))
+
+
+def _variables(node) -> set[str]:
+    if type(node).__name__ == "Variable":
+        return {node.var}
+    return set().union(*(_variables(c) for c in getattr(node, "children", ())))
+
+
+def signal_names(scenario) -> tuple[str, ...]:
+    """The signals a run of ``scenario`` records (`validation.run._sample.signal_layout`): the
+    model's states, tips, reference, estimates (with an observer), measurements,
+    torques, the PBC's unrealisable forces (laws that have them) and disturbances."""
+    from reduced_model._plant_interface import TRUTH_EXTRAS
+
+    from ._sample import signal_layout
+    from .laws import measurement_names, nominal_model
+    model = nominal_model(scenario.nominal_params, scenario.model.modes_per_link)
+    names, _ = signal_layout(model.state_names, TRUTH_EXTRAS,
+                             measurement_names(scenario, model),
+                             scenario.observer.kind != "none", model.coordinate_names[2:])
+    return names
+
+
+def check_requirements(scenario) -> None:
+    """Names unique, every formula's signals recorded by the run, its time bounds whole
+    multiples of Ts (ConfigError naming ``requirement[i]``)."""
+    names = set()
+    for i, req in enumerate(scenario.requirement):
+        where = f"requirement[{i}]"
+        check(req.name not in names, f"{where}.name", f"duplicate requirement {req.name!r}")
+        names.add(req.name)
+        if not req.formula:
+            continue
+        signals = signal_names(scenario)
+        try:
+            spec, used = _parse(req.formula, signals, scenario.Ts)
+        except KeyError as exc:
+            raise ConfigError(f"{where}.formula", f"unknown signal {exc.args[0]!r} in "
+                                                  f"{req.formula!r} (signals: "
+                                                  f"{', '.join(signals)})") from None
+        except ConfigError as exc:
+            raise exc.under(where) from None
+        _evaluate(req.formula, signals, scenario.Ts, np.array([0.0, scenario.Ts]),
+                  {v: np.zeros(2) for v in used}, where)
+
+
+def _evaluate(formula: str, signals: tuple[str, ...], Ts: float, time: np.ndarray,
+              values: dict, where: str = "formula") -> float:
+    from rtamt.exception.exception import RTAMTException
+    spec, used = _parse(formula, signals, Ts)
+    data = {"time": time.tolist()} | {v: np.asarray(values[v], float).tolist() for v in used}
+    try:
+        with _quiet():
+            out = spec.evaluate(data)
+    except RTAMTException as exc:
+        text = " ".join(str(exc).replace("RTAMT Exception:", "").split())
+        raise ConfigError(f"{where}.formula" if where != "formula" else where,
+                          f"{formula!r}: {text} (Ts = {Ts:g} s)") from None
+    return float(out[0][1])
+
+
+def robustness(requirement: Requirement, result, metrics: dict) -> tuple[float, str]:
+    """(ρ, note) of one requirement on one run: NaN with the reason when it does not
+    apply (a claim that needs an observer the run has not, a run that did not complete)."""
+    if result.status != "ok" or result.time.size == 0:
+        return math.nan, f"the run {result.status}"
+    if requirement.claim:
+        claim = claim_by_key(requirement.claim)
+        value, note = claim.measure(metrics, result)
+        return float(claim.bound - value), note
+    config = result.config
+    signals = tuple(result.names)
+    try:
+        spec, used = _parse(requirement.formula, signals, float(config["Ts"]))
+    except KeyError as exc:
+        return math.nan, f"no signal {exc.args[0]!r} in this run"
+    return _evaluate(requirement.formula, signals, float(config["Ts"]), result.time,
+                     {v: result[v] for v in used}), ""
+
+
+def requirement_metrics(result, metrics: dict) -> dict[str, float]:
+    """``rho_<name>`` of every requirement in the run's scenario (NaN if it does not apply)."""
+    out = {}
+    for data in result.config.get("requirement", ()):
+        req = Requirement(**data)
+        out[req.metric] = robustness(req, result, metrics)[0]
+    return out
