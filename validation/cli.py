@@ -44,8 +44,8 @@ from controllers import CONTROLLERS, OBSERVERS
 
 from .run._config import ConfigError
 from .batch.compiling import compile_for
-from .batch.executor import (Interrupted, available_cores, exit_status, make_runner,
-                             signals_interrupt)
+from .batch.executor import (Interrupted, available_cores, check_limits, exit_status,
+                             make_runner, signals_interrupt)
 from .run.scenario import (ARMS, DEFAULT_TRANSIENT, PLANTS, Scenario, default_transient,
                            scenario_from_mapping)
 from .batch.store import ResultStore, StoreError, run_id
@@ -344,10 +344,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(note)
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
+    check_limits(args.run_timeout, args.memory_limit)
+    store = open_output(args.out or Path("results") / f"run-{rid}")  # bad --out: nothing ran
     _compile([scenario])  # before its worker forks from here
-    with make_runner("local", 1, run_timeout=args.run_timeout,
-                     memory_limit=args.memory_limit) as runner:  # a worker process
-        store = open_output(args.out or Path("results") / f"run-{rid}")
+    with make_runner("local", 1, run_timeout=args.run_timeout, memory_limit=args.memory_limit,
+                     scenarios=[scenario]) as runner:  # a worker process
         (_, result, metrics), = runner.results([(rid, scenario)])
     path = store.add(rid, result, metrics)
     store.export()
@@ -396,11 +397,15 @@ def _compile(scenarios) -> None:
 
 
 def _runner(args, scenarios=()):
+    """The runner of a command's runs: for local workers, the kernels the runs of
+    ``scenarios`` use compiled here first, with progress (they fork with them)."""
+    scenarios = list(scenarios)
     if args.executor == "local":
         _compile(scenarios)
     return make_runner(args.executor, args.workers, args.scheduler,
                        force=getattr(args, "force_workers", False),
-                       run_timeout=args.run_timeout, memory_limit=args.memory_limit)
+                       run_timeout=args.run_timeout, memory_limit=args.memory_limit,
+                       scenarios=scenarios or None)
 
 
 def _finish(summary, name: str, out) -> int:
@@ -505,9 +510,11 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     campaign = load_campaign(campaigns_dir() / "paper.toml")
     runs = expand(campaign)
     out = Path(args.out or Path("results") / "paper")
-    _compile(r.scenario for r in runs)
+    scenarios = [r.scenario for r in runs]
+    _compile(scenarios)
     runner = make_runner("local", args.workers, force=args.force_workers,
-                         run_timeout=args.run_timeout, memory_limit=args.memory_limit)
+                         run_timeout=args.run_timeout, memory_limit=args.memory_limit,
+                         scenarios=scenarios)
     with runner:
         open_output(out)
         summary = run_campaign(campaign, out, runner=runner, progress=not args.no_progress,
@@ -566,9 +573,11 @@ def _stability_scenarios(args: argparse.Namespace) -> tuple[list, list | None, l
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
+    from .verdicts.stability import cases_from_scenarios
     scenarios, plants, arms = _stability_scenarios(args)
     out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
-    runner = _runner(args, scenarios)
+    cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)  # what will run
+    runner = _runner(args, [scenario_from_mapping(c.base) for c in cases])
     with runner:
         return _stability(runner, scenarios, out, progress=not args.no_progress,
                           plants=plants, arms=arms)
