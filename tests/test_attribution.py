@@ -7,6 +7,7 @@ import sys
 
 import pytest
 
+from validation.report.verdict_tables import write_attribution
 from validation.verdicts import attribution as att
 from validation.run.scenario import scenario_from_mapping
 
@@ -108,7 +109,7 @@ def test_a_real_attribution_on_the_reduced_plant(tmp_path):
         assert phi["actuation"] == 0.0
     # The payload error dominates the tracking gap (measured ~100 %).
     assert a.contributions["track_max"]["parameters"] > 0.5 * a.totals["track_max"]
-    text = att.write_attribution([a], tmp_path)
+    text = write_attribution([a], tmp_path)
     assert "## t" in text and (tmp_path / "attribution.csv").read_text().count("\n") > 8
 
 

@@ -16,7 +16,8 @@ import pytest
 from campaign_testing import campaign_toml, metrics_table, stored_count
 from validation.run._config import ConfigError
 from validation.batch.campaign import campaign_from_mapping, expand, load_campaign, run_campaign
-from validation.verdicts.claims import CLAIMS, claim_columns, write_claims
+from validation.report.verdict_tables import write_claims
+from validation.verdicts.claims import CLAIMS, claim_columns
 from validation.batch.executor import LocalPoolRunner, SerialRunner, make_runner
 from validation.report.report import write_report
 from validation.run.results import RunResult

@@ -17,7 +17,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from validation.verdicts.claims import CLAIMS, SYSTEM, claim_columns, claims_tables, evaluate
+from validation.report.verdict_tables import claims_tables
+from validation.verdicts.claims import CLAIMS, SYSTEM, claim_columns, evaluate
 from validation.run.loop import run_scenario
 from validation.run.metrics import all_metrics
 from validation.run.results import RunResult

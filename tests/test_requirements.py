@@ -178,7 +178,8 @@ def test_the_cli_refuses_an_unknown_signal_in_one_line_writing_nothing(tmp_path)
 def test_requirements_enter_the_claims_table():
     from types import SimpleNamespace
 
-    from validation.verdicts.claims import claim_columns, claims_tables
+    from validation.report.verdict_tables import claims_tables
+    from validation.verdicts.claims import claim_columns
     scenario = scenario_from_mapping({
         "name": "paper/pbc+smo-paper", "duration": 3.0, "transient": 1.0,
         "observer": {"kind": "smo-paper"},

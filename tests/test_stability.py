@@ -2,6 +2,7 @@
 import math
 from types import SimpleNamespace
 
+from validation.report.verdict_tables import stability_rows
 from validation.verdicts import stability
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 
@@ -52,7 +53,7 @@ def test_lost_tracking_without_divergence_is_not_called_unstable():
     assert r.tracking.largest == 3.98e-3 and r.tracking.first_bad == 4.46e-3
     assert r.tracking.outcome == "lost tracking" and r.tracking.non_monotone == (1e-2,)
     assert r.non_monotone == ["kept tracking at 10 ms above the first lost tracking at 4.46 ms"]
-    row = stability.stability_rows([r])[0]
+    row = stability_rows([r])[0]
     assert row["no_divergence"] == "10" and row["first_divergence"] == "> 10"
     assert row["first_loss"] == "4.46 (lost tracking)" and "10 ms" in row["notes"]
 
@@ -67,7 +68,7 @@ def test_a_failed_run_is_failed_not_unstable():
     # Nothing is known at 2 ms: both limits stop below it, and it is not a divergence.
     assert r.divergence.largest == 1e-3 and r.divergence.outcome == "failed"
     assert r.failed == [2e-3]
-    assert "FAILED at 2 ms" in stability.stability_rows([r])[0]["notes"]
+    assert "FAILED at 2 ms" in stability_rows([r])[0]["notes"]
     # A failure is not bisected towards: it says nothing about where a limit lies.
     assert stability._bisection_points(tested) == set()
 

@@ -8,7 +8,8 @@ import pytest
 from validation.batch.campaign import campaign_from_mapping, run_campaign
 from validation.cli import main
 from validation.report.report import write_report
-from validation.verdicts.validity import CHANNELS, load_validity, write_validity
+from validation.report.verdict_tables import write_validity
+from validation.verdicts.validity import CHANNELS, load_validity
 
 
 @pytest.mark.parametrize("argv, text", [

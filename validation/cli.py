@@ -506,7 +506,7 @@ def campaigns_dir() -> Path:
 
 def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     from .batch.campaign import expand, load_campaign, run_campaign
-    from .verdicts.claims import write_claims
+    from .report.verdict_tables import write_claims
     campaign = load_campaign(campaigns_dir() / "paper.toml")
     runs = expand(campaign)
     out = Path(args.out or Path("results") / "paper")
@@ -545,7 +545,8 @@ def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arm
     """Run the stability map into ``out`` and print it; the exit status: 130/143 if it
     was interrupted, 1 if some of its runs failed (a failure is no verdict on stability:
     the map is incomplete there)."""
-    from .verdicts.stability import cases_from_scenarios, stability_map, write_stability
+    from .report.verdict_tables import write_stability
+    from .verdicts.stability import cases_from_scenarios, stability_map
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     open_output(out)
     results, summary = stability_map(cases, out, runner=runner, progress=progress)
@@ -600,7 +601,8 @@ def _stability_folder(args, out: Path) -> Path | None:
 
 def cmd_validity(args: argparse.Namespace) -> int:
     from .verdicts.stability import cases_from_scenarios
-    from .verdicts.validity import validity_analysis, write_validity
+    from .report.verdict_tables import write_validity
+    from .verdicts.validity import validity_analysis
     scenarios, plants, arms = _stability_scenarios(args)
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     out = Path(args.out or Path("results") / f"validity-{Path(args.file).stem}")
@@ -648,7 +650,8 @@ def cmd_repair(args: argparse.Namespace) -> int:
 
 def cmd_attribute(args: argparse.Namespace) -> int:
     from .batch.campaign import expand, load_study
-    from .verdicts.attribution import attribute, default_factors, parse_factors, write_attribution
+    from .report.verdict_tables import write_attribution
+    from .verdicts.attribution import attribute, default_factors, parse_factors
     study = load_study(args.file)
     systems = [(r.scenario.name.split("/")[-1], r.scenario) for r in expand(study)]
     default_out = Path("results") / (study.name if study.sweeps or study.attribution

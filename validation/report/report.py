@@ -39,7 +39,8 @@ from ..run.results import write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
 from ..verdicts.mesh import MESH_SWEEP, is_check
-from ..verdicts.validity import gap_rows, load_validity, table_rows
+from ..verdicts.validity import load_validity
+from .verdict_tables import gap_rows, stability_rows, study_view, table_rows
 
 __all__ = ["write_report", "report_data", "content_key", "report_is_current", "figure_group",
            "claim_bounds",
@@ -374,7 +375,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     stability_dir = store.out / "stability"
     tasks = []
     if ResultStore(stability_dir).exists():
-        from ..verdicts.stability import load_stability, stability_rows
+        from ..verdicts.stability import load_stability
         results = load_stability(stability_dir, fresh_only=True)
         if results:
             rows = stability_rows(results)
@@ -389,7 +390,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
             tasks.append(("Stability map", "sampled-data stability map: tested control periods "
                           "per case, plant and arm", lambda: fig.stability_chart(results)))
     for study, spec in campaigns.get("attribution", {}).get("studies", {}).items():
-        from ..verdicts.attribution import attribution_from_store, study_view
+        from ..verdicts.attribution import attribution_from_store
         a = attribution_from_store(store.out, study, tuple(spec["factors"]))
         view = study_view(a)
         data.attribution.append(view)

@@ -83,12 +83,13 @@ def claims_view(columns) -> list[dict]:
     """Per arm: column labels, one row per claim (cells: value in display units, verdict,
     margin, note) and the verdicts for the cell colours."""
     from ..run.scenario import ARMS
-    from ..verdicts.claims import CLAIMS, SYSTEM, arm_notes, mesh_row
+    from ..verdicts.claims import CLAIMS, SYSTEM
+    from .verdict_tables import arm_notes, mesh_row, run_text
     tables = []
     for arm in dict.fromkeys(c.arm for c in columns):
         cols = [c for c in columns if c.arm == arm]
         rows = [{"claim": f"run of the system ({SYSTEM})", "bound": "", "guards": "",
-                 "cells": [_run_text(c.runs.get(SYSTEM)) for c in cols],
+                 "cells": [run_text(c.runs.get(SYSTEM)) for c in cols],
                  "verdicts": [c.runs[SYSTEM].status if SYSTEM in c.runs else "not run"
                               for c in cols]},
                 dict(mesh_row(cols), bound="")]
@@ -101,14 +102,6 @@ def claims_view(columns) -> list[dict]:
                        "columns": [c.label for c in cols], "rows": rows,
                        "notes": arm_notes(cols)})
     return tables
-
-
-def _run_text(run) -> str:
-    if run is None:
-        return "not run"
-    if run.status == "ok":
-        return f"ok, {run.end_time:g} s"
-    return f"{run.status.upper()}: {run.message}"
 
 
 def summary_view(columns) -> list[dict]:

@@ -43,8 +43,7 @@ from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping,
 from ..batch.store import ResultStore, run_id
 
 __all__ = ["FACTORS", "METRICS", "METRIC_NAMES", "DIVERGED_RULE", "World", "Attribution",
-           "plan", "attribute", "shapley", "attribution_from_store", "write_attribution",
-           "parse_factors"]
+           "plan", "attribute", "shapley", "attribution_from_store", "parse_factors"]
 
 #: The rule for worlds without a value: the module docstring's paragraph on them, whole.
 DIVERGED_RULE = " ".join(next(p for p in __doc__.split("\n\n")
@@ -366,46 +365,3 @@ def records(att: Attribution) -> list[dict]:
     return out
 
 
-def write_attribution(atts: list[Attribution], out) -> str:
-    """attribution.csv and attribution.md in ``out``; returns the markdown."""
-    import csv
-    import io
-    from pathlib import Path
-
-    from ..report.render import render
-    from ..run.results import write_atomic
-    rows = [r for a in atts for r in records(a)]
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=["study", "metric", "factor", "contribution",
-                                             "share"], lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    out = Path(out)
-    write_atomic(out / "attribution.csv", lambda fh: fh.write(buf.getvalue()))
-    text = render("attribution.md.j2", studies=[study_view(a) for a in atts], factors=FACTORS,
-                  rule=DIVERGED_RULE)
-    write_atomic(out / "attribution.md", lambda fh: fh.write(text))
-    return text
-
-
-def study_view(att: Attribution) -> dict:
-    """Data for the templates: per metric (by its human name, in the unit a reader
-    expects: mrad, mm), one row per factor (and the sub-ladder)."""
-    from ..report.render import display_unit, fmt_number
-    metrics = []
-    for metric, contributions in att.contributions.items():
-        total = att.totals[metric]
-        scale, unit = display_unit(METRICS[metric][1])
-        num = lambda v: fmt_number(None if v is None else scale * v)  # noqa: E731
-        rows = [[f, num(v), f"{100 * v / total:.1f}" if total and math.isfinite(v)
-                 else "—"] for f, v in contributions.items()]
-        ladder = " → ".join(f"{f}: {num(v)}" for f, v in att.ladder.get(metric, []))
-        pair, value = att.interaction.get(metric, (None, math.nan))
-        metrics.append({"metric": METRIC_NAMES.get(metric, metric), "key": metric, "unit": unit,
-                        "scale": scale, "rows": rows,
-                        "real": num(att.real_value.get(metric)),
-                        "ideal": num(att.ideal_value.get(metric)),
-                        "total": num(total), "ladder": ladder,
-                        "interaction": f"{pair[0]} × {pair[1]}: {num(value)}" if pair else ""})
-    return {"name": att.name, "factors": [f for f in att.factors],
-            "destabilising": att.destabilising, "diverging": att.diverging, "metrics": metrics}

@@ -36,9 +36,7 @@ from ..run.metrics import all_metrics
 from . import mesh as mesh_check
 
 __all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "SYSTEM",
-           "DISTURBED", "WINDOWS", "column_key", "claims_tables", "claims_records",
-           "write_claims", "cell_text", "mesh_rows", "mesh_status", "mesh_row", "arm_notes",
-           "MeshRow"]
+           "DISTURBED", "WINDOWS", "column_key", "claims_records", "mesh_rows", "MeshRow"]
 
 #: The family of transients [s] every windowed claim is measured over.
 WINDOWS = (1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0)
@@ -175,10 +173,10 @@ def _mesh_values(claim: Claim, run: _Measured, checks: dict,
 
 
 def _mesh_text(claim: Claim, values: tuple) -> str:
-    from ..report.render import fmt_number
-    return ", ".join(f"{label}: " + (v if isinstance(v, str) else
-                                      "never" if math.isinf(v) else
-                                      f"{fmt_number(v)} {claim.unit}".strip())
+    """"ANCF 4: 0.0075 rad, ANCF 8: 0.0049 rad, …" (a status text as it is)."""
+    return ", ".join(f"{label}: " + (v if isinstance(v, str) else "never" if math.isinf(v)
+                                      else "n/a" if math.isnan(v)
+                                      else f"{v:.3g} {claim.unit}".strip())
                      for label, v in values)
 
 
@@ -283,142 +281,7 @@ def mesh_rows(runs) -> list[MeshRow]:
     return out
 
 
-def mesh_status(run, checks: dict | None, verdicts: dict) -> str:
-    """The claims table's mesh row for one column (``run``: the system's stored run)."""
-    if checks is None:
-        return "— (reduced plant)"
-    if not checks or not any(checks.values()):
-        return "not checked"
-    labels = ", ".join(checks)
-    if run.status != "ok":
-        others = {label: other.status for label, other in checks.items() if other is not None}
-        if any(status != run.status for status in others.values()):
-            return f"NOT CONVERGED: {run.status} on its mesh, " + ", ".join(
-                f"{status} on {label}" for label, status in others.items())
-        return f"{run.status} on every mesh ({labels})"
-    moved = [k for k, v in verdicts.items() if v.verdict == "not converged"]
-    if moved:
-        return f"NOT CONVERGED against {labels}: {', '.join(moved)}"
-    if any(v is None for v in checks.values()):
-        return f"checks incomplete ({labels})"
-    return f"converged against {labels}"
-
-
 # --- tables ---------------------------------------------------------------------------------
-def cell_text(claim: Claim, v: Verdict) -> str:
-    """One cell: "0.00963 rad — holds (note)", or what happened instead of a value (the
-    reason of a divergence is in the table's "run" row)."""
-    if v.verdict in ("diverged", "failed"):
-        return f"— ({v.verdict})"
-    if v.verdict in ("not run", "n/a"):
-        return v.verdict + (f" ({v.note})" if v.note else "")
-    if v.verdict == "not converged":
-        return f"not converged ({v.note})"
-    from ..report.render import fmt_number
-    value = "never" if math.isinf(v.value) else f"{fmt_number(v.value)} {claim.unit}".strip()
-    return f"{value} — {v.verdict}" + (f" ({v.note})" if v.note else "")
-
-
-def claims_tables(columns: list[Column]) -> list[dict]:
-    """Per arm: column labels, one row of cell texts per claim (with the failure it
-    guards), the run row and the mesh row (for the templates)."""
-    from ..run.scenario import ARMS
-    tables = []
-    for arm in dict.fromkeys(c.arm for c in columns):
-        cols = [c for c in columns if c.arm == arm]
-        rows = [{"claim": "run of the system (" + SYSTEM + ")", "key": "run", "guards": "",
-                 "cells": [_run_text(c.runs.get(SYSTEM)) for c in cols],
-                 "verdicts": [c.runs[SYSTEM].status if SYSTEM in c.runs else "not run"
-                              for c in cols]},
-                mesh_row(cols)]
-        rows += [{"claim": claim.text, "key": claim.key, "guards": claim.guards,
-                  "cells": [cell_text(claim, c.verdicts[claim.key]) for c in cols],
-                  "verdicts": [c.verdicts[claim.key].verdict for c in cols]}
-                 for claim in CLAIMS]
-        rows += _requirement_rows(cols)
-        tables.append({"arm": arm, "arm_text": ARMS.get(arm, arm),
-                       "columns": [c.label for c in cols], "rows": rows,
-                       "notes": arm_notes(cols)})
-    return tables
-
-
-def mesh_row(columns: list[Column]) -> dict:
-    """The claims table's row saying, per column, whether the system's truth-plant run
-    survived the mesh refinement (cells and their verdicts)."""
-    return {"claim": "truth plant under mesh refinement (closed loop)", "key": "mesh",
-            "guards": "results of the FE discretisation taken for the arm's",
-            "cells": [mesh_status(c.runs[SYSTEM], c.checks.get(SYSTEM), c.verdicts)
-                      if SYSTEM in c.runs else "not run" for c in columns],
-            "verdicts": [_mesh_verdict(c) if SYSTEM in c.runs else "not run"
-                         for c in columns]}
-
-
-def _mesh_verdict(column: Column) -> str:
-    checks = column.checks.get(SYSTEM)
-    if checks is None:
-        return "n/a"
-    if mesh_status(column.runs[SYSTEM], checks, column.verdicts).startswith("NOT CONVERGED"):
-        return "not converged"
-    return "converged" if checks and all(checks.values()) else "mesh not checked"
-
-
-def arm_notes(columns: list[Column]) -> list[str]:
-    """What is true of an arm's truth plant when its columns did not converge."""
-    from reduced_model import ArmParameters
-    notes = []
-    for c in columns:
-        run = c.runs.get(SYSTEM)
-        if run is None or _mesh_verdict(c) != "not converged":
-            continue
-        params = ArmParameters.from_mapping(run.config["true_params"])
-        if params.stator_inertia == 0:
-            notes.append(
-                "With no stator inertia at the link-1 tip the motor-2 reaction torque acts "
-                "on an FE node whose only rotary inertia is the elements' consistent mass: "
-                "the FE model has no mesh limit (its joint-2 mobility grows as elements³), "
-                "so its truth-plant columns describe the mesh, not the arm.  Give the arm "
-                "a stator inertia (true_params.stator_inertia): campaigns/stator.toml "
-                "measures the smallest at which the truth plant converges in closed loop "
-                "(README.md, 'Mesh convergence of the truth plant').")
-            break
-    return notes
-
-
-def _requirement_rows(cols: list[Column]) -> list[dict]:
-    """A row per ``[[requirement]]`` of the system's runs: its robustness ρ (≥ 0 holds)."""
-    from ..report.render import fmt_number
-    texts: dict[str, str] = {}
-    for c in cols:
-        for r in (c.runs[SYSTEM].config.get("requirement", []) if SYSTEM in c.runs else []):
-            texts.setdefault(r["name"], r["formula"] or f"claim {r['claim']}")
-    rows = []
-    for name, text in texts.items():
-        cells, verdicts = [], []
-        for c in cols:
-            run = c.runs.get(SYSTEM)
-            rho = run.metrics.get(f"rho_{name}") if run is not None else None
-            if run is not None and run.status != "ok":
-                verdict, cell = run.status, f"— ({run.status})"
-            elif not isinstance(rho, float) or math.isnan(rho):
-                verdict = cell = "not run" if rho is None else "n/a"
-            else:
-                verdict = "holds" if rho >= 0 else "fails"
-                cell = f"ρ = {fmt_number(rho)} — {verdict}"
-            cells.append(cell)
-            verdicts.append(verdict)
-        rows.append({"claim": f"requirement {name}: {text}", "key": f"rho_{name}",
-                     "guards": "", "cells": cells, "verdicts": verdicts})
-    return rows
-
-
-def _run_text(run) -> str:
-    if run is None:
-        return "not run"
-    if run.status == "ok":
-        return f"ok, {run.end_time:g} s"
-    return f"{run.status.upper()}: {run.message}"
-
-
 def claims_records(columns: list[Column]) -> list[dict]:
     """Long-format rows of claims.csv: what was run, the claim, value, verdict, and the
     values over the window family and the meshes."""
@@ -439,38 +302,3 @@ def claims_records(columns: list[Column]) -> list[dict]:
     return records
 
 
-def write_claims(results_dir) -> str:
-    """Write claims.md and claims.csv in ``results_dir`` from its stored runs; return the
-    markdown."""
-    import csv
-    import io
-    from pathlib import Path
-
-    from ..report.render import render
-    from ..run.results import write_atomic
-    from ..batch.store import ResultStore
-    store = ResultStore(results_dir)
-    rows = store.rows()
-    columns = claim_columns(rows)
-    if not columns:
-        raise ValueError(f"{results_dir}: no run named {SYSTEM!r}; the claims need the paper "
-                         "campaign (flexarm reproduce-paper)")
-    example = next(iter(columns[0].runs.values())).config
-    sensors = example["sensors"]
-    text = render("claims.md.j2", tables=claims_tables(columns), claims=CLAIMS,
-                  duration=f"{example['duration']:g} s",
-                  windows=", ".join(f"{T:g}" for T in WINDOWS),
-                  rtol=f"{mesh_check.MESH_RTOL:.0%}", atol=f"{mesh_check.MESH_ATOL:.0%}",
-                  initial_error=", ".join(f"{v:g}" for v in example["observer"]["initial_error"])
-                  + " (rad, m, rad/s, m/s)",
-                  noise=f"{sensors['encoder_noise']:g} rad, {sensors['modal_noise']:g} m, "
-                        f"{sensors['rate_noise']:g} rad/s and m/s")
-    out = Path(results_dir)
-    write_atomic(out / "claims.md", lambda fh: fh.write(text))
-    records = claims_records(columns)
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(records[0]), lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(records)
-    write_atomic(out / "claims.csv", lambda fh: fh.write(buf.getvalue()))
-    return text

@@ -43,9 +43,9 @@ from ..run.scenario import (arm_parameters, scenario_from_mapping, scenario_to_m
 from ..batch.store import ResultStore, run_id
 from .sampled import predicted_period
 
-__all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "OUTCOMES", "StabilityCase", "StabilityResult",
-           "cases_from_scenarios", "stability_map", "load_stability", "outcome",
-           "stability_rows", "write_stability"]
+__all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "OUTCOMES", "StabilityCase",
+           "StabilityResult", "cases_from_scenarios", "stability_map", "load_stability",
+           "outcome"]
 
 GRID = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
 DURATION = 2.0
@@ -319,60 +319,3 @@ def _result(case: StabilityCase, tested: dict) -> StabilityResult:
                            _limit(tested, _GOOD["tracking"]), predicted_period(case.base))
 
 
-def stability_rows(results: list[StabilityResult]) -> list[dict]:
-    """Table rows (values in ms as text) for the templates and stability.csv."""
-    from ..report.render import fmt_number
-
-    def ms(v):
-        return "—" if math.isnan(v) else fmt_number(1e3 * v)
-
-    def largest(limit: Limit) -> str:
-        return ms(limit.largest) if not math.isnan(limit.largest) else \
-            f"< {fmt_number(1e3 * GRID[0])}"
-
-    def first(limit: Limit) -> str:
-        if math.isnan(limit.first_bad):
-            return f"> {fmt_number(1e3 * GRID[-1])}"
-        return f"{ms(limit.first_bad)} ({limit.outcome})"
-    rows = []
-    for r in results:
-        notes = r.non_monotone + [f"FAILED at {1e3 * Ts:.3g} ms: {r.tested[Ts][1]}"
-                                  for Ts in r.failed]
-        rows.append({"case": r.case.label, "plant": r.case.plant, "arm": r.case.arm,
-                     "no_divergence": largest(r.divergence),
-                     "first_divergence": first(r.divergence),
-                     "tracking": largest(r.tracking), "first_loss": first(r.tracking),
-                     "predicted": ms(r.predicted),
-                     "reason": r.divergence.reason if r.divergence.reason == r.tracking.reason
-                     else "; ".join(x for x in (r.tracking.reason, r.divergence.reason) if x),
-                     "mesh": r.mesh or "— (reduced plant)",
-                     "notes": "; ".join(notes) or "monotone",
-                     "no_divergence_s": r.divergence.largest,
-                     "first_divergence_s": r.divergence.first_bad,
-                     "tracking_s": r.tracking.largest, "first_loss_s": r.tracking.first_bad,
-                     "predicted_s": r.predicted, "failed_s": " ".join(f"{Ts:g}" for Ts in r.failed)})
-    return rows
-
-
-def write_stability(results: list[StabilityResult], out) -> str:
-    """Write stability.md and stability.csv into ``out``; return the markdown."""
-    import csv
-    import io
-    from pathlib import Path
-
-    from ..report.render import render
-    from ..run.results import write_atomic
-    rows = stability_rows(results)
-    text = render("stability.md.j2", rows=rows, duration=f"{DURATION:g}",
-                  grid=", ".join(f"{1e3 * t:g}" for t in GRID), bisections=BISECTIONS,
-                  limit=f"{TRACKING_LIMIT:g}")
-    out = Path(out)
-    write_atomic(out / "stability.md", lambda fh: fh.write(text))
-    keys = ["case", "plant", "arm", "no_divergence_s", "first_divergence_s", "tracking_s",
-            "first_loss_s", "predicted_s", "failed_s", "mesh", "notes", "reason"]
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore", lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    write_atomic(out / "stability.csv", lambda fh: fh.write(buf.getvalue()))
-    return text

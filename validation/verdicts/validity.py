@@ -25,9 +25,7 @@ part of the joint mobility, so that its measured limit can be a property of the 
 """
 from __future__ import annotations
 
-import csv
 import dataclasses
-import io
 import json
 import math
 import time
@@ -45,7 +43,7 @@ from .sampled import POINTS, case_mesh, certificate, certified_period, predictio
 from .stability import _label, _options_key, load_stability
 
 __all__ = ["THETA2", "FREQUENCIES_HZ", "CERTIFY_PERIODS", "STEP_CHECK", "arm_validity",
-           "case_rows", "validity_analysis", "write_validity", "load_validity"]
+           "case_rows", "validity_analysis", "load_validity"]
 
 #: θ2 grid [rad] of the ν-gap map and the frequency responses.
 THETA2 = tuple(float(t) for t in np.linspace(0.0, np.pi, 7))
@@ -220,73 +218,6 @@ def validity_analysis(cases, *, stability_dir=None, progress=None) -> dict:
     return {"arms": per_arm, "cases": rows, "timings": timings,
             "stability": str(stability_dir) if stability_dir else "",
             "certify_periods": list(CERTIFY_PERIODS), "points": POINTS}
-
-
-def _ms(value: float) -> str:
-    from ..report.render import fmt_number
-    if isinstance(value, float) and math.isinf(value):
-        return "> 100" if value > 0 else "−∞"
-    return "—" if value is None or math.isnan(value) else fmt_number(1e3 * value)
-
-
-def table_rows(data: dict) -> tuple[list[str], list[list[str]]]:
-    """(header, rows) of the case table (values as text, periods in ms)."""
-    from ..report.render import fmt_number
-    head = ["case", "plant", "arm", "predicted [ms]", "FE mesh", "predicted, mesh ×2 [ms]",
-            "certified [ms]", "measured: no divergence up to [ms]", "first divergence [ms]",
-            "in bracket", "certificate sound", "certified / measured", "notes"]
-    rows = []
-    for r in data["cases"]:
-        notes = "; ".join(n for n in (r["note"], r["evidence"]) if n)
-        rows.append([r["case"], r["plant"], r["arm"], _ms(r["predicted_s"]), r["mesh"],
-                     _ms(r["predicted_fine_s"]) if r["mesh_fine"] else "",
-                     _ms(r["certified_s"]) if r["certificate"] else "n/a",
-                     _ms(r["largest_stable_s"]), _ms(r["first_unstable_s"]), r["in_bracket"],
-                     r["sound"], fmt_number(r["conservatism"]), notes])
-    return head, rows
-
-
-def gap_rows(data: dict) -> tuple[list[str], list[list[str]]]:
-    """(header, rows) of the ν-gap over θ2 table."""
-    from ..report.render import fmt_number
-    head = ["arm", "θ₂ [rad]", "δν τ→θ", "peak [Hz]", "δν τ→tip", "peak [Hz]",
-            "δν PBC loop at Ts", "peak [Hz]"]
-    rows = []
-    for arm in data["arms"]:
-        for g in arm["gaps"]:
-            rows.append([arm["arm"], fmt_number(g["theta2"])] +
-                        [fmt_number(g[k]) for v in _GAP_VIEWS for k in (v, f"{v}_peak_hz")])
-    return head, rows
-
-
-def write_validity(data: dict, out) -> str:
-    """Write ``out``/validity.json (the data), validity.md, validity.csv (the cases),
-    nugap.csv (ν-gap over θ2) and the figures (figures/*.png); return the markdown."""
-    from ..report.linear_figures import validity_figures
-    from ..report.render import render
-    from ..run.results import write_atomic
-    out = Path(out)
-    (out / "figures").mkdir(parents=True, exist_ok=True)
-    write_atomic(out / "validity.json", lambda fh: json.dump(data, fh, indent=1))
-    head, rows = table_rows(data)
-    ghead, grows = gap_rows(data)
-    figures = validity_figures(data)
-    files = []
-    for i, (caption, png) in enumerate(figures):
-        name = f"figures/validity{i:02d}.png"
-        write_atomic(out / name, lambda fh, png=png: fh.write(png), binary=True)
-        files.append({"caption": caption, "file": name})
-    text = render("validity.md.j2", head=head, rows=rows, ghead=ghead, grows=grows,
-                  figures=files, timings=data["timings"], points=data["points"],
-                  periods=", ".join(f"{1e3 * t:g}" for t in data["certify_periods"]))
-    write_atomic(out / "validity.md", lambda fh: fh.write(text))
-    for name, (h, r) in (("validity.csv", (head, rows)), ("nugap.csv", (ghead, grows))):
-        buf = io.StringIO()
-        writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow(h)
-        writer.writerows(r)
-        write_atomic(out / name, lambda fh, text=buf.getvalue(): fh.write(text))
-    return text
 
 
 def load_validity(folder) -> dict | None:

@@ -1,0 +1,347 @@
+"""The verdicts as a reader sees them: claims.md/.csv, stability.md/.csv,
+attribution.md/.csv and validity.md/.csv, and the table rows the report shows — the text
+and layout of what `validation.verdicts` computes (values in the units a reader
+expects, notes, the mesh and run rows)."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+
+from reduced_model import ArmParameters
+
+from ..batch.store import ResultStore
+from ..run.results import write_atomic
+from ..run.scenario import ARMS
+from ..verdicts import mesh as mesh_check
+from ..verdicts.attribution import (DIVERGED_RULE, FACTORS, METRIC_NAMES, METRICS,
+                                    Attribution, records)
+from ..verdicts.claims import (CLAIMS, SYSTEM, WINDOWS, Claim, Column, Verdict, claim_columns,
+                               claims_records)
+from ..verdicts.stability import (BISECTIONS, DURATION, GRID, TRACKING_LIMIT, Limit,
+                                  StabilityResult)
+from ..verdicts.validity import _GAP_VIEWS
+from .linear_figures import validity_figures
+from .render import display_unit, fmt_number, render
+
+__all__ = ["write_claims", "claims_tables", "cell_text", "mesh_row", "mesh_status",
+           "arm_notes", "run_text", "stability_rows", "write_stability", "write_attribution",
+           "study_view", "table_rows", "gap_rows", "write_validity"]
+
+
+# --- from claims --------------------------------------------------------------------------------
+def mesh_status(run, checks: dict | None, verdicts: dict) -> str:
+    """The claims table's mesh row for one column (``run``: the system's stored run)."""
+    if checks is None:
+        return "— (reduced plant)"
+    if not checks or not any(checks.values()):
+        return "not checked"
+    labels = ", ".join(checks)
+    if run.status != "ok":
+        others = {label: other.status for label, other in checks.items() if other is not None}
+        if any(status != run.status for status in others.values()):
+            return f"NOT CONVERGED: {run.status} on its mesh, " + ", ".join(
+                f"{status} on {label}" for label, status in others.items())
+        return f"{run.status} on every mesh ({labels})"
+    moved = [k for k, v in verdicts.items() if v.verdict == "not converged"]
+    if moved:
+        return f"NOT CONVERGED against {labels}: {', '.join(moved)}"
+    if any(v is None for v in checks.values()):
+        return f"checks incomplete ({labels})"
+    return f"converged against {labels}"
+
+
+def cell_text(claim: Claim, v: Verdict) -> str:
+    """One cell: "0.00963 rad — holds (note)", or what happened instead of a value (the
+    reason of a divergence is in the table's "run" row)."""
+    if v.verdict in ("diverged", "failed"):
+        return f"— ({v.verdict})"
+    if v.verdict in ("not run", "n/a"):
+        return v.verdict + (f" ({v.note})" if v.note else "")
+    if v.verdict == "not converged":
+        return f"not converged ({v.note})"
+    value = "never" if math.isinf(v.value) else f"{fmt_number(v.value)} {claim.unit}".strip()
+    return f"{value} — {v.verdict}" + (f" ({v.note})" if v.note else "")
+
+
+def claims_tables(columns: list[Column]) -> list[dict]:
+    """Per arm: column labels, one row of cell texts per claim (with the failure it
+    guards), the run row and the mesh row (for the templates)."""
+    tables = []
+    for arm in dict.fromkeys(c.arm for c in columns):
+        cols = [c for c in columns if c.arm == arm]
+        rows = [{"claim": "run of the system (" + SYSTEM + ")", "key": "run", "guards": "",
+                 "cells": [run_text(c.runs.get(SYSTEM)) for c in cols],
+                 "verdicts": [c.runs[SYSTEM].status if SYSTEM in c.runs else "not run"
+                              for c in cols]},
+                mesh_row(cols)]
+        rows += [{"claim": claim.text, "key": claim.key, "guards": claim.guards,
+                  "cells": [cell_text(claim, c.verdicts[claim.key]) for c in cols],
+                  "verdicts": [c.verdicts[claim.key].verdict for c in cols]}
+                 for claim in CLAIMS]
+        rows += _requirement_rows(cols)
+        tables.append({"arm": arm, "arm_text": ARMS.get(arm, arm),
+                       "columns": [c.label for c in cols], "rows": rows,
+                       "notes": arm_notes(cols)})
+    return tables
+
+
+def mesh_row(columns: list[Column]) -> dict:
+    """The claims table's row saying, per column, whether the system's truth-plant run
+    survived the mesh refinement (cells and their verdicts)."""
+    return {"claim": "truth plant under mesh refinement (closed loop)", "key": "mesh",
+            "guards": "results of the FE discretisation taken for the arm's",
+            "cells": [mesh_status(c.runs[SYSTEM], c.checks.get(SYSTEM), c.verdicts)
+                      if SYSTEM in c.runs else "not run" for c in columns],
+            "verdicts": [_mesh_verdict(c) if SYSTEM in c.runs else "not run"
+                         for c in columns]}
+
+
+def _mesh_verdict(column: Column) -> str:
+    checks = column.checks.get(SYSTEM)
+    if checks is None:
+        return "n/a"
+    if mesh_status(column.runs[SYSTEM], checks, column.verdicts).startswith("NOT CONVERGED"):
+        return "not converged"
+    return "converged" if checks and all(checks.values()) else "mesh not checked"
+
+
+def arm_notes(columns: list[Column]) -> list[str]:
+    """What is true of an arm's truth plant when its columns did not converge."""
+    notes = []
+    for c in columns:
+        run = c.runs.get(SYSTEM)
+        if run is None or _mesh_verdict(c) != "not converged":
+            continue
+        params = ArmParameters.from_mapping(run.config["true_params"])
+        if params.stator_inertia == 0:
+            notes.append(
+                "With no stator inertia at the link-1 tip the motor-2 reaction torque acts "
+                "on an FE node whose only rotary inertia is the elements' consistent mass: "
+                "the FE model has no mesh limit (its joint-2 mobility grows as elements³), "
+                "so its truth-plant columns describe the mesh, not the arm.  Give the arm "
+                "a stator inertia (true_params.stator_inertia): campaigns/stator.toml "
+                "measures the smallest at which the truth plant converges in closed loop "
+                "(README.md, 'Mesh convergence of the truth plant').")
+            break
+    return notes
+
+
+def _requirement_rows(cols: list[Column]) -> list[dict]:
+    """A row per ``[[requirement]]`` of the system's runs: its robustness ρ (≥ 0 holds)."""
+    texts: dict[str, str] = {}
+    for c in cols:
+        for r in (c.runs[SYSTEM].config.get("requirement", []) if SYSTEM in c.runs else []):
+            texts.setdefault(r["name"], r["formula"] or f"claim {r['claim']}")
+    rows = []
+    for name, text in texts.items():
+        cells, verdicts = [], []
+        for c in cols:
+            run = c.runs.get(SYSTEM)
+            rho = run.metrics.get(f"rho_{name}") if run is not None else None
+            if run is not None and run.status != "ok":
+                verdict, cell = run.status, f"— ({run.status})"
+            elif not isinstance(rho, float) or math.isnan(rho):
+                verdict = cell = "not run" if rho is None else "n/a"
+            else:
+                verdict = "holds" if rho >= 0 else "fails"
+                cell = f"ρ = {fmt_number(rho)} — {verdict}"
+            cells.append(cell)
+            verdicts.append(verdict)
+        rows.append({"claim": f"requirement {name}: {text}", "key": f"rho_{name}",
+                     "guards": "", "cells": cells, "verdicts": verdicts})
+    return rows
+
+
+def run_text(run) -> str:
+    if run is None:
+        return "not run"
+    if run.status == "ok":
+        return f"ok, {run.end_time:g} s"
+    return f"{run.status.upper()}: {run.message}"
+
+
+def write_claims(results_dir) -> str:
+    """Write claims.md and claims.csv in ``results_dir`` from its stored runs; return the
+    markdown."""
+    store = ResultStore(results_dir)
+    rows = store.rows()
+    columns = claim_columns(rows)
+    if not columns:
+        raise ValueError(f"{results_dir}: no run named {SYSTEM!r}; the claims need the paper "
+                         "campaign (flexarm reproduce-paper)")
+    example = next(iter(columns[0].runs.values())).config
+    sensors = example["sensors"]
+    text = render("claims.md.j2", tables=claims_tables(columns), claims=CLAIMS,
+                  duration=f"{example['duration']:g} s",
+                  windows=", ".join(f"{T:g}" for T in WINDOWS),
+                  rtol=f"{mesh_check.MESH_RTOL:.0%}", atol=f"{mesh_check.MESH_ATOL:.0%}",
+                  initial_error=", ".join(f"{v:g}" for v in example["observer"]["initial_error"])
+                  + " (rad, m, rad/s, m/s)",
+                  noise=f"{sensors['encoder_noise']:g} rad, {sensors['modal_noise']:g} m, "
+                        f"{sensors['rate_noise']:g} rad/s and m/s")
+    out = Path(results_dir)
+    write_atomic(out / "claims.md", lambda fh: fh.write(text))
+    records = claims_records(columns)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(records[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(records)
+    write_atomic(out / "claims.csv", lambda fh: fh.write(buf.getvalue()))
+    return text
+
+
+# --- from stability --------------------------------------------------------------------------------
+def stability_rows(results: list[StabilityResult]) -> list[dict]:
+    """Table rows (values in ms as text) for the templates and stability.csv."""
+
+    def ms(v):
+        return "—" if math.isnan(v) else fmt_number(1e3 * v)
+
+    def largest(limit: Limit) -> str:
+        return ms(limit.largest) if not math.isnan(limit.largest) else \
+            f"< {fmt_number(1e3 * GRID[0])}"
+
+    def first(limit: Limit) -> str:
+        if math.isnan(limit.first_bad):
+            return f"> {fmt_number(1e3 * GRID[-1])}"
+        return f"{ms(limit.first_bad)} ({limit.outcome})"
+    rows = []
+    for r in results:
+        notes = r.non_monotone + [f"FAILED at {1e3 * Ts:.3g} ms: {r.tested[Ts][1]}"
+                                  for Ts in r.failed]
+        rows.append({"case": r.case.label, "plant": r.case.plant, "arm": r.case.arm,
+                     "no_divergence": largest(r.divergence),
+                     "first_divergence": first(r.divergence),
+                     "tracking": largest(r.tracking), "first_loss": first(r.tracking),
+                     "predicted": ms(r.predicted),
+                     "reason": r.divergence.reason if r.divergence.reason == r.tracking.reason
+                     else "; ".join(x for x in (r.tracking.reason, r.divergence.reason) if x),
+                     "mesh": r.mesh or "— (reduced plant)",
+                     "notes": "; ".join(notes) or "monotone",
+                     "no_divergence_s": r.divergence.largest,
+                     "first_divergence_s": r.divergence.first_bad,
+                     "tracking_s": r.tracking.largest, "first_loss_s": r.tracking.first_bad,
+                     "predicted_s": r.predicted, "failed_s": " ".join(f"{Ts:g}" for Ts in r.failed)})
+    return rows
+
+
+def write_stability(results: list[StabilityResult], out) -> str:
+    """Write stability.md and stability.csv into ``out``; return the markdown."""
+    rows = stability_rows(results)
+    text = render("stability.md.j2", rows=rows, duration=f"{DURATION:g}",
+                  grid=", ".join(f"{1e3 * t:g}" for t in GRID), bisections=BISECTIONS,
+                  limit=f"{TRACKING_LIMIT:g}")
+    out = Path(out)
+    write_atomic(out / "stability.md", lambda fh: fh.write(text))
+    keys = ["case", "plant", "arm", "no_divergence_s", "first_divergence_s", "tracking_s",
+            "first_loss_s", "predicted_s", "failed_s", "mesh", "notes", "reason"]
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    write_atomic(out / "stability.csv", lambda fh: fh.write(buf.getvalue()))
+    return text
+
+
+# --- from attribution --------------------------------------------------------------------------------
+def write_attribution(atts: list[Attribution], out) -> str:
+    """attribution.csv and attribution.md in ``out``; returns the markdown."""
+    rows = [r for a in atts for r in records(a)]
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=["study", "metric", "factor", "contribution",
+                                             "share"], lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    out = Path(out)
+    write_atomic(out / "attribution.csv", lambda fh: fh.write(buf.getvalue()))
+    text = render("attribution.md.j2", studies=[study_view(a) for a in atts], factors=FACTORS,
+                  rule=DIVERGED_RULE)
+    write_atomic(out / "attribution.md", lambda fh: fh.write(text))
+    return text
+
+
+def study_view(att: Attribution) -> dict:
+    """Data for the templates: per metric (by its human name, in the unit a reader
+    expects: mrad, mm), one row per factor (and the sub-ladder)."""
+    metrics = []
+    for metric, contributions in att.contributions.items():
+        total = att.totals[metric]
+        scale, unit = display_unit(METRICS[metric][1])
+        num = lambda v: fmt_number(None if v is None else scale * v)  # noqa: E731
+        rows = [[f, num(v), f"{100 * v / total:.1f}" if total and math.isfinite(v)
+                 else "—"] for f, v in contributions.items()]
+        ladder = " → ".join(f"{f}: {num(v)}" for f, v in att.ladder.get(metric, []))
+        pair, value = att.interaction.get(metric, (None, math.nan))
+        metrics.append({"metric": METRIC_NAMES.get(metric, metric), "key": metric, "unit": unit,
+                        "scale": scale, "rows": rows,
+                        "real": num(att.real_value.get(metric)),
+                        "ideal": num(att.ideal_value.get(metric)),
+                        "total": num(total), "ladder": ladder,
+                        "interaction": f"{pair[0]} × {pair[1]}: {num(value)}" if pair else ""})
+    return {"name": att.name, "factors": [f for f in att.factors],
+            "destabilising": att.destabilising, "diverging": att.diverging, "metrics": metrics}
+
+
+# --- from validity --------------------------------------------------------------------------------
+def _ms(value: float) -> str:
+    if isinstance(value, float) and math.isinf(value):
+        return "> 100" if value > 0 else "−∞"
+    return "—" if value is None or math.isnan(value) else fmt_number(1e3 * value)
+
+
+def table_rows(data: dict) -> tuple[list[str], list[list[str]]]:
+    """(header, rows) of the case table (values as text, periods in ms)."""
+    head = ["case", "plant", "arm", "predicted [ms]", "FE mesh", "predicted, mesh ×2 [ms]",
+            "certified [ms]", "measured: no divergence up to [ms]", "first divergence [ms]",
+            "in bracket", "certificate sound", "certified / measured", "notes"]
+    rows = []
+    for r in data["cases"]:
+        notes = "; ".join(n for n in (r["note"], r["evidence"]) if n)
+        rows.append([r["case"], r["plant"], r["arm"], _ms(r["predicted_s"]), r["mesh"],
+                     _ms(r["predicted_fine_s"]) if r["mesh_fine"] else "",
+                     _ms(r["certified_s"]) if r["certificate"] else "n/a",
+                     _ms(r["largest_stable_s"]), _ms(r["first_unstable_s"]), r["in_bracket"],
+                     r["sound"], fmt_number(r["conservatism"]), notes])
+    return head, rows
+
+
+def gap_rows(data: dict) -> tuple[list[str], list[list[str]]]:
+    """(header, rows) of the ν-gap over θ2 table."""
+    head = ["arm", "θ₂ [rad]", "δν τ→θ", "peak [Hz]", "δν τ→tip", "peak [Hz]",
+            "δν PBC loop at Ts", "peak [Hz]"]
+    rows = []
+    for arm in data["arms"]:
+        for g in arm["gaps"]:
+            rows.append([arm["arm"], fmt_number(g["theta2"])] +
+                        [fmt_number(g[k]) for v in _GAP_VIEWS for k in (v, f"{v}_peak_hz")])
+    return head, rows
+
+
+def write_validity(data: dict, out) -> str:
+    """Write ``out``/validity.json (the data), validity.md, validity.csv (the cases),
+    nugap.csv (ν-gap over θ2) and the figures (figures/*.png); return the markdown."""
+    out = Path(out)
+    (out / "figures").mkdir(parents=True, exist_ok=True)
+    write_atomic(out / "validity.json", lambda fh: json.dump(data, fh, indent=1))
+    head, rows = table_rows(data)
+    ghead, grows = gap_rows(data)
+    figures = validity_figures(data)
+    files = []
+    for i, (caption, png) in enumerate(figures):
+        name = f"figures/validity{i:02d}.png"
+        write_atomic(out / name, lambda fh, png=png: fh.write(png), binary=True)
+        files.append({"caption": caption, "file": name})
+    text = render("validity.md.j2", head=head, rows=rows, ghead=ghead, grows=grows,
+                  figures=files, timings=data["timings"], points=data["points"],
+                  periods=", ".join(f"{1e3 * t:g}" for t in data["certify_periods"]))
+    write_atomic(out / "validity.md", lambda fh: fh.write(text))
+    for name, (h, r) in (("validity.csv", (head, rows)), ("nugap.csv", (ghead, grows))):
+        buf = io.StringIO()
+        writer = csv.writer(buf, lineterminator="\n")
+        writer.writerow(h)
+        writer.writerows(r)
+        write_atomic(out / name, lambda fh, text=buf.getvalue(): fh.write(text))
+    return text
