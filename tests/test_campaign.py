@@ -325,11 +325,11 @@ def test_claims_table_of_the_paper_campaign(tmp_path):
     assert body[0].startswith("| run of the system")
     assert body[1].startswith("| truth plant under mesh refinement")
     for line, claim in zip(body[2:], CLAIMS):
-        cells = [c.strip() for c in line.strip().strip("|").split("|")][2:]  # claim, guards
-        assert len(cells) == 2, line
+        cells = [c.strip() for c in line.strip().strip("|").split("|")][3:]  # claim, bound,
+        assert len(cells) == 2, line  # guards
         for cell, col in zip(cells, columns):
-            assert cell.endswith(col.verdicts[claim.key].verdict) or \
-                f"— {col.verdicts[claim.key].verdict} (" in cell, (claim.key, cell)
+            verdict = col.verdicts[claim.key].verdict
+            assert cell.endswith(verdict) or f"— {verdict}" in cell, (claim.key, cell)
     # claims.csv: long format, one row per (column, claim), the same verdicts.
     with (tmp_path / "claims.csv").open(newline="") as fh:
         records = list(csv.DictReader(fh))

@@ -341,7 +341,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                 animation_path: Path | None = None) -> ReportData:
     """Everything the report shows, as data (figures as PNG bytes)."""
     from ..verdicts.claims import CLAIMS, claim_columns
-    from .summary import NOTE_MEANING, claims_view, pairs_table, summary_view
+    from .summary import NOTE_MEANING, pairs_table, summary_view
+    from .verdict_tables import claims_tables
     store = ResultStore(results_dir)
     all_rows, runs, warnings, evaluations = _included(store)
     fresh_ids = {r.run_id for r in runs}
@@ -365,7 +366,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     data.mesh = _mesh_table(runs + checks)
     if columns:
         data.summary = summary_view(columns)
-        data.claims = claims_view(columns)
+        data.claims = claims_tables(columns)
         data.claims_criteria = [{"text": c.text, "criterion": c.criterion,
                                  "bound": f"{fmt_number(c.bound)} {c.unit}",
                                  "rationale": c.rationale} for c in CLAIMS]

@@ -15,7 +15,8 @@ import math
 
 from .render import display_unit, fmt_number
 
-__all__ = ["claims_view", "summary_view", "pairs_table", "NOTE_MEANING", "margin"]
+__all__ = ["verdict_text", "value_text", "summary_view", "pairs_table", "NOTE_MEANING",
+           "margin"]
 
 #: What the note in brackets after a verdict says, per claim.
 NOTE_MEANING = {
@@ -38,7 +39,8 @@ def margin(claim, value: float) -> float:
     return 1.0 - value / claim.bound
 
 
-def _value(claim, value: float) -> str:
+def value_text(claim, value: float) -> str:
+    """A value in the unit a reader expects: "9.63 mrad", "never"."""
     if math.isinf(value):
         return "never"
     scale, unit = display_unit(claim.unit)
@@ -73,35 +75,10 @@ def verdict_text(claim, v) -> str:
         return v.verdict + (f" ({v.note})" if v.note else "")
     if v.verdict == "not converged":
         return f"not converged ({v.note})"
-    text = f"{_value(claim, v.value)} — {v.verdict}"
+    text = f"{value_text(claim, v.value)} — {v.verdict}"
     if v.verdict in ("holds", "fails") and _margin_text(claim, v.value):
         text += f", {_margin_text(claim, v.value)}"
     return text + (f" ({v.note})" if v.note else "")
-
-
-def claims_view(columns) -> list[dict]:
-    """Per arm: column labels, one row per claim (cells: value in display units, verdict,
-    margin, note) and the verdicts for the cell colours."""
-    from ..run.scenario import ARMS
-    from ..verdicts.claims import CLAIMS, SYSTEM
-    from .verdict_tables import arm_notes, mesh_row, run_text
-    tables = []
-    for arm in dict.fromkeys(c.arm for c in columns):
-        cols = [c for c in columns if c.arm == arm]
-        rows = [{"claim": f"run of the system ({SYSTEM})", "bound": "", "guards": "",
-                 "cells": [run_text(c.runs.get(SYSTEM)) for c in cols],
-                 "verdicts": [c.runs[SYSTEM].status if SYSTEM in c.runs else "not run"
-                              for c in cols]},
-                dict(mesh_row(cols), bound="")]
-        rows += [{"claim": claim.text, "bound": _value(claim, claim.bound),
-                  "guards": claim.guards,
-                  "cells": [verdict_text(claim, c.verdicts[claim.key]) for c in cols],
-                  "verdicts": [c.verdicts[claim.key].verdict for c in cols]}
-                 for claim in CLAIMS]
-        tables.append({"arm": arm, "arm_text": ARMS.get(arm, arm),
-                       "columns": [c.label for c in cols], "rows": rows,
-                       "notes": arm_notes(cols)})
-    return tables
 
 
 def summary_view(columns) -> list[dict]:
@@ -125,7 +102,7 @@ def summary_view(columns) -> list[dict]:
                 lines, verdict = _summary_cell(claim, plants)
                 cells.append(lines)
                 classes.append(verdict)
-            rows.append({"claim": claim.text, "bound": _value(claim, claim.bound),
+            rows.append({"claim": claim.text, "bound": value_text(claim, claim.bound),
                          "cells": cells, "verdicts": classes})
         tables.append({"arm": arm, "columns": heads, "rows": rows})
     return tables

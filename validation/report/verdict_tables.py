@@ -18,15 +18,16 @@ from ..run.scenario import ARMS
 from ..verdicts import mesh as mesh_check
 from ..verdicts.attribution import (DIVERGED_RULE, FACTORS, METRIC_NAMES, METRICS,
                                     Attribution, records)
-from ..verdicts.claims import (CLAIMS, SYSTEM, WINDOWS, Claim, Column, Verdict, claim_columns,
+from ..verdicts.claims import (CLAIMS, SYSTEM, WINDOWS, Column, claim_columns,
                                claims_records)
 from ..verdicts.stability import (BISECTIONS, DURATION, GRID, TRACKING_LIMIT, Limit,
                                   StabilityResult)
 from ..verdicts.validity import _GAP_VIEWS
 from .linear_figures import validity_figures
 from .render import display_unit, fmt_number, render
+from .summary import value_text, verdict_text
 
-__all__ = ["write_claims", "claims_tables", "cell_text", "mesh_row", "mesh_status",
+__all__ = ["write_claims", "claims_tables", "mesh_row", "mesh_status",
            "arm_notes", "run_text", "stability_rows", "write_stability", "write_attribution",
            "study_view", "table_rows", "gap_rows", "write_validity"]
 
@@ -53,32 +54,21 @@ def mesh_status(run, checks: dict | None, verdicts: dict) -> str:
     return f"converged against {labels}"
 
 
-def cell_text(claim: Claim, v: Verdict) -> str:
-    """One cell: "0.00963 rad — holds (note)", or what happened instead of a value (the
-    reason of a divergence is in the table's "run" row)."""
-    if v.verdict in ("diverged", "failed"):
-        return f"— ({v.verdict})"
-    if v.verdict in ("not run", "n/a"):
-        return v.verdict + (f" ({v.note})" if v.note else "")
-    if v.verdict == "not converged":
-        return f"not converged ({v.note})"
-    value = "never" if math.isinf(v.value) else f"{fmt_number(v.value)} {claim.unit}".strip()
-    return f"{value} — {v.verdict}" + (f" ({v.note})" if v.note else "")
-
-
 def claims_tables(columns: list[Column]) -> list[dict]:
-    """Per arm: column labels, one row of cell texts per claim (with the failure it
-    guards), the run row and the mesh row (for the templates)."""
+    """Per arm: column labels, the run row and the mesh row, one row per claim (its bound
+    and cells in the units a reader expects, with the margin: `summary.verdict_text`; the
+    failure it guards against) and one per requirement — for claims.md and the report."""
     tables = []
     for arm in dict.fromkeys(c.arm for c in columns):
         cols = [c for c in columns if c.arm == arm]
-        rows = [{"claim": "run of the system (" + SYSTEM + ")", "key": "run", "guards": "",
-                 "cells": [run_text(c.runs.get(SYSTEM)) for c in cols],
+        rows = [{"claim": "run of the system (" + SYSTEM + ")", "key": "run", "bound": "",
+                 "guards": "", "cells": [run_text(c.runs.get(SYSTEM)) for c in cols],
                  "verdicts": [c.runs[SYSTEM].status if SYSTEM in c.runs else "not run"
                               for c in cols]},
-                mesh_row(cols)]
-        rows += [{"claim": claim.text, "key": claim.key, "guards": claim.guards,
-                  "cells": [cell_text(claim, c.verdicts[claim.key]) for c in cols],
+                dict(mesh_row(cols), bound="")]
+        rows += [{"claim": claim.text, "key": claim.key, "bound": value_text(claim, claim.bound),
+                  "guards": claim.guards,
+                  "cells": [verdict_text(claim, c.verdicts[claim.key]) for c in cols],
                   "verdicts": [c.verdicts[claim.key].verdict for c in cols]}
                  for claim in CLAIMS]
         rows += _requirement_rows(cols)
@@ -151,7 +141,7 @@ def _requirement_rows(cols: list[Column]) -> list[dict]:
             cells.append(cell)
             verdicts.append(verdict)
         rows.append({"claim": f"requirement {name}: {text}", "key": f"rho_{name}",
-                     "guards": "", "cells": cells, "verdicts": verdicts})
+                     "bound": "ρ ≥ 0", "guards": "", "cells": cells, "verdicts": verdicts})
     return rows
 
 
