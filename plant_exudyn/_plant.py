@@ -107,6 +107,10 @@ class ExudynPlant:
         self.time = 0.0
         self._cache = None  # state readout of the current step (see _read)
         self._tip_force = (0.0, 0.0)
+        # Bound once: the loop advances and reads the plant every sample.
+        self._set_load = self.system.mbs.SetLoadParameter
+        self._iteration = self.solver.it
+        self._system_data = self.system.mbs.systemData
 
     def _index_state(self) -> None:
         """Cache ODE2 indices and reference values of everything `truth` reads."""
@@ -166,32 +170,31 @@ class ExudynPlant:
         return self.measure()
 
     def advance(self, tau, Ts: float, tip_force=None) -> None:
-        """`step` without the measurement (what the closed loop calls)."""
-        last_Ts, nsteps = self._Ts_nsteps
-        if Ts != last_Ts:
-            nsteps = check_sample_time(Ts, self.h)
-            self._Ts_nsteps = (Ts, nsteps)
-        tau = np.asarray(tau, dtype=float)
-        if tau.shape != (2,):
-            raise ValueError("the Exudyn plant has two actuators: tau must have shape (2,), "
-                             f"got {tau.shape}")
-        mbs = self.system.mbs
+        """`step` without the measurement (what the closed loop calls once per sample:
+        nothing here builds an object it does not need)."""
+        if Ts != self._Ts_nsteps[0]:
+            self._Ts_nsteps = (Ts, check_sample_time(Ts, self.h))
+        if len(tau) != 2:
+            raise ValueError("the Exudyn plant has two actuators: tau must have 2 values, "
+                             f"got {len(tau)}")
         t1, t2 = float(tau[0]), float(tau[1])
-        l1, l2, l2r = self.system.loads
-        mbs.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])
-        mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
-        mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
-        force = (0.0, 0.0) if tip_force is None else (float(tip_force[0]), float(tip_force[1]))
-        if force != self._tip_force:
-            mbs.SetLoadParameter(self.system.tip_load, "loadVector", [force[0], force[1], 0.0])
-            self._tip_force = force
-        self._steps += nsteps
+        set_load, (l1, l2, l2r) = self._set_load, self.system.loads
+        set_load(l1, "loadVector", [0.0, 0.0, t1])
+        set_load(l2, "loadVector", [0.0, 0.0, t2])
+        set_load(l2r, "loadVector", [0.0, 0.0, -t2])
+        if tip_force is not None or self._tip_force != (0.0, 0.0):
+            force = (0.0, 0.0) if tip_force is None else (float(tip_force[0]),
+                                                           float(tip_force[1]))
+            if force != self._tip_force:
+                set_load(self.system.tip_load, "loadVector", [force[0], force[1], 0.0])
+                self._tip_force = force
+        self._steps += self._Ts_nsteps[1]
         self._cache = self._truth = None
-        self.solver.it.endTime = self._steps * self.h
-        if not self.solver.SolveSteps(mbs, self.settings):
+        self._iteration.endTime = self._steps * self.h
+        if not self.solver.SolveSteps(self.system.mbs, self.settings):
             msg = self.solver.GetErrorString() or "Newton iteration did not converge"
-            raise PlantFailure(f"Exudyn solver failed at t = {self.solver.it.currentTime:.6g} s: "
-                               f"{msg.strip()}")
+            raise PlantFailure(f"Exudyn solver failed at t = {self._iteration.currentTime:.6g} "
+                               f"s: {msg.strip()}")
         self.time = self._steps * self.h
 
     def measure(self) -> Measurement:
@@ -215,7 +218,7 @@ class ExudynPlant:
 
     def truth_into(self, out: np.ndarray) -> None:
         """`truth_vector` written into ``out`` (one compiled call on Exudyn's coordinates)."""
-        sd = self.system.mbs.systemData
+        sd = self._system_data
         readout_into(self._readout, sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), out)
 
     def _truth_now(self) -> np.ndarray:

@@ -260,9 +260,14 @@ def _python_loop(plant, controller, observer, s: Scenario, reference, r: _Run,
     n, N, Ts, ctx, rows = r.n, r.N, s.Ts, r.context, r.rows
     laws = None if compiled_laws else _PythonLaws(controller, observer, s, reference, r,
                                                   has_residual)
-    t_plant = t_laws = first = 0.0
+    t_laws = first = 0.0
     status, message, k_done = "ok", "", N
-    plant.truth_into(r.truth)
+    # the payload force, when a disturbance acts there (else the plant is told none)
+    force = r.force if any(d.target in ("tip_x", "tip_y") for d in s.disturbances) else None
+    applied = {m: r.tau_plant[:m] for m in (2, n)}  # by the number of torques applied
+    sample = laws.sample if laws is not None else (lambda t, k, row: sample_laws(ctx, t, k, row))
+    advance, truth_into, truth = plant.advance, plant.truth_into, r.truth
+    truth_into(truth)
     wall0 = _time.perf_counter()
     for k in range(N):
         t = k * Ts
@@ -271,7 +276,7 @@ def _python_loop(plant, controller, observer, s: Scenario, reference, r: _Run,
             r.yv[:] = plant.measure().values
         a = _time.perf_counter()
         try:
-            code = sample_laws(ctx, t, k, row) if laws is None else laws.sample(t, k, row)
+            code = sample(t, k, row)
         except _LawRaised as exc:
             status, message, k_done = exc.status, exc.message, k
             break
@@ -279,23 +284,21 @@ def _python_loop(plant, controller, observer, s: Scenario, reference, r: _Run,
             status, k_done = "diverged", k
             message = status_message(code, r.info[0], s.divergence, t, r.failure)
             break
-        b = _time.perf_counter()
-        t_laws += b - a
+        t_laws += _time.perf_counter() - a
         try:
-            force = r.force if r.force[0] or r.force[1] else None
-            plant.advance(r.tau_plant[:r.counts[1]], Ts, tip_force=force)
+            advance(applied[r.counts[1]], Ts, tip_force=force)
         except PlantFailure as exc:
             status, message, k_done = "failed", str(exc), k + 1
             break
-        plant.truth_into(r.truth)
-        t_plant += _time.perf_counter() - b
+        truth_into(truth)
         if k == 0:  # the first sample pays for loading or compiling the kernels
             first = _time.perf_counter() - wall0
     else:
         code = check_bounds(r.truth, n, r.bounds, r.info)
         if code != SampleStatus.OK:
             status, message = "diverged", status_message(code, r.info[0], s.divergence, N * Ts)
-    return status, message, k_done, {"plant_s": t_plant, "laws_s": t_laws, "first": first}
+    plant_s = _time.perf_counter() - wall0 - t_laws  # the plant and the loop around it
+    return status, message, k_done, {"plant_s": plant_s, "laws_s": t_laws, "first": first}
 
 
 class _LawRaised(Exception):
