@@ -20,6 +20,7 @@ import ast
 import functools
 import hashlib
 import importlib.machinery
+import sys
 import sysconfig
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
@@ -85,12 +86,20 @@ def _locate(name: str, inside: tuple[str, ...] | None) -> Path | None:
 
 def _walk(start: list[str], inside) -> dict[str, Path]:
     """Module name → file of ``start`` and everything it imports (transitively) whose file
-    lies under ``inside`` (None: anywhere but the Python installation)."""
+    lies under ``inside`` (None: anywhere but the Python installation).  Each name is
+    looked up once; with ``inside``, only names of packages that live there are (the
+    rest of the world cannot), without it the standard library is skipped by name."""
     found: dict[str, Path] = {}
+    seen: set[str] = set()
+    local = None if inside is None else {root.name for root in inside}
     todo = list(start)
     while todo:
         name = todo.pop()
-        if name in found or not name:
+        if not name or name in seen:
+            continue
+        seen.add(name)
+        top = name.partition(".")[0]
+        if (local is not None and top not in local) or top in sys.stdlib_module_names:
             continue
         path = _locate(name, inside)
         if path is None or (inside is None and _installed(path)):
