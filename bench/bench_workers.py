@@ -1,0 +1,151 @@
+"""Two workers against one, the whole command line, side by side: a campaign of short
+reduced runs, `flexarm verify` on the truth plant, and each worker's peak memory.
+
+- ``flexarm campaign`` of 48 × 5 s reduced runs (the sweep of `bench_campaign.py`) with 1
+  and 2 workers, paired repeats: the speed-up, median and minimum.  Also the same
+  command on a one-run campaign: the command's fixed start (imports, loading the compiled
+  kernels, checking the scenarios, starting the workers, exporting), which no number of
+  workers shortens and which bounds the speed-up (Amdahl).
+- ``flexarm verify --mode estimate`` of 16 truth-plant draws (20 s, PBC + EKF), 1 and 2
+  workers: the verdict workload, where each run is long.
+- ``flexarm campaign`` of 8 × 20 s truth-plant runs with 2 workers: the peak resident
+  memory (VmHWM) of each worker and of the command's own process, read from /proc while
+  it runs.
+
+Targets (issue 24): 2 workers ≥ 1.7× one, for the campaign and for verify.
+"""
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from _report import report, target
+
+ROOT = Path(__file__).resolve().parent.parent
+REPEATS = 5
+CAMPAIGN = """name = "bench-reduced"
+[scenario]
+duration = 5.0
+observer.kind = "smo-paper"
+[[sweep]]
+grid."true_params.Mp" = [0.0, 0.1, 0.2, 0.3, 0.5, 0.8]
+grid."observer.kind" = ["smo-paper", "smo-bl"]
+grid.seed = [1, 2, 3, 4]
+"""
+ONE_RUN = """name = "bench-one"
+[scenario]
+duration = 5.0
+observer.kind = "smo-paper"
+"""
+TRUTH = """name = "bench-truth"
+[scenario]
+plant.kind = "exudyn"
+observer.kind = "smo-paper"
+[[sweep]]
+grid."true_params.Mp" = [0.0, 0.1, 0.5, 1.0]
+grid.seed = [1, 2]
+"""
+
+
+def flexarm(*args: str, poll=None) -> float:
+    """Wall seconds of ``flexarm ARGS`` in a fresh process (``poll(proc)`` called every
+    0.2 s while it runs)."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "validation.cli", *args, "--no-progress"],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    while proc.poll() is None:
+        if poll is not None:
+            poll(proc)
+        time.sleep(0.2)
+    seconds = time.perf_counter() - t0
+    out, err = proc.communicate()
+    if proc.returncode != 0:
+        raise SystemExit(f"flexarm {' '.join(args)} exited {proc.returncode}:\n{err[-2000:]}")
+    return seconds
+
+
+def paired(make_args, repeats: int) -> dict[int, list[float]]:
+    times = {1: [], 2: []}
+    for i in range(repeats):
+        for workers in ((1, 2) if i % 2 == 0 else (2, 1)):
+            with tempfile.TemporaryDirectory() as tmp:
+                times[workers].append(flexarm(*make_args(Path(tmp)), "--workers", str(workers)))
+    return times
+
+
+def _peak_kib(pid: int) -> int:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1])
+    except OSError:
+        pass
+    return 0
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+def main(repeats: int = REPEATS) -> None:
+    rows = []
+    with tempfile.TemporaryDirectory() as spec_dir:
+        spec = Path(spec_dir)
+        for name, text in (("c48.toml", CAMPAIGN), ("c1.toml", ONE_RUN), ("truth.toml", TRUTH)):
+            (spec / name).write_text(text)
+        flexarm("campaign", str(spec / "c1.toml"), "--out", str(spec / "warm"))  # kernels
+        start = paired(lambda tmp: ("campaign", str(spec / "c1.toml"), "--out", str(tmp)),
+                       repeats)
+        campaign = paired(lambda tmp: ("campaign", str(spec / "c48.toml"), "--out", str(tmp)),
+                          repeats)
+        ratios = [a / b for a, b in zip(campaign[1], campaign[2])]
+        fixed = statistics.median(start[1])
+        serial = statistics.median(campaign[1])
+        rows.append({"what": "campaign 48 x 5 s reduced, CLI", "one_worker_s": serial,
+                     "two_workers_s": statistics.median(campaign[2]),
+                     "speedup": statistics.median(ratios), "speedup_min": min(ratios),
+                     **target(statistics.median(ratios), ">=", 1.7),
+                     "note": f"fixed start {fixed:.2f} s of {serial:.2f} s: at most "
+                             f"{serial / (fixed + (serial - fixed) / 2):.2f}x with 2 workers"})
+        rows.append({"what": "  its fixed start (a one-run campaign)", "one_worker_s": fixed,
+                     "two_workers_s": statistics.median(start[2])})
+        verify = paired(lambda tmp: ("verify", "campaigns/robust.toml", "--mode", "estimate",
+                                     "--system", "pbc+ekf", "--samples", "16",
+                                     "--out", str(tmp)), max(1, repeats // 2))
+        ratios = [a / b for a, b in zip(verify[1], verify[2])]
+        rows.append({"what": "verify estimate, 16 truth draws x 20 s, CLI",
+                     "one_worker_s": statistics.median(verify[1]),
+                     "two_workers_s": statistics.median(verify[2]),
+                     "speedup": statistics.median(ratios), "speedup_min": min(ratios),
+                     **target(statistics.median(ratios), ">=", 1.7)})
+        peaks: dict[str, dict[int, int]] = {"command": {}, "workers": {}}
+
+        def watch(proc):
+            peaks["command"][proc.pid] = max(peaks["command"].get(proc.pid, 0),
+                                             _peak_kib(proc.pid))
+            for child in _children(proc.pid):
+                peaks["workers"][child] = max(peaks["workers"].get(child, 0), _peak_kib(child))
+
+        with tempfile.TemporaryDirectory() as tmp:
+            flexarm("campaign", str(spec / "truth.toml"), "--out", tmp, "--workers", "2",
+                    poll=watch)
+        workers = sorted(peaks["workers"].values())
+        rows.append({"what": "peak RSS, truth campaign 8 x 20 s, 2 workers [MiB]",
+                     "note": f"each worker {', '.join(f'{w / 1024:.0f}' for w in workers)}; "
+                             f"the command {max(peaks['command'].values()) / 1024:.0f}"})
+    report("workers", rows, title=f"Whole command line, 1 vs 2 workers, medians of paired "
+                                  f"repeats (load {os.getloadavg()[0]:.1f})",
+           columns=["what", "one_worker_s", "two_workers_s", "speedup", "speedup_min",
+                    "target", "met", "note"])
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else REPEATS)
