@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from validation.batch import compiling
 from validation.batch.fingerprint import (_ROOT, code_fingerprint, plugin_sources,
                                           result_sources, run_fingerprint)
 from validation.batch.store import run_id
@@ -157,7 +158,7 @@ def test_every_command_reads_a_scenario_file_the_same_way(tmp_path, monkeypatch)
                  ["attribute", str(path), "--factors", "sampling", "--workers", "1"]):
         # the scenarios compiled for are those the run's worker gets; the others compile
         # nothing here (their work is recorded instead)
-        monkeypatch.setattr(cli, "compile_for", record("run") if argv[0] == "run" else
+        monkeypatch.setattr(compiling, "compile_for", record("run") if argv[0] == "run" else
                             lambda *a, **k: None)
         with pytest.raises(Stop):
             cli.main(argv)

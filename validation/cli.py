@@ -43,8 +43,7 @@ import numpy as np
 from controllers import CONTROLLERS, OBSERVERS
 
 from .run._config import ConfigError
-from .batch.compiling import compile_for
-from .batch.executor import (Interrupted, available_cores, check_limits, exit_status,
+from .batch.executor import (Interrupted, available_cores, check_runner, exit_status,
                              make_runner, signals_interrupt)
 from .run.scenario import (ARMS, DEFAULT_TRANSIENT, PLANTS, Scenario, default_transient,
                            scenario_from_mapping)
@@ -344,11 +343,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(note)
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
-    check_limits(args.run_timeout, args.memory_limit)
+    check_runner(run_timeout=args.run_timeout, memory_limit=args.memory_limit)
     store = open_output(args.out or Path("results") / f"run-{rid}")  # bad --out: nothing ran
-    _compile([scenario])  # before its worker forks from here
     with make_runner("local", 1, run_timeout=args.run_timeout, memory_limit=args.memory_limit,
-                     scenarios=[scenario]) as runner:  # a worker process
+                     scenarios=[scenario], progress=sys.stderr) as runner:  # a worker process
         (_, result, metrics), = runner.results([(rid, scenario)])
     path = store.add(rid, result, metrics)
     store.export()
@@ -390,22 +388,19 @@ Rerun a stored run:  flexarm run --like results/paper/RUN_ID  (--set KEY=VALUE t
 
 
 # --- campaigns ----------------------------------------------------------------------------
-def _compile(scenarios) -> None:
-    """Compile (or load) here, with progress on stderr, the kernels the runs of
-    ``scenarios`` use, before a local runner forks its workers (they inherit them)."""
-    compile_for(list(scenarios), stream=sys.stderr)
-
-
-def _runner(args, scenarios=()):
-    """The runner of a command's runs: for local workers, the kernels the runs of
-    ``scenarios`` use compiled here first, with progress (they fork with them)."""
-    scenarios = list(scenarios)
-    if args.executor == "local":
-        _compile(scenarios)
-    return make_runner(args.executor, args.workers, args.scheduler,
-                       force=getattr(args, "force_workers", False),
-                       run_timeout=args.run_timeout, memory_limit=args.memory_limit,
-                       scenarios=scenarios or None)
+def _runner(args, scenarios, *folders: Path):
+    """The runner of a command's runs: its options checked, then the results ``folders``
+    created or opened (bad input writes nothing), then, for local workers, the kernels the
+    runs of ``scenarios`` use compiled here with progress on stderr (workers fork with
+    them)."""
+    executor = getattr(args, "executor", "local")
+    options = dict(force=args.force_workers, run_timeout=args.run_timeout,
+                   memory_limit=args.memory_limit)
+    check_runner(executor, args.workers, getattr(args, "scheduler", None), **options)
+    for folder in folders:
+        open_output(folder)
+    return make_runner(executor, args.workers, getattr(args, "scheduler", None), **options,
+                       scenarios=list(scenarios) or None, progress=sys.stderr)
 
 
 def _finish(summary, name: str, out) -> int:
@@ -434,9 +429,8 @@ def cmd_campaign(args: argparse.Namespace) -> int:
         print(f"{len(runs)} runs planned: {len(todo)} to run, {len(runs) - len(todo)} already "
               f"stored in {out}")
         return 0
-    runner = _runner(args, [r.scenario for r in runs])
+    runner = _runner(args, [r.scenario for r in runs], out)
     with runner:
-        open_output(out)
         summary = run_campaign(campaign, out, runner=runner, retry_failed=args.retry_failed,
                                reuse_stale=args.reuse_stale, progress=not args.no_progress,
                                only=runs)
@@ -511,12 +505,8 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     runs = expand(campaign)
     out = Path(args.out or Path("results") / "paper")
     scenarios = [r.scenario for r in runs]
-    _compile(scenarios)
-    runner = make_runner("local", args.workers, force=args.force_workers,
-                         run_timeout=args.run_timeout, memory_limit=args.memory_limit,
-                         scenarios=scenarios)
+    runner = _runner(args, scenarios, out, *([] if args.no_stability else [out / "stability"]))
     with runner:
-        open_output(out)
         summary = run_campaign(campaign, out, runner=runner, progress=not args.no_progress,
                                only=runs)
         if summary.interrupted:
@@ -542,13 +532,12 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
 
 
 def _stability(runner, scenarios, out: Path, *, progress: bool, plants=None, arms=None) -> int:
-    """Run the stability map into ``out`` and print it; the exit status: 130/143 if it
-    was interrupted, 1 if some of its runs failed (a failure is no verdict on stability:
-    the map is incomplete there)."""
+    """Run the stability map into ``out`` (opened by the caller) and print it; the exit
+    status: 130/143 if it was interrupted, 1 if some of its runs failed (a failure is no
+    verdict on stability: the map is incomplete there)."""
     from .report.verdict_tables import write_stability
     from .verdicts.stability import cases_from_scenarios, stability_map
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
-    open_output(out)
     results, summary = stability_map(cases, out, runner=runner, progress=progress)
     if summary.interrupted:
         return _finish(summary, "stability", out)
@@ -578,7 +567,7 @@ def cmd_stability(args: argparse.Namespace) -> int:
     scenarios, plants, arms = _stability_scenarios(args)
     out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)  # what will run
-    runner = _runner(args, [scenario_from_mapping(c.base) for c in cases])
+    runner = _runner(args, [scenario_from_mapping(c.base) for c in cases], out)
     with runner:
         return _stability(runner, scenarios, out, progress=not args.no_progress,
                           plants=plants, arms=arms)
@@ -667,9 +656,8 @@ def cmd_attribute(args: argparse.Namespace) -> int:
         plan(s, factors, label)
     out = Path(args.out or default_out)
     results = []
-    runner = _runner(args, [s for _, s, _ in plans])
+    runner = _runner(args, [s for _, s, _ in plans], out)
     with runner:
-        open_output(out)
         for label, s, factors in plans:
             att, summary = attribute(s, factors, out, name=label, runner=runner,
                                      progress=not args.no_progress)
@@ -705,15 +693,15 @@ def cmd_verify(args: argparse.Namespace) -> int:
                     else s.requirements[0] for s in systems]
     default = Path("results") / f"verify-{Path(args.file).stem}-{args.mode}"
     out = Path(args.out or default)
+    folders = {s.name: out if len(systems) == 1 else out / s.name for s in systems}
     # The kernels of every system's laws, on both plants, before the workers fork.
     runner = _runner(args, [s.scenario({}, plant=plant) for s in systems
-                            for plant in ("reduced", "exudyn")])
+                            for plant in ("reduced", "exudyn")], *folders.values())
     failed = False
     # A signal between two batches of a search (not only during one) stops it: exit 143.
     with runner, signals_interrupt():
         for system, requirement in zip(systems, requirements):
-            where = out if len(systems) == 1 else out / system.name
-            open_output(where)
+            where = folders[system.name]
             print(f"{system.name}: {args.mode} over {', '.join(system.uncertainty.describe())}")
             if args.mode == "estimate":
                 v = estimate(system, requirement, where, runner=runner, samples=args.samples,

@@ -7,6 +7,7 @@ import sys
 
 import pytest
 
+from validation.batch import compiling
 from validation.cli import main
 
 BROKEN_TOML = "duration = = 5\n"
@@ -163,6 +164,11 @@ def test_bad_input(argv, text, scratch, capsys, monkeypatch):
     argv = [a.replace("{tmp}", str(scratch)) for a in argv]
     if argv[0] in ("run", "campaign") and "--out" not in argv:
         argv += ["--out", str(out)]
+    # As on a fresh clone, compiling prints: bad input must be refused before that.
+    real = compiling.compile_groups
+    monkeypatch.setattr(compiling, "compile_groups", lambda groups, stream=None, **kw: (
+        print("compiling (as on a fresh clone)", file=stream) if stream and groups else None,
+        real(groups, stream=None, **kw))[1])
     before = sorted(p.name for p in scratch.iterdir())
     code, captured = run_main(argv, capsys)
     lines = captured.err.strip().splitlines()

@@ -80,11 +80,8 @@ def compile_groups(groups: list[tuple[str, Callable[[], object]]], *,
 
 def compile_for(scenarios, *, stream: TextIO | None = sys.stderr) -> dict[str, float]:
     """Compile or load here, with progress on ``stream``, the kernels the runs of
-    ``scenarios`` use (`validation.batch.worker.kernel_groups`), before a local runner
-    forks its workers: they inherit them, and compiling is not counted in the runs' time
-    limits.  Compiling executes two samples of a run, so runs of plug-in laws (whose code
-    may exit, crash or hang) are left out: their workers compile what they need within
-    the run (its time limit allows for it)."""
+    ``scenarios`` use (`validation.batch.worker.kernel_groups`: plug-in laws left out),
+    before a local runner forks its workers: they inherit them, and compiling is not
+    counted in the runs' time limits."""
     from .worker import kernel_groups
-    trusted = [s for s in scenarios if ":" not in s.controller.kind and ":" not in s.observer.kind]
-    return compile_groups(kernel_groups(trusted), stream=stream) if trusted else {}
+    return compile_groups(kernel_groups(scenarios), stream=stream)

@@ -31,6 +31,7 @@ import threading
 import time
 from contextlib import contextmanager
 from multiprocessing import connection
+from typing import TextIO
 
 from ..run._config import ConfigError, check
 from .limits import (MIN_MEMORY_MIB, RUN_TIMEOUT_BASE, default_memory_limit,
@@ -163,14 +164,19 @@ class LocalPoolRunner(Runner):
     loads the simulation code and its kernels before its first run."""
 
     def __init__(self, workers: int, *, run_timeout: float | None = None,
-                 memory_limit: int | None = None, scenarios=None) -> None:
+                 memory_limit: int | None = None, scenarios=None,
+                 progress: TextIO | None = None) -> None:
         self.workers, self.run_timeout = workers, run_timeout
         self.memory_limit = memory_limit if memory_limit is not None else \
             default_memory_limit(workers)
         self._warm = "fork" in multiprocessing.get_all_start_methods()
-        if self._warm:
+        if self._warm:  # loaded once here, inherited by every forked worker
+            from .compiling import compile_for
             from .worker import warm_up
-            warm_up(scenarios)  # loaded once here, inherited by every forked worker
+            if scenarios is None:
+                warm_up()
+            else:
+                compile_for(scenarios, stream=progress)
         self._ctx = multiprocessing.get_context("fork" if self._warm else "spawn")
         self._pool: list[_Worker | None] = [None] * workers
         for i in range(workers):  # all now, before any other thread exists here
@@ -384,37 +390,25 @@ class DaskRunner(Runner):
         self.client.close()
 
 
-def check_limits(run_timeout: float | None, memory_limit: int | None) -> None:
-    """`ConfigError` unless the limits of `make_runner` are valid (checked before anything
-    is written)."""
+def check_runner(kind: str = "local", workers: int | None = None,
+                 scheduler: str | None = None, *, force: bool = False,
+                 run_timeout: float | None = None, memory_limit: int | None = None):
+    """The options of `make_runner`, checked (a `ConfigError` naming the first bad one)
+    before anything is compiled, started or written; returns the number of local workers
+    (default: the cores), or the Dask scheduler's address."""
     check(run_timeout is None or run_timeout > 0, "--run-timeout",
           f"must be > 0 s, got {run_timeout!r}")
-    check(memory_limit is None or memory_limit >= MIN_MEMORY_MIB, "--memory-limit",
-          f"must be >= {MIN_MEMORY_MIB} MiB (an idle worker takes ~650 MiB of address "
-          f"space), got {memory_limit}")
-
-
-def make_runner(kind: str = "local", workers: int | None = None, scheduler: str | None = None,
-                *, force: bool = False, run_timeout: float | None = None,
-                memory_limit: int | None = None, scenarios=None) -> Runner:
-    """A runner: "local" (``workers`` processes, default the cores) or "dask" (the
-    cluster at ``scheduler`` or $DASK_SCHEDULER_ADDRESS).  More local workers than cores
-    are refused unless ``force`` (they only share the cores).  ``run_timeout`` [s] limits
-    every run (default: derived from each run, `limits.default_run_timeout`);
-    ``memory_limit`` [MiB] each local worker (default `limits.default_memory_limit`).
-    Local workers are forked after the kernels the runs of ``scenarios`` use are loaded
-    (default: the PBC with the paper's SMO on both plants; `worker.warm_up`)."""
-    keep_freed_memory()  # this process stores the runs (and forks the local workers)
-    check_limits(run_timeout, memory_limit if kind == "local" else None)
     if kind == "local":
+        check(memory_limit is None or memory_limit >= MIN_MEMORY_MIB, "--memory-limit",
+              f"must be >= {MIN_MEMORY_MIB} MiB (an idle worker takes ~650 MiB of address "
+              f"space), got {memory_limit}")
         check(scheduler is None, "--scheduler", "only for --executor dask")
         cores = available_cores()
         workers = workers or cores
         check(workers >= 1, "--workers", f"must be >= 1, got {workers}")
         check(workers <= cores or force, "--workers", f"{workers} workers on {cores} cores "
               "only share the cores (each costs ~300 MB); pass --force-workers to insist")
-        return LocalPoolRunner(workers, run_timeout=run_timeout, memory_limit=memory_limit,
-                               scenarios=scenarios)
+        return workers
     if kind == "dask":
         address = scheduler or os.environ.get("DASK_SCHEDULER_ADDRESS")
         check(bool(address), "--scheduler", "the dask executor needs --scheduler "
@@ -422,8 +416,30 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
         check(workers is None, "--workers", "the Dask cluster decides its workers")
         check(memory_limit is None, "--memory-limit", "the Dask workers have their own "
                                                       "(dask worker --memory-limit)")
-        return DaskRunner(address, run_timeout=run_timeout)
+        return address
     raise ConfigError("--executor", f"must be 'local' or 'dask', got {kind!r}")
+
+
+def make_runner(kind: str = "local", workers: int | None = None, scheduler: str | None = None,
+                *, force: bool = False, run_timeout: float | None = None,
+                memory_limit: int | None = None, scenarios=None,
+                progress: TextIO | None = None) -> Runner:
+    """A runner: "local" (``workers`` processes, default the cores) or "dask" (the
+    cluster at ``scheduler`` or $DASK_SCHEDULER_ADDRESS).  More local workers than cores
+    are refused unless ``force`` (they only share the cores).  ``run_timeout`` [s] limits
+    every run (default: derived from each run, `limits.default_run_timeout`);
+    ``memory_limit`` [MiB] each local worker (default `limits.default_memory_limit`).
+    Every option is checked first (`check_runner`); then local workers are forked after
+    the kernels the runs of ``scenarios`` use are compiled or loaded, with progress on
+    ``progress`` (`compiling.compile_for`; default: the PBC with the paper's SMO on both
+    plants, silently, `worker.warm_up`)."""
+    where = check_runner(kind, workers, scheduler, force=force, run_timeout=run_timeout,
+                         memory_limit=memory_limit)
+    keep_freed_memory()  # this process stores the runs (and forks the local workers)
+    if kind == "local":
+        return LocalPoolRunner(where, run_timeout=run_timeout, memory_limit=memory_limit,
+                               scenarios=scenarios, progress=progress)
+    return DaskRunner(where, run_timeout=run_timeout)
 
 
 @contextmanager

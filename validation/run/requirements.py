@@ -165,7 +165,7 @@ def _parse(formula: str, variables: tuple[str, ...], Ts: float = 1e-3):
         except RTAMTException as exc:
             text = " ".join(str(exc).replace("RTAMT Exception:", "").split())
             raise ConfigError("formula", f"{formula!r} does not parse: {text}") from None
-        except KeyError as exc:
+        except KeyError:
             if not variables:
                 return None, ()  # a syntax check only: names are checked per scenario
             raise
