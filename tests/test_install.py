@@ -1,5 +1,6 @@
 """A clean install: ``pip install -e .`` builds without a setuptools warning (the
-templates folder once produced a 40-line "Package would be ignored" banner), and a
+templates folder once produced a 40-line "Package would be ignored" banner, the editable
+import hook a "Please be careful with folders" one), and a
 wheel carries the report templates.  Built from a copy of the tracked sources in a
 throwaway virtual environment; pip fetches the build backend from the package index,
 so the test is skipped when the index cannot be reached."""
@@ -44,6 +45,9 @@ def test_editable_install_prints_no_setuptools_warning(pip):
     assert proc.returncode == 0, out[-2000:]
     assert "would be ignored" not in out and "is absent from the `packages`" not in out
     assert "_Warning" not in out and "SetuptoolsDeprecationWarning" not in out
+    # lenient editable mode's import hook warns about same-named folders; the .pth path
+    # (package-dir "" = ".") does not
+    assert "BuildBackendWarning" not in out and "Please be careful" not in out
 
 
 def test_the_wheel_carries_the_templates(pip):
