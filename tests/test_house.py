@@ -84,7 +84,7 @@ def test_the_fingerprint_covers_every_project_module_a_run_loads(plugin_package)
     assert plugin == set(plugin_sources(kind)) == {plugin_package / "__init__.py",
                                                   plugin_package / "helpers.py",
                                                   plugin_package / "control.py"}
-    for name in ("validation/cli.py", "validation/batch/store.py", "validation/report/report.py",
+    for name in ("validation/cli/one_run.py", "validation/batch/store.py", "validation/report/report.py",
                  "validation/verdicts/claims.py"):
         assert _ROOT / name not in hashed, name
 
@@ -133,6 +133,7 @@ def test_every_command_reads_a_scenario_file_the_same_way(tmp_path, monkeypatch)
     """run, stability and attribute accept the same scenario file (with a ``name``, the
     case that once drifted) and hand the same scenario to their work."""
     from validation import cli
+    from validation.cli import verdicts as verdict_commands
     from validation.verdicts import attribution
     path = tmp_path / "s.toml"
     path.write_text('name = "mine"\nduration = 0.5\ntransient = 0.1\n'
@@ -150,7 +151,7 @@ def test_every_command_reads_a_scenario_file_the_same_way(tmp_path, monkeypatch)
             raise Stop
         return fake
 
-    monkeypatch.setattr(cli, "_stability", lambda runner, scenarios, *a, **k:
+    monkeypatch.setattr(verdict_commands, "stability_map_into", lambda runner, scenarios, *a, **k:
                         record("stability")(list(scenarios)))
     monkeypatch.setattr(attribution, "attribute", record("attribute"))
     monkeypatch.chdir(tmp_path)

@@ -10,7 +10,7 @@ from html.parser import HTMLParser
 import pytest
 
 from validation.batch.campaign import campaign_from_mapping, run_campaign
-from validation.report.figures import sweep_figures
+from validation.report.sweep_figures import sweep_figures
 from validation.report.report import write_report
 from validation.batch.store import ResultStore
 

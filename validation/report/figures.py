@@ -20,7 +20,6 @@ Conventions every figure follows, so that none misleads its reader:
 from __future__ import annotations
 
 import io
-import json
 import math
 import textwrap
 
@@ -31,9 +30,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 __all__ = ["png", "state_label", "state_unit", "state_display", "tracking", "deflections",
-           "rates", "estimation_errors", "phase_portrait", "sweep_figures", "validity_map",
-           "stability_chart", "animation", "waterfall", "AXIS_UNITS", "axis_label",
-           "describe_run", "envelope", "SWEEP_METRICS", "PLANT_NAME"]
+           "rates", "estimation_errors", "phase_portrait", "animation", "describe_run",
+           "envelope", "figure_title", "figure_legend", "PLANT_NAME", "PLANT_STYLE",
+           "BOUND_STYLE"]
 
 #: Reduced plant wide and light underneath, truth plant thin and dark on top.
 PLANT_STYLE = {"reduced": dict(color="tab:blue", lw=2.4, alpha=0.45, zorder=2),
@@ -41,18 +40,6 @@ PLANT_STYLE = {"reduced": dict(color="tab:blue", lw=2.4, alpha=0.45, zorder=2),
 PLANT_NAME = {"reduced": "reduced plant", "exudyn": "truth plant (Exudyn)"}
 BOUND_STYLE = dict(color="crimson", lw=0.9, ls=(0, (5, 3)), zorder=4)
 _SUB = str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉")
-
-#: Units of the scenario keys a sweep may vary (shown on the x axes).
-AXIS_UNITS = {
-    "Ts": "s", "plant.step": "s", "duration": "s", "transient": "s", "torque_limit": "N m",
-    "sensors.encoder_noise": "rad", "sensors.modal_noise": "m", "sensors.rate_noise": "rad/s",
-    "sensors.encoder_resolution": "rad", "sensors.delay": "samples",
-    "Mp": "kg", "Jp": "kg m²", "mh1": "kg", "mh2": "kg", "Jh1": "kg m²", "Jh2": "kg m²",
-    "EI1": "N m²", "EI2": "N m²", "rho1": "kg/m", "rho2": "kg/m", "L1": "m", "L2": "m",
-    "stator_inertia": "kg m²", "stator_mass": "kg", "bending_damping1": "N m² s",
-    "bending_damping2": "N m² s",
-}
-
 
 def png(fig, dpi: int = 90) -> bytes:
     """The figure as PNG bytes (its layout engine already fits everything in: no second
@@ -82,27 +69,19 @@ def state_display(state: str) -> tuple[float, str]:
     return 1e3, {"rad": "mrad", "m": "mm", "rad/s": "mrad/s", "m/s": "mm/s"}[state_unit(state)]
 
 
-def axis_label(axis: str) -> str:
-    """A sweep axis as an axis label with its unit, e.g. "true_params.Mp [kg]"."""
-    unit = AXIS_UNITS.get(axis) or AXIS_UNITS.get(axis.split(".")[-1])
-    if axis in ("Ts", "plant.step"):
-        return f"{axis} [ms]"
-    return f"{axis} [{unit}]" if unit else axis
-
-
 def describe_run(config: dict) -> str:
     """What was run, in a few words: arm, Ts, initial condition."""
     start = "from rest" if config.get("initial_state") == "rest" else "moving with the reference"
     return f"{config.get('arm', 'default')} arm, Ts = {1e3 * config['Ts']:g} ms, {start}"
 
 
-def _title(fig, text: str, fontsize: float = 10) -> None:
+def figure_title(fig, text: str, fontsize: float = 10) -> None:
     """A figure title wrapped to the figure's width (never wider than the plots)."""
     chars = max(40, int(fig.get_figwidth() * 72 / (0.55 * fontsize)))
     fig.suptitle(textwrap.fill(text, chars), fontsize=fontsize)
 
 
-def _figure_legend(fig, axes) -> None:
+def figure_legend(fig, axes) -> None:
     """One legend for a grid of panels, below them (never over the data); entries of
     every panel, each label once."""
     seen = {}
@@ -198,8 +177,8 @@ def tracking(group, title: str, transient: float, bound: float | None = None) ->
         if bound is not None:
             _bound_lines(axes[1, j], 1e3 * bound, f"tracking bound ±{1e3 * bound:g} mrad")
         _fit_ylim(axes[1, j], errs[j], transient, None if bound is None else 1e3 * bound, "mrad")
-    _figure_legend(fig, axes)
-    _title(fig, f"{title}: joint tracking (cf. the paper's Fig. 3); error axis scaled after "
+    figure_legend(fig, axes)
+    figure_title(fig, f"{title}: joint tracking (cf. the paper's Fig. 3); error axis scaled after "
                 f"the {transient:g} s transient (grey line)")
     return png(fig)
 
@@ -238,8 +217,8 @@ def deflections(group, title: str, transient: float, cutoff_hz: float | None,
                 _bound_lines(axes[1, j], 1e3 * bound, f"vibration bound (on the RMS) "
                                                       f"±{1e3 * bound:g} mm")
             _fit_ylim(axes[1, j], vib[j], transient, None if bound is None else 1e3 * bound, "mm")
-    _figure_legend(fig, axes)
-    _title(fig, f"{title}: tip deflections (cf. Fig. 4) and their oscillatory part (the "
+    figure_legend(fig, axes)
+    figure_title(fig, f"{title}: tip deflections (cf. Fig. 4) and their oscillatory part (the "
                 "vibration the claim judges)")
     return png(fig)
 
@@ -285,8 +264,8 @@ def rates(group, title: str, transient: float) -> bytes:
         ax.tick_params(labelsize=7)
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
-    _figure_legend(fig, axes)
-    _title(fig, f"{title}: true vs estimated rates (cf. Figs. 5–6), y-range after the "
+    figure_legend(fig, axes)
+    figure_title(fig, f"{title}: true vs estimated rates (cf. Figs. 5–6), y-range after the "
                 f"{transient:g} s transient (grey line)")
     return png(fig)
 
@@ -324,8 +303,8 @@ def estimation_errors(group, title: str, transient: float, bound: float | None =
         ax.yaxis.get_offset_text().set_fontsize(7)
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
-    _figure_legend(fig, axes)
-    _title(fig, f"{title}: estimation errors x̂ − x (cf. Fig. 7), y-range after the "
+    figure_legend(fig, axes)
+    figure_title(fig, f"{title}: estimation errors x̂ − x (cf. Fig. 7), y-range after the "
                 f"{transient:g} s transient")
     return png(fig)
 
@@ -354,243 +333,8 @@ def phase_portrait(group, title: str, rate_bound: float | None = None) -> bytes:
         for y in (1.2, -1.2):
             axes[j].axhline(y, color="grey", lw=0.5, ls=":",
                             label="the paper's ±1.2 rad/s" if y > 0 else None)
-    _figure_legend(fig, axes)
-    _title(fig, f"{title}: phase portrait (cf. Fig. 8)")
-    return png(fig)
-
-
-# --- sweeps -------------------------------------------------------------------------------------
-#: (key, title, metrics whose largest value is drawn, display factor, display unit).
-SWEEP_METRICS = [
-    ("track_max", "tracking error, max after the transient", ("track_max_1", "track_max_2"),
-     1e3, "mrad"),
-    ("vib_rms", "vibration RMS after the transient", ("vib_rms_1", "vib_rms_2"), 1e3, "mm"),
-    ("est_theta", "angle estimation error, max", ("est_max_theta1", "est_max_theta2"),
-     1e3, "mrad"),
-    ("tau_tv", "torque variation", ("tau_tv_1", "tau_tv_2"), 1.0, "N m/s"),
-]
-
-
-def _key(value) -> str:
-    return json.dumps(value, sort_keys=True)
-
-
-def _groups_of_axes(runs, axes: list[str]) -> list[list[str]]:
-    """Varying axes grouped where one determines the others (a zip: ``name`` with the
-    controller and observer kinds it pairs with) — one x axis per group."""
-    distinct = {a: len({_key(r.axes.get(a)) for r in runs}) for a in axes}
-    order = sorted(axes, key=lambda a: (-distinct[a], a != "name", a))
-    groups: list[list[str]] = []
-    for a in order:
-        for g in groups:
-            pairs = {(_key(r.axes.get(g[0])), _key(r.axes.get(a))) for r in runs}
-            if len(pairs) == distinct[g[0]]:  # g's leader determines a
-                g.append(a)
-                break
-        else:
-            groups.append([a])
-    return groups
-
-
-def sweep_figures(sweep: str, runs, bounds: dict | None = None) -> list[tuple[str, bytes]]:
-    """Each metric of a sweep against its swept values, with its claim's bound
-    (``bounds``: metric key of `SWEEP_METRICS` → bound in SI units).
-
-    Axes that vary together (a zip) form one group and one x axis, labelled by the run
-    names if ``name`` is among them.  A figure is drawn for every numeric group and every
-    group of three or more values (the other groups become series, one per combination
-    and plant); with no such group, the largest group is the x axis.  Constant axes are
-    not drawn; list-valued axes are categories labelled by their value; diverged and
-    failed runs are a crimson × in a strip above the panel, never a data point."""
-    axes = sorted({a for r in runs for a in r.axes})
-    varying = [a for a in axes if a != "plant.kind"
-               and len({_key(r.axes.get(a)) for r in runs}) > 1]
-    groups = _groups_of_axes(runs, varying)
-    values = {tuple(g): sorted({_key([r.axes.get(a) for a in g]) for r in runs},
-                               key=lambda k: _sort_key(json.loads(k))) for g in groups}
-
-    def numeric(g):  # the group's leading axis is a number: a numeric x axis
-        return all(isinstance(json.loads(x)[0], (int, float)) and
-                   not isinstance(json.loads(x)[0], bool) for x in values[tuple(g)])
-    primary = [g for g in groups if numeric(g) or len(values[tuple(g)]) >= 3] or \
-        sorted(groups, key=lambda g: -len(values[tuple(g)]))[:1]
-    metrics = [m for m in SWEEP_METRICS if any(isinstance(r.metrics.get(k), float) and
-                                               not math.isnan(r.metrics.get(k)) for r in runs
-                                               for k in m[2])]
-    return [_sweep_figure(sweep, runs, g, [a for h in groups if h != g for a in h], values[tuple(g)],
-                          numeric(g), metrics, bounds or {}) for g in primary]
-
-
-def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> tuple[str, bytes]:
-    label_axis = "name" if "name" in group else group[0]
-    scale = 1e3 if group[0] in ("Ts", "plant.step") else 1.0
-    series: dict[tuple, list] = {}
-    for r in runs:
-        other = ", ".join(f"{a.split('.')[-1]}={_short(r.axes.get(a))}" for a in others)
-        series.setdefault((other, r.plant), []).append(r)
-    keys = sorted(series)
-    others_order = sorted({k[0] for k in keys})
-    any_bad = any(r.status != "ok" for r in runs)
-    fig = plt.figure(figsize=(3.9 * len(metrics) + 2.8, 4.0), layout="constrained")
-    grid = fig.add_gridspec(2 if any_bad else 1, len(metrics),
-                            height_ratios=[1, 7] if any_bad else [1])
-    legend_from = None
-    for col, (key, title, names, factor, unit) in enumerate(metrics):
-        ax = fig.add_subplot(grid[-1, col])
-        strip = fig.add_subplot(grid[0, col], sharex=ax) if any_bad else None
-        legend_from = legend_from or ax
-        for n, (other, plant) in enumerate(keys):
-            color = f"C{others_order.index(other) % 10}"
-            pts, bad = [], []
-            for r in series[(other, plant)]:
-                xk = _key([r.axes.get(a) for a in group])
-                if numeric:
-                    x = json.loads(xk)[0] * scale
-                else:
-                    x = xs.index(xk) + (n - (len(keys) - 1) / 2) * 0.6 / max(len(keys), 1)
-                if r.status != "ok":
-                    bad.append(x)
-                    continue
-                vals = [r.metrics.get(k) for k in names]
-                vals = [v for v in vals if isinstance(v, float) and not math.isnan(v)]
-                if vals:
-                    pts.append((x, factor * max(vals)))
-            label = PLANT_NAME.get(plant, plant) + (f", {other}" if other else "")
-            style = dict(color=color, marker="o" if plant == "exudyn" else "s", ms=5,
-                         mfc=color if plant == "exudyn" else "white", label=label)
-            if pts:
-                pts.sort()
-                ax.plot(*zip(*pts), ls=("--" if plant == "exudyn" else "-") if numeric
-                        else "none", lw=1, **style)
-            if bad:
-                strip.plot(bad, [0.5] * len(bad), "x", color="crimson", ms=7, mew=2)
-        bound = bounds.get(key)
-        if bound is not None:
-            ax.axhline(factor * bound, label="claim bound", **BOUND_STYLE)
-            lo, hi = ax.get_ylim()
-            if factor * bound > 4 * hi:  # far above the data: name it, keep the data's scale
-                ax.axhline(factor * bound, alpha=0)
-                ax.set_ylim(lo, hi)
-                ax.text(0.99, 0.97, f"bound {factor * bound:g} {unit}: above", ha="right",
-                        va="top", transform=ax.transAxes, fontsize=7, color="crimson")
-        ax.set_title(f"{title} [{unit}]", fontsize=9)
-        zipped = [a for a in group if a != label_axis]
-        ax.set_xlabel(axis_label(label_axis) + (f"\n(zipped with {', '.join(zipped)})"
-                                                if zipped else ""), fontsize=8)
-        if numeric:
-            lo = min(json.loads(x)[0] for x in xs) * scale
-            hi = max(json.loads(x)[0] for x in xs) * scale
-            if lo > 0 and hi / lo > 20:
-                ax.set_xscale("log")
-        else:
-            ax.set_xticks(range(len(xs)))
-            idx = group.index(label_axis)
-            ax.set_xticklabels([_short(json.loads(x)[idx]).split("/")[-1] for x in xs],
-                               rotation=30, ha="right", fontsize=7)
-        ax.tick_params(labelsize=7)
-        if strip is not None:
-            strip.set_ylim(0, 1)
-            strip.set_yticks([])
-            strip.tick_params(labelbottom=False, labelsize=7)
-            strip.set_title(f"{title} [{unit}]", fontsize=9)
-            ax.set_title("")
-            strip.set_ylabel("diverged,\nfailed", rotation=0, ha="right", va="center",
-                             fontsize=7, color="crimson")
-    handles, labels = legend_from.get_legend_handles_labels()
-    if any_bad:
-        handles.append(plt.Line2D([], [], ls="none", marker="x", color="crimson", mew=2))
-        labels.append("diverged / failed (no value; top strip)")
-    fig.legend(handles, labels, loc="outside right center", fontsize=7,
-               title="filled: truth plant; hollow: reduced", title_fontsize=7)
-    caption = f"sweep '{sweep}': metrics vs {' / '.join(group)}"
-    _title(fig, caption)
-    return caption, png(fig)
-
-
-def _sort_key(values):
-    return [(0, v) if isinstance(v, (int, float)) else (1, _key(v)) for v in values]
-
-
-def _short(value) -> str:
-    if isinstance(value, float):
-        return f"{value:g}"
-    if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
-        return "; ".join(f"{d.get('kind', '?')} {d.get('target', '')} {d.get('amplitude', '')}"
-                         .strip() for d in value)
-    if value == []:
-        return "none"
-    return json.dumps(value) if isinstance(value, (list, dict)) else str(value)
-
-
-# --- the reduced model's validity, the stability map --------------------------------------------
-def validity_map(params, modes: tuple[int, int], arm_text: str) -> bytes:
-    """Frequencies of the reduced model vs the FE model over θ2, and their gap in %."""
-    from plant_exudyn import Mesh, natural_frequencies
-    from reduced_model import ArmModel
-    theta2 = np.linspace(0.0, np.pi, 13)
-    model = ArmModel(params, modes)
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), sharex=True, layout="constrained")
-    for col, joints in enumerate(("locked", "free")):
-        red, fe = [], []
-        for t2 in theta2:
-            Q = np.zeros(model.n)
-            Q[1] = t2
-            red.append(model.natural_frequencies(Q, joints)[:4])
-            fe.append(natural_frequencies(params, Mesh(), theta=(0.0, t2), joints=joints,
-                                          n=len(red[-1])))
-        red, fe = np.array(red), np.array(fe)
-        for k in range(red.shape[1]):
-            axes[0, col].plot(theta2, red[:, k], color=f"C{k}", label=f"mode {k + 1}, reduced")
-            axes[0, col].plot(theta2, fe[:, k], color=f"C{k}", ls="--", marker=".",
-                              label=f"mode {k + 1}, FE")
-            axes[1, col].plot(theta2, 100 * (red[:, k] - fe[:, k]) / fe[:, k], color=f"C{k}",
-                              marker=".")
-        axes[0, col].set_yscale("log")
-        axes[0, col].set_ylabel("frequency [Hz]")
-        axes[0, col].set_title(f"joints {joints}", fontsize=10)
-        axes[1, col].set_ylabel("(reduced − FE)/FE [%]")
-        axes[1, col].set_xlabel("θ₂ [rad]")
-        axes[1, col].axhline(0, color="k", lw=0.5)
-    _figure_legend(fig, axes[0, :1])
-    _title(fig, f"validity map, {arm_text}: reduced model ({modes[0]}+{modes[1]} modes, "
-                "solid) vs FE (ANCF, 4 elements per link, dashed), θ₁ = 0")
-    return png(fig)
-
-
-def stability_chart(results) -> bytes:
-    """Tested Ts per case by outcome (stable, lost tracking, diverged, failed), the largest
-    Ts with no divergence and the largest that keeps tracking (bars), and the predicted
-    limit (grey diamond)."""
-    style = {"stable": ("o", "seagreen", 5), "lost tracking": ("^", "darkorange", 6),
-             "diverged": ("x", "crimson", 7), "failed": ("s", "k", 6)}
-    fig, ax = plt.subplots(figsize=(9, 0.32 * len(results) + 1.8), layout="constrained")
-    labels = []
-    for i, r in enumerate(results):
-        labels.append(f"{r.case.label} · {r.case.plant} · {r.case.arm}")
-        for Ts, (outcome, _) in r.tested.items():
-            marker, color, size = style[outcome]
-            ax.plot(1e3 * Ts, i, marker, color=color, ms=size, mew=2,
-                    mfc="none" if outcome == "failed" else color)
-        # The longer black bar stays visible where both limits coincide.
-        for limit, color, half in ((r.divergence, "k", 0.42), (r.tracking, "darkorange", 0.25)):
-            if not math.isnan(limit.largest):
-                ax.plot([1e3 * limit.largest] * 2, [i - half, i + half], color=color, lw=2)
-        if math.isfinite(r.predicted):
-            ax.plot(1e3 * r.predicted, i, "D", color="0.5", ms=5, mfc="none")
-    ax.set_yticks(range(len(results)))
-    ax.set_yticklabels(labels, fontsize=7)
-    ax.set_ylim(len(results) - 0.5, -0.5)
-    ax.set_xscale("log")
-    ax.set_xlabel("control period Ts [ms]")
-    ax.axvline(1.0, color="grey", lw=0.5, ls=":")
-    for outcome, (marker, color, size) in style.items():
-        ax.plot([], [], marker, color=color, ms=size, mew=2,
-                mfc="none" if outcome == "failed" else color, label=outcome)
-    ax.plot([], [], "|", color="k", ms=10, mew=2, label="no divergence up to")
-    ax.plot([], [], "|", color="darkorange", ms=10, mew=2, label="keeps tracking up to")
-    ax.plot([], [], "D", color="0.5", mfc="none", label="predicted (ZOH eigenvalues)")
-    fig.legend(fontsize=7, loc="outside lower center", ncol=4)
-    _title(fig, "sampled-data stability map (case · plant · arm; dotted: Ts = 1 ms)")
+    figure_legend(fig, axes)
+    figure_title(fig, f"{title}: phase portrait (cf. Fig. 8)")
     return png(fig)
 
 
@@ -663,43 +407,3 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str:
     tmp.replace(path)
     return (f"{title}: arm motion over the whole {t_end:.0f} s run (2× speed), truth and "
             f"reduced plant, deflection ×{magnify:g}")
-
-
-def waterfall(study: str, metric: str, unit: str, ideal: float, contributions: dict,
-              total: float) -> bytes:
-    """From m(ideal) to m(real): one bar per factor's Shapley contribution, in the
-    display unit the caller chose (``metric`` is its human name)."""
-    parts = [(f, v) for f, v in contributions.items() if not f.startswith("plant: ")]
-    fig, ax = plt.subplots(figsize=(1.2 * len(parts) + 3.4, 3.8), layout="constrained")
-    level, levels = ideal, [0.0, ideal, ideal + total]
-    ax.bar(0, ideal, color="0.6")
-    for i, (f, v) in enumerate(parts, start=1):
-        if not math.isfinite(v):
-            ax.text(i, level, "diverges", rotation=90, ha="center", va="bottom", fontsize=8,
-                    color="crimson")
-            continue
-        ax.bar(i, v, bottom=level, color="tab:red" if v > 0 else "tab:green")
-        level += v
-        levels.append(level)
-    ax.bar(len(parts) + 1, ideal + total, color="0.3")
-    labels = ["ideal", *(f"{f}\n{v:+.3g}" if math.isfinite(v) else f"{f}\n(diverges)"
-                         for f, v in parts), "real"]
-    ax.set_xticks(range(len(labels)))
-    ax.set_xticklabels(labels, fontsize=7)
-    lo, hi = min(levels), max(levels)
-    steps = [ideal, ideal + total, *(ideal + sum(v for _, v in parts[:k] if math.isfinite(v))
-                                     for k in range(1, len(parts) + 1))]
-    gap = max(steps) - min(steps)
-    zoom = 0 < gap < 0.3 * max(abs(lo), abs(hi))  # the contributions would be slivers
-    if zoom:  # show the steps; the bars from 0 are cut at the bottom, and the axis says so
-        ax.set_ylim(min(steps) - 1.2 * gap, max(steps) + 0.5 * gap)
-        ax.text(0.01, 0.02, "y axis does not start at 0", transform=ax.transAxes, fontsize=7,
-                color="0.3")
-    else:
-        span = (hi - lo) or abs(hi) or 1.0
-        ax.set_ylim(min(0.0, lo - 0.1 * span), hi + 0.25 * span)  # room above the bars
-    ax.set_ylabel(f"{metric} [{unit}]")
-    ax.axhline(ideal, color="grey", lw=0.5, ls=":")
-    _title(fig, f"{study}: {metric}, from the ideal world of the design to the real one "
-                "(red: worsens, green: improves)", fontsize=9)
-    return png(fig)

@@ -30,6 +30,8 @@ from pathlib import Path
 from reduced_model import ArmParameters
 
 from . import figures as fig
+from .sweep_figures import short_value, sweep_figures
+from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
 from .drawing import draw_all
 from ..batch.fingerprint import run_fingerprint
@@ -100,7 +102,7 @@ def _start(config: dict) -> str:
 
 
 def _swept(run) -> str:
-    return ", ".join(f"{k}={fig._short(v)}" for k, v in run.axes.items() if k not in _OWN_COLUMNS)
+    return ", ".join(f"{k}={short_value(v)}" for k, v in run.axes.items() if k not in _OWN_COLUMNS)
 
 
 def _identity(run) -> list:
@@ -389,7 +391,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                   r["reason"]] for r in rows],
                 ["failed" if "FAILED" in r["notes"] else "" for r in rows])}
             tasks.append(("Stability map", "sampled-data stability map: tested control periods "
-                          "per case, plant and arm", lambda: fig.stability_chart(results)))
+                          "per case, plant and arm", lambda: stability_chart(results)))
     for study, spec in campaigns.get("attribution", {}).get("studies", {}).items():
         from ..verdicts.attribution import attribution_from_store
         a = attribution_from_store(store.out, study, tuple(spec["factors"]))
@@ -399,7 +401,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
             key, scale = m["key"], m["scale"]
             contributions = {f: scale * v for f, v in a.contributions[key].items()}
             tasks.append(("Attribution", f"{study}: {m['metric']}, from the ideal to the real "
-                          "world", lambda a=a, m=m, c=contributions, s=scale: fig.waterfall(
+                          "world", lambda a=a, m=m, c=contributions, s=scale: waterfall(
                               a.name, m["metric"], m["unit"], s * a.ideal_value[m["key"]], c,
                               s * a.totals[m["key"]])))
     data.robust, robust_tasks = robust_section(store, evaluations)
@@ -420,7 +422,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     sweep_bounds = {"track_max": bounds["tracking"], "vib_rms": bounds["vibration"],
                     "est_theta": bounds["estimation"]}
     for sweep, rs in by_sweep.items():
-        tasks.append(("Sweeps", None, lambda sweep=sweep, rs=rs: fig.sweep_figures(
+        tasks.append(("Sweeps", None, lambda sweep=sweep, rs=rs: sweep_figures(
             sweep, rs, sweep_bounds)))
     validity = load_validity(store.out / "validity")
     if validity:
@@ -435,7 +437,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         tasks.append(("Validity of the reduced model",
                       f"validity map, {arm} arm: reduced model vs FE frequencies over θ₂ and "
                       "their relative gap",
-                      lambda p=params, m=modes, a=arm: fig.validity_map(p, m, f"{a} arm")))
+                      lambda p=params, m=modes, a=arm: validity_map(p, m, f"{a} arm")))
     makes = [make for _, _, make in tasks]
     if animate and groups and animation_path is not None:
         makes.append(lambda: _animation(groups[0], animation_path))

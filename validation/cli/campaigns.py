@@ -1,0 +1,83 @@
+"""``flexarm campaign`` and ``flexarm reproduce-paper``."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..batch.store import ResultStore
+
+from .common import EXIT_FAILED, finish, mesh_checks, runner_for
+from .results import render_report
+from .verdicts import stability_map_into
+
+
+def cmd_campaign(args: argparse.Namespace) -> int:
+    from ..batch.campaign import classify, expand, load_campaign, run_campaign
+    campaign = load_campaign(args.file)
+    runs = expand(campaign)  # every scenario checked before anything runs
+    out = Path(args.out or Path("results") / campaign.name)
+    if args.dry_run:
+        store = ResultStore(out)
+        todo = classify(runs, store, retry_failed=args.retry_failed,
+                        reuse_stale=args.reuse_stale)[0] if store.exists() else runs
+        todo_ids = {r.run_id for r in todo}
+        for r in runs:
+            axes = ", ".join(f"{k}={v}" for k, v in r.axes.items())
+            mark = "run " if r.run_id in todo_ids else "done"
+            print(f"{mark} {r.run_id}  {r.sweep:<16} {axes}")
+        print(f"{len(runs)} runs planned: {len(todo)} to run, {len(runs) - len(todo)} already "
+              f"stored in {out}")
+        return 0
+    runner = runner_for(args, [r.scenario for r in runs], out)
+    with runner:
+        summary = run_campaign(campaign, out, runner=runner, retry_failed=args.retry_failed,
+                               reuse_stale=args.reuse_stale, progress=not args.no_progress,
+                               only=runs)
+        if args.mesh_check and not summary.interrupted:
+            status = mesh_checks(runner, out, {r.run_id for r in runs},
+                                  progress=not args.no_progress)
+            if status:
+                return status
+    return finish(summary, campaign.name, out)
+
+
+def campaigns_dir() -> Path:
+    """The shipped campaigns/ folder of this checkout."""
+    here = Path(__file__).resolve().parents[2] / "campaigns"
+    if not (here / "paper.toml").exists():
+        raise ValueError(f"shipped campaigns not found in {here}; run from the repository "
+                         "(pip install -e .)")
+    return here
+
+
+def cmd_reproduce_paper(args: argparse.Namespace) -> int:
+    from ..batch.campaign import expand, load_campaign, run_campaign
+    from ..report.verdict_tables import write_claims
+    campaign = load_campaign(campaigns_dir() / "paper.toml")
+    runs = expand(campaign)
+    out = Path(args.out or Path("results") / "paper")
+    scenarios = [r.scenario for r in runs]
+    runner = runner_for(args, scenarios, out, *([] if args.no_stability else [out / "stability"]))
+    with runner:
+        summary = run_campaign(campaign, out, runner=runner, progress=not args.no_progress,
+                               only=runs)
+        if summary.interrupted:
+            return finish(summary, campaign.name, out)
+        print(summary.line(campaign.name, out))
+        checks = mesh_checks(runner, out, {r.run_id for r in runs},
+                              progress=not args.no_progress)
+        if checks and checks != EXIT_FAILED:
+            return checks
+        stability = 0
+        if not args.no_stability:
+            stability = stability_map_into(runner, [r.scenario for r in runs if not
+                                            r.scenario.disturbances], out / "stability",
+                                   progress=not args.no_progress)
+            if stability not in (0, EXIT_FAILED):  # interrupted
+                return stability
+    print()
+    print(write_claims(out))
+    print(f"claims: {out / 'claims.md'} and claims.csv")
+    if not args.no_report:
+        print(render_report(out, animate=not args.no_animation, progress=not args.no_progress))
+    return EXIT_FAILED if summary.any_failed or checks or stability else 0

@@ -1,0 +1,66 @@
+"""What the commands share: exit statuses, results folders, the runner of a command's
+runs, and how a command ends."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from ..batch.executor import check_runner, exit_status, make_runner
+from ..batch.store import ResultStore, StoreError
+
+
+EXIT_USAGE = 2
+EXIT_FAILED = 1
+
+
+def open_output(out: str | Path) -> ResultStore:
+    """Create (or open) a results folder; one line naming it if that is impossible."""
+    store = ResultStore(out)
+    try:
+        store.prepare()
+    except StoreError as exc:
+        raise StoreError(f"--out {exc}") from None
+    probe = store.out / ".write-test"
+    try:
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise StoreError(f"--out {out}: not writable ({exc.strerror or exc})") from None
+    return store
+
+
+def runner_for(args, scenarios, *folders: Path):
+    """The runner of a command's runs: its options checked, then the results ``folders``
+    created or opened (bad input writes nothing), then, for local workers, the kernels the
+    runs of ``scenarios`` use compiled here with progress on stderr (workers fork with
+    them)."""
+    executor = getattr(args, "executor", "local")
+    options = dict(force=args.force_workers, run_timeout=args.run_timeout,
+                   memory_limit=args.memory_limit)
+    check_runner(executor, args.workers, getattr(args, "scheduler", None), **options)
+    for folder in folders:
+        open_output(folder)
+    return make_runner(executor, args.workers, getattr(args, "scheduler", None), **options,
+                       scenarios=list(scenarios) or None, progress=sys.stderr)
+
+
+def finish(summary, name: str, out) -> int:
+    print(summary.line(name, out))
+    if summary.interrupted:
+        print(f"flexarm: interrupted ({summary.done} finished runs kept): rerun the same "
+              "command to resume", file=sys.stderr)
+        return exit_status(summary.interrupted)
+    return EXIT_FAILED if summary.any_failed else 0
+
+
+def mesh_checks(runner, out: Path, run_ids: set, *, progress: bool) -> int:
+    """Run the mesh checks of the truth-plant runs ``run_ids`` stored in ``out``; a
+    non-zero exit status if interrupted or a check failed."""
+    from ..verdicts.mesh import MESH_SWEEP, run_checks
+    rows = [r for r in ResultStore(out).rows() if r.run_id in run_ids]
+    summary = run_checks(rows, out, runner=runner, progress=progress)
+    if summary.planned:
+        print(summary.line(MESH_SWEEP, out))
+    if summary.interrupted:
+        return finish(summary, MESH_SWEEP, out)
+    return EXIT_FAILED if summary.any_failed else 0

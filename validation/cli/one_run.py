@@ -1,0 +1,228 @@
+"""``flexarm run`` and ``flexarm show``: one scenario, from flags, a file or a stored run,
+and the figures of one stored run."""
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import math
+import sys
+from pathlib import Path
+
+from ..batch.executor import check_runner, make_runner
+from ..batch.store import ResultStore, run_id
+from ..run._config import ConfigError
+from ..run.scenario import Scenario, default_transient, scenario_from_mapping
+from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
+
+from .common import EXIT_FAILED, open_output
+
+
+_RUN_FLAGS = {"plant": "plant.kind", "controller": "controller.kind", "arm": "arm",
+              "observer": "observer.kind", "duration": "duration", "seed": "seed", "Ts": "Ts",
+              "feedback": "feedback", "initial_state": "initial_state", "name": "name"}
+#: Metrics that measure the computer, not the run (left out when a rerun is compared).
+_WALL_CLOCK = {"wall_s", "startup_s", "realtime_factor"}
+
+
+def stored_run(spec: str, flag: str):
+    """The stored run ``RESULTS/RUN``: RESULTS is the leading part of the path that holds
+    a results index; RUN is a run id (or a unique prefix of one, at least 4 characters)
+    or a run name (in full, or its part after the campaign's "/")."""
+    from ..batch.store import INDEX_NAME
+    parts = Path(spec).parts
+    for k in range(len(parts) - 1, 0, -1):
+        if (Path(*parts[:k]) / INDEX_NAME).is_file():
+            folder, selector = Path(*parts[:k]), "/".join(parts[k:])
+            break
+    else:
+        raise ConfigError(flag, f"{spec}: expected RESULTS/RUN (a results folder holding "
+                                f"{INDEX_NAME}, then a run id or name)")
+    rows = ResultStore(folder).rows()
+    found = [r for r in rows if r.run_id == selector] or \
+        [r for r in rows if len(selector) >= 4 and r.run_id.startswith(selector)] or \
+        [r for r in rows if r.name == selector] or \
+        [r for r in rows if r.name.split("/")[-1] == selector]
+    if not found:
+        names = sorted({r.name for r in rows})
+        raise ConfigError(flag, f"{folder} has no run {selector!r} (names: "
+                                f"{', '.join(names[:12])}{', ...' if len(names) > 12 else ''})")
+    if len(found) > 1:
+        from ..report.figures import describe_run
+        choices = "; ".join(f"{r.run_id} ({r.plant} plant, {describe_run(r.config)})"
+                            for r in found[:12])
+        raise ConfigError(flag, f"{len(found)} runs of {folder} are named {selector!r}; give "
+                                f"one's id: {choices}{'; ...' if len(found) > 12 else ''}")
+    return found[0]
+
+
+def auto_name(s: Scenario) -> str:
+    """A run's name from what it is: controller (+ observer) @ plant, e.g.
+    "pbc+smo-paper@exudyn" (a plug-in by its class name)."""
+    law = lambda kind: kind.rsplit(":", 1)[-1]  # noqa: E731
+    observer = "" if s.observer.kind == "none" else "+" + law(s.observer.kind)
+    return f"{law(s.controller.kind)}{observer}@{s.plant.kind}"
+
+
+def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
+    """The scenario of ``flexarm run`` and what to tell the user about where it came from."""
+    from ..batch.campaign import load_study
+    notes, like = [], getattr(args, "like", None)
+    if like and args.config:
+        raise ConfigError("--like", "--like and --config exclude each other")
+    if like:
+        row = stored_run(like, "--like")
+        data = copy.deepcopy(row.config)
+    elif args.config:
+        study = load_study(args.config)
+        data = deep_merge({}, study.base)
+        if len(study.sweeps) == 1 and set(study.sweeps[0]) == {"name"}:
+            data["name"] = study.sweeps[0]["name"]  # a scenario file's own name
+        elif study.sweeps:
+            notes.append(f"{args.config} is a campaign: running its [scenario] base (its "
+                         f"{len(study.sweeps)} sweep(s) are not run: flexarm campaign "
+                         f"{args.config})")
+    else:
+        data = {}
+    named = "name" in data or args.name is not None
+    sets = {item.partition("=")[0].strip() for item in args.set or []}
+    if args.duration is not None and "transient" not in sets and "transient" in data and \
+            data["transient"] == default_transient(data.get("duration", Scenario.duration)):
+        del data["transient"]  # it was the default for the old duration: follow the new one
+    for attr, key in _RUN_FLAGS.items():
+        value = getattr(args, attr)
+        if value is not None:
+            set_dotted(data, key, value)
+    for item in args.set or []:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError("--set", f"expected KEY=VALUE, got {item!r}")
+        set_dotted(data, key.strip(), parse_value(text.strip(), key.strip()))
+        named = named or key.strip() == "name"
+    scenario = scenario_from_mapping(data)
+    if not named:
+        scenario = dataclasses.replace(scenario, name=auto_name(scenario))
+    if like:
+        from ..batch.fingerprint import run_fingerprint
+        from ..run.scenario import scenario_to_mapping
+        old, new = flatten(row.config), flatten(scenario_to_mapping(scenario))
+        changed = [f"{k} = {new.get(k)!r} (was {old.get(k)!r})" for k in sorted(old | new)
+                   if old.get(k) != new.get(k)]
+        head = f"rerunning {row.run_id} ({row.name}, stored in {row.store.out})"
+        notes.append(head + (" exactly" if not changed else
+                             f" with {len(changed)} change(s): " + "; ".join(changed)))
+        if row.fingerprint != run_fingerprint(row.config):
+            notes.append("  it was stored by other code (its fingerprint differs): the "
+                         "numbers may differ")
+        args.like_row = None if changed else row
+    return scenario, notes
+
+
+_TABLE = [("status", "status", "{}"),
+          ("track_max_1", "max |θ1 − θ1d| [mrad]", "{:.4g}", 1e3),
+          ("track_max_2", "max |θ2 − θ2d| [mrad]", "{:.4g}", 1e3),
+          ("track_rms_1", "RMS θ1 − θ1d [mrad]", "{:.3g}", 1e3),
+          ("track_rms_2", "RMS θ2 − θ2d [mrad]", "{:.3g}", 1e3),
+          ("tip_err_max", "max payload error vs the rigid arm [mm]", "{:.3g}", 1e3),
+          ("defl_max_1", "max tip deflection, link 1 [mm]", "{:.3g}", 1e3),
+          ("defl_max_2", "max tip deflection, link 2 [mm]", "{:.3g}", 1e3),
+          ("vib_rms_1", "vibration RMS, link 1 [mm]", "{:.3g}", 1e3),
+          ("vib_rms_2", "vibration RMS, link 2 [mm]", "{:.3g}", 1e3),
+          ("tau_max_1", "max |τ1| [N m]", "{:.3g}"), ("tau_max_2", "max |τ2| [N m]", "{:.3g}"),
+          ("tau_tv_1", "τ1 variation [N m/s]", "{:.3g}"),
+          ("tau_tv_2", "τ2 variation [N m/s]", "{:.3g}"),
+          ("wall_s", "wall time [s]", "{:.3g}"), ("realtime_factor", "real-time factor", "{:.3g}")]
+
+
+def format_metrics(metrics: dict) -> str:
+    lines = []
+    if "transient_s" in metrics and "end_time" in metrics:
+        lines.append(f"  metrics after the {metrics['transient_s']:g} s transient, over "
+                     f"{metrics['transient_s']:g}–{metrics['end_time']:g} s (maxima of "
+                     "deflection and torque, torque variation: the whole run)")
+    for key, label, fmt, *scale in _TABLE:
+        value = metrics.get(key)
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            continue
+        lines.append(f"  {label:<44} {fmt.format(value * scale[0] if scale else value)}")
+    ratios = {k.removeprefix("est_to_noise_"): v for k, v in metrics.items()
+              if k.startswith("est_to_noise_") and isinstance(v, float) and math.isfinite(v)}
+    if ratios:
+        worst = max(ratios, key=ratios.get)
+        lines.append(f"  {'estimate / measurement error, worst':<44} {ratios[worst]:.3g} ({worst})")
+    if metrics.get("est_worse"):
+        lines.append(f"  {'estimate worse than the measurement':<44} {metrics['est_worse']}")
+    if metrics.get("est_worse_zero"):
+        lines.append(f"  {'estimate worse than x̂ ≡ 0':<44} {metrics['est_worse_zero']}")
+    for key, value in metrics.items():  # the requirements' robustness (rho >= 0 holds)
+        if key.startswith("rho_") and isinstance(value, float) and not math.isnan(value):
+            verdict = "holds" if value >= 0 else "fails"
+            lines.append(f"  {'requirement ' + key.removeprefix('rho_') + ': rho':<44} "
+                         f"{value:.6g} ({verdict})")
+    return "\n".join(lines)
+
+
+def _compare_with_stored(stored, metrics: dict) -> str:
+    """One line: does a rerun reproduce the stored run's metrics?"""
+    keys = [k for k, v in stored.metrics.items() if k not in _WALL_CLOCK | set(stored.timings)
+            and isinstance(v, float)]
+    worst, where = 0.0, ""
+    for k in keys:
+        a, b = stored.metrics[k], metrics.get(k, math.nan)
+        if math.isnan(a) and isinstance(b, float) and math.isnan(b):
+            continue
+        diff = abs(a - b) / max(abs(a), 1e-300) if a != b else 0.0
+        if not diff <= worst:
+            worst, where = (math.inf if math.isnan(diff) else diff), k
+    if worst <= 1e-12:
+        return f"  the stored metrics are reproduced: {len(keys)} metrics, largest relative " \
+               f"difference {worst:.1g}"
+    return f"  DIFFERS from the stored run: {where} by {worst:.3g} (relative)"
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from ..batch.campaign import check_run_name
+    from ..run.scenario import scenario_to_mapping
+    scenario, notes = scenario_from_args(args)
+    check_run_name(scenario.name, "name")
+    for note in notes:
+        print(note)
+    data = scenario_to_mapping(scenario)
+    rid = run_id(data)
+    check_runner(run_timeout=args.run_timeout, memory_limit=args.memory_limit)
+    store = open_output(args.out or Path("results") / f"run-{rid}")  # bad --out: nothing ran
+    with make_runner("local", 1, run_timeout=args.run_timeout, memory_limit=args.memory_limit,
+                     scenarios=[scenario], progress=sys.stderr) as runner:  # a worker process
+        (_, result, metrics), = runner.results([(rid, scenario)])
+    path = store.add(rid, result, metrics)
+    store.export()
+    s = scenario
+    obs = "" if s.observer.kind == "none" else f" + {s.observer.kind}"
+    print(f"{s.name}: {s.controller.kind}{obs} on the {s.plant.kind} plant, {s.arm} arm, "
+          f"{s.duration:g} s at Ts = {s.Ts:g} s, from {s.initial_state}")
+    if result.message:
+        print(f"  {result.status}: {result.message}")
+    print(format_metrics(metrics))
+    if getattr(args, "like_row", None) is not None and result.status == "ok":
+        print(_compare_with_stored(args.like_row, metrics))
+    print(f"results: {path} (index and metrics.csv in {store.out}); figures: "
+          f"flexarm show {store.out}/{rid}")
+    return 0 if result.status != "failed" else EXIT_FAILED
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    from ..report.show import open_in_browser, show_run
+    row = stored_run(args.run, "RESULTS/RUN")
+    if row.status != "ok":
+        print(f"{row.run_id} ({row.name}) {row.status}: {row.message}; a run that did not "
+              "complete is not drawn", file=sys.stderr)
+        return EXIT_FAILED
+    page, files, note = show_run(row)
+    if note:
+        print(note)
+    for f in files:
+        print(f"  {f}")
+    print(f"figures of {row.run_id} ({row.name}): {page}")
+    if not args.no_open and open_in_browser(page):
+        print("opened in the browser")
+    return 0

@@ -1,0 +1,45 @@
+"""Commands on a results folder: ``report``, ``export``, ``repair``."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..batch.store import ResultStore, StoreError
+
+
+def render_report(results, *, animate: bool, progress: bool, force: bool = False) -> str:
+    """Render the report of ``results`` unless it is current; the line to print."""
+    from ..report.report import report_is_current, write_report
+    if not force and report_is_current(results, animate=animate):
+        html_path = Path(results) / "report" / "report.html"
+        return f"report: {html_path} is up to date (same runs, same code): not rendered again"
+    html_path, md_path = write_report(results, animate=animate, progress=progress, force=True)
+    return f"report: {html_path} (self-contained) and {md_path}"
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    print(render_report(args.results, animate=not args.no_animation,
+                        progress=not args.no_progress, force=args.force))
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    store = ResultStore(args.results)
+    csv_path, json_path = store.export()
+    print(f"exported {len(store.rows())} runs: {csv_path if args.format == 'csv' else json_path}")
+    return 0
+
+
+def cmd_repair(args: argparse.Namespace) -> int:
+    store = ResultStore(args.results)
+    if not store.runs_dir.is_dir():
+        raise StoreError(f"{args.results}: no runs/ folder (not a results folder)")
+    if not store.writable():
+        raise StoreError(f"{args.results}: read-only; repair rewrites the index")
+    report = store.repair()
+    store.remove_stale_temporaries(older_than=0.0)
+    store.export(allow_fewer=True)  # what repair dropped is listed below
+    for action, ids in report.items():
+        print(f"{action}: {len(ids)}" + (f" ({', '.join(ids)})" if ids else ""))
+    print(f"{store.out}: {len(store.rows())} runs indexed")
+    return 0

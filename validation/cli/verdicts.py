@@ -1,0 +1,270 @@
+"""The verdict commands: ``stability``, ``validity``, ``attribute``, ``verify``,
+``baseline check|update``."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+from ..batch.executor import signals_interrupt
+from ..batch.store import ResultStore, StoreError
+from ..run._config import ConfigError
+from ..run.scenario import ARMS, PLANTS, scenario_from_mapping
+
+from .common import EXIT_FAILED, finish, mesh_checks, runner_for
+
+
+def stability_map_into(runner, scenarios, out: Path, *, progress: bool, plants=None,
+                       arms=None) -> int:
+    """Run the stability map into ``out`` (opened by the caller) and print it; the exit
+    status: 130/143 if it was interrupted, 1 if some of its runs failed (a failure is no
+    verdict on stability: the map is incomplete there)."""
+    from ..report.verdict_tables import write_stability
+    from ..verdicts.stability import cases_from_scenarios, stability_map
+    cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
+    results, summary = stability_map(cases, out, runner=runner, progress=progress)
+    if summary.interrupted:
+        return finish(summary, "stability", out)
+    print(write_stability(results, out))
+    print(f"stability map: {out / 'stability.md'} and stability.csv")
+    failed = [f"{r.case.label} ({r.case.plant}, {r.case.arm}) at {1e3 * Ts:.3g} ms"
+              for r in results for Ts in r.failed]
+    if failed or summary.any_failed:
+        print(f"flexarm: {len(failed)} stability run(s) failed — no verdict on stability "
+              f"there: {'; '.join(failed) or 'mesh-check runs'}", file=sys.stderr)
+        return EXIT_FAILED
+    return 0
+
+
+def _stability_scenarios(args: argparse.Namespace) -> tuple[list, list | None, list | None]:
+    """(scenarios, plants, arms) of `flexarm stability`/`validity FILE`: a single scenario
+    on both plants and both arms (unless --plant/--arm), or every run of a campaign."""
+    from ..batch.campaign import expand, load_study
+    scenarios = [r.scenario for r in expand(load_study(args.file))]
+    if len(scenarios) == 1:
+        return scenarios, args.plant or list(PLANTS), args.arm or list(ARMS)
+    return scenarios, args.plant, args.arm
+
+
+def cmd_stability(args: argparse.Namespace) -> int:
+    from ..verdicts.stability import cases_from_scenarios
+    scenarios, plants, arms = _stability_scenarios(args)
+    out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
+    cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)  # what will run
+    runner = runner_for(args, [scenario_from_mapping(c.base) for c in cases], out)
+    with runner:
+        return stability_map_into(runner, scenarios, out, progress=not args.no_progress,
+                          plants=plants, arms=arms)
+
+
+def _stability_folder(args, out: Path) -> Path | None:
+    """The stability map whose measurements `flexarm validity` joins: --stability, else
+    OUT/stability, else OUT itself if it holds one, else none."""
+    if args.stability:
+        store = ResultStore(args.stability)
+        if not store.exists():
+            raise StoreError(f"--stability {args.stability}: not a results folder "
+                             "(no index.sqlite)")
+        return store.out
+    for folder in (out / "stability", out):
+        if ResultStore(folder).exists() and ResultStore(folder).rows(where="sweep = 'stability'"):
+            return folder
+    return None
+
+
+def cmd_validity(args: argparse.Namespace) -> int:
+    from ..verdicts.stability import cases_from_scenarios
+    from ..report.verdict_tables import write_validity
+    from ..verdicts.validity import validity_analysis
+    scenarios, plants, arms = _stability_scenarios(args)
+    cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
+    out = Path(args.out or Path("results") / f"validity-{Path(args.file).stem}")
+    stability = _stability_folder(args, out)
+    folder = out / "validity"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise StoreError(f"--out {out}: cannot write ({exc.strerror or exc})") from None
+
+    def progress(row):
+        if not args.no_progress:
+            print(f"  {row['case']} · {row['plant']} · {row['arm']}: predicted "
+                  f"{1e3 * row['predicted_s']:.4g} ms, certified {1e3 * row['certified_s']:.3g} ms "
+                  f"({row['seconds']:.1f} s)", flush=True)
+    print(f"linear validity of {len(cases)} cases"
+          + (f", measured map: {stability}" if stability else ", no measured stability map"))
+    data = validity_analysis(cases, stability_dir=stability, progress=progress)
+    print(write_validity(data, folder))
+    print(f"validity: {folder / 'validity.md'}, validity.csv, nugap.csv, validity.json, figures/")
+    return 0
+
+
+def cmd_attribute(args: argparse.Namespace) -> int:
+    from ..batch.campaign import expand, load_study
+    from ..report.verdict_tables import write_attribution
+    from ..verdicts.attribution import attribute, default_factors, parse_factors
+    study = load_study(args.file)
+    systems = [(r.scenario.name.split("/")[-1], r.scenario) for r in expand(study)]
+    default_out = Path("results") / (study.name if study.sweeps or study.attribution
+                                     else f"attribution-{study.name}")
+    names = [n.strip() for n in args.factors.split(",") if n.strip()] \
+        if args.factors is not None else study.attribution.get("factors")
+    if names is not None and not isinstance(names, list):
+        raise ConfigError("attribution.factors", "must be a list of factor names")
+    plans = [(label, s, parse_factors(names, s) if names is not None else default_factors(s))
+             for label, s in systems]
+    from ..verdicts.attribution import plan
+    for label, s, factors in plans:  # every world checked before anything runs
+        plan(s, factors, label)
+    out = Path(args.out or default_out)
+    results = []
+    runner = runner_for(args, [s for _, s, _ in plans], out)
+    with runner:
+        for label, s, factors in plans:
+            att, summary = attribute(s, factors, out, name=label, runner=runner,
+                                     progress=not args.no_progress)
+            print(summary.line(f"attribution {label}", out))
+            if summary.interrupted:
+                return finish(summary, label, out)
+            results.append(att)
+        if args.mesh_check:
+            status = mesh_checks(runner, out, {r.run_id for r in ResultStore(out).rows()},
+                                  progress=not args.no_progress)
+            if status:
+                return status
+    print(write_attribution(results, out))
+    print(f"attribution: {out / 'attribution.csv'} and attribution.md; "
+          f"'flexarm report {out}' draws the waterfalls")
+    return 0
+
+
+# --- flexarm verify --------------------------------------------------------------------------
+def cmd_verify(args: argparse.Namespace) -> int:
+    from ..verdicts.uncertainty import load_systems
+    from ..verdicts.verify import conform, estimate, falsify
+    systems = load_systems(args.file)
+    if args.system is not None:
+        names = [s.name for s in systems]
+        if args.system not in names:
+            raise ConfigError("--system", f"no system {args.system!r} in {args.file} "
+                                          f"(systems: {', '.join(names)})")
+        systems = [s for s in systems if s.name == args.system]
+    # The requirement of each system, checked before anything runs (estimate reports every
+    # requirement; its headline is the named one or the first).
+    requirements = [s.requirement(args.requirement) if args.mode == "falsify" or args.requirement
+                    else s.requirements[0] for s in systems]
+    default = Path("results") / f"verify-{Path(args.file).stem}-{args.mode}"
+    out = Path(args.out or default)
+    folders = {s.name: out if len(systems) == 1 else out / s.name for s in systems}
+    # The kernels of every system's laws, on both plants, before the workers fork.
+    runner = runner_for(args, [s.scenario({}, plant=plant) for s in systems
+                            for plant in ("reduced", "exudyn")], *folders.values())
+    failed = False
+    # A signal between two batches of a search (not only during one) stops it: exit 143.
+    with runner, signals_interrupt():
+        for system, requirement in zip(systems, requirements):
+            where = folders[system.name]
+            print(f"{system.name}: {args.mode} over {', '.join(system.uncertainty.describe())}")
+            if args.mode == "estimate":
+                v = estimate(system, requirement, where, runner=runner, samples=args.samples,
+                             seed=args.seed)
+                for r in v["requirements"].values():
+                    print(f"  {r['requirement']}: {r['n'] - r['failures']}/{r['n']} hold, "
+                          f"P(holds) in [{r['p_low']:.3f}, {r['p_high']:.3f}] at "
+                          f"{r['level']:g} (Clopper-Pearson); sequential test: "
+                          f"{r['sequential']['decision']}")
+            elif args.mode == "falsify":
+                v = falsify(system, requirement, where, runner=runner, budget=args.budget,
+                            seed=args.seed)
+                what = "counterexample" if v["found"] else "no counterexample; worst case"
+                truth = (f"{v['rho_truth']:.6g}" if v["rho_truth"] is not None else
+                         f"-inf ({v.get('truth_status', 'no run')})")
+                reduced = (f"{v['rho_reduced']:.6g}" if v["rho_reduced"] is not None
+                           else "-inf (diverged)")
+                print(f"  {requirement.name}: {what}: rho truth {truth}, reduced {reduced} "
+                      f"({v['counterexample'] or v['worst_case']}); simulations "
+                      f"{v['simulations']}")
+            else:
+                v = conform(system, where, runner=runner, budget=args.budget, seed=args.seed)
+                print(f"  largest |theta_truth - theta_reduced| = {v['distance']} rad "
+                      f"({v['scenario']}); simulations {v['simulations']}")
+            failed |= bool(v["failed_runs"])
+            print(f"  verdict: {where / 'verdict.json'}")
+    return EXIT_FAILED if failed else 0
+
+
+# --- flexarm baseline -----------------------------------------------------------------------
+def _baseline_rows(args) -> tuple:
+    from ..verdicts.baselines import evaluate, load_baselines
+    if args.only is not None and not args.only.strip():
+        raise ConfigError("--only", "must be a non-empty pattern")
+    baselines = load_baselines(args.file)
+    rows = evaluate(baselines, out=args.out or Path("results") / "baselines", tier=args.tier,
+                    only=args.only, campaign=args.campaign,
+                    results=getattr(args, "results", None))
+    if not rows:
+        tiers = sorted({c.tier for c in baselines.checks
+                        if not args.campaign or c.campaign == args.campaign})
+        raise ValueError(f"no check matches the selection (--tier {args.tier}"
+                         + (f", --campaign {args.campaign}" if args.campaign else "")
+                         + (f", --only {args.only}" if args.only else "")
+                         + f"); matching tiers: {', '.join(tiers) or 'none'}")
+    return baselines, rows
+
+
+def _print_checks(rows, extra=None) -> None:
+    print(f"  {'check':<40} {'metric':<28} {'bound':>12} {'value':>12}  status")
+    for i, row in enumerate(rows):
+        c = row["check"]
+        metric = c.metric[0] if len(c.metric) == 1 else f"max({', '.join(c.metric)})"
+        if len(metric) > 28:
+            metric = metric[:25] + "..."
+        status = "ok" if row["ok"] else "FAIL"
+        print(f"  {c.name:<40} {metric:<28} {c.op}{c.bound:>10.4g} {row['value']:>12.4g}  "
+              f"{status}{extra[i] if extra else ''}")
+
+
+def cmd_baseline_check(args: argparse.Namespace) -> int:
+    _, rows = _baseline_rows(args)
+    _print_checks(rows)
+    failed = [r for r in rows if not r["ok"]]
+    for r in failed:
+        c = r["check"]
+        print(f"FAIL {c.name}: {'/'.join(c.metric)} = {r['value']:.6g}, bound {c.op} {c.bound:.6g}"
+              f" (measured {c.measured} when set); result: {r['path'] or 'no simulation'}",
+              file=sys.stderr)
+    print(f"{len(rows) - len(failed)} of {len(rows)} checks hold")
+    return EXIT_FAILED if failed else 0
+
+
+def cmd_baseline_update(args: argparse.Namespace) -> int:
+    from ..verdicts.baselines import proposed_bounds, write_baselines
+    baselines, rows = _baseline_rows(args)
+    proposals = proposed_bounds(rows, baselines)
+    notes, loosened, changed = [], [], {}
+    for r in rows:
+        p = proposals.get(r["check"].name)
+        if p is None:
+            notes.append("  (not measurable: the run did not complete)")
+            continue
+        notes.append(f"  -> {r['check'].op}{p['bound']:.4g}" + ("  LOOSER" if p["looser"] else
+                                                                 "" if p["changed"] else "  (same)"))
+        if p["looser"]:
+            loosened.append(r["check"].name)
+        if p["changed"]:
+            changed[r["check"].name] = p
+    _print_checks(rows, notes)
+    if loosened and not args.allow_loosen:
+        print(f"refusing to loosen {len(loosened)} bound(s): {', '.join(loosened)} "
+              "(pass --allow-loosen if that is intended)", file=sys.stderr)
+        return EXIT_FAILED
+    if not changed:
+        print(f"no change: every bound in {baselines.path} already matches the policy")
+        return 0
+    checks = [dataclasses.replace(c, bound=changed[c.name]["bound"],
+                                  measured=changed[c.name]["measured"])
+              if c.name in changed else c for c in baselines.checks]
+    write_baselines(baselines, checks)
+    print(f"updated {len(changed)} bound(s) in {baselines.path}")
+    return 0

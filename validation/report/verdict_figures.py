@@ -1,0 +1,122 @@
+"""Figures of the verdicts: the frequency validity map, the stability map and the
+attribution waterfalls (the conventions of `validation.report.figures`)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .figures import figure_legend, figure_title, plt, png
+
+__all__ = ["validity_map", "stability_chart", "waterfall"]
+
+
+def validity_map(params, modes: tuple[int, int], arm_text: str) -> bytes:
+    """Frequencies of the reduced model vs the FE model over θ2, and their gap in %."""
+    from plant_exudyn import Mesh, natural_frequencies
+    from reduced_model import ArmModel
+    theta2 = np.linspace(0.0, np.pi, 13)
+    model = ArmModel(params, modes)
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), sharex=True, layout="constrained")
+    for col, joints in enumerate(("locked", "free")):
+        red, fe = [], []
+        for t2 in theta2:
+            Q = np.zeros(model.n)
+            Q[1] = t2
+            red.append(model.natural_frequencies(Q, joints)[:4])
+            fe.append(natural_frequencies(params, Mesh(), theta=(0.0, t2), joints=joints,
+                                          n=len(red[-1])))
+        red, fe = np.array(red), np.array(fe)
+        for k in range(red.shape[1]):
+            axes[0, col].plot(theta2, red[:, k], color=f"C{k}", label=f"mode {k + 1}, reduced")
+            axes[0, col].plot(theta2, fe[:, k], color=f"C{k}", ls="--", marker=".",
+                              label=f"mode {k + 1}, FE")
+            axes[1, col].plot(theta2, 100 * (red[:, k] - fe[:, k]) / fe[:, k], color=f"C{k}",
+                              marker=".")
+        axes[0, col].set_yscale("log")
+        axes[0, col].set_ylabel("frequency [Hz]")
+        axes[0, col].set_title(f"joints {joints}", fontsize=10)
+        axes[1, col].set_ylabel("(reduced − FE)/FE [%]")
+        axes[1, col].set_xlabel("θ₂ [rad]")
+        axes[1, col].axhline(0, color="k", lw=0.5)
+    figure_legend(fig, axes[0, :1])
+    figure_title(fig, f"validity map, {arm_text}: reduced model ({modes[0]}+{modes[1]} modes, "
+                "solid) vs FE (ANCF, 4 elements per link, dashed), θ₁ = 0")
+    return png(fig)
+
+
+def stability_chart(results) -> bytes:
+    """Tested Ts per case by outcome (stable, lost tracking, diverged, failed), the largest
+    Ts with no divergence and the largest that keeps tracking (bars), and the predicted
+    limit (grey diamond)."""
+    style = {"stable": ("o", "seagreen", 5), "lost tracking": ("^", "darkorange", 6),
+             "diverged": ("x", "crimson", 7), "failed": ("s", "k", 6)}
+    fig, ax = plt.subplots(figsize=(9, 0.32 * len(results) + 1.8), layout="constrained")
+    labels = []
+    for i, r in enumerate(results):
+        labels.append(f"{r.case.label} · {r.case.plant} · {r.case.arm}")
+        for Ts, (outcome, _) in r.tested.items():
+            marker, color, size = style[outcome]
+            ax.plot(1e3 * Ts, i, marker, color=color, ms=size, mew=2,
+                    mfc="none" if outcome == "failed" else color)
+        # The longer black bar stays visible where both limits coincide.
+        for limit, color, half in ((r.divergence, "k", 0.42), (r.tracking, "darkorange", 0.25)):
+            if not math.isnan(limit.largest):
+                ax.plot([1e3 * limit.largest] * 2, [i - half, i + half], color=color, lw=2)
+        if math.isfinite(r.predicted):
+            ax.plot(1e3 * r.predicted, i, "D", color="0.5", ms=5, mfc="none")
+    ax.set_yticks(range(len(results)))
+    ax.set_yticklabels(labels, fontsize=7)
+    ax.set_ylim(len(results) - 0.5, -0.5)
+    ax.set_xscale("log")
+    ax.set_xlabel("control period Ts [ms]")
+    ax.axvline(1.0, color="grey", lw=0.5, ls=":")
+    for outcome, (marker, color, size) in style.items():
+        ax.plot([], [], marker, color=color, ms=size, mew=2,
+                mfc="none" if outcome == "failed" else color, label=outcome)
+    ax.plot([], [], "|", color="k", ms=10, mew=2, label="no divergence up to")
+    ax.plot([], [], "|", color="darkorange", ms=10, mew=2, label="keeps tracking up to")
+    ax.plot([], [], "D", color="0.5", mfc="none", label="predicted (ZOH eigenvalues)")
+    fig.legend(fontsize=7, loc="outside lower center", ncol=4)
+    figure_title(fig, "sampled-data stability map (case · plant · arm; dotted: Ts = 1 ms)")
+    return png(fig)
+
+
+def waterfall(study: str, metric: str, unit: str, ideal: float, contributions: dict,
+              total: float) -> bytes:
+    """From m(ideal) to m(real): one bar per factor's Shapley contribution, in the
+    display unit the caller chose (``metric`` is its human name)."""
+    parts = [(f, v) for f, v in contributions.items() if not f.startswith("plant: ")]
+    fig, ax = plt.subplots(figsize=(1.2 * len(parts) + 3.4, 3.8), layout="constrained")
+    level, levels = ideal, [0.0, ideal, ideal + total]
+    ax.bar(0, ideal, color="0.6")
+    for i, (f, v) in enumerate(parts, start=1):
+        if not math.isfinite(v):
+            ax.text(i, level, "diverges", rotation=90, ha="center", va="bottom", fontsize=8,
+                    color="crimson")
+            continue
+        ax.bar(i, v, bottom=level, color="tab:red" if v > 0 else "tab:green")
+        level += v
+        levels.append(level)
+    ax.bar(len(parts) + 1, ideal + total, color="0.3")
+    labels = ["ideal", *(f"{f}\n{v:+.3g}" if math.isfinite(v) else f"{f}\n(diverges)"
+                         for f, v in parts), "real"]
+    ax.set_xticks(range(len(labels)))
+    ax.set_xticklabels(labels, fontsize=7)
+    lo, hi = min(levels), max(levels)
+    steps = [ideal, ideal + total, *(ideal + sum(v for _, v in parts[:k] if math.isfinite(v))
+                                     for k in range(1, len(parts) + 1))]
+    gap = max(steps) - min(steps)
+    zoom = 0 < gap < 0.3 * max(abs(lo), abs(hi))  # the contributions would be slivers
+    if zoom:  # show the steps; the bars from 0 are cut at the bottom, and the axis says so
+        ax.set_ylim(min(steps) - 1.2 * gap, max(steps) + 0.5 * gap)
+        ax.text(0.01, 0.02, "y axis does not start at 0", transform=ax.transAxes, fontsize=7,
+                color="0.3")
+    else:
+        span = (hi - lo) or abs(hi) or 1.0
+        ax.set_ylim(min(0.0, lo - 0.1 * span), hi + 0.25 * span)  # room above the bars
+    ax.set_ylabel(f"{metric} [{unit}]")
+    ax.axhline(ideal, color="grey", lw=0.5, ls=":")
+    figure_title(fig, f"{study}: {metric}, from the ideal world of the design to the real one "
+                "(red: worsens, green: improves)", fontsize=9)
+    return png(fig)
