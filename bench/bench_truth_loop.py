@@ -81,7 +81,7 @@ def single_solve(s, torques: np.ndarray) -> tuple[float, np.ndarray, float]:
     l1, l2, l2r = plant.system.loads
     h, steps = plant.h, torques.shape[0]
 
-    def pre_step(mbs_, t):  # t is already the step's end time (EXUDYN_NOTES.md)
+    def pre_step(mbs_, t):  # Exudyn passes the step's end time
         k = min(int(round(t / h)) - 1, steps - 1)
         t1, t2 = float(torques[k, 0]), float(torques[k, 1])
         mbs_.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])

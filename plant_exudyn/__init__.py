@@ -3,7 +3,7 @@
 Both links are ANCF cable elements (default) or geometrically exact 2D beams, built from
 the same `reduced_model.ArmParameters` as the reduced model; the deflection field is
 projected onto the reduced model's mode shapes so that both plants report the same
-coordinates.  `ExudynPlant` implements the Plant interface of DESIGN.md; `linear_model`
+coordinates.  `ExudynPlant` implements the plant interface (`reduced_model._plant_interface`); `linear_model`
 linearises the FE arm about a configuration (a `control.StateSpace`).
 """
 import importlib

@@ -40,7 +40,7 @@ class Mesh:
         0.04 % of the converged values (convergence study in tests/test_exudyn_fidelity.py).
     axial_stiffness : float
         EA [N] of both links.  1e7 puts the first axial mode near 520 Hz, far above the
-        bending modes of interest, without changing them (EXUDYN_NOTES.md).  The
+        bending modes of interest, without changing them.  The
         geometrically exact beam also derives its shear stiffness (0.4 EA) and
         cross-section rotary inertia per length (ρ EI/EA = ρ I/A) from it.
     """

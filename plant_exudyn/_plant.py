@@ -20,7 +20,7 @@ __all__ = ["ExudynPlant", "simulation_settings"]
 
 def simulation_settings(*, step: float, spectral_radius: float = 0.9,
                         newton_tolerance: float = 1e-6) -> exu.SimulationSettings:
-    """Generalised-α settings measured on this model (EXUDYN_NOTES.md): Newton tolerances
+    """Generalised-α settings measured on this model (README, *The truth plant*): Newton tolerances
     1e-6 (the default absolute 1e-10 is below ANCF round-off), sparse linear solver
     reusing its analysed pattern, no solution file, no console output, fixed step ``step``, halved on Newton failure
     down to step/1000 (ten halvings; Exudyn's default 1e-8 s makes a hopeless step take

@@ -81,7 +81,7 @@ class ArmParameters:
     @classmethod
     def table1(cls) -> "ArmParameters":
         """The paper's Table 1 exactly: no stator inertia, no structural damping.  The
-        published and the FE reference frequencies (DESIGN.md) are for this arm."""
+        published and the independent FE reference frequencies (`flexarm modes --table1`) are for this arm."""
         return cls(stator_inertia=0.0, bending_damping1=0.0, bending_damping2=0.0)
 
     def __post_init__(self) -> None:

@@ -1,4 +1,4 @@
-"""The Plant interface of DESIGN.md, shared by the reduced and the Exudyn plant.
+"""The plant interface, shared by the reduced and the Exudyn plant.
 
 A plant is anything with ``name``, ``state_size`` (length of the state ``reset`` takes),
 ``reset(state0) -> Measurement``, ``step(tau, Ts, tip_force=None) -> Measurement``,

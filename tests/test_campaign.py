@@ -323,7 +323,7 @@ def test_claims_table_of_the_paper_campaign(tmp_path):
     assert table.count("## Arm: ") == 1
     body = lines[1:1 + 2 + len(CLAIMS)]  # after the header row
     assert body[0].startswith("| run of the system")
-    assert body[1].startswith("| truth plant under mesh refinement")
+    assert body[1].startswith("| truth plant under mesh and time-step refinement")
     for line, claim in zip(body[2:], CLAIMS):
         cells = [c.strip() for c in line.strip().strip("|").split("|")][3:]  # claim, bound,
         assert len(cells) == 2, line  # guards

@@ -62,7 +62,7 @@ def test_bad_input_one_line_exit_2(tmp_path, args, text):
 def test_modes_table1_prints_the_independent_reference_without_negative_zero(capsys):
     assert main(["modes", "--table1"]) == 0
     out = capsys.readouterr().out
-    # DESIGN.md's independent references (converged Euler–Bernoulli FE), next to ours.
+    # The independent references (a converged Euler–Bernoulli FE model built outside this code), next to ours.
     assert "0.6316     3.8312     6.3499    33.6650" in out
     assert "2.2359     6.1233    31.4140    34.3020" in out
     assert out.count("gap to reference [%]") == 2 and "-0.0000" not in out

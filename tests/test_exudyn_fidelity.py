@@ -12,7 +12,7 @@ from plant_exudyn._build import beam_template
 from reduced_model import ArmModel, ArmParameters
 
 TABLE1 = ArmParameters.table1()
-LOCKED_REF = [0.6316, 3.8312, 6.3499, 33.665]  # converged Euler–Bernoulli FE (DESIGN.md)
+LOCKED_REF = [0.6316, 3.8312, 6.3499, 33.665]  # converged Euler–Bernoulli FE built outside this code
 FREE_REF = [2.2359, 6.1233]
 
 

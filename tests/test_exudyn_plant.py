@@ -245,7 +245,7 @@ def test_bad_steps():
 def test_solver_failure_is_reported_and_nothing_is_written(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     plant = ExudynPlant()
-    # An absolute Newton tolerance below ANCF round-off can never be met (EXUDYN_NOTES.md).
+    # An absolute Newton tolerance below ANCF round-off can never be met: a system at rest never converges.
     plant.settings.timeIntegration.newton.absoluteTolerance = 1e-16
     plant.settings.timeIntegration.newton.relativeTolerance = 1e-16
     plant.reset()

@@ -220,7 +220,7 @@ ROOMS = ("run", "batch", "verdicts", "report")  # each builds only on the ones b
 
 
 def test_the_rooms_depend_in_one_direction():
-    """run <- batch <- verdicts <- report (DESIGN.md), imports inside functions included;
+    """run <- batch <- verdicts <- report (README, *Layout*), imports inside functions included;
     only the command line sits over every room."""
     for module, path in _modules().items():
         room = module.split(".")[1]

@@ -92,8 +92,8 @@ def test_reduced_and_fe_models_share_their_outputs():
     assert list(red.output_labels) == list(fe.output_labels)
     # Their static rigid-body response agrees: the high-frequency mobility of θ̇ (the
     # Markov parameter C_θ̇ B) is the joint block of M⁻¹: 91 on the reduced model and 101
-    # on the FE arm for joint 2 (EXUDYN_NOTES.md: the FE modes above the 2+2 model carry
-    # the difference), ~1 for joint 1.
+    # on the FE arm for joint 2 (the FE modes above the 2+2 model carry the
+    # difference), ~1 for joint 1.
     rows = [red.output_labels.index("theta1_dot"), red.output_labels.index("theta2_dot")]
     mob_red = (red.C @ red.B)[rows]
     mob_fe = (fe.C @ fe.B)[rows]

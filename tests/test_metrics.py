@@ -20,7 +20,7 @@ def result(**signals) -> RunResult:
 
 def test_vibration_is_the_oscillatory_part_only():
     cutoff = vibration_cutoff(ArmParameters())
-    # 0.8 × the first locked mode of the default arm (0.6316 Hz, DESIGN.md's FE reference
+    # 0.8 × the first locked mode of the default arm (0.6316 Hz, the independent FE reference
     # for Table 1; the stator moves it by < 0.4 %).
     assert cutoff == pytest.approx(0.8 * 0.6316, rel=5e-3)
     slow = 0.01 * np.sin(2 * np.pi * 0.2 * T)  # bending demanded by a 0.1 Hz motion

@@ -25,7 +25,7 @@ def random_state(model, rng, q_scale=0.03):
 # --- published references ----------------------------------------------------------------
 def test_table1_locked_frequencies_match_fe_reference():
     f = ArmModel(ArmParameters.table1()).natural_frequencies(joints="locked")
-    # Converged Euler–Bernoulli FE (DESIGN.md): the 2-mode model must be within 0.5 %
+    # Converged Euler–Bernoulli FE built outside this code: the 2-mode model must be within 0.5 %
     # on the first three; the 4th (33.665 Hz) has a truncation gap and is only reported.
     np.testing.assert_allclose(f[:3], [0.6316, 3.8312, 6.3499], rtol=5e-3)
 

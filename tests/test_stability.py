@@ -89,3 +89,30 @@ def test_a_stability_campaign_with_a_solver_failure_exits_1(tmp_path, monkeypatc
     assert "1 stability run(s) failed" in err and "1 ms" in err
     text = (tmp_path / "out" / "stability.md").read_text()
     assert "FAILED at 1 ms" in text
+
+
+def test_a_truth_plant_limit_that_moves_with_the_time_step_is_not_converged(tmp_path,
+                                                                            monkeypatch):
+    """Known bad: the PBC fed the true state on the default arm is stable at 3.55 ms with
+    Exudyn stepping at Ts/4 (0.89 ms) and diverges with a quarter of that step (at 0.13 s:
+    the step damps the FE modes above ~50 Hz that carry part of the joint mobility), so
+    its limit is "not converged".  Known good: the PD's limit (largest stable 1 ms, first
+    divergence 3.55 ms) keeps both outcomes with the finer step and on both check meshes."""
+    monkeypatch.setattr(stability, "GRID", (1e-3, 3.55e-3))
+    monkeypatch.setattr(stability, "BISECTIONS", 0)
+    monkeypatch.setattr(stability, "DURATION", 1.0)  # the finer step diverges by 0.2 s
+    scenarios = [scenario_from_mapping({"observer": {"kind": "none"}}),
+                 scenario_from_mapping({"controller": {"kind": "pd"}})]
+    cases = stability.cases_from_scenarios(scenarios, plants=["exudyn"], arms=["default"])
+    results, summary = stability.stability_map(cases, tmp_path, progress=False)
+    assert summary.failed == 0
+    by_case = {r.case.label: r for r in results}
+    pbc, pd = by_case["pbc"], by_case["pd"]
+    assert pbc.divergence.largest == 3.55e-3  # on the case's own step
+    assert pbc.mesh_converged is False
+    assert "at 3.55 ms stable, ANCF 4 el/link, step 0.222 ms diverged" in pbc.mesh
+    assert pd.divergence.largest == 1e-3 and pd.divergence.first_bad == 3.55e-3
+    assert pd.mesh_converged is True and "step 0.25 ms" in pd.mesh
+    row = {r["case"]: r for r in stability_rows(results)}
+    assert "not converged" in row["pbc"]["no_divergence"]
+    assert "not converged" not in row["pd"]["no_divergence"]

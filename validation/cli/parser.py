@@ -188,8 +188,9 @@ def build_parser() -> argparse.ArgumentParser:
     camp.add_argument("--dry-run", action="store_true",
                       help="list the runs and which are already stored; run nothing")
     camp.add_argument("--mesh-check", action="store_true",
-                      help="also run every truth-plant run on the check meshes (closed-loop "
-                           "mesh convergence; the report and claims need it for a verdict)")
+                      help="also run every truth-plant run on the check meshes and with a "
+                           "finer step (closed-loop convergence; the report and claims need "
+                           "it for a verdict)")
     camp.set_defaults(func=cmd_campaign)
 
     rep = sub.add_parser("report", help="write report.html and report.md of a results folder")
@@ -258,8 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "actuation (default: every factor the scenario has)")
     att.add_argument("--out", metavar="DIR", help="results folder")
     att.add_argument("--mesh-check", action="store_true",
-                     help="also run every truth-plant world on the check meshes (closed-loop "
-                          "mesh convergence, shown by the report)")
+                     help="also run every truth-plant world on the check meshes and with a "
+                          "finer step (closed-loop convergence, shown by the report)")
     _add_execution(att)
     att.set_defaults(func=cmd_attribute)
 

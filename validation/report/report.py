@@ -225,7 +225,7 @@ def _mesh_table(runs) -> dict | None:
         by_label = dict(r.values)
         unit = r.claim.unit if r.claim else ""
         values = [text(by_label[label], unit) if label in by_label else "" for label in labels]
-        verdict = {True: "converged" if r.claim else "same outcome on every mesh",
+        verdict = {True: "converged" if r.claim else "same outcome in every check",
                    False: "not converged", None: "check not run"}[r.converged]
         detail.append([*_identity(r.run)[:2], *_identity(r.run)[3:], _swept(r.run),
                        r.claim.key if r.claim else "run status", *values, verdict])
@@ -237,7 +237,7 @@ def _mesh_table(runs) -> dict | None:
                  for r, v in items if r.converged is False]
         missing = any(r.converged is None for r, _ in items)
         verdict = ("not converged" if moved else "check not run" if missing else
-                   "converged" if run.status == "ok" else f"{run.status} on every mesh")
+                   "converged" if run.status == "ok" else f"{run.status} in every check")
         compact.append([*_identity(run)[:2], *_identity(run)[3:], _swept(run), verdict,
                         "; ".join(moved) or "—"])
         classes.append("fails" if moved else "" if missing else "holds")

@@ -1,4 +1,4 @@
-"""The closed loop, written once for both plants (DESIGN.md: the data flow of one run).
+"""The closed loop, written once for both plants (README, *The closed loop*).
 
 At every control instant t_k = k·Ts:  y_k (+ noise, delay) → observer → x̂_k →
 controller(t_k, x̂_k or x_k, ref) → saturation → τ_k (+ disturbances) held over

@@ -10,11 +10,12 @@ row guards against.  The paper's system is the PBC fed by the sign SMO (run name
 plant, control period Ts and initial condition.  A column whose run diverged says so with
 the reason and time — a result, not a hole.
 
-A verdict is given only after two checks, in this order (DESIGN.md, "What a verdict is"):
+A verdict is given only after two checks, in this order (README, *Verdicts*):
 
-1. **Mesh convergence** (truth plant only): the claim's value on the run's mesh and on
-   its check meshes (`validation.verdicts.mesh`) must agree within the stated tolerance;
-   otherwise the cell is "not converged" with every mesh's value.  A truth-plant run
+1. **Mesh convergence** (truth plant only): the claim's value on the run's mesh and in
+   its checks — two refined meshes and a finer integration step
+   (`validation.verdicts.mesh`) — must agree within the stated tolerance; otherwise the
+   cell is "not converged" with every check's value.  A truth-plant run
    without stored checks is "mesh not checked".
 2. **Window family** (claims measured after a transient): the value is measured with the
    transient at each of `WINDOWS` (1–4 s); if the verdict differs within the family the

@@ -1,23 +1,27 @@
-"""Closed-loop mesh convergence of the truth plant: a truth-plant run is a result only if
-the same scenario on a refined mesh, and with the other element formulation, gives the
-same judged values.
+"""Closed-loop convergence of the truth plant, in space and in time: a truth-plant run is
+a result only if the same scenario on a refined mesh, with the other element formulation,
+and with a finer integration step gives the same judged values.
 
-The FE model is a discretisation.  A closed loop feeds the mesh's own dynamics back
-through the sampled controller, so a frequency-domain convergence study (the open-loop
-natural frequencies converge at ANCF 4 el/link) does not prove that a closed-loop run has
-converged: with no stator inertia at the link-1 tip (the paper's Table 1 exactly), the
-motor-2 reaction torque acts on an FE node whose only rotary inertia is the elements'
-consistent mass, the joint-2 mobility grows as (elements)³ and a closed-loop run describes
-the mesh, not the arm (EXUDYN_NOTES.md).
+The FE model is a discretisation, and so is its time integration.  A closed loop feeds the
+mesh's own dynamics back through the sampled controller, so a frequency-domain
+convergence study (the open-loop natural frequencies converge at ANCF 4 el/link) does not
+prove that a closed-loop run has converged: with no stator inertia at the link-1 tip (the
+paper's Table 1 exactly), the motor-2 reaction torque acts on an FE node whose only
+rotary inertia is the elements' consistent mass, the joint-2 mobility grows as
+(elements)³ (9.9e4, 7.8e5, 6.2e6 at ANCF 4, 8, 16 el/link) and a closed-loop run
+describes the mesh, not the arm.  In time, generalised-α at a step near 1 ms damps the
+FE modes above ~50 Hz that carry part of the joint mobility: the default arm's PBC,
+stable at Ts = 3.16 ms with Exudyn stepping at Ts/3, diverges with a step of Ts/12.
 
-For every truth-plant run a verdict relies on, `check_runs` plans the same scenario on
-two other meshes (`refinements`): the same element with twice the elements per link, and
-the other formulation at a resolution at least as fine (the geometrically exact beam
-converges slower: 8× ANCF's elements, GE 32 el/link for ANCF 4 — at 16 it was itself the
-unconverged one, a sub-µm modal RMS 15 % off where ANCF 4 and 8 agreed to 0.1 %).  They are
+For every truth-plant run a verdict relies on, `check_runs` plans the same scenario three
+more times (`refinements`): the same element with twice the elements per link; the other
+formulation at a resolution at least as fine (the geometrically exact beam converges
+slower: 8× ANCF's elements, GE 32 el/link for ANCF 4 — at 16 it was itself the
+unconverged one, a sub-µm modal RMS 15 % off where ANCF 4 and 8 agreed to 0.1 %); and the
+run's own mesh with a quarter of its integration step (`STEP_REFINEMENT`).  They are
 ordinary runs of the results store (sweep ``mesh-check``): stored, deduplicated, resumed
 and verified like any other.  `agrees` is the stated tolerance a judged value must keep
-between meshes; `status_agrees` compares runs that did not complete.
+between the checks; `status_agrees` compares runs that did not complete.
 """
 from __future__ import annotations
 
@@ -28,7 +32,7 @@ from ..batch.executor import Runner
 from ..batch.store import run_id
 from ..run.scenario import scenario_from_mapping, scenario_to_mapping
 
-__all__ = ["MESH_SWEEP", "MESH_RTOL", "MESH_ATOL", "refinements", "mesh_label", "check_runs",
+__all__ = ["MESH_SWEEP", "MESH_RTOL", "MESH_ATOL", "STEP_REFINEMENT", "refinements", "mesh_label", "check_runs",
            "run_checks", "checks_of", "is_check", "agrees", "status_agrees"]
 
 #: The sweep name of the check runs in a results store.
@@ -42,9 +46,11 @@ MESH_SWEEP = "mesh-check"
 MESH_RTOL = 0.1
 MESH_ATOL = 0.05
 #: Element-count ratio of the geometrically exact beam to ANCF in the check (module
-#: docstring; EXUDYN_NOTES.md: GE 16 el/link 0.6 % on the 4th mode, ANCF 4: 0.04 %).
+#: docstring; open-loop 4th-mode error: GE 16 el/link 0.6 %, ANCF 4 0.04 %).
 _GE_PER_ANCF = 8
 _MAX_ELEMENTS = 64
+#: The time-step check divides the run's integration step by this.
+STEP_REFINEMENT = 4
 
 
 def mesh_label(mesh: dict) -> str:
@@ -55,9 +61,10 @@ def mesh_label(mesh: dict) -> str:
 
 
 def refinements(config: dict) -> list[tuple[str, dict]]:
-    """(mesh label, resolved scenario) of the check runs of a truth-plant run: the same
-    element with twice the elements per link, and the other element formulation at a
-    comparable resolution (module docstring); meshes beyond 64 el/link are left out."""
+    """(label, resolved scenario) of the check runs of a truth-plant run: the same element
+    with twice the elements per link, the other element formulation at a comparable
+    resolution (meshes beyond 64 el/link are left out), and the run's mesh with its
+    integration step divided by `STEP_REFINEMENT` (module docstring)."""
     plant = config["plant"]
     mesh = plant["mesh"]
     n = tuple(mesh["elements_per_link"])
@@ -71,7 +78,15 @@ def refinements(config: dict) -> list[tuple[str, dict]]:
             continue
         new_mesh = dict(mesh, element=element, elements_per_link=list(per_link))
         out.append((mesh_label(new_mesh), dict(config, plant=dict(plant, mesh=new_mesh))))
+    step = plant["step"] / STEP_REFINEMENT
+    out.append((f"{mesh_label(mesh)}, step {_ms(step)}", dict(config, plant=dict(plant,
+                                                                                 step=step))))
     return out
+
+
+def _ms(seconds: float) -> str:
+    """"0.25 ms", "50 µs"."""
+    return f"{1e3 * seconds:.3g} ms" if seconds >= 1e-4 else f"{1e6 * seconds:.3g} µs"
 
 
 def is_check(row) -> bool:

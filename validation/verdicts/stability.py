@@ -21,8 +21,9 @@ divergence** and the largest Ts that **keeps tracking**.  A failed run ends a li
 scan (nothing is known there).  Each limit is monotone in what it claims; a tested Ts
 above a limit that nevertheless did not diverge (or kept tracking) is reported as a
 *non-monotone* case, never smoothed over.  On the truth plant the runs that define the
-limits are repeated on the check meshes (`validation.verdicts.mesh`); a limit whose
-outcomes differ between meshes is "not converged".
+limits are repeated on the check meshes and with a finer integration step
+(`validation.verdicts.mesh`); a limit whose outcomes differ between them is "not
+converged".
 
 The *predicted* limit is the exact zero-order-hold eigenvalue analysis of the case's own
 linearised sampled loop (`validation.verdicts.sampled`): the law linearised from its
@@ -207,7 +208,7 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
     """Run the grid and the bisections for every case into the results folder ``out``
     (resumable like any campaign; the progress bar names the round: grid, bisection k/3,
     mesh check), then, with ``mesh_check``, the truth-plant runs that define the limits on
-    the check meshes; returns the results and the summary of every round together."""
+    the check meshes and with a finer step; returns the results and the summary of every round together."""
     campaign = Campaign(name="stability", base={}, sweeps=(),
                         description="sampled-data stability map")
     tested: dict[int, dict[float, tuple[str, str]]] = {i: {} for i in range(len(cases))}
