@@ -110,9 +110,9 @@ def test_a_truth_plant_limit_that_moves_with_the_time_step_is_not_converged(tmp_
     pbc, pd = by_case["pbc"], by_case["pd"]
     assert pbc.divergence.largest == 3.55e-3  # on the case's own step
     assert pbc.mesh_converged is False
-    assert "at 3.55 ms stable, ANCF 4 el/link, step 0.222 ms diverged" in pbc.mesh
+    assert "at 3.55 ms stable, ANCF 4 el/link, step/4 diverged" in pbc.mesh
     assert pd.divergence.largest == 1e-3 and pd.divergence.first_bad == 3.55e-3
-    assert pd.mesh_converged is True and "step 0.25 ms" in pd.mesh
+    assert pd.mesh_converged is True and "step/4" in pd.mesh
     row = {r["case"]: r for r in stability_rows(results)}
     assert "not converged" in row["pbc"]["no_divergence"]
     assert "not converged" not in row["pd"]["no_divergence"]
