@@ -180,6 +180,13 @@ def test_a_counterexample_replays_to_the_same_robustness(tmp_path):
     assert done.returncode == 0, done.stderr
     verdict = json.loads((tmp_path / "out" / "verdict.json").read_text())
     assert verdict["found"] and verdict["rho_truth"] < 0 and verdict["simulations"]["truth"] >= 1
+    # The counterexample stays one on both check meshes and with a quarter of the step.
+    convergence = verdict["convergence"]
+    assert convergence["verdict"] == "converged", convergence
+    assert list(convergence["checks"]) == ["ANCF 8 el/link", "GE 32 el/link",
+                                           "ANCF 4 el/link, step/4"]
+    assert all(c["status"] == "diverged" or c["rho"] < 0
+               for c in convergence["checks"].values())
     replay = load_toml(tmp_path / "out" / verdict["counterexample"])
     assert replay["plant"]["kind"] == "exudyn"
     _, metrics = execute_run(replay)
@@ -193,6 +200,36 @@ def test_a_counterexample_replays_to_the_same_robustness(tmp_path):
     assert any("against the simulations" in c for c in captions)
     assert any("counterexample" in c and "(Fig. 3)" in c for c in captions)
     assert "## Runs" not in text  # the search's evaluations are not listed one by one
+
+
+@pytest.mark.parametrize("rho, checks, expected", [
+    (-0.01, [("ok", -0.02), ("diverged", None), ("ok", -0.005)], "converged"),
+    (-0.01, [("ok", -0.02), ("ok", 0.004), ("ok", -0.005)], "not converged"),  # refuted once
+    (0.03, [("ok", 0.02), ("ok", 0.01), ("ok", 0.05)], "converged"),  # holds in every check
+    (0.03, [("ok", 0.02), ("diverged", None), ("ok", 0.05)], "not converged"),
+    (-0.01, [("ok", -0.02), ("failed", None), ("ok", -0.005)], "check failed"),
+])
+def test_a_falsification_answer_stands_only_if_every_check_keeps_its_sign(rho, checks,
+                                                                           expected,
+                                                                           monkeypatch):
+    """The rule of `verify._convergence` on stored check runs: a counterexample (ρ < 0)
+    is converged only if it is one in every check (a diverged run fails every
+    requirement); a case that holds only if it holds in every check."""
+    from types import SimpleNamespace
+
+    from validation.run.requirements import Requirement
+    from validation.verdicts import verify
+    req = Requirement(name="track", claim="tracking")
+    rows = {f"check{i}": SimpleNamespace(status=status, metrics={req.metric: value},
+                                         run_id=f"check{i}")
+            for i, (status, value) in enumerate(checks)}
+    monkeypatch.setattr(verify, "run_checks",
+                        lambda *a, **k: SimpleNamespace(interrupted=0))
+    monkeypatch.setattr(verify, "checks_of", lambda row, by_id: dict(rows))
+    ev = SimpleNamespace(out=None, runner=None, store=SimpleNamespace(rows=lambda: []))
+    result = verify._convergence(ev, SimpleNamespace(), req, rho)
+    assert result["verdict"] == expected
+    assert [c["status"] for c in result["checks"].values()] == [c[0] for c in checks]
 
 
 HOLDS = SYSTEM.replace('{ uniform = [0.0, 4.0] }', '{ uniform = [0.0, 0.2] }').replace(

@@ -185,6 +185,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
                 print(f"  {requirement.name}: {what}: rho truth {truth}, reduced {reduced} "
                       f"({v['counterexample'] or v['worst_case']}); simulations "
                       f"{v['simulations']}")
+                if "convergence" in v:
+                    print(f"  truth plant under refinement: {_checks_line(v['convergence'])}")
             else:
                 v = conform(system, where, runner=runner, budget=args.budget, seed=args.seed)
                 print(f"  largest |theta_truth - theta_reduced| = {v['distance']} rad "
@@ -192,6 +194,14 @@ def cmd_verify(args: argparse.Namespace) -> int:
             failed |= bool(v["failed_runs"])
             print(f"  verdict: {where / 'verdict.json'}")
     return EXIT_FAILED if failed else 0
+
+
+def _checks_line(convergence: dict) -> str:
+    """"converged (ANCF 8 el/link: -0.0123; ...)": a verdict's checks and their ρ (or the
+    status of a check whose run did not complete)."""
+    checks = "; ".join(f"{label}: " + (c["status"] if c["rho"] is None else f"{c['rho']:.6g}")
+                       for label, c in convergence["checks"].items())
+    return f"{convergence['verdict']} ({checks})"
 
 
 # --- flexarm baseline -----------------------------------------------------------------------

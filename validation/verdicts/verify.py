@@ -20,7 +20,10 @@ uncertainty set, each answered in ``OUT/verdict.json``:
   the truth plant confirms — or, with ``[verify] worst_case = true``, goes on to the end
   of its budget confirming only points predicted below the lowest ρ confirmed so far
   (the worst case, not just a case).  A counterexample is written as a scenario file
-  that ``flexarm run --config`` replays to the same ρ.
+  that ``flexarm run --config`` replays to the same ρ.  The truth-plant run behind the
+  answer is repeated on the check meshes and with a quarter of its step
+  (`validation.verdicts.mesh`): the answer is *converged* only if ρ keeps its sign in
+  every check (a counterexample stays one), else *not converged*, with every check's ρ.
 - **conform** — maximise the disagreement between the two plants on the same scenario,
   max over time and joints of |θ_truth − θ_reduced|, with CMA-ES; every point costs one
   simulation of each plant; the difference in each requirement's ρ is reported there.
@@ -49,6 +52,7 @@ from ..run.requirements import Requirement
 from ..run.results import write_atomic
 from ..run.scenario import scenario_to_mapping
 from ..run.tomlfiles import toml_text
+from .mesh import checks_of, run_checks
 from .search import CMASearch
 from .statistics import clopper_pearson, sprt
 from .uncertainty import System
@@ -352,6 +356,7 @@ def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace
         verdict["point"] = _point_axes(worst["point"])
         verdict["truth_status"] = row.status + (f": {row.message}" if row.message else "")
         verdict["runs"] = {"truth": row.run_id}
+        verdict["convergence"] = _convergence(ev, row, requirement, worst["rho_truth"])
     verdict |= {"spurious": [{"point": _point_axes(e["point"]),
                               "rho_reduced": _number(e["rho_reduced"]),
                               "rho_truth": _number(e["rho_truth"])} for e in spurious],
@@ -364,6 +369,28 @@ def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace
     ev.finish()
     write_verdict(out, verdict)
     return verdict
+
+
+def _convergence(ev: Evaluations, row, requirement: Requirement, rho: float) -> dict:
+    """The truth-plant run ``row`` (robustness ``rho``) repeated on the check meshes and
+    with a finer step: "converged" if ρ has the same sign in every check, "not
+    converged" if it changes sign in one, "check failed" if a check run failed; with
+    every check's ρ."""
+    summary = run_checks([row], ev.out, runner=ev.runner, progress=False)
+    if summary.interrupted:
+        raise Interrupted(summary.interrupted)
+    by_id = {r.run_id: r for r in ev.store.rows()}
+    checks = {label: check for label, check in checks_of(row, by_id).items()}
+    rhos = {label: None if check is None else effective_rho(check, requirement)
+            for label, check in checks.items()}
+    if any(r is not None and (r < 0) != (rho < 0) for r in rhos.values()):
+        verdict = "not converged"
+    else:
+        verdict = "check failed" if any(r is None for r in rhos.values()) else "converged"
+    return {"verdict": verdict,
+            "checks": {label: {"status": "not run" if check is None else check.status,
+                               "rho": None if rhos[label] is None else _number(rhos[label])}
+                       for label, check in checks.items()}}
 
 
 # --- conform --------------------------------------------------------------------------------------
