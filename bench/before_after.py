@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 from _report import report
+from _workloads import CLI, REDUCED_48
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -44,18 +45,6 @@ run_scenario(scenario_from_mapping({**m, "duration": 0.01, "transient": 0.0}))
 t0 = time.perf_counter()
 r = run_scenario(scenario_from_mapping(m))
 print(json.dumps({"seconds": time.perf_counter() - t0, "status": r.status}))
-"""
-
-CLI = "import sys; from validation.cli import main; raise SystemExit(main(sys.argv[1:]))"
-
-CAMPAIGN = """name = "bench-reduced"
-[scenario]
-duration = 5.0
-observer.kind = "smo-paper"
-[[sweep]]
-grid."true_params.Mp" = [0.0, 0.1, 0.2, 0.3, 0.5, 0.8]
-grid."observer.kind" = ["smo-paper", "smo-bl"]
-grid.seed = [1, 2, 3, 4]
 """
 
 
@@ -76,7 +65,7 @@ def closed_loop(tree: Path, plant: str) -> float:
 
 def campaign(tree: Path, workers: int, scratch: Path) -> float:
     spec = scratch / "campaign.toml"
-    spec.write_text(CAMPAIGN)
+    spec.write_text(REDUCED_48)
     out = Path(tempfile.mkdtemp(dir=scratch))
     t0 = time.perf_counter()
     done = _python(tree, "-c", CLI, "campaign", str(spec), "--out", str(out / "r"),

@@ -17,8 +17,10 @@ import statistics
 import sys
 import tempfile
 import time
+import tomllib
 
 from _report import report, target
+from _workloads import REDUCED_48, TRUTH_8
 from validation.batch.campaign import campaign_from_mapping, run_campaign
 from validation.batch.executor import make_runner
 from validation.run.metrics import all_metrics
@@ -27,17 +29,10 @@ from validation.batch.worker import warm_up
 
 REPEATS = 5  # the machines drift up to 2x within an hour: medians of paired repeats
 
-SWEEPS = {
-    "reduced, 48 runs x 5 s": ({
-        "name": "bench-reduced", "scenario": {"duration": 5.0, "observer": {"kind": "smo-paper"}},
-        "sweep": [{"grid": {"true_params.Mp": [0.0, 0.1, 0.2, 0.3, 0.5, 0.8],
-                            "observer.kind": ["smo-paper", "smo-bl"],
-                            "seed": [1, 2, 3, 4]}}]}, 1.6, 10.0),
-    "exudyn, 8 runs x 20 s": ({
-        "name": "bench-exudyn", "scenario": {"plant": {"kind": "exudyn"},
-                                             "observer": {"kind": "smo-paper"}},
-        "sweep": [{"grid": {"true_params.Mp": [0.0, 0.1, 0.5, 1.0], "seed": [1, 2]}}]}, 1.8,
-        None),  # its set-up includes assembling the Exudyn mesh: no orchestration target
+SWEEPS = {  # label: (campaign, speed-up target of 2 workers, orchestration target [ms])
+    "reduced, 48 runs x 5 s": (tomllib.loads(REDUCED_48), 1.6, 10.0),
+    # its set-up includes assembling the Exudyn mesh: no orchestration target
+    "exudyn, 8 runs x 20 s": (tomllib.loads(TRUTH_8), 1.8, None),
 }
 
 

@@ -24,9 +24,9 @@ import time
 from pathlib import Path
 
 from _report import report, target
+from _workloads import CLI
 
 ROOT = Path(__file__).resolve().parent.parent
-CLI = "import sys; from validation.cli import main; raise SystemExit(main(sys.argv[1:]))"
 
 
 def _cpu() -> float:

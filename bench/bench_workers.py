@@ -25,30 +25,14 @@ import time
 from pathlib import Path
 
 from _report import report, target
+from _workloads import REDUCED_48, TRUTH_8
 
 ROOT = Path(__file__).resolve().parent.parent
 REPEATS = 5
-CAMPAIGN = """name = "bench-reduced"
-[scenario]
-duration = 5.0
-observer.kind = "smo-paper"
-[[sweep]]
-grid."true_params.Mp" = [0.0, 0.1, 0.2, 0.3, 0.5, 0.8]
-grid."observer.kind" = ["smo-paper", "smo-bl"]
-grid.seed = [1, 2, 3, 4]
-"""
 ONE_RUN = """name = "bench-one"
 [scenario]
 duration = 5.0
 observer.kind = "smo-paper"
-"""
-TRUTH = """name = "bench-truth"
-[scenario]
-plant.kind = "exudyn"
-observer.kind = "smo-paper"
-[[sweep]]
-grid."true_params.Mp" = [0.0, 0.1, 0.5, 1.0]
-grid.seed = [1, 2]
 """
 
 
@@ -99,7 +83,8 @@ def main(repeats: int = REPEATS) -> None:
     rows = []
     with tempfile.TemporaryDirectory() as spec_dir:
         spec = Path(spec_dir)
-        for name, text in (("c48.toml", CAMPAIGN), ("c1.toml", ONE_RUN), ("truth.toml", TRUTH)):
+        for name, text in (("c48.toml", REDUCED_48), ("c1.toml", ONE_RUN),
+                           ("truth.toml", TRUTH_8)):
             (spec / name).write_text(text)
         flexarm("campaign", str(spec / "c1.toml"), "--out", str(spec / "warm"))  # kernels
         start = paired(lambda tmp: ("campaign", str(spec / "c1.toml"), "--out", str(tmp)),

@@ -87,6 +87,14 @@ def _add_limits(p) -> None:
                         "of the machine's memory shared among the workers)")
 
 
+def _add_cases(p) -> None:
+    """--plant and --arm of the commands that take a scenario or a campaign's cases."""
+    p.add_argument("--plant", action="append", choices=PLANTS,
+                   help="plant(s) (default: both for a scenario, the campaign's own)")
+    p.add_argument("--arm", action="append", choices=tuple(ARMS),
+                   help="arm(s) (default: both for a scenario, the campaign's own)")
+
+
 def _add_execution(p, *, dask: bool = True) -> None:
     p.add_argument("--workers", type=_int_in(1, 4096), default=None, metavar="N",
                    help=f"parallel runs (default: the {available_cores()} cores; 1 = one "
@@ -216,10 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     stab.add_argument("file", metavar="SCENARIO_OR_CAMPAIGN.toml")
     stab.add_argument("--out", metavar="DIR",
                       help="results folder (default results/stability-<file name>)")
-    stab.add_argument("--plant", action="append", choices=PLANTS,
-                      help="plant(s) to test (default: both for a scenario, the campaign's own)")
-    stab.add_argument("--arm", action="append", choices=tuple(ARMS),
-                      help="arm(s) to test (default: both for a scenario, the campaign's own)")
+    _add_cases(stab)
     _add_execution(stab)
     stab.set_defaults(func=cmd_stability)
 
@@ -232,10 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "results/validity-<file name>)")
     val.add_argument("--stability", metavar="DIR",
                      help="stability map to compare with (default: DIR/stability or DIR)")
-    val.add_argument("--plant", action="append", choices=PLANTS,
-                     help="plant(s) (default: both for a scenario, the campaign's own)")
-    val.add_argument("--arm", action="append", choices=tuple(ARMS),
-                     help="arm(s) (default: both for a scenario, the campaign's own)")
+    _add_cases(val)
     val.add_argument("--no-progress", action="store_true", help="no line per case")
     val.set_defaults(func=cmd_validity)
 

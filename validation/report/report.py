@@ -385,7 +385,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
             data.stability = {"table": _table(
                 ["case", "plant", "arm", "no divergence up to [ms]", "first divergence [ms]",
                  "keeps tracking up to [ms]", "first loss [ms]", "predicted [ms]",
-                 "monotone?", "mesh", "why the first bad one is"],
+                 "monotone?", "mesh and step", "why the first bad one is"],
                 [[r["case"], r["plant"], r["arm"], r["no_divergence"], r["first_divergence"],
                   r["tracking"], r["first_loss"], r["predicted"], r["notes"], r["mesh"],
                   r["reason"]] for r in rows],

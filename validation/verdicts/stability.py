@@ -258,7 +258,7 @@ def _defining(tested: dict) -> list[float]:
 
 def _mesh_check(tested: dict, rows_at: dict, by_id: dict) -> tuple[str, bool | None]:
     """(text, converged?) of the mesh check of a truth-plant case: the outcome of every
-    run defining a limit must be the same on every check mesh."""
+    run defining a limit must be the same in every check (refined meshes, finer step)."""
     from .mesh import checks_of
     moved, missing, labels = [], False, {}
     for Ts in _defining(tested):

@@ -380,7 +380,7 @@ def _convergence(ev: Evaluations, row, requirement: Requirement, rho: float) -> 
     if summary.interrupted:
         raise Interrupted(summary.interrupted)
     by_id = {r.run_id: r for r in ev.store.rows()}
-    checks = {label: check for label, check in checks_of(row, by_id).items()}
+    checks = checks_of(row, by_id)
     rhos = {label: None if check is None else effective_rho(check, requirement)
             for label, check in checks.items()}
     if any(r is not None and (r < 0) != (rho < 0) for r in rhos.values()):
