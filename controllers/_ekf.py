@@ -20,6 +20,7 @@ from numba import njit
 from reduced_model import ArmModel
 from reduced_model._kernels import (cholesky_factor_inplace, cholesky_solve_factored,
                                     rk4_advance_packed)
+from reduced_model._views import matrix_view
 
 from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
 from ._gains import gain_vector
@@ -315,18 +316,17 @@ def ekf_kernel(t, Ts, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
     N = x_hat.shape[0]
     m, nsub = ints[0], ints[1]
     x = state[:N]
-    P = state[N:N + N * N].reshape((N, N))
-    b = N + N * N
     nn = N * N
+    P = matrix_view(state, N, N, N)
+    b = N + nn  # the scratch: two vectors, three N x N, N x m, m x m, m
+    s = b + 2 * N + 3 * nn
     ok = _ekf_update(mi, mr, wc, wr, x, P, tau, Ts / nsub, nsub, ints[2] == 0, y, reals[:m],
-                     reals[m:m + nn].reshape((N, N)), state[b:b + N], state[b + N:b + 2 * N],
-                     state[b + 2 * N:b + 2 * N + nn].reshape((N, N)),
-                     state[b + 2 * N + nn:b + 2 * N + 2 * nn].reshape((N, N)),
-                     state[b + 2 * N + 2 * nn:b + 2 * N + 3 * nn].reshape((N, N)),
-                     state[b + 2 * N + 3 * nn:b + 2 * N + 3 * nn + N * m].reshape((N, m)),
-                     state[b + 2 * N + 3 * nn + N * m:b + 2 * N + 3 * nn + N * m + m * m]
-                     .reshape((m, m)),
-                     state[b + 2 * N + 3 * nn + N * m + m * m:b + 2 * N + 3 * nn + N * m + m * m + m])
+                     matrix_view(reals, m, N, N), state[b:b + N], state[b + N:b + 2 * N],
+                     matrix_view(state, b + 2 * N, N, N),
+                     matrix_view(state, b + 2 * N + nn, N, N),
+                     matrix_view(state, b + 2 * N + 2 * nn, N, N),
+                     matrix_view(state, s, N, m), matrix_view(state, s + N * m, m, m),
+                     state[s + N * m + m * m:s + N * m + m * m + m])
     ints[2] = 0  # no longer fresh: later calls predict
     for i in range(N):
         x_hat[i] = x[i] if ok else np.nan

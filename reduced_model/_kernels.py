@@ -47,6 +47,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ._views import matrix_view
+
 __all__ = [
     "ModelData", "Workspace", "pack_model", "unpack_model", "new_workspace", "unpack_workspace",
     "mass_matrix_into", "coriolis_matrix_into", "mass_bias_into", "bias_forces_into",
@@ -117,9 +119,9 @@ def unpack_model(ints, reals):
     n1, n2 = ints[0], ints[1]
     n, nb1, nb2 = 2 + n1 + n2, 1 + n1, 2 + n2
     o = 2
-    gram1 = reals[o:o + nb1 * nb1].reshape((nb1, nb1))
+    gram1 = matrix_view(reals, o, nb1, nb1)
     o += nb1 * nb1
-    gram2 = reals[o:o + nb2 * nb2].reshape((nb2, nb2))
+    gram2 = matrix_view(reals, o, nb2, nb2)
     o += nb2 * nb2
     phi1_tip = reals[o:o + n1]
     o += n1
@@ -127,11 +129,11 @@ def unpack_model(ints, reals):
     o += n1
     phi2_tip = reals[o:o + n2]
     o += n2
-    M_rotors = reals[o:o + n * n].reshape((n, n))
+    M_rotors = matrix_view(reals, o, n, n)
     o += n * n
-    K = reals[o:o + n * n].reshape((n, n))
+    K = matrix_view(reals, o, n, n)
     o += n * n
-    D = reals[o:o + n * n].reshape((n, n))
+    D = matrix_view(reals, o, n, n)
     return ModelData(n1, n2, ints[2:2 + nb1], ints[2 + nb1:2 + nb1 + n], reals[0], gram1, gram2,
                      phi1_tip, dphi1_tip, phi2_tip, reals[1], M_rotors, K, D)
 
@@ -152,19 +154,19 @@ def unpack_workspace(ints, wc, wr):
     n, nb1, nb2 = 2 + n1 + n2, 1 + n1, 2 + n2
     nb = max(nb1, nb2)
     o = 0
-    A1 = wc[o:o + nb1 * nb1].reshape((nb1, nb1))
+    A1 = matrix_view(wc, o, nb1, nb1)
     o += nb1 * nb1
-    Ad1 = wc[o:o + nb1 * nb1].reshape((nb1, nb1))
+    Ad1 = matrix_view(wc, o, nb1, nb1)
     o += nb1 * nb1
-    A2 = wc[o:o + n * nb2].reshape((n, nb2))
+    A2 = matrix_view(wc, o, n, nb2)
     o += n * nb2
-    Ad2 = wc[o:o + n * nb2].reshape((n, nb2))
+    Ad2 = matrix_view(wc, o, n, nb2)
     o += n * nb2
     c_hat = wc[o:o + n]
     o += n
     v = wc[o:o + nb]
     Gv = wc[o + nb:o + 2 * nb]
-    M = wr[0:n * n].reshape((n, n))
+    M = matrix_view(wr, 0, n, n)
     o = n * n
     f = wr[o:o + n]
     o += n
@@ -252,7 +254,7 @@ def _add_gram(A, G, B, rows, out, gb):
 @njit(cache=True)
 def mass_matrix_into(d, Q, M, ws):
     """M(Q) into ``M`` (n, n)."""
-    mass_bias_into(d, Q, Q, M, ws.f, ws, False)
+    mass_bias_into(d, Q, Q, Q, M, ws.f, ws, False)
 
 
 @njit(cache=True)
@@ -265,28 +267,36 @@ def coriolis_matrix_into(d, Q, Qd, C, ws):
 
 
 @njit(cache=True, inline="always")
-def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
-    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇) Q̇ into ``h`` (structured
-    evaluation, see module doc).
+def mass_bias_into(d, Q, Qa, Qb, M, h, ws, with_bias=True):
+    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇a) Q̇b into ``h`` (structured
+    evaluation, see module doc); Q̇a = Q̇b = Q̇ gives the velocity-product forces C Q̇.
 
     Everything is expressed in link 2's frame (link 1's in its own), where the phases
     e^{iθ1}, e^{iα} drop out.  v is the basis-coefficient vector of the velocity-product
-    accelerations Σ_j Ȧ_j Q̇_j of each link, and h_i = Re(conj(A_i) G v).
+    accelerations Σ_j Ȧ_j Q̇_j of each link, and h_i = Re(conj(A_i) G v).  v is a
+    quadratic form in Q̇ whose Christoffel coefficients are symmetric, so C(Q, a) b is its
+    polar form: each product of two rates is taken as a·b, each doubled product 2·x·y as
+    x_a·y_b + x_b·y_a (with a = b exactly the products of the quadratic form, bit for bit).
     """
     n1, n2 = d.n1, d.n2
     n = 2 + n1 + n2
     G1, G2, v, Gv, c_hat = d.gram1, d.gram2, ws.v, ws.Gv, ws.c_hat
-    th1d = Qd[0]
+    th1a, th1b = Qa[0], Qb[0]
     w1e = 0.0
-    w1ed = 0.0
+    w1ea = 0.0
+    w1eb = 0.0
     s1e = 0.0
-    s1ed = 0.0
+    s1ea = 0.0
+    s1eb = 0.0
     for k in range(n1):
         w1e += d.phi1_tip[k] * Q[2 + k]
-        w1ed += d.phi1_tip[k] * Qd[2 + k]
+        w1ea += d.phi1_tip[k] * Qa[2 + k]
+        w1eb += d.phi1_tip[k] * Qb[2 + k]
         s1e += d.dphi1_tip[k] * Q[2 + k]
-        s1ed += d.dphi1_tip[k] * Qd[2 + k]
-    alphad = th1d + Qd[1] + s1ed
+        s1ea += d.dphi1_tip[k] * Qa[2 + k]
+        s1eb += d.dphi1_tip[k] * Qb[2 + k]
+    alpha_a = th1a + Qa[1] + s1ea
+    alpha_b = th1b + Qb[1] + s1eb
 
     for i in range(n):
         h[i] = 0.0
@@ -301,9 +311,9 @@ def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
             M[2 + k, 2 + l] += G1[1 + k, 1 + l]
             M[0, 0] += Q[2 + k] * G1[1 + k, 1 + l] * Q[2 + l]
     if with_bias:
-        v[0] = -th1d * th1d
+        v[0] = -th1a * th1b
         for k in range(n1):
-            v[1 + k] = -1j * th1d * th1d * Q[2 + k] - 2.0 * th1d * Qd[2 + k]
+            v[1 + k] = -1j * th1a * th1b * Q[2 + k] - (th1a * Qb[2 + k] + th1b * Qa[2 + k])
         for b in range(1 + n1):
             acc = 0.0 + 0.0j
             for g in range(1 + n1):
@@ -349,10 +359,11 @@ def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
     if not with_bias:
         return
     # velocity-product accelerations: link-1 tip (centripetal + Coriolis) and link 2.
-    v[0] = eg * (-th1d * th1d * (d.L1 + 1j * w1e) - 2.0 * th1d * w1ed)
-    v[1] = -alphad * alphad
+    v[0] = eg * (-th1a * th1b * (d.L1 + 1j * w1e) - (th1a * w1eb + th1b * w1ea))
+    v[1] = -alpha_a * alpha_b
     for k in range(n2):
-        v[2 + k] = -1j * alphad * alphad * Q[2 + n1 + k] - 2.0 * alphad * Qd[2 + n1 + k]
+        v[2 + k] = (-1j * alpha_a * alpha_b * Q[2 + n1 + k]
+                    - (alpha_a * Qb[2 + n1 + k] + alpha_b * Qa[2 + n1 + k]))
     for b in range(2 + n2):
         acc = 0.0 + 0.0j
         for g in range(2 + n2):
@@ -371,7 +382,7 @@ def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
 @njit(cache=True, inline="always")
 def bias_forces_into(d, Q, Qd, h, ws):
     """h = C(Q,Q̇) Q̇ + D Q̇ + K Q into ``h``, and M(Q) into ws.M."""
-    mass_bias_into(d, Q, Qd, ws.M, h, ws)
+    mass_bias_into(d, Q, Qd, Qd, ws.M, h, ws)
     n = h.shape[0]
     for i in range(2, n):  # K and D vanish on the joint rows/columns
         s = 0.0

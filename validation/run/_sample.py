@@ -32,7 +32,8 @@ from numba import njit, types
 from numba.experimental import structref
 
 from controllers import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, reference_into
-from reduced_model._kernels import rk4_advance_packed, tip_kinematics_packed
+from reduced_model._kernels import (rk4_advance, tip_kinematics_packed, unpack_model,
+                                    unpack_workspace)
 
 __all__ = ["SampleStatus", "status_message", "DisturbanceKind", "DisturbanceTarget", "Group",
            "signal_layout", "noise_stream", "SampleContext", "new_context", "pre_sample",
@@ -389,13 +390,14 @@ def run_reduced(c, rows, h, nsteps, xp, pm_i, pm_r, p_wc, p_wr, basis):
     offending value in ``c.info[0]``).  ``xp`` is the plant state (its own coordinates);
     ``basis`` maps its modal coordinates to the model's (0 × 0: the same basis)."""
     tips = np.zeros(6)
+    model, work = unpack_model(pm_i, pm_r), unpack_workspace(pm_i, p_wc, p_wr)
     n_samples = rows.shape[0]
     for k in range(n_samples):
         _reduced_truth(xp, basis, c.n, pm_i, pm_r, tips, c.truth)
         code = sample_laws(c, k * c.Ts, k, rows[k])
         if code != SampleStatus.OK:
             return k, code
-        rk4_advance_packed(pm_i, pm_r, p_wc, p_wr, xp, c.tau_plant[:c.counts[1]], h, nsteps)
+        rk4_advance(model, xp, c.tau_plant[:c.counts[1]], h, nsteps, work)
     # the state after the last period is checked too (as the Python loop does)
     _reduced_truth(xp, basis, c.n, pm_i, pm_r, tips, c.truth)
     return n_samples, check_bounds(c.truth, c.n, c.bounds, c.info)
