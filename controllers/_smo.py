@@ -188,7 +188,9 @@ class PositionOnlySMO(_SlidingModeObserver):
         self._setup(model, l_position, l_velocity, filter_time=filter_time, gate=gate)
 
 
-@njit(cache=True)
+# Inlined into `smo_kernel`: called there as a separate compiled function it cost 0.7 µs
+# of a 4.7 µs sample (20 s PBC + smo-paper on the reduced plant: 94.5 -> 81 ms).
+@njit(cache=True, inline="always")
 def _smo_update(ints, reals, wc, wr, x, tau, Ts, nsub, predict, y, lp, lv, variant, layer,
                 alpha, gate, nu):
     if predict:
