@@ -5,10 +5,13 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import pytest
 
 from campaign_testing import wait_gone
+
+ROOT = Path(__file__).resolve().parents[2]
 
 HANGS = textwrap.dedent('''
     import time
@@ -82,6 +85,12 @@ def test_ctrl_c_stops_a_report_being_written(lab):
                                         "sweep": [{"grid": {"seed": [0, 1]}}]}),
                  results, progress=False)
     figures = results / "report" / "figures"
+    # The project's modules byte-compiled first: on a fresh clone the report would compile
+    # the sources it imports lazily, and a SIGINT landing while Python compiles a module's
+    # source is lost (observed 1 in 25 tries; an open problem of its own, not this test's).
+    compiled = subprocess.run([sys.executable, "-m", "compileall", "-q", "validation"],
+                              cwd=ROOT, capture_output=True, text=True)
+    assert compiled.returncode == 0, compiled.stdout + compiled.stderr
     # Once its figures folder exists the report is being drawn (figures are written at
     # the end, with the tables): the signal lands mid-way.
     done = interrupt(lab, ["report", str(results), "--no-progress"],
