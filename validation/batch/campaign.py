@@ -170,16 +170,22 @@ def flatten_axes(table: dict) -> dict[str, object]:
     return flatten(table, leaf=lambda value: bool(set(value) & _SPEC_KEYS))
 
 
+def _numeric_field(resolved_base: dict, path: str, where: str):
+    """The base scenario's value at ``path``, which a ``scale`` axis multiplies: a number."""
+    try:
+        value = get_dotted(resolved_base, path)
+    except KeyError:
+        raise ConfigError(where, f"{path} is not a scenario field") from None
+    check(isinstance(value, (int, float)) and not isinstance(value, bool), where,
+          f"scale needs a numeric field, {path} is {value!r}")
+    return value
+
+
 def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
     """The list of values of a grid or zip axis."""
     if isinstance(spec, dict):
         check(set(spec) == {"scale"}, where, "a grid/zip axis is a list or {scale = [...]}")
-        try:
-            base_value = get_dotted(resolved_base, path)
-        except KeyError:
-            raise ConfigError(where, f"{path} is not a scenario field") from None
-        check(isinstance(base_value, (int, float)) and not isinstance(base_value, bool), where,
-              f"scale needs a numeric field, {path} is {base_value!r}")
+        base_value = _numeric_field(resolved_base, path, where)
         factors = spec["scale"]
         check(isinstance(factors, list) and factors and all(
             isinstance(f, (int, float)) and not isinstance(f, bool) for f in factors), where,
@@ -273,13 +279,7 @@ def random_axis(path: str, spec, resolved_base: dict, where: str) -> RandomAxis:
     if scaled:
         base = []
         for p in (path, *also):
-            try:
-                value = get_dotted(resolved_base, p)
-            except KeyError:
-                raise ConfigError(where, f"{p} is not a scenario field") from None
-            check(isinstance(value, (int, float)) and not isinstance(value, bool), where,
-                  f"scale needs a numeric field, {p} is {value!r}")
-            base.append(value)
+            base.append(_numeric_field(resolved_base, p, where))
         check(kind != "choices" or all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                        for v in arg), where, "scale choices must be numbers")
         base = tuple(base)
