@@ -36,7 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from ..run._config import ConfigError, check, check_label
-from .executor import Interrupted, Runner, SerialRunner
+from .executor import Runner, SerialRunner
+from .interrupts import Interrupted
 from .fingerprint import run_fingerprint
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .store import ResultStore, environment, run_id

@@ -27,29 +27,20 @@ from __future__ import annotations
 import multiprocessing
 import os
 import signal
-import threading
 import time
 from contextlib import contextmanager
 from multiprocessing import connection
 from typing import TextIO
 
 from ..run._config import ConfigError, check
+from .interrupts import Interrupted, signals_interrupt
 from .limits import (MIN_MEMORY_MIB, RUN_TIMEOUT_BASE, default_memory_limit,
                      default_run_timeout)
 from .threads import ONE_THREAD
 from .worker import execute_run, failed_result, keep_freed_memory, serve
 
 __all__ = ["Runner", "SerialRunner", "LocalPoolRunner", "DaskRunner", "make_runner",
-           "Interrupted", "available_cores", "exit_status", "signals_interrupt"]
-
-
-class Interrupted(BaseException):
-    """SIGINT or SIGTERM arrived; ``signum`` says which (a BaseException, so that no
-    ``except Exception`` in a run swallows it)."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
+           "available_cores"]
 
 
 def available_cores() -> int:
@@ -454,38 +445,3 @@ def _environment(values: dict):
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
-
-
-#: Signals received while `signals_interrupt` is in force (shared by nested uses).
-_received: list[int] = []
-
-
-def _on_signal(signum, frame):
-    if _received:  # the second signal: end the workers and this process now
-        for child in multiprocessing.active_children():
-            child.kill()
-        os._exit(exit_status(signum))
-    _received.append(signum)
-    raise Interrupted(signum)
-
-
-@contextmanager
-def signals_interrupt():
-    """SIGINT/SIGTERM raise `Interrupted` in the main thread; a second one exits now.
-    Nested uses share the first one's state (a second signal is a second signal)."""
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is _on_signal):
-        yield
-        return
-    _received.clear()
-    previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
-
-
-def exit_status(signum: int) -> int:
-    """The shell's convention: 128 + the signal number (130 for SIGINT, 143 SIGTERM)."""
-    return 128 + signum

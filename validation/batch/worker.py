@@ -17,6 +17,7 @@ import numpy as np
 
 from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, before the fork
 from ..run.results import RunResult
+from .interrupts import Interrupted
 
 __all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "serve",
            "warm_up", "kernel_groups"]
@@ -93,6 +94,8 @@ def execute_run(scenario) -> tuple[RunResult, dict]:
             metrics = all_metrics(result)
             metrics |= requirement_metrics(result, metrics)
             result.signals = result.signals.astype(np.float32)
+    except Interrupted:  # a Ctrl-C to this process (a serial runner): not the run's
+        raise
     except (Exception, SystemExit, KeyboardInterrupt) as exc:  # noqa: BLE001 - the run's failure
         return failed_result(scenario, _over_memory(
             f"{describe(exc)}, {time.perf_counter() - started:.3g} s after the run started"))

@@ -46,7 +46,7 @@ import argparse  # noqa: E402
 import errno  # noqa: E402
 import sqlite3  # noqa: E402
 
-from ..batch.executor import Interrupted, exit_status, signals_interrupt  # noqa: E402
+from ..batch.interrupts import Interrupted, exit_status, signals_interrupt  # noqa: E402
 from ..batch.store import StoreError  # noqa: E402
 from .common import EXIT_FAILED, EXIT_USAGE  # noqa: E402
 from .parser import build_parser  # noqa: E402
@@ -83,6 +83,8 @@ def _command(args: argparse.Namespace) -> int:
     except SystemExit as exc:  # flexarm's own code never exits from inside a command
         return _error(f"sys.exit({exc.code!r}) was called by code this command ran "
                       "(a plug-in's?); stopped", EXIT_FAILED)
+    except Interrupted:  # a Ctrl-C (a KeyboardInterrupt too): `main` says so
+        raise
     except KeyboardInterrupt:  # a Ctrl-C raises Interrupted: this one was raised by code
         return _error("KeyboardInterrupt raised by code this command ran (a plug-in's?), "
                       "not by a Ctrl-C; stopped", EXIT_FAILED)

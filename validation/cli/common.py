@@ -5,7 +5,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ..batch.executor import check_runner, exit_status, make_runner
+from ..batch.executor import check_runner, make_runner
+from ..batch.interrupts import exit_status
 from ..batch.store import ResultStore, StoreError
 
 

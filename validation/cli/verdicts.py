@@ -7,7 +7,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from ..batch.executor import signals_interrupt
+from ..batch.interrupts import signals_interrupt
 from ..batch.store import ResultStore, StoreError
 from ..run._config import ConfigError
 from ..run.scenario import ARMS, PLANTS, scenario_from_mapping

@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from ..batch.campaign import Campaign, PlannedRun, run_campaign
-from ..batch.executor import Interrupted
+from ..batch.interrupts import Interrupted
 from ..batch.store import ResultStore, run_id
 from ..run._config import ConfigError
 from ..run.requirements import Requirement
