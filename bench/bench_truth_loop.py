@@ -25,7 +25,8 @@ import time
 import numpy as np
 
 from _report import report, target
-from validation.run.loop import _to_plant_state, build, make_reference, run_scenario
+from validation.run.loop import run_scenario
+from validation.run.replay import bare_replay, fresh_plant, truth_now
 from validation.run.scenario import scenario_from_mapping
 
 REPEATS = 5
@@ -34,49 +35,11 @@ SCENARIO = {"plant": {"kind": "exudyn"}, "duration": 20.0,
             "observer": {"kind": "smo-paper", "initial_error": [0.1, 5e-3, 0.3, 0.05]}}
 
 
-def _fresh_plant(s):
-    """A plant of ``s`` reset to the closed loop's initial state."""
-    setup = build(s)
-    x0 = np.zeros(2 * setup.model.n)
-    theta0, _, _ = make_reference(s.reference)(0.0)
-    x0[:2] = theta0
-    setup.plant.reset(_to_plant_state(x0, setup.plant, setup.model))
-    return setup.plant
-
-
-def _truth(plant) -> np.ndarray:
-    """The plant's truth vector read now (not the copy it keeps for its last step)."""
-    out = np.empty(plant.state_size + 8)
-    plant.truth_into(out)
-    return out
-
-
-def replay(s, torques: np.ndarray) -> tuple[float, np.ndarray, np.ndarray, float]:
-    """(seconds, θ at the start of the last period, final truth, Newton iterations per
-    step) of the bare replay."""
-    plant = _fresh_plant(s)
-    mbs, solver, settings = plant.system.mbs, plant.solver, plant.settings
-    l1, l2, l2r = plant.system.loads
-    h, last = plant.h, torques.shape[0] - 1
-    t0 = time.perf_counter()
-    for k in range(torques.shape[0]):
-        if k == last:  # what the closed loop recorded last
-            theta_last = _truth(plant)[:2]
-        t1, t2 = float(torques[k, 0]), float(torques[k, 1])
-        mbs.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])
-        mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
-        mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
-        solver.it.endTime = (k + 1) * h
-        solver.SolveSteps(mbs, settings)
-    seconds = time.perf_counter() - t0
-    return seconds, theta_last, _truth(plant), solver.it.newtonStepsCount / (last + 1)
-
-
 def single_solve(s, torques: np.ndarray) -> tuple[float, np.ndarray, float]:
     """(seconds, final truth, Newton iterations per step) of one SolveDynamic whose
     pre-step function sets the next period's torques."""
     import exudyn as exu
-    plant = _fresh_plant(s)
+    plant = fresh_plant(s)
     mbs = plant.system.mbs
     l1, l2, l2r = plant.system.loads
     h, steps = plant.h, torques.shape[0]
@@ -97,7 +60,7 @@ def single_solve(s, torques: np.ndarray) -> tuple[float, np.ndarray, float]:
     t0 = time.perf_counter()
     solver.SolveSystem(mbs, settings)
     seconds = time.perf_counter() - t0
-    return seconds, _truth(plant), solver.it.newtonStepsCount / steps
+    return seconds, truth_now(plant), solver.it.newtonStepsCount / steps
 
 
 def main(repeats: int = REPEATS) -> None:
@@ -108,9 +71,10 @@ def main(repeats: int = REPEATS) -> None:
         result = run_scenario(s)
         torques = (result.select(["tau1", "tau2"]) + result.select(["dist_tau1", "dist_tau2"])).T
         loop_s.append(result.timings["wall_s"])
-        seconds, theta_last, truth, newton["replay"] = replay(s, np.ascontiguousarray(torques))
-        replay_s.append(seconds)
-        gap = np.abs(theta_last - result.select(["theta1", "theta2"])[:, -1]).max()
+        floor = bare_replay(s, torques)
+        replay_s.append(floor.seconds)
+        truth, newton["replay"] = floor.truth, floor.newton_per_step
+        gap = np.abs(floor.theta[0] - result.select(["theta1", "theta2"])[:, -1]).max()
         seconds, truth_single, newton["single solve"] = single_solve(s, torques)
         single_s.append(seconds)
         single_gap = np.abs(truth_single[:2] - truth[:2]).max()

@@ -172,13 +172,8 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
         raise ValueError("reference must be the scenario's own (see scenario.reference)")
     n, Ts = model.n, s.Ts
     reference = make_reference(s.reference)
-    # Initial state: at rest at θ_d(0), or moving with the reference ("reference").
-    x0 = np.zeros(2 * n)
-    theta_d0, dtheta_d0, _ = reference(0.0)
-    x0[:2] = theta_d0
-    if s.initial_state == "reference":
-        x0[n:n + 2] = dtheta_d0
-    y = plant.reset(_to_plant_state(x0, plant, model))
+    x0 = initial_state(s, model)
+    y = plant.reset(plant_state(x0, plant, model))
     if observer is not None:
         missing = [m for m in observer.measured if m not in y.names]
         if missing:
@@ -381,7 +376,19 @@ def _one_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else "(no message)"
 
 
-def _to_plant_state(x0: np.ndarray, plant, model: ArmModel) -> np.ndarray:
+def initial_state(scenario: Scenario, model: ArmModel) -> np.ndarray:
+    """x(0) of a run of ``scenario`` in ``model``'s coordinates: at rest at θ_d(0), or
+    moving with the reference (initial_state = "reference"); no deflection."""
+    n = model.n
+    x0 = np.zeros(2 * n)
+    theta_d0, dtheta_d0, _ = make_reference(scenario.reference)(0.0)
+    x0[:2] = theta_d0
+    if scenario.initial_state == "reference":
+        x0[n:n + 2] = dtheta_d0
+    return x0
+
+
+def plant_state(x0: np.ndarray, plant, model: ArmModel) -> np.ndarray:
     """The initial state in the plant's own coordinates: same joints, no deflection."""
     out = np.zeros(plant.state_size)
     half, n = plant.state_size // 2, model.n

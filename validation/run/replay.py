@@ -1,0 +1,76 @@
+"""The truth plant's floor: Exudyn alone replaying the torques a closed loop applied.
+
+`bare_replay` starts the Exudyn plant of a scenario where the closed loop starts it and,
+for each control period, sets the three joint loads (`SetLoadParameter`) and calls
+`SolveSteps`: nothing else (no law, no readout, no recording unless asked).  It is what
+a truth-plant run costs at least (``bench/bench_truth_loop.py`` times the closed loop
+against it) and what the closed loop must reproduce exactly: the loop adds time, never
+physics (tested on θ at every sample).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from reduced_model._plant_interface import TRUTH_EXTRAS
+
+from .loop import build, initial_state, plant_state
+from .scenario import Scenario
+
+__all__ = ["Replay", "fresh_plant", "truth_now", "bare_replay"]
+
+
+@dataclass
+class Replay:
+    """What `bare_replay` measured."""
+    theta: np.ndarray  #: (periods, 2): θ at the start of each period (``record``) or of the last
+    truth: np.ndarray  #: the truth vector at the end
+    seconds: float  #: wall time of the periods (loads and solves)
+    newton_per_step: float  #: Newton iterations per solver step
+
+
+def fresh_plant(scenario: Scenario):
+    """The Exudyn plant of ``scenario`` reset to the closed loop's initial state."""
+    if scenario.plant.kind != "exudyn":
+        raise ValueError(f"a bare replay runs the Exudyn plant; plant.kind is "
+                         f"{scenario.plant.kind!r}")
+    setup = build(scenario)
+    setup.plant.reset(plant_state(initial_state(scenario, setup.model), setup.plant,
+                                  setup.model))
+    return setup.plant
+
+
+def truth_now(plant) -> np.ndarray:
+    """The plant's truth vector read now (not the copy it keeps for its last step)."""
+    out = np.empty(plant.state_size + len(TRUTH_EXTRAS))
+    plant.truth_into(out)
+    return out
+
+
+def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False) -> Replay:
+    """Apply ``torques`` (periods, 2) [N m] — what the plant received, disturbances
+    included — one per control period of ``scenario`` to its fresh Exudyn plant.
+    ``record``: read θ at the start of every period (costs a readout per period; off,
+    only at the start of the last one, as the floor should be timed)."""
+    plant = fresh_plant(scenario)
+    mbs, solver, settings = plant.system.mbs, plant.solver, plant.settings
+    l1, l2, l2r = plant.system.loads
+    steps_per_period = int(round(scenario.Ts / plant.h))
+    periods = torques.shape[0]
+    theta = np.empty((periods if record else 1, 2))
+    started = time.perf_counter()
+    for k in range(periods):
+        if record or k == periods - 1:
+            theta[k if record else 0] = truth_now(plant)[:2]
+        t1, t2 = float(torques[k, 0]), float(torques[k, 1])
+        mbs.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])
+        mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
+        mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
+        solver.it.endTime = (k + 1) * steps_per_period * plant.h
+        if not solver.SolveSteps(mbs, settings):
+            raise RuntimeError(f"the bare replay's solver failed in period {k}")
+    seconds = time.perf_counter() - started
+    return Replay(theta, truth_now(plant), seconds,
+                  solver.it.newtonStepsCount / (periods * steps_per_period))
