@@ -61,6 +61,33 @@ def test_two_campaigns_into_one_folder_both_keep_every_row(tmp_path):
     assert (out / "metrics.csv").read_text().count("\n") == 25  # header + every run
 
 
+OPEN_OUTPUT_REPEATEDLY = """
+import sys
+from validation.cli.common import open_output
+from validation.batch.store import StoreError
+refused = 0
+for _ in range(200):
+    try:
+        open_output(sys.argv[1])
+    except StoreError:
+        refused += 1
+print(refused)
+"""
+
+
+def test_commands_opening_one_folder_at_once_all_find_it_writable(tmp_path):
+    """Each command checks that --out is writable with a file of its own: with one shared
+    probe name, two commands starting together deleted each other's probe and one was
+    told "not writable" (the concurrent-campaign test above failed so; measured 42 of
+    600 checks refused from two processes)."""
+    procs = [subprocess.Popen([sys.executable, "-c", OPEN_OUTPUT_REPEATEDLY,
+                               str(tmp_path / "out")], stdout=subprocess.PIPE, text=True)
+             for _ in range(2)]
+    refused = [int(p.communicate(timeout=300)[0]) for p in procs]
+    assert refused == [0, 0]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["index.sqlite", "runs"]
+
+
 @pytest.mark.parametrize("workers, sig, status", [("1", signal.SIGTERM, 143),
                                                   ("2", signal.SIGINT, 130)])
 def test_a_signal_keeps_finished_runs_and_ends_the_workers(tmp_path, workers, sig, status):

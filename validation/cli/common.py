@@ -3,6 +3,7 @@ runs, and how a command ends."""
 from __future__ import annotations
 
 import sys
+import tempfile
 from pathlib import Path
 
 from ..batch.executor import check_runner, make_runner
@@ -21,10 +22,9 @@ def open_output(out: str | Path) -> ResultStore:
         store.prepare()
     except StoreError as exc:
         raise StoreError(f"--out {exc}") from None
-    probe = store.out / ".write-test"
-    try:
-        probe.write_text("")
-        probe.unlink()
+    try:  # a file of this process's own (commands may share the folder), gone at close
+        with tempfile.TemporaryFile(dir=store.out):
+            pass
     except OSError as exc:
         raise StoreError(f"--out {out}: not writable ({exc.strerror or exc})") from None
     return store
