@@ -29,6 +29,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..run.results import write_atomic  # noqa: E402
+
 __all__ = ["png", "state_label", "state_unit", "state_display", "tracking", "deflections",
            "rates", "estimation_errors", "phase_portrait", "animation", "describe_run",
            "envelope", "figure_title", "figure_legend", "PLANT_NAME", "PLANT_STYLE",
@@ -401,9 +403,9 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str:
         rgba = np.asarray(fig.canvas.buffer_rgba())
         images.append(Image.fromarray(rgba[..., :3].copy()).quantize(colors=64))
     plt.close(fig)
-    tmp = path.with_suffix(".tmp.gif")
-    images[0].save(tmp, save_all=True, append_images=images[1:], duration=int(1000 / fps),
-                   loop=0)
-    tmp.replace(path)
+    write_atomic(path, lambda fh: images[0].save(fh, format="GIF", save_all=True,
+                                                 append_images=images[1:],
+                                                 duration=int(1000 / fps), loop=0),
+                 binary=True)
     return (f"{title}: arm motion over the whole {t_end:.0f} s run (2× speed), truth and "
             f"reduced plant, deflection ×{magnify:g}")
