@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reduced_model._plant_interface import TRUTH_EXTRAS
+from reduced_model._plant_interface import TRUTH_EXTRAS, check_sample_time
 
 from .loop import build, initial_state, plant_state
 from .scenario import Scenario
@@ -57,7 +57,7 @@ def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False
     plant = fresh_plant(scenario)
     mbs, solver, settings = plant.system.mbs, plant.solver, plant.settings
     l1, l2, l2r = plant.system.loads
-    steps_per_period = int(round(scenario.Ts / plant.h))
+    steps_per_period = check_sample_time(scenario.Ts, plant.h)
     periods = torques.shape[0]
     theta = np.empty((periods if record else 1, 2))
     started = time.perf_counter()
