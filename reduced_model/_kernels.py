@@ -176,7 +176,11 @@ def unpack_workspace(ints, wc, wr):
 
 
 # --- kinematic coefficients ------------------------------------------------------------
-@njit(cache=True)
+# The dense path (`mass_matrix_into`, `coriolis_matrix_into` and their helpers) is inlined
+# into its callers, as `mass_bias_into` is: a call that is not inlined passes the model and
+# workspace namedtuples field by field, which cost 2.4x the arithmetic of C (dense C
+# ~680 -> ~280 ns per call, `bench/bench_reduced_model.py`).
+@njit(cache=True, inline="always")
 def _fill_coefficients(d, Q, Qd, ws):
     """A_i[row, β] = coefficient of b_β in ∂z_i/∂Q_row, and its time derivative Ȧ_i."""
     n1, n2 = d.n1, d.n2
@@ -232,7 +236,7 @@ def _fill_coefficients(d, Q, Qd, ws):
         Ad2[j, 2 + k] = -alphad * Ea
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _add_gram(A, G, B, rows, out, gb):
     """out[rows[i], rows[j]] += Re(conj(A) G Bᵀ)[i, j] for real symmetric G.
     ``gb``: complex scratch (nb,)."""
@@ -251,13 +255,13 @@ def _add_gram(A, G, B, rows, out, gb):
             out[rows[i], rows[j]] += s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def mass_matrix_into(d, Q, M, ws):
     """M(Q) into ``M`` (n, n)."""
-    mass_bias_into(d, Q, Q, Q, M, ws.f, ws, False)
+    mass_bias_into(d, Q, Q, M, ws.f, ws, False)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def coriolis_matrix_into(d, Q, Qd, C, ws):
     """Christoffel-form C(Q, Q̇) into ``C`` (n, n)."""
     _fill_coefficients(d, Q, Qd, ws)
@@ -267,36 +271,28 @@ def coriolis_matrix_into(d, Q, Qd, C, ws):
 
 
 @njit(cache=True, inline="always")
-def mass_bias_into(d, Q, Qa, Qb, M, h, ws, with_bias=True):
-    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇a) Q̇b into ``h`` (structured
-    evaluation, see module doc); Q̇a = Q̇b = Q̇ gives the velocity-product forces C Q̇.
+def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
+    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇) Q̇ into ``h`` (structured
+    evaluation, see module doc).
 
     Everything is expressed in link 2's frame (link 1's in its own), where the phases
     e^{iθ1}, e^{iα} drop out.  v is the basis-coefficient vector of the velocity-product
-    accelerations Σ_j Ȧ_j Q̇_j of each link, and h_i = Re(conj(A_i) G v).  v is a
-    quadratic form in Q̇ whose Christoffel coefficients are symmetric, so C(Q, a) b is its
-    polar form: each product of two rates is taken as a·b, each doubled product 2·x·y as
-    x_a·y_b + x_b·y_a (with a = b exactly the products of the quadratic form, bit for bit).
+    accelerations Σ_j Ȧ_j Q̇_j of each link, and h_i = Re(conj(A_i) G v).
     """
     n1, n2 = d.n1, d.n2
     n = 2 + n1 + n2
     G1, G2, v, Gv, c_hat = d.gram1, d.gram2, ws.v, ws.Gv, ws.c_hat
-    th1a, th1b = Qa[0], Qb[0]
+    th1d = Qd[0]
     w1e = 0.0
-    w1ea = 0.0
-    w1eb = 0.0
+    w1ed = 0.0
     s1e = 0.0
-    s1ea = 0.0
-    s1eb = 0.0
+    s1ed = 0.0
     for k in range(n1):
         w1e += d.phi1_tip[k] * Q[2 + k]
-        w1ea += d.phi1_tip[k] * Qa[2 + k]
-        w1eb += d.phi1_tip[k] * Qb[2 + k]
+        w1ed += d.phi1_tip[k] * Qd[2 + k]
         s1e += d.dphi1_tip[k] * Q[2 + k]
-        s1ea += d.dphi1_tip[k] * Qa[2 + k]
-        s1eb += d.dphi1_tip[k] * Qb[2 + k]
-    alpha_a = th1a + Qa[1] + s1ea
-    alpha_b = th1b + Qb[1] + s1eb
+        s1ed += d.dphi1_tip[k] * Qd[2 + k]
+    alphad = th1d + Qd[1] + s1ed
 
     for i in range(n):
         h[i] = 0.0
@@ -311,9 +307,9 @@ def mass_bias_into(d, Q, Qa, Qb, M, h, ws, with_bias=True):
             M[2 + k, 2 + l] += G1[1 + k, 1 + l]
             M[0, 0] += Q[2 + k] * G1[1 + k, 1 + l] * Q[2 + l]
     if with_bias:
-        v[0] = -th1a * th1b
+        v[0] = -th1d * th1d
         for k in range(n1):
-            v[1 + k] = -1j * th1a * th1b * Q[2 + k] - (th1a * Qb[2 + k] + th1b * Qa[2 + k])
+            v[1 + k] = -1j * th1d * th1d * Q[2 + k] - 2.0 * th1d * Qd[2 + k]
         for b in range(1 + n1):
             acc = 0.0 + 0.0j
             for g in range(1 + n1):
@@ -359,11 +355,10 @@ def mass_bias_into(d, Q, Qa, Qb, M, h, ws, with_bias=True):
     if not with_bias:
         return
     # velocity-product accelerations: link-1 tip (centripetal + Coriolis) and link 2.
-    v[0] = eg * (-th1a * th1b * (d.L1 + 1j * w1e) - (th1a * w1eb + th1b * w1ea))
-    v[1] = -alpha_a * alpha_b
+    v[0] = eg * (-th1d * th1d * (d.L1 + 1j * w1e) - 2.0 * th1d * w1ed)
+    v[1] = -alphad * alphad
     for k in range(n2):
-        v[2 + k] = (-1j * alpha_a * alpha_b * Q[2 + n1 + k]
-                    - (alpha_a * Qb[2 + n1 + k] + alpha_b * Qa[2 + n1 + k]))
+        v[2 + k] = -1j * alphad * alphad * Q[2 + n1 + k] - 2.0 * alphad * Qd[2 + n1 + k]
     for b in range(2 + n2):
         acc = 0.0 + 0.0j
         for g in range(2 + n2):
@@ -382,7 +377,7 @@ def mass_bias_into(d, Q, Qa, Qb, M, h, ws, with_bias=True):
 @njit(cache=True, inline="always")
 def bias_forces_into(d, Q, Qd, h, ws):
     """h = C(Q,Q̇) Q̇ + D Q̇ + K Q into ``h``, and M(Q) into ws.M."""
-    mass_bias_into(d, Q, Qd, Qd, ws.M, h, ws)
+    mass_bias_into(d, Q, Qd, ws.M, h, ws)
     n = h.shape[0]
     for i in range(2, n):  # K and D vanish on the joint rows/columns
         s = 0.0
