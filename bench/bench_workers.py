@@ -5,7 +5,14 @@ reduced runs, `flexarm verify` on the truth plant, and each worker's peak memory
   and 2 workers, paired repeats: the speed-up, median and minimum.  Also the same
   command on a one-run campaign: the command's fixed start (imports, loading the compiled
   kernels, checking the scenarios, starting the workers, exporting), which no number of
-  workers shortens and which bounds the speed-up (Amdahl).
+  workers shortens and which bounds the speed-up (Amdahl).  Beside it, the floor of any
+  such start: a fresh interpreter importing only the libraries a reduced run needs (no
+  flexarm code), and the bound it would set; and the same campaign with 50 s runs (ten
+  times the work, the same start).  For both campaigns with 2 workers, the CPU seconds
+  of the workers and of the command itself: after its serial start, the command's own
+  work (storing each run's file) competes with the two workers for the 2 cores, which
+  bounds the wall time below by the start plus half of what remains (a prediction from
+  medians of separate runs, not a strict bound).
 - ``flexarm verify --mode estimate`` of 16 truth-plant draws (20 s, PBC + EKF), 1 and 2
   workers: the verdict workload, where each run is long.
 - ``flexarm campaign`` of 8 × 20 s truth-plant runs with 2 workers: the peak resident
@@ -16,6 +23,7 @@ Targets (issue 24): 2 workers ≥ 1.7× one, for the campaign and for verify.
 """
 from __future__ import annotations
 
+import json
 import os
 import statistics
 import subprocess
@@ -29,6 +37,9 @@ from _workloads import REDUCED_48, TRUTH_8
 
 ROOT = Path(__file__).resolve().parent.parent
 REPEATS = 5
+LIBRARIES = "import numpy, numba, scipy.linalg, scipy.optimize, scipy.signal"
+LONG_RUNS = REDUCED_48.replace("duration = 5.0", "duration = 50.0")
+assert LONG_RUNS != REDUCED_48
 ONE_RUN = """name = "bench-one"
 [scenario]
 duration = 5.0
@@ -51,6 +62,60 @@ def flexarm(*args: str, poll=None) -> float:
     if proc.returncode != 0:
         raise SystemExit(f"flexarm {' '.join(args)} exited {proc.returncode}:\n{err[-2000:]}")
     return seconds
+
+
+CPU_SPLIT = """
+import json, resource, sys
+from validation.cli import main
+try:
+    main(sys.argv[1:])
+finally:
+    own, kids = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+    print(json.dumps([own.ru_utime + own.ru_stime, kids.ru_utime + kids.ru_stime]), file=sys.stderr)
+"""
+
+
+def cpu_split(*args: str) -> tuple[float, float]:
+    """CPU seconds of ``flexarm ARGS``: (the command's own process, its workers)."""
+    done = subprocess.run([sys.executable, "-c", CPU_SPLIT, *args, "--no-progress"], cwd=ROOT,
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"flexarm {' '.join(args)} exited {done.returncode}:\n"
+                         f"{done.stderr[-2000:]}")
+    own, workers = json.loads(done.stderr.strip().splitlines()[-1])
+    return own, workers
+
+
+def cpu_row(what: str, spec: Path, one_worker: float, start: tuple[float, float]) -> dict:
+    """The CPU split of campaign ``spec`` with 2 workers and the speed-up it allows: the
+    command's fixed start (``start``: its wall and own CPU seconds, from a one-run
+    campaign) is serial; after it, the workers and the rest of the command's own work
+    (storing the runs) share 2 cores."""
+    with tempfile.TemporaryDirectory() as tmp:
+        own, workers = cpu_split("campaign", str(spec), "--out", tmp, "--workers", "2")
+    start_wall, start_cpu = start
+    floor = start_wall + (workers + own - start_cpu) / 2
+    return {"what": f"  {what}: CPU s with 2 workers", "two_workers_s": floor,
+            "note": f"workers {workers:.2f} s, the command {own:.2f} s ({start_cpu:.2f} s "
+                    f"of it its start): wall >= {floor:.2f} s on 2 cores, which predicts "
+                    f"{one_worker / floor:.2f}x"}
+
+
+def bare_start(repeats: int) -> float:
+    """Median wall seconds of a fresh interpreter importing `LIBRARIES`."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", LIBRARIES], check=True)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def bound(start: float, one_worker: float, fixed: float) -> float:
+    """The most 2 workers can gain (Amdahl) when a command whose work alone takes
+    ``one_worker - fixed`` on one worker starts in ``start`` seconds."""
+    work = one_worker - fixed
+    return (start + work) / (start + work / 2)
 
 
 def paired(make_args, repeats: int) -> dict[int, list[float]]:
@@ -84,7 +149,7 @@ def main(repeats: int = REPEATS) -> None:
     with tempfile.TemporaryDirectory() as spec_dir:
         spec = Path(spec_dir)
         for name, text in (("c48.toml", REDUCED_48), ("c1.toml", ONE_RUN),
-                           ("truth.toml", TRUTH_8)):
+                           ("long.toml", LONG_RUNS), ("truth.toml", TRUTH_8)):
             (spec / name).write_text(text)
         flexarm("campaign", str(spec / "c1.toml"), "--out", str(spec / "warm"))  # kernels
         start = paired(lambda tmp: ("campaign", str(spec / "c1.toml"), "--out", str(tmp)),
@@ -99,9 +164,27 @@ def main(repeats: int = REPEATS) -> None:
                      "speedup": statistics.median(ratios), "speedup_min": min(ratios),
                      **target(statistics.median(ratios), ">=", 1.7),
                      "note": f"fixed start {fixed:.2f} s of {serial:.2f} s: at most "
-                             f"{serial / (fixed + (serial - fixed) / 2):.2f}x with 2 workers"})
+                             f"{bound(fixed, serial, fixed):.2f}x with 2 workers"})
         rows.append({"what": "  its fixed start (a one-run campaign)", "one_worker_s": fixed,
                      "two_workers_s": statistics.median(start[2])})
+        floor = bare_start(repeats)
+        rows.append({"what": "  floor: python importing the libraries only", "one_worker_s": floor,
+                     "note": f"{LIBRARIES[7:]}; a start this short would allow at most "
+                             f"{bound(floor, serial, fixed):.2f}x"})
+        with tempfile.TemporaryDirectory() as tmp:
+            start_cpu = cpu_split("campaign", str(spec / "c1.toml"), "--out", tmp,
+                                  "--workers", "2")[0]
+        rows.append(cpu_row("48 x 5 s", spec / "c48.toml", serial, (fixed, start_cpu)))
+        long = paired(lambda tmp: ("campaign", str(spec / "long.toml"), "--out", str(tmp)),
+                      repeats)
+        ratios = [a / b for a, b in zip(long[1], long[2])]
+        rows.append({"what": "campaign 48 x 50 s reduced, CLI (10x the work)",
+                     "one_worker_s": statistics.median(long[1]),
+                     "two_workers_s": statistics.median(long[2]),
+                     "speedup": statistics.median(ratios), "speedup_min": min(ratios),
+                     "note": "the same fixed start"})
+        rows.append(cpu_row("48 x 50 s", spec / "long.toml", statistics.median(long[1]),
+                            (fixed, start_cpu)))
         verify = paired(lambda tmp: ("verify", "campaigns/robust.toml", "--mode", "estimate",
                                      "--system", "pbc+ekf", "--samples", "16",
                                      "--out", str(tmp)), max(1, repeats // 2))
