@@ -177,9 +177,9 @@ def unpack_workspace(ints, wc, wr):
 
 # --- kinematic coefficients ------------------------------------------------------------
 # The dense path (`mass_matrix_into`, `coriolis_matrix_into` and their helpers) is inlined
-# into its callers, as `mass_bias_into` is: a call that is not inlined passes the model and
-# workspace namedtuples field by field, which cost 2.4x the arithmetic of C (dense C
-# ~680 -> ~280 ns per call, `bench/bench_reduced_model.py`).
+# into its callers, as `mass_bias_into` is: calls that are not inlined pass the model and
+# workspace namedtuples field by field, which more than doubled the cost of forming C
+# (~680 instead of ~290 ns per call, `bench/bench_reduced_model.py`).
 @njit(cache=True, inline="always")
 def _fill_coefficients(d, Q, Qd, ws):
     """A_i[row, β] = coefficient of b_β in ∂z_i/∂Q_row, and its time derivative Ȧ_i."""
