@@ -68,7 +68,7 @@ CPU_SPLIT = """
 import json, resource, sys
 from validation.cli import main
 try:
-    main(sys.argv[1:])
+    raise SystemExit(main(sys.argv[1:]))
 finally:
     own, kids = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
     print(json.dumps([own.ru_utime + own.ru_stime, kids.ru_utime + kids.ru_stime]), file=sys.stderr)
