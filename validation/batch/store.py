@@ -164,6 +164,22 @@ def _sqlite_errors(method):
     return wrapper
 
 
+def _set_wal(db: sqlite3.Connection) -> None:
+    """Switch ``db`` to a WAL journal.  SQLite refuses the switch with SQLITE_BUSY at once,
+    without its busy handler, while another connection is making the same switch (two
+    commands creating one folder together: 2 in 5 such starts failed), so it is retried
+    here until `_BUSY_TIMEOUT`."""
+    deadline = time.monotonic() + _BUSY_TIMEOUT
+    while True:
+        try:
+            db.execute("PRAGMA journal_mode=WAL")
+            return
+        except sqlite3.OperationalError as exc:
+            if exc.sqlite_errorname != "SQLITE_BUSY" or time.monotonic() > deadline:
+                raise
+            time.sleep(0.005)
+
+
 class ResultStore:
     """Reads and writes one results folder (created on the first write)."""
 
@@ -204,7 +220,7 @@ class ResultStore:
         existed = self.exists()
         db = sqlite3.connect(self.index_path, timeout=_BUSY_TIMEOUT, isolation_level=None)
         try:
-            db.execute("PRAGMA journal_mode=WAL")
+            _set_wal(db)
             # NORMAL: a transaction is durable once the WAL is checkpointed; an
             # application crash never loses a committed run, a power cut may lose the
             # last ones (they are then redone on resume: their files fail verification).
