@@ -1,16 +1,23 @@
-# Two commands matter: `make demo` and `make test`.  Both bootstrap .venv from PyPI.
+# Two commands matter: `make demo` and `make test`.  Both bootstrap .venv from PyPI with
+# the pinned set in constraints.txt (every package, transitive ones, pip and setuptools
+# included); `make lock` regenerates it from what PyPI serves today, `make test-latest`
+# runs the tests against that newest set without touching .venv.
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PYTEST := $(BIN)/python -m pytest
+EXTRAS := test,cluster
+PINS   := constraints.txt
 
-.PHONY: demo test test-all bench clean
+.PHONY: demo test test-all test-latest lock bench clean
 
-$(STAMP): pyproject.toml
+# pip and setuptools first (pinned), then the project against the venv's own setuptools
+# (no build isolation: the build backend is pinned too).
+$(STAMP): pyproject.toml $(PINS)
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,cluster]'
+	$(BIN)/python -m pip install --quiet -c $(PINS) pip setuptools
+	$(BIN)/python -m pip install --quiet -c $(PINS) --no-build-isolation -e '.[$(EXTRAS)]'
 	touch $(STAMP)
 
 # The main job: the paper's scenario on both plants, its claims table and the report.
@@ -27,9 +34,31 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(PYTEST) -m "slow or not slow" || { rc=$$?; [ $$rc -ne 5 ] || echo "make test-all: pytest collected no tests"; exit $$rc; }
 
+# The suite against the newest releases PyPI serves (no pins), in its own .venv-latest:
+# drift is seen here before a user meets it.  It prints the versions it tested.
+test-latest:
+	rm -rf .venv-latest
+	$(PYTHON) -m venv .venv-latest
+	.venv-latest/bin/python -m pip install --quiet --upgrade pip setuptools
+	.venv-latest/bin/python -m pip install --quiet --upgrade --no-build-isolation -e '.[$(EXTRAS)]'
+	.venv-latest/bin/python -m pip freeze --exclude-editable | tr '\n' ' '; echo
+	.venv-latest/bin/python -m pytest
+
+# Regenerate the pins: a fresh environment with the newest releases of everything the
+# project needs (pyproject.toml's ranges), frozen.  Commit the result after `make test`.
+lock:
+	rm -rf .venv-lock
+	$(PYTHON) -m venv .venv-lock
+	.venv-lock/bin/python -m pip install --quiet --upgrade pip setuptools
+	.venv-lock/bin/python -m pip install --quiet --no-build-isolation '.[$(EXTRAS)]'
+	{ echo "# Every package make demo / make test install, pinned (regenerate: make lock)."; \
+	  echo "# $$(.venv-lock/bin/python --version), $$(date -u +%Y-%m-%d)"; \
+	  .venv-lock/bin/python -m pip freeze --all --exclude flexarm-validation; } > $(PINS)
+	rm -rf .venv-lock build
+
 bench: $(STAMP)
 	for script in bench/bench_*.py; do $(BIN)/python $$script || exit 1; done
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache bench/results
+	rm -rf $(VENV) .venv-latest .venv-lock build *.egg-info .pytest_cache bench/results
 	find . -name __pycache__ -prune -exec rm -rf {} +

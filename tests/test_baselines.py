@@ -104,3 +104,22 @@ def test_results_that_are_not_a_results_folder_are_refused(tmp_path):
                            "--results", str(tmp_path / "nowhere"), "--only", "pbc-*"],
                           capture_output=True, text=True)
     assert proc.returncode == 2 and "--results" in proc.stderr and "not a results folder" in proc.stderr
+
+
+def test_a_bound_keeps_the_metric_precision_clear_of_its_value():
+    """Known bad (issue 30): a frequency-gap bound set at 1.25 × 9.3e-9 failed on a machine
+    that computed 8.5e-8; the FE eigenvalues carry ~2e-7 of round-off.  A bound now stands
+    at least the metric's precision above the value, and a re-measurement within that
+    precision of the stored value is no change, while one beyond it is."""
+    from validation.verdicts.baselines import proposed_bounds, updated_bound
+    gap = next(c for c in BASELINES.checks if c.kind == "frequency")
+    assert gap.precision == 1e-6
+    assert updated_bound(gap, 9.3e-9, BASELINES) >= 9.3e-9 + 1e-6 * (1 - 1e-3)
+    stored = dataclasses.replace(gap, measured=9.3e-9, bound=updated_bound(gap, 9.3e-9, BASELINES))
+    other_machine = proposed_bounds([{"check": stored, "value": 8.5e-8}], BASELINES)[gap.name]
+    assert not other_machine["changed"] and stored.passes(8.5e-8)
+    regressed = proposed_bounds([{"check": stored, "value": 5e-6}], BASELINES)[gap.name]
+    assert regressed["changed"] and regressed["looser"] and not stored.passes(5e-6)
+    # A run metric far above its precision keeps the relative policy (25 %).
+    track = next(c for c in BASELINES.checks if c.name == "pbc-tracking-reduced")
+    assert updated_bound(track, 0.01, BASELINES) == 0.0125

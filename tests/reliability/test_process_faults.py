@@ -6,6 +6,7 @@ workers.
 
 One campaign holds every fault and is run once per worker count (module fixtures); each
 fault is then its own test on the stored results."""
+import math
 import subprocess
 import sys
 import textwrap
@@ -45,8 +46,8 @@ FAULTS = textwrap.dedent('''
                 if self.fault == "sleep":
                     while True:
                         time.sleep(1.0)
-                if self.fault == "hoard":  # 64 MiB more at every sample
-                    _hoard.append(np.ones(8 << 20))
+                if self.fault == "hoard":  # 64 MiB more address space at every sample
+                    _hoard.append(np.empty(8 << 20))
             n = x.shape[0] // 2
             theta_d, dtheta_d, _ = ref(t)
             return 30.0 * (theta_d - x[:2]) + 18.0 * (dtheta_d - x[n:n + 2])
@@ -58,15 +59,26 @@ EXPECTED = {
     "os._exit": "the worker exited with status 0 during the run",
     "segfault": "the worker was killed by signal 11 (SIGSEGV) during the run",
     "KeyboardInterrupt": "KeyboardInterrupt raised during the run (not a Ctrl-C)",
-    "sleep": "no result after 8 s",
+    "sleep": "no result after {timeout} s",
     "hoard": "exceeded the memory limit of 2048 MiB",
 }
 GOOD_RUNS = 4
-#: Far beyond the ~0.05 s a healthy 0.5 s run takes, even on a busy machine.
-RUN_TIMEOUT = "8"
 #: An idle worker takes ~650 MiB of address space; the hoarding law passes 2 GiB in ~25
 #: samples.
 MEMORY_LIMIT = "2048"
+
+
+def run_timeout() -> int:
+    """The campaign's time limit [s], from what its costliest run that must not reach it
+    costs on this machine now: the hoarding law reaching the memory limit, timed in a
+    fresh Python (its start included).  The limit is on address space, so the law takes it
+    untouched (`np.empty`): filling 2 GiB with ones cost 5.4 s of page faults on a quiet
+    machine and more under load, where a fixed 8 s raced it.  Ten times the cost, at least
+    8 s (160 times the ~0.05 s of a healthy 0.5 s run)."""
+    fill = f"import numpy as np; h = [np.empty(8 << 20) for _ in range({MEMORY_LIMIT} // 64)]"
+    started = time.perf_counter()
+    subprocess.run([sys.executable, "-c", fill], check=True)
+    return max(8, math.ceil(10 * (time.perf_counter() - started)))
 
 
 def campaign_text() -> str:
@@ -108,11 +120,12 @@ def lab(tmp_path_factory):
 @pytest.fixture(scope="module", params=["1", "2"], ids=["serial", "2-workers"])
 def campaign(request, lab):
     """The fault campaign run by the CLI: (workers, exit status, stdout, stderr, rows by
-    name, whether its process group was gone after it)."""
+    name, whether its process group was gone after it, its time limit)."""
     out = lab / f"out-{request.param}"
+    timeout = run_timeout()
     proc = flexarm(lab, "campaign", "faults.toml", "--out", str(out), "--workers",
                    request.param, "--force-workers", "--no-progress",
-                   "--run-timeout", RUN_TIMEOUT, "--memory-limit", MEMORY_LIMIT)
+                   "--run-timeout", str(timeout), "--memory-limit", MEMORY_LIMIT)
     stdout, stderr = proc.communicate(timeout=600)
     gone = wait_gone(proc.pid)
     store = ResultStore(out)
@@ -120,11 +133,11 @@ def campaign(request, lab):
     for r in store.rows():
         rows.setdefault(r.name, []).append(r)
     store.close()
-    return request.param, proc.returncode, stdout, stderr, rows, gone
+    return request.param, proc.returncode, stdout, stderr, rows, gone, timeout
 
 
 def test_the_campaign_outlives_every_fault(campaign):
-    workers, status, stdout, stderr, rows, gone = campaign
+    workers, status, stdout, stderr, rows, gone, _ = campaign
     assert status == 1, stderr  # some runs failed
     assert "Traceback" not in stdout + stderr, stderr
     total = GOOD_RUNS + len(EXPECTED)
@@ -137,10 +150,10 @@ def test_the_campaign_outlives_every_fault(campaign):
 
 @pytest.mark.parametrize("fault", list(EXPECTED))
 def test_a_fault_is_a_failed_run_saying_what_happened(campaign, fault):
-    workers, status, stdout, stderr, rows, gone = campaign
+    workers, status, stdout, stderr, rows, gone, timeout = campaign
     (row,) = rows[f"faults/{fault.replace('_', '').replace('.', '-')}"]
     assert row.status == "failed"
-    assert EXPECTED[fault] in row.message, row.message
+    assert EXPECTED[fault].format(timeout=timeout) in row.message, row.message
     # ... and when: the simulated time (the loop caught it), the wall time into the run
     # (the worker caught it or died), or the limit that stopped it.
     assert any(when in row.message for when in ("at t = ", "s after the run started",
@@ -221,11 +234,13 @@ def test_a_run_past_its_time_limit_is_stopped_on_dask(lab, monkeypatch, tmp_path
                                "controller.options": [{"fault": "sleep"}, {}]}}]}
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None, host="127.0.0.1") as cluster:
-        with make_runner("dask", scheduler=cluster.scheduler_address, run_timeout=5) as dask:
+        timeout = run_timeout()
+        with make_runner("dask", scheduler=cluster.scheduler_address,
+                         run_timeout=timeout) as dask:
             summary = run_campaign(campaign_from_mapping(spec), tmp_path, runner=dask,
                                    progress=False)
     rows = {r.name: r for r in ResultStore(tmp_path).rows()}
     assert (summary.ok, summary.failed) == (1, 1), {n: r.message for n, r in rows.items()}
     assert rows["dask/hangs"].status == "failed"
-    assert "no result after 5 s" in rows["dask/hangs"].message
+    assert f"no result after {timeout} s" in rows["dask/hangs"].message
     assert rows["dask/runs"].status == "ok"

@@ -46,10 +46,18 @@ import argparse  # noqa: E402
 import errno  # noqa: E402
 import sqlite3  # noqa: E402
 
-from ..batch.interrupts import Interrupted, exit_status, signals_interrupt  # noqa: E402
-from ..batch.store import StoreError  # noqa: E402
-from .common import EXIT_FAILED, EXIT_USAGE  # noqa: E402
-from .parser import build_parser  # noqa: E402
+from .system import missing_library  # noqa: E402
+
+try:
+    from ..batch.interrupts import Interrupted, exit_status, signals_interrupt  # noqa: E402
+    from ..batch.store import StoreError  # noqa: E402
+    from .common import EXIT_FAILED, EXIT_USAGE  # noqa: E402
+    from .parser import build_parser  # noqa: E402
+except ImportError as _exc:  # a system library missing: one line naming the fix
+    if not (_is_the_program() and missing_library(_exc)):
+        raise
+    print(f"flexarm: error: {missing_library(_exc)}", file=sys.stderr)
+    sys.exit(2)
 
 __all__ = ["main", "build_parser"]
 
@@ -78,6 +86,10 @@ def _command(args: argparse.Namespace) -> int:
         return args.func(args)
     except (ValueError, StoreError) as exc:  # ConfigError, StoreError: bad input
         return _error(exc, EXIT_USAGE)
+    except ImportError as exc:  # a module imported when first needed
+        if missing_library(exc) is None:
+            raise
+        return _error(missing_library(exc), EXIT_USAGE)
     except RecursionError:  # a structure the checks did not bound
         return _error("input nested too deeply", EXIT_USAGE)
     except SystemExit as exc:  # flexarm's own code never exits from inside a command

@@ -46,6 +46,19 @@ __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updat
            "proposed_bounds", "write_baselines", "DEFAULT_FILE"]
 
 DEFAULT_FILE = Path(__file__).resolve().parents[2] / "baselines.toml"
+#: The numerical precision of each kind of metric (glob of its key, first match): two
+#: machines' values of the same check may differ by this much (BLAS kernels, compilers,
+#: thread counts), so a bound stands at least this far from the value it was set from, and
+#: `update` keeps a stored bound whose measured value moved by less.
+PRECISION = (
+    # Relative FE frequency gap: the FE eigenvalues carry cond(K)·eps ≈ 2e-7 (the axial
+    # modes at 0.5-26 kHz over the 0.63 Hz bending mode give cond ≈ 2e9); measured 9.3e-9
+    # on one machine and 8.5e-8 on another for the same check.
+    ("gap", 1e-6),
+    # Everything a run measures (angles [rad], lengths [m], rates, ratios, ρ): the truth
+    # plant's Newton tolerance is 1e-6; the reduced plant is far more precise.
+    ("*", 1e-6),
+)
 _CHECK_KEYS = {"name", "kind", "scenario", "campaign", "run", "plant", "arm", "initial_state",
                "metric", "op", "bound", "measured", "joints", "theta2", "mode", "margin", "note"}
 
@@ -73,6 +86,12 @@ class Check:
     @property
     def tier(self) -> str:
         return "full" if self.campaign else "short"
+
+    @property
+    def precision(self) -> float:
+        """The numerical precision of this check's metric (`PRECISION`)."""
+        return max(next(p for pattern, p in PRECISION if fnmatch.fnmatch(key, pattern))
+                   for key in self.metric)
 
     def passes(self, value: float) -> bool:
         if not math.isfinite(value):
@@ -241,12 +260,22 @@ def evaluate(baselines: Baselines, *, out: str | Path, tier: str = "short",
 
 
 def updated_bound(c: Check, value: float, baselines: Baselines) -> float:
-    """The margin policy: headroom relative to the measured value plus an absolute floor,
-    rounded to the 4 significant digits the file stores."""
+    """The margin policy: headroom relative to the measured value plus an absolute one, and
+    never less than the metric's numerical precision (`Check.precision`), rounded to the 4
+    significant digits the file stores."""
     rel = baselines.relative if c.margin is None else c.margin
     if c.op == "<=":
-        return _stored(value * (1 + rel) + baselines.absolute)
-    return _stored(value * (1 - rel) - baselines.absolute)
+        return _stored(max(value * (1 + rel) + baselines.absolute, value + c.precision))
+    return _stored(min(value * (1 - rel) - baselines.absolute, value - c.precision))
+
+
+def _within_precision(c: Check, value: float) -> bool:
+    """Whether ``value`` is the stored measurement again, up to the metric's precision,
+    and the stored bound keeps that precision clear of it."""
+    if c.measured is None or abs(value - c.measured) > c.precision:
+        return False
+    headroom = c.bound - c.measured if c.op == "<=" else c.measured - c.bound
+    return headroom >= c.precision * (1 - 1e-3)  # the 4 stored digits round the bound
 
 
 def _stored(value: float) -> float:
@@ -256,12 +285,18 @@ def _stored(value: float) -> float:
 
 def proposed_bounds(rows: list[dict], baselines: Baselines) -> dict[str, dict]:
     """Per measurable check: the policy's bound and measured value at stored precision,
-    whether it differs from the stored bound and whether it is looser.  Comparing at
-    stored precision makes `update` idempotent: a second update changes nothing."""
+    whether it differs from the stored bound and whether it is looser.  A value within the
+    metric's precision of the stored measurement keeps its bound (another machine's
+    round-off is no change), and comparing at stored precision makes `update` idempotent:
+    a second update changes nothing."""
     out = {}
     for r in rows:
         c, value = r["check"], r["value"]
         if not math.isfinite(value):
+            continue
+        if _within_precision(c, value):
+            out[c.name] = {"bound": c.bound, "measured": c.measured, "looser": False,
+                           "changed": False}
             continue
         bound = updated_bound(c, value, baselines)
         looser = bound > c.bound if c.op == "<=" else bound < c.bound
