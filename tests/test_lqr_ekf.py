@@ -250,15 +250,15 @@ def test_lqr_rejects_bad_options(option, value):
 
 def test_lqr_reports_an_undetectable_design():
     # Table 1 has no damping: with no weight on q, q̇ its undamped modes are invisible to
-    # the cost and stay on the unit circle (computed 1 − |z| = ±1e-9: round-off); the
-    # design asks a decay rate ≥ MIN_DECAY_RATE, 1 − |z| ≥ 1e-7 at 1 ms: 100× clear.
+    # the cost and stay on the unit circle (computed 1 − |z| = ±7e-10: round-off); the
+    # design asks a decay rate ≥ MIN_DECAY_RATE, 1 − |z| ≥ 1e-8 at 1 ms: 14× clear.
     with pytest.raises(ValueError, match="^q_q, q_q_dot: no stabilising"):
         GainScheduledLQR(ArmModel(ARMS["table1"], (4, 4)), q_q=0.0, q_q_dot=0.0)
 
 
 def test_lqr_accepts_damped_modes_the_cost_does_not_see():
     # Known good: the same weights on the default arm, whose structural damping decays
-    # every mode at ≥ 0.116 1/s (1 − |z| = 1.16e-4): 1000× above MIN_DECAY_RATE.
+    # every mode at ≥ 0.116 1/s (1 − |z| = 1.16e-4): 10⁴× above MIN_DECAY_RATE.
     lqr = GainScheduledLQR(ArmModel(ARMS["default"], (4, 4)), q_q=0.0, q_q_dot=0.0)
     assert np.all(np.isfinite(lqr.gains)) and np.abs(lqr.gains).max() > 1.0
 
