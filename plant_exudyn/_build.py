@@ -101,14 +101,22 @@ def _rot3(a: float) -> list[list[float]]:
 
 
 def beam_template(mesh: Mesh, *, rho: float, EI: float, damping: float):
-    """The Exudyn beam element (template for `GenerateBeamElementsAlongLine`) of a link."""
-    ea = mesh.axial_stiffness
+    """The Exudyn beam element (template for `GenerateBeamElementsAlongLine`) of a link.
+
+    ``damping`` is the Kelvin–Voigt bending damping d [N m² s] (`ArmParameters`); the
+    material's retardation time β = d / EI damps every strain alike — bending (d), axial
+    (β EA) and, for the geometrically exact beam, shear (β GA) — so every mode of the
+    link, axial ones included, has the damping ratio ζ = π f β (stiffness-proportional).
+    Bending damping alone left the axial modes (0.5–26 kHz) undamped."""
+    ea, beta = mesh.axial_stiffness, damping / EI
     if mesh.element == "ancf":
         return ObjectANCFCable2D(massPerLength=rho, bendingStiffness=EI, axialStiffness=ea,
-                                 bendingDamping=damping)
+                                 bendingDamping=damping, axialDamping=beta * ea)
+    ga = 0.4 * ea
     return ObjectBeamGeometricallyExact2D(
         massPerLength=rho, crossSectionInertia=rho * EI / ea, bendingStiffness=EI,
-        axialStiffness=ea, shearStiffness=0.4 * ea, bendingDamping=damping)
+        axialStiffness=ea, shearStiffness=ga, bendingDamping=damping,
+        axialDamping=beta * ea, shearDamping=beta * ga)
 
 
 def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),

@@ -13,6 +13,7 @@ from reduced_model._plant_interface import TRUTH_EXTRAS, true_state_from_vector
 
 from ._build import ArmSystem, Mesh, build_arm
 from ._fields import LinkField, link_readout
+from ._hold import ExactHold
 from ._modal import natural_frequencies
 
 __all__ = ["ExudynPlant", "simulation_settings"]
@@ -55,7 +56,7 @@ class ExudynPlant:
     mesh : Mesh
         Beam element type and elements per link (default: ANCF, 4 per link).
     step : float
-        Time step [s] of the generalised-α integrator (default 1 ms; each control period
+        Time step [s] of the generalised-α integrator (default 0.5 ms; each control period
         must be a whole number of steps).  The solver is initialised once per `reset`
         and advanced period by period: identical to a continuous run.
     modal_basis : (LinkModes, LinkModes), optional
@@ -69,6 +70,11 @@ class ExudynPlant:
     newton_tolerance : float
         Absolute and relative Newton tolerance (default 1e-6; ANCF round-off makes much
         smaller absolute tolerances unreachable: the solver then fails).
+    exact_hold : bool
+        Apply each period's loads as an exact zero-order hold (default; `ExactHold`:
+        second order in the step).  False gives Exudyn's own treatment of a load that
+        jumps at a step boundary, first order in the step: kept as the known-bad
+        reference of the tests and benchmarks.
 
     Coordinates: θ1 is hub 1's angle; θ2 is hub 2's angle relative to the tangent of
     link 1 at its tip (what a motor-2 encoder reads).  q, q̇ are the mass-weighted
@@ -78,13 +84,13 @@ class ExudynPlant:
     name = "exudyn"
 
     def __init__(self, params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
-                 step: float = 1e-3, modal_basis: tuple[LinkModes, LinkModes] | None = None,
+                 step: float = 5e-4, modal_basis: tuple[LinkModes, LinkModes] | None = None,
                  sensors: SensorConfig = SensorConfig(), spectral_radius: float = 0.9,
-                 newton_tolerance: float = 1e-6) -> None:
+                 newton_tolerance: float = 1e-6, exact_hold: bool = True) -> None:
         if not (np.isfinite(step) and step > 0.0):
             raise ValueError(f"step must be a positive number of seconds, got {step!r}")
-        if not 0.0 <= spectral_radius <= 1.0:
-            raise ValueError(f"spectral_radius must be in [0, 1], got {spectral_radius!r}")
+        if not 0.0 < spectral_radius <= 1.0:
+            raise ValueError(f"spectral_radius must be in (0, 1], got {spectral_radius!r}")
         self.params = params if params is not None else ArmParameters()
         self.mesh = mesh
         self.h = float(step)
@@ -97,6 +103,15 @@ class ExudynPlant:
         self.settings = simulation_settings(step=self.h, spectral_radius=spectral_radius,
                                             newton_tolerance=newton_tolerance)
         self.solver = exu.MainSolverImplicitSecondOrder()
+        l1, l2, l2r = self.system.loads
+        tip = self.system.tip_load
+        self.hold = ExactHold(
+            self.system.mbs, self.settings, self.h,
+            [[(l1, (0, 0, 1))], [(l2, (0, 0, 1)), (l2r, (0, 0, -1))], [(tip, (1, 0, 0))],
+             [(tip, (0, 1, 0))]],
+            [n for link in self.system.links for n in link.nodes]
+            if self.system.element == "ancf" else []) if exact_hold else None
+        self._applied = np.zeros(4)  # the loads held now: τ1, τ2, Fx, Fy
         self._index_state()
         self._readout = new_readout(self.system.element == "ancf", *self._joint_arrays(),
                                     *self.fields[0].compiled(), *self.fields[1].compiled())
@@ -106,7 +121,6 @@ class ExudynPlant:
         self._steps = 0
         self.time = 0.0
         self._cache = None  # state readout of the current step (see _read)
-        self._tip_force = (0.0, 0.0)
         # Bound once: the loop advances and reads the plant every sample.
         self._set_load = self.system.mbs.SetLoadParameter
         self._iteration = self.solver.it
@@ -152,7 +166,7 @@ class ExudynPlant:
         sd.SetODE2Coordinates_t(v, configuration=cfg)
         for load in (*self.system.loads, self.system.tip_load):
             self.system.mbs.SetLoadParameter(load, "loadVector", [0.0, 0.0, 0.0])
-        self._tip_force = (0.0, 0.0)
+        self._applied[:] = 0.0
         self.settings.timeIntegration.startTime = 0.0
         if not self.solver.InitializeSolver(self.system.mbs, self.settings):
             raise PlantFailure(f"Exudyn could not initialise the solver: "
@@ -177,17 +191,9 @@ class ExudynPlant:
         if len(tau) != 2:
             raise ValueError("the Exudyn plant has two actuators: tau must have 2 values, "
                              f"got {len(tau)}")
-        t1, t2 = float(tau[0]), float(tau[1])
-        set_load, (l1, l2, l2r) = self._set_load, self.system.loads
-        set_load(l1, "loadVector", [0.0, 0.0, t1])
-        set_load(l2, "loadVector", [0.0, 0.0, t2])
-        set_load(l2r, "loadVector", [0.0, 0.0, -t2])
-        if tip_force is not None or self._tip_force != (0.0, 0.0):
-            force = (0.0, 0.0) if tip_force is None else (float(tip_force[0]),
-                                                           float(tip_force[1]))
-            if force != self._tip_force:
-                set_load(self.system.tip_load, "loadVector", [force[0], force[1], 0.0])
-                self._tip_force = force
+        fx, fy = (0.0, 0.0) if tip_force is None else (float(tip_force[0]),
+                                                       float(tip_force[1]))
+        self.hold_loads(float(tau[0]), float(tau[1]), fx, fy)
         self._steps += self._Ts_nsteps[1]
         self._cache = self._truth = None
         self._iteration.endTime = self._steps * self.h
@@ -196,6 +202,26 @@ class ExudynPlant:
             raise PlantFailure(f"Exudyn solver failed at t = {self._iteration.currentTime:.6g} "
                                f"s: {msg.strip()}")
         self.time = self._steps * self.h
+
+    def hold_loads(self, t1: float, t2: float, fx: float = 0.0, fy: float = 0.0) -> None:
+        """Hold joint torques ``t1``, ``t2`` [N m] and the payload force (``fx``, ``fy``)
+        [N] from now on: set the loads that changed and, with the exact hold, restart the
+        next step from the accelerations they give (`ExactHold`)."""
+        new = (t1, t2, fx, fy)
+        applied = self._applied
+        if self.hold is not None and (new[0] != applied[0] or new[1] != applied[1]
+                                      or new[2] != applied[2] or new[3] != applied[3]):
+            self.hold.apply((new[0] - applied[0], new[1] - applied[1],
+                             new[2] - applied[2], new[3] - applied[3]))
+        set_load, (l1, l2, l2r) = self._set_load, self.system.loads
+        if t1 != applied[0]:
+            set_load(l1, "loadVector", [0.0, 0.0, t1])
+        if t2 != applied[1]:
+            set_load(l2, "loadVector", [0.0, 0.0, t2])
+            set_load(l2r, "loadVector", [0.0, 0.0, -t2])
+        if fx != applied[2] or fy != applied[3]:
+            set_load(self.system.tip_load, "loadVector", [fx, fy, 0.0])
+        applied[:] = new
 
     def measure(self) -> Measurement:
         """The measurement now."""

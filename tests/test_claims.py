@@ -294,3 +294,16 @@ def test_mesh_check_marks_table1_not_converged_and_the_default_arm_converged(mes
     alone = claim_columns([r for r in rows if r.sweep != "mesh-check"])
     assert {v.verdict for c in alone for v in c.verdicts.values()} <= {
         "mesh not checked", "n/a", "not run"}
+
+
+def test_richardson_gives_the_order_and_the_error_of_a_refined_sequence():
+    """Known good: a second-order sequence f(h) = 1 + 3h² at h = 1, 1/2, 1/4 gives order 2
+    and the nominal value's true error 3; known bad: a sequence that has not settled (its
+    differences change sign) gives no order, and its spread as the error."""
+    from validation.verdicts.mesh import richardson
+    order, error = richardson(4.0, 1.75, 1.1875)
+    assert order == pytest.approx(2.0, abs=1e-12) and error == pytest.approx(3.0, abs=1e-12)
+    order, error = richardson(1.0, 1.2, 0.9)
+    assert math.isnan(order) and error == pytest.approx(0.2)
+    assert richardson(1.0, 1.0, 1.0)[1] == 0.0
+    assert math.isnan(richardson(1.0, 1.1)[0]) and richardson(1.0, 1.1)[1] == pytest.approx(0.1)

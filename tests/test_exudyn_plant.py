@@ -235,7 +235,7 @@ def test_bad_steps():
     plant = ExudynPlant()
     plant.reset()
     with pytest.raises(ValueError, match="not a whole multiple"):
-        plant.step([0.0, 0.0], 1.5e-3)
+        plant.step([0.0, 0.0], 1.25e-3)  # 2.5 steps of 0.5 ms
     with pytest.raises(ValueError, match="two actuators"):
         plant.step(np.zeros(6), 1e-3)
     with pytest.raises(ValueError, match="state0 must be 12"):

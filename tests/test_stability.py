@@ -3,6 +3,7 @@ import math
 from types import SimpleNamespace
 
 from validation.report.verdict_tables import stability_rows
+from validation.run.metrics import all_metrics
 from validation.verdicts import stability
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 
@@ -32,9 +33,9 @@ def test_a_small_map_finds_the_table1_limit(tmp_path, monkeypatch):
     assert again["table1"].tested == t1.tested
 
 
-def _row(status: str, track: float = 0.01, message: str = ""):
+def _row(status: str, track: float = 0.01, message: str = "", metrics: dict | None = None):
     return SimpleNamespace(status=status, message=message,
-                           metrics={"track_max_1": track, "track_max_2": track / 2})
+                           metrics=metrics or {"track_max_1": track, "track_max_2": track / 2})
 
 
 def test_lost_tracking_without_divergence_is_not_called_unstable():
@@ -91,28 +92,44 @@ def test_a_stability_campaign_with_a_solver_failure_exits_1(tmp_path, monkeypatc
     assert "FAILED at 1 ms" in text
 
 
-def test_a_truth_plant_limit_that_moves_with_the_time_step_is_not_converged(tmp_path,
-                                                                            monkeypatch):
-    """Known bad: the PBC fed the true state on the default arm is stable at 3.55 ms with
-    Exudyn stepping at Ts/4 (0.89 ms) and diverges with a quarter of that step (at 0.13 s:
-    the step damps the FE modes above ~50 Hz that carry part of the joint mobility), so
-    its limit is "not converged".  Known good: the PD's limit (largest stable 1 ms, first
-    divergence 3.55 ms) keeps both outcomes with the finer step and on both check meshes."""
-    monkeypatch.setattr(stability, "GRID", (1e-3, 3.55e-3))
-    monkeypatch.setattr(stability, "BISECTIONS", 0)
-    monkeypatch.setattr(stability, "DURATION", 1.0)  # the finer step diverges by 0.2 s
-    scenarios = [scenario_from_mapping({"observer": {"kind": "none"}}),
-                 scenario_from_mapping({"controller": {"kind": "pd"}})]
-    cases = stability.cases_from_scenarios(scenarios, plants=["exudyn"], arms=["default"])
+def test_a_limit_that_moves_under_refinement_is_mapped_again_finer(tmp_path, monkeypatch):
+    """The PBC fed the true state on the default arm's truth plant, started on a mesh too
+    coarse for it (ANCF 1 el/link: the FE prediction is 3.04 ms, against 2.725 at ANCF 2
+    and 2.738 at ANCF 4 and 8).  Known bad: on ANCF 1 its bracket is [2.82, 3.16] ms, and
+    2.82 ms diverges on the refined sequence: not converged.  One level finer (ANCF 2, half
+    the step) 2.82 ms is still stable (marginal there: growth −0.06 1/s) and diverges on
+    ANCF 4 with a quarter of the step: not converged either.  Two levels finer (ANCF 4, a
+    quarter of the step) the bracket [2.51, 2.82] ms keeps its outcomes on ANCF 8 and 16
+    (half and a quarter of that step) and on GE 32, and contains the converged FE
+    prediction, 2.738 ms (exact ZOH eigenvalues of the FE linearisation)."""
+    monkeypatch.setattr(stability, "GRID", (2e-3, 5e-3))
+    base = scenario_from_mapping({"observer": {"kind": "none"},
+                                  "plant": {"kind": "exudyn",
+                                            "mesh": {"elements_per_link": [1, 1]}}})
+    cases = stability.cases_from_scenarios([base], plants=["exudyn"], arms=["default"])
     results, summary = stability.stability_map(cases, tmp_path, progress=False)
     assert summary.failed == 0
-    by_case = {r.case.label: r for r in results}
-    pbc, pd = by_case["pbc"], by_case["pd"]
-    assert pbc.divergence.largest == 3.55e-3  # on the case's own step
-    assert pbc.mesh_converged is False
-    assert "at 3.55 ms stable, ANCF 4 el/link, step/4 diverged" in pbc.mesh
-    assert pd.divergence.largest == 1e-3 and pd.divergence.first_bad == 3.55e-3
-    assert pd.mesh_converged is True and "step/4" in pd.mesh
-    row = {r["case"]: r for r in stability_rows(results)}
-    assert "not converged" in row["pbc"]["no_divergence"]
-    assert "not converged" not in row["pd"]["no_divergence"]
+    (pbc,) = results
+    assert pbc.case.level == 2 and pbc.mesh_converged is True, pbc.mesh
+    assert pbc.discretisation.startswith("ANCF 4 el/link")
+    low, high = pbc.divergence.largest, pbc.divergence.first_bad
+    assert low < 2.738e-3 < high and high / low < 1.15, (low, high)
+    assert low < pbc.predicted < high  # the prediction on ANCF 4: 2.738 ms
+    level0 = stability.load_stability(tmp_path, cases=cases)
+    assert level0[0].mesh_converged is False and level0[0].divergence.largest > 2.8e-3
+
+
+def test_a_growing_run_is_diverging_before_it_leaves_the_bounds():
+    """Known bad: the default arm's PBC at 2.76 ms on the truth plant (limit 2.738 ms)
+    grows at +4 1/s and is still inside the divergence bounds after 1 s; known good: at
+    2.6 ms its fastest motion decays."""
+    from validation.run.loop import run_scenario
+    outcomes = {}
+    for Ts in (2.6e-3, 2.76e-3):
+        result = run_scenario(scenario_from_mapping({
+            "plant": {"kind": "exudyn", "step": Ts / 6}, "Ts": Ts, "duration": 1.0,
+            "transient": 0.5, "initial_state": "reference", "observer": {"kind": "none"}}))
+        assert result.status == "ok"
+        outcomes[Ts] = stability.outcome(_row("ok", metrics=all_metrics(result)))
+    assert outcomes[2.6e-3][0] == "stable", outcomes
+    assert outcomes[2.76e-3][0] == "diverged" and "growing" in outcomes[2.76e-3][1], outcomes

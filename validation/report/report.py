@@ -227,8 +227,11 @@ def _mesh_table(runs) -> dict | None:
         values = [text(by_label[label], unit) if label in by_label else "" for label in labels]
         verdict = {True: "converged" if r.claim else "same outcome in every check",
                    False: "not converged", None: "check not run"}[r.converged]
+        estimate = "" if not math.isfinite(r.error) else \
+            f"± {fmt_number(r.error, 2)} {unit}".strip() + (
+                f" (order {r.order:.2g})" if math.isfinite(r.order) else " (order not observed)")
         detail.append([*_identity(r.run)[:2], *_identity(r.run)[3:], _swept(r.run),
-                       r.claim.key if r.claim else "run status", *values, verdict])
+                       r.claim.key if r.claim else "run status", *values, estimate, verdict])
         detail_classes.append({True: "holds", False: "fails", None: ""}[r.converged])
         per_run.setdefault(r.run.run_id, (r.run, []))[1].append((r, values))
     compact, classes = [], []
@@ -244,8 +247,8 @@ def _mesh_table(runs) -> dict | None:
     head = ["name", "arm", "Ts [ms]", "start", "swept values"]
     return {"compact": _table(head + ["verdict", f"moved ({', '.join(labels)})"], compact,
                               classes),
-            "detail": _table(head + ["judged value", *labels, "verdict"], detail,
-                             detail_classes),
+            "detail": _table(head + ["judged value", *labels, "estimated error", "verdict"],
+                             detail, detail_classes),
             "tolerance": f"|a − b| ≤ {MESH_RTOL:.0%} of the larger value + {MESH_ATOL:.0%} "
                          "of the claim's bound"}
 

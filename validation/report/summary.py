@@ -39,13 +39,15 @@ def margin(claim, value: float) -> float:
     return 1.0 - value / claim.bound
 
 
-def value_text(claim, value: float) -> str:
-    """A value in the unit a reader expects: "9.63 mrad", "never"."""
+def value_text(claim, value: float, error: float = math.nan) -> str:
+    """A value in the unit a reader expects, with its estimated discretisation error where
+    one is known: "9.63 mrad", "9.63 ± 0.02 mrad", "never"."""
     if math.isinf(value):
         return "never"
     scale, unit = display_unit(claim.unit)
     unit = "" if unit == "(ratio)" else f" {unit}"
-    return f"{fmt_number(scale * value)}{unit}"
+    plus = f" ± {fmt_number(scale * error, 2)}" if math.isfinite(error) else ""
+    return f"{fmt_number(scale * value)}{plus}{unit}"
 
 
 def _percent(x: float) -> str:
@@ -75,7 +77,7 @@ def verdict_text(claim, v) -> str:
         return v.verdict + (f" ({v.note})" if v.note else "")
     if v.verdict == "not converged":
         return f"not converged ({v.note})"
-    text = f"{value_text(claim, v.value)} — {v.verdict}"
+    text = f"{value_text(claim, v.value, v.error)} — {v.verdict}"
     if v.verdict in ("holds", "fails") and _margin_text(claim, v.value):
         text += f", {_margin_text(claim, v.value)}"
     return text + (f" ({v.note})" if v.note else "")

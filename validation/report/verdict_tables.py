@@ -20,7 +20,8 @@ from ..verdicts.attribution import (DIVERGED_RULE, FACTORS, METRIC_NAMES, METRIC
                                     Attribution, records)
 from ..verdicts.claims import (CLAIMS, SYSTEM, WINDOWS, Column, claim_columns,
                                claims_records)
-from ..verdicts.stability import (BISECTIONS, DURATION, GRID, TRACKING_LIMIT, Limit,
+from ..verdicts.stability import (BISECTIONS, DURATION, GRID, GROWTH_LIMIT, MAX_LEVEL,
+                                  TRACKING_LIMIT, Limit,
                                   StabilityResult)
 from ..verdicts.validity import _GAP_VIEWS
 from .linear_figures import validity_figures
@@ -211,7 +212,8 @@ def stability_rows(results: list[StabilityResult]) -> list[dict]:
                      "predicted": ms(r.predicted),
                      "reason": r.divergence.reason if r.divergence.reason == r.tracking.reason
                      else "; ".join(x for x in (r.tracking.reason, r.divergence.reason) if x),
-                     "mesh": r.mesh or "— (reduced plant)",
+                     "mesh": (f"at {r.discretisation}: {r.mesh}" if r.discretisation
+                              else r.mesh) or "— (reduced plant)",
                      "notes": "; ".join(notes) or "monotone",
                      "no_divergence_s": r.divergence.largest,
                      "first_divergence_s": r.divergence.first_bad,
@@ -225,7 +227,8 @@ def write_stability(results: list[StabilityResult], out) -> str:
     rows = stability_rows(results)
     text = render("stability.md.j2", rows=rows, duration=f"{DURATION:g}",
                   grid=", ".join(f"{1e3 * t:g}" for t in GRID), bisections=BISECTIONS,
-                  limit=f"{TRACKING_LIMIT:g}")
+                  limit=f"{TRACKING_LIMIT:g}", growth=f"{GROWTH_LIMIT:g}",
+                  max_level=MAX_LEVEL)
     out = Path(out)
     write_atomic(out / "stability.md", lambda fh: fh.write(text))
     keys = ["case", "plant", "arm", "no_divergence_s", "first_divergence_s", "tracking_s",

@@ -60,9 +60,9 @@ from reduced_model import ArmParameters
 from .results import RunResult
 
 __all__ = ["tracking", "tip_error", "deflection", "vibration", "vibration_decay",
-           "estimation", "torque", "residual", "convergence_time", "convergence_tolerances",
+           "estimation", "torque", "growth_rate", "residual", "convergence_time", "convergence_tolerances",
            "all_metrics", "vibration_cutoff", "CONVERGENCE_FRACTION", "CONVERGENCE_WINDOW",
-           "CONVERGENCE_NOISE_FACTOR", "PAPER_ANGLE_BOUND", "PAPER_SLOPE_RATE_BOUND",
+           "CONVERGENCE_NOISE_FACTOR", "PAPER_ANGLE_BOUND", "PAPER_SLOPE_RATE_BOUND", "GROWTH_WINDOW", "GROWTH_FLOOR",
            "VIBRATION_CUTOFF", "VIBRATION_WINDOW"]
 
 #: Convergence, states the paper gives no number for: windowed error RMS within this
@@ -77,6 +77,13 @@ CONVERGENCE_NOISE_FACTOR = 1.5
 #: (tip-slope rate) errors at 2e-3 rad/s.
 PAPER_ANGLE_BOUND = 0.02
 PAPER_SLOPE_RATE_BOUND = 2e-3
+#: Window [s] of `growth_rate`: 0.1 s holds ≥ 10 periods of anything a 1-10 ms loop can
+#: make unstable; ten of them in the second half of a 2 s run.
+GROWTH_WINDOW = 0.1
+#: `growth_rate`'s floor: fast motion below 1e-3 of the torques' RMS is not a motion of the
+#: loop (the default arm's PBC at 2.6 ms, stable: 1e-6; at 2.76 ms, growing: 1.4, the
+#: torque's RMS ~1 N m).
+GROWTH_FLOOR = 1e-3
 #: Length [s] of the sliding window of the convergence test (100 samples at 1 kHz: noise
 #: averages out, a real excursion of a few periods of the 34 Hz mode does not).
 CONVERGENCE_WINDOW = 0.1
@@ -323,6 +330,30 @@ def torque(result: RunResult) -> dict[str, float]:
     return out
 
 
+def growth_rate(result: RunResult) -> dict[str, float]:
+    """``growth_rate`` [1/s]: how fast the loop's fastest motion grows over the second half
+    of the run — the slope of log RMS of the torques' second difference Δ²τ (what a
+    sampled loop's instability at or near the Nyquist frequency drives first) per
+    ``GROWTH_WINDOW`` window.  A stable loop's transient decays (< 0), a chattering one
+    holds (≈ 0), an unstable one grows (the default arm's PBC at 2.76 ms: +4 1/s, long
+    before it leaves the divergence bounds).  0 when the last window's Δ²τ is below
+    ``GROWTH_FLOOR`` of the torques' RMS: a smooth torque's Δ²τ ≈ τ̈ Ts² (1e-8 N m at
+    0.2 ms) varies with the reference, not with the loop's stability."""
+    tau = np.vstack([result["tau1"], result["tau2"]]).astype(float)
+    if tau.shape[1] < 3:
+        return {"growth_rate": math.nan}
+    d2, t = np.diff(tau, 2, axis=1), result.time[2:]
+    start = result.time[0] + 0.5 * (result.time[-1] - result.time[0])
+    edges = np.arange(start, t[-1] + 1e-12, GROWTH_WINDOW)
+    rms = np.array([_rms(d2[:, (t >= a) & (t < a + GROWTH_WINDOW)].ravel()) for a in edges[:-1]])
+    if rms.size < 3 or not np.all(np.isfinite(rms)):
+        return {"growth_rate": math.nan}
+    if rms[-1] <= GROWTH_FLOOR * _rms(tau[:, result.time >= start].ravel()):
+        return {"growth_rate": 0.0}  # no fast motion to speak of: a smooth torque
+    return {"growth_rate": float(np.polyfit(edges[:-1], np.log(np.maximum(rms, 1e-300)),
+                                            1)[0])}
+
+
 def residual(result: RunResult) -> dict[str, float]:
     """RMS of the PBC's unrealisable flexible-coordinate forces, per coordinate."""
     return {f"residual_rms_{n.removeprefix('residual_')}": float(_rms(result[n].astype(float)))
@@ -348,7 +379,7 @@ def all_metrics(result: RunResult, transient: float | None = None) -> dict[str, 
             | deflection(result, transient)
             | vibration(result, transient, vibration_cutoff(true_params))
             | estimation(result, transient, model) | tip_slope_rate_error(result, transient, model)
-            | torque(result) | residual(result)
+            | torque(result) | growth_rate(result) | residual(result)
             | {"wall_s": timings.get("wall_s", math.nan),
                "startup_s": timings.get("startup_s", math.nan),
                "realtime_factor": timings.get("realtime_factor", math.nan)})

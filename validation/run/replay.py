@@ -1,8 +1,8 @@
 """The truth plant's floor: Exudyn alone replaying the torques a closed loop applied.
 
 `bare_replay` starts the Exudyn plant of a scenario where the closed loop starts it and,
-for each control period, sets the three joint loads (`SetLoadParameter`) and calls
-`SolveSteps`: nothing else (no law, no readout, no recording unless asked).  It is what
+for each control period, holds the joint torques (`ExudynPlant.hold_loads`: the loads
+and the exact zero-order hold) and calls `SolveSteps`: nothing else (no law, no readout, no recording unless asked).  It is what
 a truth-plant run costs at least (``bench/bench_truth_loop.py`` times the closed loop
 against it) and what the closed loop must reproduce exactly: the loop adds time, never
 physics (tested on θ at every sample).
@@ -56,7 +56,7 @@ def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False
     only at the start of the last one, as the floor should be timed)."""
     plant = fresh_plant(scenario)
     mbs, solver, settings = plant.system.mbs, plant.solver, plant.settings
-    l1, l2, l2r = plant.system.loads
+    hold_loads = plant.hold_loads
     steps_per_period = check_sample_time(scenario.Ts, plant.h)
     periods = torques.shape[0]
     theta = np.empty((periods if record else 1, 2))
@@ -64,10 +64,7 @@ def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False
     for k in range(periods):
         if record or k == periods - 1:
             theta[k if record else 0] = truth_now(plant)[:2]
-        t1, t2 = float(torques[k, 0]), float(torques[k, 1])
-        mbs.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])
-        mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
-        mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
+        hold_loads(float(torques[k, 0]), float(torques[k, 1]))
         solver.it.endTime = (k + 1) * steps_per_period * plant.h
         if not solver.SolveSteps(mbs, settings):
             raise RuntimeError(f"the bare replay's solver failed in period {k}")

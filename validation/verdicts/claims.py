@@ -12,11 +12,12 @@ the reason and time — a result, not a hole.
 
 A verdict is given only after two checks, in this order (README, *Verdicts*):
 
-1. **Mesh convergence** (truth plant only): the claim's value on the run's mesh and in
-   its checks — two refined meshes and a finer integration step
-   (`validation.verdicts.mesh`) — must agree within the stated tolerance; otherwise the
-   cell is "not converged" with every check's value.  A truth-plant run
-   without stored checks is "mesh not checked".
+1. **Convergence** (truth plant only): the claim's value on the run's mesh and in its
+   checks — the mesh and the step refined together twice, and the other element
+   formulation (`validation.verdicts.mesh`) — must agree within the stated tolerance;
+   otherwise the cell is "not converged" with every check's value.  The value carries
+   the estimated error of the sequence (Richardson).  A truth-plant run without stored
+   checks is "mesh not checked".
 2. **Window family** (claims measured after a transient): the value is measured with the
    transient at each of `WINDOWS` (1–4 s); if the verdict differs within the family the
    cell is "window-sensitive" and says at which transient it flips.
@@ -55,6 +56,8 @@ class Verdict:
     note: str = ""
     windows: tuple = ()
     meshes: tuple = ()
+    error: float = math.nan  # estimated discretisation error of ``value`` (truth plant)
+    order: float = math.nan  # observed order of the refined sequence (NaN: not observed)
 
 
 def column_key(config: dict) -> tuple:
@@ -196,20 +199,23 @@ def evaluate(claim: Claim, stored, checks: dict | None = None, *,
     verdict = claim.judge(value)
     if verdict == "n/a":
         return Verdict(value, verdict, note)
-    meshes: tuple = ()
+    meshes, estimate = (), {}
     if _plant(stored) == "exudyn":
         if not checks:
             return Verdict(value, "mesh not checked", note)
         converged, meshes = _mesh_values(claim, run, checks, cache)
+        order, error = mesh_check.sequence_estimate(stored.config, value, dict(meshes))
+        estimate = {"error": error, "order": order}
         if converged is None:
-            return Verdict(value, "mesh not checked", note, meshes=meshes)
+            return Verdict(value, "mesh not checked", note, meshes=meshes, **estimate)
         if not converged:
-            return Verdict(value, "not converged", _mesh_text(claim, meshes), meshes=meshes)
+            return Verdict(value, "not converged", _mesh_text(claim, meshes), meshes=meshes,
+                           **estimate)
     windows = _window_family(claim, run) if claim.windowed else ()
     if len({v for _, _, v in windows} | {verdict}) > 1:
         note = f"{_flip_note(windows)}; {note}" if note else _flip_note(windows)
-        return Verdict(value, "window-sensitive", note, windows, meshes)
-    return Verdict(value, verdict, note, windows, meshes)
+        return Verdict(value, "window-sensitive", note, windows, meshes, **estimate)
+    return Verdict(value, verdict, note, windows, meshes, **estimate)
 
 
 def claim_columns(runs) -> list[Column]:
@@ -247,6 +253,8 @@ class MeshRow:
     claim: Claim
     converged: bool | None  # None: a check was not run
     values: tuple  # ((mesh label, value or status text), ...)
+    order: float = math.nan  # observed order of the refined sequence (`mesh.richardson`)
+    error: float = math.nan  # estimated error of the nominal value
 
 
 def mesh_rows(runs) -> list[MeshRow]:
@@ -278,7 +286,8 @@ def mesh_rows(runs) -> list[MeshRow]:
             if math.isnan(run.value(claim)[0]):
                 continue
             converged, values = _mesh_values(claim, run, checks, cache)
-            out.append(MeshRow(r, claim, converged, values))
+            order, error = mesh_check.sequence_estimate(r.config, values[0][1], dict(values))
+            out.append(MeshRow(r, claim, converged, values, order, error))
     return out
 
 
@@ -295,6 +304,7 @@ def claims_records(columns: list[Column]) -> list[dict]:
             records.append({"arm": arm, "plant": plant, "Ts": Ts, "initial_state": start,
                             "claim": claim.key, "criterion": claim.criterion,
                             "bound": claim.bound, "unit": claim.unit, "value": v.value,
+                            "error": v.error, "order": v.order,
                             "verdict": v.verdict, "note": v.note,
                             "windows": " ".join(f"{T:g}:{x:.6g}" for T, x, _ in v.windows),
                             "meshes": "; ".join(f"{label}: {x if isinstance(x, str) else f'{x:.6g}'}"

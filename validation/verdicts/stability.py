@@ -12,7 +12,9 @@ and last `DURATION` seconds.  Each run has one *outcome*:
   five times the paper's 0.02 rad yardstick: a loop that rings up slowly is caught even if
   it has not crossed the divergence bounds);
 - ``lost tracking``: completed without diverging, beyond the tracking limit;
-- ``diverged``: left the divergence bounds (a result of the loop);
+- ``diverged``: left the divergence bounds, or grows faster than `GROWTH_LIMIT` over its
+  second half (a loop just beyond its limit grows slowly: 2 s would not take it out of
+  the bounds);
 - ``failed``: the plant's solver or a law gave up — no verdict about stability at all;
   the stability command exits 1 when a case has one.
 
@@ -44,16 +46,31 @@ from ..run.scenario import (arm_parameters, scenario_from_mapping, scenario_to_m
 from ..batch.store import ResultStore, run_id
 from .sampled import predicted_period
 
-__all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "OUTCOMES", "StabilityCase",
+__all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "GROWTH_LIMIT", "MAX_LEVEL", "OUTCOMES",
+           "StabilityCase",
            "StabilityResult", "cases_from_scenarios", "stability_map", "load_stability",
            "outcome"]
 
 GRID = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
 DURATION = 2.0
 TRACKING_LIMIT = 0.1
+#: A run whose fastest motion grows faster than this [1/s] over its second half (the
+#: metric ``growth_rate``) is diverging even if it has not left the divergence bounds
+#: yet.  Measured over 2 s runs at Ts = 1 ms (PBC with and without observers, PD, CT, LQR,
+#: both plants, both starts): −2.6 to +0.68 1/s, the largest from rest as the reference's
+#: demand rises; the default arm's PBC fed the true state on the truth plant: −2.6 at
+#: 2.6-2.7 ms (stable), +4 to +5.5 at 2.76 ms (diverging, at 1.3-3.3 s).  1.5 sits 2× above
+#: the stable ones; slower growth is beyond what a 2 s run resolves.
+GROWTH_LIMIT = 1.5
 BISECTIONS = 3
 OUTCOMES = ("stable", "lost tracking", "diverged", "failed")
 _MAX_PLANT_STEP = 1e-3
+
+
+#: The finest discretisation a truth-plant case is re-bisected at when its limits move
+#: under refinement: level k has 2^k times the elements per link and 1/2^k of the step
+#: (`validation.verdicts.mesh`); level 2's own checks reach ANCF 16 × 4 = 64 el/link.
+MAX_LEVEL = 2
 
 
 @dataclass(frozen=True)
@@ -62,6 +79,11 @@ class StabilityCase:
     plant: str
     arm: str
     base: dict  # a resolved scenario mapping (Ts and plant step are set per run)
+    level: int = 0  # truth plant: the mesh and step refined 2^level times (MAX_LEVEL)
+
+    def refined(self) -> "StabilityCase":
+        """The same case one level finer."""
+        return StabilityCase(self.label, self.plant, self.arm, self.base, self.level + 1)
 
 
 @dataclass(frozen=True)
@@ -86,6 +108,7 @@ class StabilityResult:
     predicted: float  # NaN when no prediction exists for the law
     mesh: str = ""  # truth plant: the mesh check of the runs defining the limits
     mesh_converged: bool | None = None  # None: reduced plant, or not checked
+    discretisation: str = ""  # truth plant: "ANCF 8 el/link, step Ts/2" of its runs
 
     @property
     def controller(self) -> str:
@@ -147,9 +170,20 @@ def _options_key(config: dict) -> str:
     return json.dumps([config["controller"], config["observer"]], sort_keys=True)
 
 
+def _refined_plant(plant: dict, level: int) -> dict:
+    """A truth plant's settings with the mesh refined 2^level times (the step is set per
+    Ts by `_scenario_at`)."""
+    if not level:
+        return plant
+    mesh = plant["mesh"]
+    return dict(plant, mesh=dict(mesh, elements_per_link=[2 ** level * n for n in
+                                                          mesh["elements_per_link"]]))
+
+
 def _scenario_at(case: StabilityCase, Ts: float) -> dict:
     data = dict(case.base, Ts=Ts)
-    data["plant"] = dict(case.base["plant"], step=Ts / math.ceil(Ts / _MAX_PLANT_STEP - 1e-9))
+    steps = math.ceil(Ts / _MAX_PLANT_STEP - 1e-9) * 2 ** case.level
+    data["plant"] = dict(_refined_plant(case.base["plant"], case.level), step=Ts / steps)
     return data
 
 
@@ -157,6 +191,10 @@ def outcome(row) -> tuple[str, str]:
     """(outcome, detail) of a stored stability run (module docstring)."""
     if row.status in ("diverged", "failed"):
         return row.status, row.message or row.status
+    growth = row.metrics.get("growth_rate", math.nan)
+    if growth > GROWTH_LIMIT:
+        return "diverged", f"growing at {growth:.2g} 1/s (the torques' second difference " \
+                           "over the second half)"
     worst = max(row.metrics.get("track_max_1", math.inf), row.metrics.get("track_max_2", math.inf))
     if not worst <= TRACKING_LIMIT:
         return "lost tracking", f"max |θ − θd| = {worst:.3g} rad over the second half"
@@ -187,7 +225,7 @@ def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
     scenario = scenario_from_mapping(_scenario_at(case, Ts))
     rid = run_id(scenario_to_mapping(scenario))
     return PlannedRun(rid, scenario, "stability", {"Ts": Ts, "plant.kind": case.plant,
-                                                   "arm": case.arm})
+                                                   "arm": case.arm, "level": case.level})
 
 
 def _bisection_points(tested: dict) -> set[float]:
@@ -208,7 +246,33 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
     """Run the grid and the bisections for every case into the results folder ``out``
     (resumable like any campaign; the progress bar names the round: grid, bisection k/3,
     mesh check), then, with ``mesh_check``, the truth-plant runs that define the limits on
-    the check meshes and with a finer step; returns the results and the summary of every round together."""
+    the refined sequence (`validation.verdicts.mesh`).  A truth-plant case whose limits
+    move under refinement is mapped again one level finer (mesh and step refined
+    together), up to `MAX_LEVEL`: its result is the first level whose limits are
+    converged, or the finest tried.  Returns the results and the summary of every round
+    together."""
+    results, summary = _map_level(cases, out, runner=runner, progress=progress,
+                                  mesh_check=mesh_check)
+    while mesh_check and not summary.interrupted:
+        moved = [r.case.refined() for r in results if r.mesh_converged is False
+                 and r.case.level < MAX_LEVEL]
+        if not moved:
+            break
+        finer, more = _map_level(moved, out, runner=runner, progress=progress,
+                                 mesh_check=True)
+        summary = summary + more
+        by_key = {_case_key(r.case): r for r in finer}
+        results = [by_key.get(_case_key(r.case), r) for r in results]
+    return results, summary
+
+
+def _case_key(case: StabilityCase) -> tuple:
+    return case.label, _options_key(case.base), case.plant, case.arm
+
+
+def _map_level(cases: list[StabilityCase], out, *, runner, progress, mesh_check):
+    """The grid, the bisections and (with ``mesh_check``) the checks of ``cases``, each at
+    its own level."""
     campaign = Campaign(name="stability", base={}, sweeps=(),
                         description="sampled-data stability map")
     tested: dict[int, dict[float, tuple[str, str]]] = {i: {} for i in range(len(cases))}
@@ -239,7 +303,8 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
                     if case.plant == "exudyn" for Ts in _defining(tested[i])]
         if defining:
             from .mesh import run_checks
-            summary = summary + run_checks(defining, out, runner=runner, progress=progress)
+            summary = summary + run_checks(defining, out, runner=runner, progress=progress,
+                                           of_checks=True)
     if summary.interrupted:
         return [], summary
     return load_stability(out, cases=cases), summary
@@ -281,42 +346,67 @@ def _mesh_check(tested: dict, rows_at: dict, by_id: dict) -> tuple[str, bool | N
 
 def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[StabilityResult]:
     """The stability map of a results folder, rebuilt from its stored runs (with
-    ``fresh_only``, from the runs made by this code only; with ``cases``, those cases
-    only)."""
+    ``fresh_only``, from the runs made by this code only; with ``cases``, those cases at
+    their own level only).  A refined level's run can be stored as another run's check
+    (the sequence's level-1 check *is* the next level's run): runs are found by what they
+    are, not by the sweep that stored them first."""
     from ..batch.fingerprint import run_fingerprint
-    groups: dict[tuple, tuple[StabilityCase, dict, dict]] = {}
-    all_rows = ResultStore(out).rows()
+    all_rows = [r for r in ResultStore(out).rows()
+                if not fresh_only or r.fingerprint == run_fingerprint(r.config)]
     by_id = {r.run_id: r for r in all_rows}
-    wanted = None if cases is None else {
-        (c.label, _options_key(c.base), c.plant, c.arm) for c in cases}
-    for row in all_rows:
-        if row.sweep != "stability":
-            continue
-        if fresh_only and row.fingerprint != run_fingerprint(row.config):
-            continue
-        c = row.config
-        key = (_label(c), _options_key(c), c["plant"]["kind"], c["arm"])
-        if wanted is not None and key not in wanted:
-            continue
-        case = StabilityCase(key[0], key[2], key[3], c)
-        _, tested, rows_at = groups.setdefault(key, (case, {}, {}))
-        tested[float(c["Ts"])] = outcome(row)
-        rows_at[float(c["Ts"])] = row
+    if cases is None:  # every case mapped in the folder, at each level it may have
+        found: dict[tuple, StabilityCase] = {}
+        for row in all_rows:
+            if row.sweep == "stability" and not row.axes.get("level", 0):
+                case = StabilityCase(_label(row.config), row.config["plant"]["kind"],
+                                     row.config["arm"], row.config)
+                found.setdefault(_case_key(case), case)
+        cases = [StabilityCase(c.label, c.plant, c.arm, c.base, level)
+                 for c in found.values()
+                 for level in range(MAX_LEVEL + 1 if c.plant == "exudyn" else 1)]
     order = {"default": 0, "table1": 1, "reduced": 0, "exudyn": 1}
-    keys = sorted(groups, key=lambda k: (k[0], order.get(k[2], 9), order.get(k[3], 9)))
-    results = []
-    for k in keys:
-        case, tested, rows_at = groups[k]
-        result = _result(case, tested)
+    cases = sorted(cases, key=lambda c: (c.label, order.get(c.plant, 9),
+                                         order.get(c.arm, 9), c.level))
+    results: dict[tuple, StabilityResult] = {}
+    for case in cases:
+        tested, rows_at = {}, {}
+        mesh = _refined_plant(case.base["plant"], case.level).get("mesh")
+        for row in all_rows:
+            c = row.config
+            if (c.get("name") != case.base.get("name") or c["arm"] != case.arm
+                    or c["plant"]["kind"] != case.plant or c["plant"].get("mesh") != mesh
+                    or _options_key(c) != _options_key(case.base)):
+                continue  # cheap tests first: the run id below builds a scenario
+            Ts = float(c["Ts"])
+            if row.run_id == _planned(case, Ts).run_id:
+                tested[Ts], rows_at[Ts] = outcome(row), row
+        if not tested:
+            continue
+        result = _result(case, tested, next(iter(rows_at.values())).config)
         if case.plant == "exudyn":
             result.mesh, result.mesh_converged = _mesh_check(tested, rows_at, by_id)
-        results.append(result)
-    return results
+            result.discretisation = _discretisation(next(iter(rows_at.values())).config,
+                                                    case.level)
+        # Per case, the first level whose limits converged, or the finest mapped.
+        best = results.get(_case_key(case))
+        if best is None or best.mesh_converged is not True:
+            results[_case_key(case)] = result
+    return list(results.values())
 
 
-def _result(case: StabilityCase, tested: dict) -> StabilityResult:
+def _discretisation(config: dict, level: int) -> str:
+    """"ANCF 8 el/link, step ≤ 0.5 ms" of a stored truth-plant run at ``level``."""
+    from .mesh import mesh_label
+    return (f"{mesh_label(config['plant']['mesh'])}, step ≤ "
+            f"{1e3 * _MAX_PLANT_STEP / 2 ** level:g} ms")
+
+
+def _result(case: StabilityCase, tested: dict, config: dict | None = None) -> StabilityResult:
+    """The limits of ``tested``; the prediction on the plant of ``config`` (one of the
+    case's runs: a refined level's own mesh), else of the case's base."""
     tested = dict(sorted(tested.items()))
     return StabilityResult(case, tested, _limit(tested, _GOOD["divergence"]),
-                           _limit(tested, _GOOD["tracking"]), predicted_period(case.base))
+                           _limit(tested, _GOOD["tracking"]),
+                           predicted_period(config if config is not None else case.base))
 
 
