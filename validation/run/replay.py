@@ -49,12 +49,17 @@ def truth_now(plant) -> np.ndarray:
     return out
 
 
-def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False) -> Replay:
+def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False,
+                exact_hold: bool = True) -> Replay:
     """Apply ``torques`` (periods, 2) [N m] — what the plant received, disturbances
     included — one per control period of ``scenario`` to its fresh Exudyn plant.
     ``record``: read θ at the start of every period (costs a readout per period; off,
-    only at the start of the last one, as the floor should be timed)."""
+    only at the start of the last one, as the floor should be timed).  ``exact_hold``
+    False replays with Exudyn's own first-order treatment of the torque jumps (the
+    truth plant before issue 31: what ``bench/bench_hold.py`` measures against)."""
     plant = fresh_plant(scenario)
+    if not exact_hold:
+        plant.hold = None
     mbs, solver, settings = plant.system.mbs, plant.solver, plant.settings
     hold_loads = plant.hold_loads
     steps_per_period = check_sample_time(scenario.Ts, plant.h)
