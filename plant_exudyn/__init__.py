@@ -3,23 +3,26 @@
 Both links are ANCF cable elements (default) or geometrically exact 2D beams, built from
 the same `reduced_model.ArmParameters` as the reduced model; the deflection field is
 projected onto the reduced model's mode shapes so that both plants report the same
-coordinates.  `ExudynPlant` implements the plant interface (`reduced_model._plant_interface`); `linear_model`
-linearises the FE arm about a configuration (a `control.StateSpace`).
+coordinates.  `ExudynPlant` implements the plant contract (`reduced_model.Plant`);
+`linear_model` linearises the FE arm about a configuration (a `control.StateSpace`).
+
+Only `Mesh` is loaded with the package: everything else imports Exudyn (and its OpenGL
+libraries) and is loaded on first use, so that describing a scenario — or reading,
+reporting and exporting stored results — never loads the solver.
 """
 import importlib
 
-from ._build import ELEMENTS, ArmSystem, Mesh, build_arm
-from ._fields import LinkField
-from ._modal import natural_frequencies
-from ._plant import ExudynPlant, simulation_settings
+from ._mesh import ELEMENTS, Mesh
 
 __all__ = ["ExudynPlant", "Mesh", "ELEMENTS", "ArmSystem", "build_arm", "LinkField",
            "natural_frequencies", "simulation_settings", "linear_model"]
 
+_LAZY = {"ExudynPlant": "._plant", "simulation_settings": "._plant", "ArmSystem": "._build",
+         "build_arm": "._build", "LinkField": "._fields", "natural_frequencies": "._modal",
+         "linear_model": "._linear"}
+
 
 def __getattr__(name: str):
-    # Loaded on first use: the linear analysis (and python-control) is no part of a run,
-    # so it stays out of the simulation path and of the runs' code fingerprint.
-    if name == "linear_model":
-        return importlib.import_module("._linear", __name__).linear_model
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name], __name__), name)
     raise AttributeError(f"module 'plant_exudyn' has no attribute {name!r}")

@@ -18,54 +18,13 @@ from exudyn.itemInterface import (
     ObjectJointGeneric, ObjectJointRevolute2D, ObjectRigidBody2D,
 )
 
-from reduced_model import ArmParameters, FieldError
+from reduced_model import ArmParameters
 
-__all__ = ["Mesh", "ArmSystem", "build_arm", "beam_template", "ELEMENTS"]
+from ._mesh import Mesh
 
-ELEMENTS = ("ancf", "geometrically_exact")
+__all__ = ["ArmSystem", "build_arm", "beam_template"]
+
 _CLAMP = [1, 1, 0, 0, 0, 1]  # x, y and the in-plane rotation
-
-
-@dataclass(frozen=True)
-class Mesh:
-    """Finite-element discretisation of both links.
-
-    Parameters
-    ----------
-    element : {"ancf", "geometrically_exact"}
-        ANCF cable elements (Euler–Bernoulli; cubic Hermite position field with nodal
-        slopes) or geometrically exact 2D beams (Reissner; linear interpolation).
-    elements_per_link : (int, int)
-        Default 4 per link: the locked and free frequencies of Table 1 are then within
-        0.04 % of the converged values (convergence study in tests/test_exudyn_fidelity.py).
-    axial_stiffness : float
-        EA [N] of both links.  1e7 puts the first axial mode near 520 Hz, far above the
-        bending modes of interest, without changing them.  The
-        geometrically exact beam also derives its shear stiffness (0.4 EA) and
-        cross-section rotary inertia per length (ρ EI/EA = ρ I/A) from it.
-    """
-
-    element: str = "ancf"
-    elements_per_link: tuple[int, int] = (4, 4)
-    axial_stiffness: float = 1e7
-
-    def __post_init__(self) -> None:
-        if self.element not in ELEMENTS:
-            raise FieldError("mesh", "element", f"must be one of {ELEMENTS}, got {self.element!r}")
-        epl = self.elements_per_link
-        if (isinstance(epl, (int, np.integer)) and not isinstance(epl, bool)):
-            epl = (int(epl), int(epl))
-        if (not isinstance(epl, (tuple, list)) or len(epl) != 2
-                or not all(isinstance(n, (int, np.integer)) and not isinstance(n, bool)
-                           and 1 <= n <= 64 for n in epl)):
-            raise FieldError("mesh", "elements_per_link", "must be an integer 1..64 or two of "
-                             f"them, got {self.elements_per_link!r}")
-        object.__setattr__(self, "elements_per_link", (int(epl[0]), int(epl[1])))
-        ea = self.axial_stiffness
-        if isinstance(ea, bool) or not isinstance(ea, (int, float)) or not np.isfinite(ea) \
-                or ea <= 0:
-            raise FieldError("mesh", "axial_stiffness", f"must be a finite number > 0, got {ea!r}")
-        object.__setattr__(self, "axial_stiffness", float(ea))
 
 
 @dataclass

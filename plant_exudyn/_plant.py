@@ -7,9 +7,8 @@ from numba import njit, types
 from numba.experimental import structref
 from scipy.integrate import cumulative_trapezoid
 
-from reduced_model import (ArmParameters, LinkModes, Measurement, PlantFailure, cached_model,
-                           SensorConfig, SensorModel, TrueState, check_sample_time)
-from reduced_model._plant_interface import TRUTH_EXTRAS, true_state_from_vector
+from reduced_model import (ArmParameters, LinkModes, Measurement, Plant, PlantFailure,
+                           SensorConfig, cached_model)
 
 from ._build import ArmSystem, Mesh, build_arm
 from ._fields import LinkField, link_readout
@@ -46,8 +45,8 @@ def simulation_settings(*, step: float, spectral_radius: float = 0.9,
     return ss
 
 
-class ExudynPlant:
-    """Two-link flexible arm as an Exudyn FE model, behind the Plant interface.
+class ExudynPlant(Plant):
+    """Two-link flexible arm as an Exudyn FE model (the plant contract: `reduced_model.Plant`).
 
     Parameters
     ----------
@@ -82,6 +81,7 @@ class ExudynPlant:
     """
 
     name = "exudyn"
+    role = "truth"
 
     def __init__(self, params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
                  step: float = 5e-4, modal_basis: tuple[LinkModes, LinkModes] | None = None,
@@ -94,8 +94,8 @@ class ExudynPlant:
         self.params = params if params is not None else ArmParameters()
         self.mesh = mesh
         self.h = float(step)
-        basis = modal_basis or cached_model(self.params, (2, 2)).mode_shapes
-        self.modal_basis = tuple(basis)
+        basis = tuple(modal_basis or cached_model(self.params, (2, 2)).mode_shapes)
+        self.modal_basis = basis
         self.system: ArmSystem = build_arm(self.params, mesh)
         self.fields = (LinkField(self.system, 0, basis[0]), LinkField(self.system, 1, basis[1]))
         if not (np.isfinite(newton_tolerance) and newton_tolerance > 0):
@@ -115,11 +115,9 @@ class ExudynPlant:
         self._index_state()
         self._readout = new_readout(self.system.element == "ancf", *self._joint_arrays(),
                                     *self.fields[0].compiled(), *self.fields[1].compiled())
-        self.sensors = SensorModel(sensors, self.modal_basis, self)
         self._truth = None
-        self._Ts_nsteps = (None, 0)
         self._steps = 0
-        self.time = 0.0
+        Plant.__init__(self, sensors, basis)
         self._cache = None  # state readout of the current step (see _read)
         # Bound once: the loop advances and reads the plant every sample.
         self._set_load = self.system.mbs.SetLoadParameter
@@ -176,25 +174,18 @@ class ExudynPlant:
         self._cache = self._truth = None
         return self.measure()
 
-    def step(self, tau, Ts: float, tip_force=None) -> Measurement:
-        """Hold joint torques ``tau`` (2,) [N m] and the payload force ``tip_force``
-        (Fx, Fy) [N, base frame] for ``Ts`` seconds; return y(t + Ts) (`advance`, then
-        `measure`).  Raises `PlantFailure` with Exudyn's message if the solver fails."""
-        self.advance(tau, Ts, tip_force)
-        return self.measure()
-
     def advance(self, tau, Ts: float, tip_force=None) -> None:
-        """`step` without the measurement (what the closed loop calls once per sample:
-        nothing here builds an object it does not need)."""
-        if Ts != self._Ts_nsteps[0]:
-            self._Ts_nsteps = (Ts, check_sample_time(Ts, self.h))
+        """Hold joint torques ``tau`` (2,) [N m] and the payload force ``tip_force``
+        (Fx, Fy) [N, base frame] for ``Ts`` seconds (an exact zero-order hold,
+        `hold_loads`).  Raises `PlantFailure` with Exudyn's message if the solver fails."""
+        steps = self.periods(Ts)
         if len(tau) != 2:
             raise ValueError("the Exudyn plant has two actuators: tau must have 2 values, "
                              f"got {len(tau)}")
         fx, fy = (0.0, 0.0) if tip_force is None else (float(tip_force[0]),
                                                        float(tip_force[1]))
         self.hold_loads(float(tau[0]), float(tau[1]), fx, fy)
-        self._steps += self._Ts_nsteps[1]
+        self._steps += steps
         self._cache = self._truth = None
         self._iteration.endTime = self._steps * self.h
         if not self.solver.SolveSteps(self.system.mbs, self.settings):
@@ -224,19 +215,11 @@ class ExudynPlant:
         applied[:] = new
 
     def measure(self) -> Measurement:
-        """The measurement now."""
+        """The measurement now (the truth vector read once per step and shared)."""
         index = self.sensors.truth_index
         if index is not None:  # the measured values are part of the truth vector
             return Measurement(self.time, self.sensors.names, self._truth_now()[index])
         return self.sensors.measure(self.time)
-
-    def measurement_index(self) -> np.ndarray | None:
-        """Where the measurement sits in the truth vector (None: gauges, quantisation or
-        the payload position make it more than those values)."""
-        return self.sensors.truth_index
-
-    def truth(self) -> TrueState:
-        return true_state_from_vector(self.time, self.truth_vector())
 
     def truth_vector(self) -> np.ndarray:
         """[θ, q, θ̇, q̇ (projected), tip positions, tip deflections, projection residuals]."""
@@ -250,7 +233,7 @@ class ExudynPlant:
     def _truth_now(self) -> np.ndarray:
         """The truth vector of the current step, read once (treat as read-only)."""
         if self._truth is None:
-            self._truth = np.empty(self.state_size + len(TRUTH_EXTRAS))
+            self._truth = np.empty(self.truth_size)
             self.truth_into(self._truth)
         return self._truth
 

@@ -15,7 +15,8 @@ from ._model import ArmModel, cached_model, validate_modes_per_link  # noqa: E40
 from ._modes import LinkModes  # noqa: E402
 from ._parameters import ArmParameters, FieldError  # noqa: E402
 from ._plant import ReducedPlant  # noqa: E402
-from ._plant_interface import (Measurement, Plant, PlantFailure, TrueState,  # noqa: E402
+from ._plant_base import Plant  # noqa: E402
+from ._plant_interface import (Measurement, PlantFailure, TrueState,  # noqa: E402
                                check_sample_time)
 from ._sensors import STRAIN_QUANTITIES, SensorConfig, SensorModel  # noqa: E402
 

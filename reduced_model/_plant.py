@@ -9,14 +9,14 @@ from . import _kernels as kern
 from ._model import cached_model, validate_modes_per_link
 from ._modes import LinkModes, gauss_legendre, weighted_projector
 from ._parameters import ArmParameters
-from ._plant_interface import (TRUTH_EXTRAS, Measurement, TrueState, check_sample_time,
-                               true_state_from_vector)
-from ._sensors import SensorConfig, SensorModel
+from ._plant_base import Plant
+from ._plant_interface import Measurement, check_sample_time
+from ._sensors import SensorConfig
 
 __all__ = ["ReducedPlant"]
 
 
-class ReducedPlant:
+class ReducedPlant(Plant):
     """`ArmModel` integrated with classical RK4 at a fixed internal step.
 
     Torques are held constant over each call of `step` (zero-order hold).  The
@@ -43,6 +43,7 @@ class ReducedPlant:
     """
 
     name = "reduced"
+    role = "reduced"
 
     def __init__(self, params: ArmParameters | None = None, *,
                  modes_per_link: tuple[int, int] = (2, 2), step: float = 1e-3,
@@ -56,27 +57,13 @@ class ReducedPlant:
         n = self.model.n
         self._x = np.zeros(2 * n)
         self._f = np.zeros(n)  # generalised forces when a tip force acts
-        self.modal_basis = tuple(modal_basis) if modal_basis is not None else self.model.mode_shapes
+        basis = tuple(modal_basis) if modal_basis is not None else self.model.mode_shapes
         self._basis_map = None if modal_basis is None else _projection(self.model.mode_shapes,
-                                                                      self.modal_basis)
-        self.sensors = SensorModel(sensors, self.modal_basis, self)
+                                                                      basis)
         self._tau = np.zeros(2)
-        self._Ts_nsteps = (None, 0)  # (last Ts, its number of internal steps)
         self._steps = 0  # internal steps since reset: time = steps · h without round-off drift
         self._work = self.model.new_workspace()[0]
-        self.time = 0.0
-
-    def measure(self) -> Measurement:
-        """The measurement now."""
-        index = self.sensors.truth_index
-        if index is not None:  # the measured values are part of the truth vector
-            return Measurement(self.time, self.sensors.names, self.truth_vector()[index])
-        return self.sensors.measure(self.time)
-
-    def measurement_index(self) -> np.ndarray | None:
-        """Where the measurement sits in the truth vector (None: gauges, quantisation or
-        the payload position make it more than those values)."""
-        return self.sensors.truth_index
+        Plant.__init__(self, sensors, basis)
 
     # --- sensor primitives (see reduced_model._sensors) ---------------------------------
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -116,12 +103,6 @@ class ReducedPlant:
         self.time = 0.0
         return self.measure()
 
-    def step(self, tau, Ts: float, tip_force=None) -> Measurement:
-        """Hold joint torques ``tau`` (2,) [N m] for ``Ts`` seconds; return y(t + Ts)
-        (`advance`, then `measure`)."""
-        self.advance(tau, Ts, tip_force)
-        return self.measure()
-
     def advance(self, tau, Ts: float, tip_force=None) -> None:
         """Hold joint torques ``tau`` (2,) [N m] for ``Ts`` seconds.
 
@@ -130,10 +111,7 @@ class ReducedPlant:
         (Fx, Fy) [N] in the base frame acts on the payload as generalised forces Jᵀ F,
         with the tip Jacobian J taken at the start of the period.
         """
-        last_Ts, nsteps = self._Ts_nsteps
-        if Ts != last_Ts:
-            nsteps = check_sample_time(Ts, self.h)
-            self._Ts_nsteps = (Ts, nsteps)
+        nsteps = self.periods(Ts)
         tau = np.asarray(tau, dtype=float)
         if tau.shape == (2,):
             self._tau[:] = tau
@@ -176,17 +154,9 @@ class ReducedPlant:
         """Copy of the state [Q, Q̇]."""
         return self._x.copy()
 
-    def truth(self) -> TrueState:
-        return true_state_from_vector(self.time, self.truth_vector())
-
-    def truth_vector(self) -> np.ndarray:
-        """[θ, q, θ̇, q̇ (q in the modal basis), tips, tip deflections, 0, 0]."""
-        out = np.empty(2 * (2 + sum(m.n for m in self.modal_basis)) + len(TRUTH_EXTRAS))
-        self.truth_into(out)
-        return out
-
     def truth_into(self, out: np.ndarray) -> None:
-        """`truth_vector` written into ``out``."""
+        """The truth vector [θ, q, θ̇, q̇ (q in the modal basis), tips, tip deflections,
+        0, 0] written into ``out``."""
         n, x = self.model.n, self._x
         if self._basis_map is None:
             out[:2 * n] = x

@@ -1,22 +1,11 @@
-"""The plant interface, shared by the reduced and the Exudyn plant.
-
-A plant is anything with ``name``, ``state_size`` (length of the state ``reset`` takes),
-``reset(state0) -> Measurement``, ``step(tau, Ts, tip_force=None) -> Measurement``,
-``truth() -> TrueState`` and ``truth_vector()`` (the same numbers as one flat array
-[x, *TRUTH_EXTRAS]).  The closed loop steps a plant without building objects per sample:
-``advance(tau, Ts, tip_force=None)`` (`step` without the measurement),
-``truth_into(out)`` (the truth vector written into ``out``), ``measure()`` (the
-measurement now) and ``measurement_index()`` (where the measurement sits in the truth
-vector when it is exactly those values, else None).  The closed loop in `validation`
-talks to plants only through this interface.
-"""
+"""What plants and the closed loop exchange: measurements, true states, the truth vector's
+layout, the failure a plant reports, and the sample-time check (the contract itself is
+`reduced_model._plant_base.Plant`)."""
 from __future__ import annotations
-
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Measurement", "TrueState", "Plant", "PlantFailure", "check_sample_time",
+__all__ = ["Measurement", "TrueState", "PlantFailure", "check_sample_time",
            "TRUTH_EXTRAS", "true_state_from_vector"]
 
 #: After the state [θ, q, θ̇, q̇], `truth_vector()` holds these, in this order.
@@ -89,28 +78,6 @@ class TrueState:
     def __repr__(self) -> str:
         return (f"TrueState(t={self.time:.6g}, theta={self.theta}, q={self.q}, "
                 f"tip_deflections={self.tip_deflections})")
-
-
-@runtime_checkable
-class Plant(Protocol):
-    name: str
-    state_size: int
-
-    def reset(self, state0=None) -> Measurement: ...
-
-    def step(self, tau, Ts: float, tip_force=None) -> Measurement: ...
-
-    def truth(self) -> TrueState: ...
-
-    def truth_vector(self) -> np.ndarray: ...
-
-    def advance(self, tau, Ts: float, tip_force=None) -> None: ...
-
-    def truth_into(self, out: np.ndarray) -> None: ...
-
-    def measure(self) -> Measurement: ...
-
-    def measurement_index(self) -> np.ndarray | None: ...
 
 
 def true_state_from_vector(time: float, v: np.ndarray) -> TrueState:

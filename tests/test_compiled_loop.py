@@ -53,7 +53,7 @@ def python_objects(s, monkeypatch):
 def stepped_from_python(s):
     """The run with the laws compiled but the plant stepped from Python."""
     setup = build(s)
-    setup.plant.compiled_stepping = None  # hide the plant's compiled stepping
+    setup.plant.compiled_stepping = lambda: None  # hide the plant's compiled stepping
     return simulate(setup.plant, setup.controller, setup.observer, s, model=setup.model)
 
 

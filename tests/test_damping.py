@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from plant_exudyn import ExudynPlant, Mesh, simulation_settings
+from plant_exudyn import Mesh, simulation_settings
 from plant_exudyn._build import build_arm
 from reduced_model import ArmModel, ArmParameters
 

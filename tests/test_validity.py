@@ -38,7 +38,7 @@ def synthetic_analysis() -> dict:
     f = [0.1, 1.0, 10.0, 100.0]
     curve = {f"{i}->{o}": [1.0, 0.1, 0.01, 0.001] for i, o in CHANNELS}
     arm = {"arm": "default", "Ts": 1e-3, "modes": [2, 2],
-           "mesh": {"element": "ancf", "elements_per_link": [4, 4], "axial_stiffness": 1e7},
+           "truth": "truth plant (Exudyn), ANCF 4 el/link",
            "frequencies_hz": f,
            "responses": [{"theta2": t, "reduced": curve, "fe": curve} for t in (0.0, 1.0, 2.0, 3.0)],
            "gaps": [{"theta2": t, "theta": 0.1, "theta_peak_hz": 3.0, "tip": 0.2,
@@ -46,7 +46,8 @@ def synthetic_analysis() -> dict:
                     for t in (0.0, 1.0)]}
     case = {"case": "pbc", "plant": "exudyn", "arm": "default", "predicted_s": 2.7e-3,
             "predicted_theta2": 0.0, "note": "FE linearisation, ancf 4+4 elements",
-            "mesh": "ancf 4+4", "predicted_fine_s": 2.71e-3, "mesh_fine": "ancf 8+8",
+            "mesh": "truth plant (Exudyn), ANCF 4 el/link", "predicted_fine_s": 2.71e-3,
+            "mesh_fine": "truth plant (Exudyn), ANCF 8 el/link", "truth": True,
             "certified_s": 7e-4, "certificate": [{"Ts": 7e-4, "nu_gap": 0.47, "margin": 0.51,
                                                   "certified": True}],
             "largest_stable_s": 3.5e-3, "first_unstable_s": 4e-3, "in_bracket": "no",
@@ -63,7 +64,7 @@ def test_written_analysis_reads_back_and_is_reported(tmp_path):
     run_campaign(campaign_from_mapping(spec), out, progress=False)
     data = synthetic_analysis()
     text = write_validity(data, out / "validity")
-    assert "| pbc | exudyn | default | 2.7 | ancf 4+4 | 2.71 | 0.7 | 3.5 | 4 | no | yes | 0.2 |" \
+    assert "| pbc | exudyn | default | 2.7 | truth plant (Exudyn), ANCF 4 el/link | 2.71 | 0.7 | 3.5 | 4 | no | yes | 0.2 |" \
         in text
     back = load_validity(out / "validity")
     assert back["cases"][0]["certified_s"] == 7e-4

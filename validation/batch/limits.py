@@ -38,12 +38,7 @@ RUN_TIMEOUT_FACTOR = 10.0
 #: Pessimistic wall time per control sample: observer, controller and recording; a
 #: Python plug-in law costs ~0.1 ms [s].
 SAMPLE_COST = 1e-3
-#: Pessimistic wall time per internal step of the reduced plant (RK4 of 2n states) [s].
-REDUCED_STEP_COST = 1e-4
-#: Pessimistic wall time per internal step of the Exudyn plant: a constant and a part
-#: proportional to the number of beam elements [s].
-EXUDYN_STEP_COST = 2.5e-4
-EXUDYN_ELEMENT_COST = 3e-5
+#: The wall time per internal step of a plant is its kind's (`PlantSpec.step_cost`).
 #: The smallest memory limit a worker can run under: an idle worker's address space,
 #: with the simulation code and Exudyn loaded, is ~650 MiB.
 MIN_MEMORY_MIB = 1024
@@ -55,11 +50,9 @@ def default_run_timeout(scenario) -> float:
     """The default wall-time limit of one run [s], whole seconds (module docstring)."""
     plant = scenario.plant
     samples = scenario.duration / scenario.Ts
-    steps = scenario.duration / plant.step
-    if plant.kind == "exudyn":
-        step_cost = EXUDYN_STEP_COST + EXUDYN_ELEMENT_COST * sum(plant.mesh.elements_per_link)
-    else:
-        step_cost = REDUCED_STEP_COST
+    # A plug-in plant's cost is per control period (it steps as it likes).
+    steps = scenario.duration / getattr(plant, "step", scenario.Ts)
+    step_cost = plant.step_cost()
     return float(math.ceil(RUN_TIMEOUT_BASE + RUN_TIMEOUT_FACTOR
                            * (samples * SAMPLE_COST + steps * step_cost)))
 

@@ -109,8 +109,9 @@ def environment() -> dict:
             return version(name)
         except PackageNotFoundError:
             return None
-    env = {name: pkg(name) for name in ("flexarm-validation", "exudyn", "numpy", "numba",
-                                        "scipy")}
+    from ..run.plants import ENGINE_PACKAGES
+    env = {name: pkg(name) for name in ("flexarm-validation", *ENGINE_PACKAGES, "numpy",
+                                        "numba", "scipy")}
     env["python"] = platform.python_version()
     try:
         env["git"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
@@ -150,6 +151,18 @@ class StoredRun:
     @property
     def plant(self) -> str:
         return self.config.get("plant", {}).get("kind", "?")
+
+    @property
+    def role(self) -> str:
+        """"truth" or "reduced" (`validation.run.plants.role_of`: no code imported)."""
+        from ..run.plants import role_of
+        return role_of(self.config)
+
+    @property
+    def plant_label(self) -> str:
+        """How tables and figures name the run's plant."""
+        from ..run.plants import label_of
+        return label_of(self.config)
 
 
 def _sqlite_errors(method):

@@ -196,6 +196,6 @@ def warm_up(scenarios=None) -> None:
 
 @functools.cache  # once per process: every runner it starts forks from the same state
 def _warm_up_default() -> None:
-    from ..run.scenario import scenario_from_mapping
-    warm_up([scenario_from_mapping({"plant": {"kind": plant}, "observer": {"kind": "smo-paper"}})
-             for plant in ("reduced", "exudyn")])
+    from ..run.scenario import PLANTS, scenario_from_mapping
+    warm_up([scenario_from_mapping({"plant": {"kind": kind}, "observer": {"kind": "smo-paper"}})
+             for kind in PLANTS])

@@ -10,6 +10,7 @@ from pathlib import Path
 from ..batch.interrupts import signals_interrupt
 from ..batch.store import ResultStore, StoreError
 from ..run._config import ConfigError
+from ..run.plants import ROLES
 from ..run.scenario import ARMS, PLANTS, scenario_from_mapping
 
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
@@ -158,8 +159,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
     out = Path(args.out or default)
     folders = {s.name: out if len(systems) == 1 else out / s.name for s in systems}
     # The kernels of every system's laws, on both plants, before the workers fork.
-    runner = runner_for(args, [s.scenario({}, plant=plant) for s in systems
-                            for plant in ("reduced", "exudyn")], *folders.values())
+    runner = runner_for(args, [s.scenario({}, plant=role) for s in systems
+                            for role in ROLES], *folders.values())
     failed = False
     # A signal between two batches of a search (not only during one) stops it: exit 143.
     with runner, signals_interrupt():

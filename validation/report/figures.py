@@ -33,13 +33,12 @@ from ..run.results import write_atomic  # noqa: E402
 
 __all__ = ["png", "state_label", "state_unit", "state_display", "tracking", "deflections",
            "rates", "estimation_errors", "phase_portrait", "animation", "describe_run",
-           "envelope", "figure_title", "figure_legend", "PLANT_NAME", "PLANT_STYLE",
+           "envelope", "figure_title", "figure_legend", "PLANT_STYLE",
            "BOUND_STYLE"]
 
 #: Reduced plant wide and light underneath, truth plant thin and dark on top.
 PLANT_STYLE = {"reduced": dict(color="tab:blue", lw=2.4, alpha=0.45, zorder=2),
-               "exudyn": dict(color="darkred", lw=0.8, alpha=1.0, zorder=3)}
-PLANT_NAME = {"reduced": "reduced plant", "exudyn": "truth plant (Exudyn)"}
+               "truth": dict(color="darkred", lw=0.8, alpha=1.0, zorder=3)}
 BOUND_STYLE = dict(color="crimson", lw=0.9, ls=(0, (5, 3)), zorder=4)
 _SUB = str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉")
 
@@ -126,8 +125,8 @@ def _trace(ax, t, y, *, color, lw=0.8, alpha=1.0, zorder=2, label=None, ls="-"):
 
 
 def _plant_trace(ax, run, t, y, *, label=True, suffix="") -> None:
-    st = PLANT_STYLE.get(run.plant, dict(color="k", lw=1.0))
-    _trace(ax, t, y, label=(PLANT_NAME.get(run.plant, run.plant) + suffix) if label else None,
+    st = PLANT_STYLE.get(run.role, dict(color="k", lw=1.0))
+    _trace(ax, t, y, label=(run.plant_label + suffix) if label else None,
            **st)
 
 
@@ -237,7 +236,7 @@ def _state_grid(states):
 
 
 #: Rates figure: (true, estimate) colours per plant, distinct from each other.
-_RATE_STYLE = {"exudyn": ("black", "darkred"), "reduced": ("0.45", "tab:blue")}
+_RATE_STYLE = {"truth": ("black", "darkred"), "reduced": ("0.45", "tab:blue")}
 
 
 def rates(group, title: str, transient: float) -> bytes:
@@ -250,8 +249,8 @@ def rates(group, title: str, transient: float) -> bytes:
         scale, unit = (1.0, "rad/s") if s.startswith("theta") else (1e3, "mm/s")
         series = []
         for run, res in observed:
-            true_color, estimate_color = _RATE_STYLE.get(run.plant, ("k", "C1"))
-            name = "truth plant" if run.plant == "exudyn" else f"{run.plant} plant"
+            true_color, estimate_color = _RATE_STYLE.get(run.role, ("k", "C1"))
+            name = run.plant_label
             estimate = scale * res[f"xhat_{s}"].astype(float)
             true = scale * res[s].astype(float)
             _trace(ax, res.time, estimate, color=estimate_color, lw=0.8, zorder=2,
@@ -317,9 +316,9 @@ def phase_portrait(group, title: str, rate_bound: float | None = None) -> bytes:
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.4), layout="constrained")
     for run, res in group:
         for j in (0, 1):
-            st = PLANT_STYLE.get(run.plant, {})
+            st = PLANT_STYLE.get(run.role, {})
             axes[j].plot(res[f"theta{j + 1}"], res[f"theta{j + 1}_dot"],
-                         label=PLANT_NAME.get(run.plant, run.plant), **st)
+                         label=run.plant_label, **st)
     ref = group[0][1]
     for j in (0, 1):
         th, dth = ref[f"theta{j + 1}_ref"], ref[f"theta{j + 1}_dot_ref"].astype(float)
@@ -360,8 +359,8 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str:
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    lines = [ax.plot([], [], lw=2, label=PLANT_NAME.get(r.plant, r.plant), animated=True,
-                     color=PLANT_STYLE.get(r.plant, {}).get("color"))[0] for r, _ in ok]
+    lines = [ax.plot([], [], lw=2, label=r.plant_label, animated=True,
+                     color=PLANT_STYLE.get(r.role, {}).get("color"))[0] for r, _ in ok]
     ref_line, = ax.plot([], [], color="k", lw=0.8, alpha=0.5, label="rigid arm at θd",
                         animated=True)
     clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=8,

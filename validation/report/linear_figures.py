@@ -16,11 +16,6 @@ _CHANNEL_TITLES = {"tau1->theta1": "τ₁ → θ₁ [rad/(N m)]", "tau2->theta2"
                    "tau2->tip_defl2": "τ₂ → w₂(L₂) [m/(N m)]"}
 
 
-def _mesh_text(arm: dict) -> str:
-    m = arm["mesh"]
-    return f"FE {m['element']} {m['elements_per_link'][0]}+{m['elements_per_link'][1]} el"
-
-
 def frequency_responses(arm: dict) -> bytes:
     """|τ → θ| and |τ → tip deflection| of both plants at three θ2 of the grid."""
     f = np.asarray(arm["frequencies_hz"])
@@ -40,7 +35,7 @@ def frequency_responses(arm: dict) -> bytes:
         ax.set_ylabel("magnitude")
     axes[0, 0].legend(fontsize=6, ncol=2)
     fig.suptitle(f"{arm['arm']} arm, θ₁ = 0: reduced model ({arm['modes'][0]}+{arm['modes'][1]} "
-                 f"modes, solid) vs {_mesh_text(arm)} (dashed), linearised at rest", fontsize=10)
+                 f"modes, solid) vs {arm['truth']} (dashed), linearised at rest", fontsize=10)
     return png(fig)
 
 
@@ -57,7 +52,7 @@ def gap_map(arm: dict) -> bytes:
     ax.set_ylabel("ν-gap δν(reduced, FE)")
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=7)
-    ax.set_title(f"{arm['arm']} arm: ν-gap of the reduced model to the {_mesh_text(arm)} "
+    ax.set_title(f"{arm['arm']} arm: ν-gap of the reduced model to the {arm['truth']} "
                  "(1 = as far apart as feedback can tell)", fontsize=9)
     return png(fig)
 

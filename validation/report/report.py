@@ -261,8 +261,7 @@ def _group_key(r) -> tuple:
 
 
 def _order(rs) -> list:
-    plants = {"exudyn": 0, "reduced": 1}
-    return sorted(rs, key=lambda r: plants.get(r.plant, 2))
+    return sorted(rs, key=lambda r: r.role != "truth")
 
 
 def figure_group(row, rows) -> list:
@@ -330,7 +329,7 @@ def _included(store: ResultStore):
 def _scope(runs) -> list[str]:
     arms = sorted({r.config.get("arm", "default") for r in runs})
     scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in arms]
-    scope.append("plants: " + ", ".join(sorted({fig.PLANT_NAME.get(r.plant, r.plant) for r in runs})))
+    scope.append("plants: " + ", ".join(sorted({r.plant_label for r in runs})))
     scope.append("control periods Ts: " + ", ".join(f"{1e3 * t:g} ms" for t in
                                                      sorted({r.config["Ts"] for r in runs})))
     scope.append("initial conditions: " + ", ".join(sorted(
@@ -461,7 +460,7 @@ def _title(group) -> str:
     head = next(r for r in group if r.status == "ok")
     swept = _swept(head)
     return f"{head.name} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})" + "".join(
-        f"; {fig.PLANT_NAME.get(r.plant, r.plant)} {r.status.upper()}: {r.message}"
+        f"; {r.plant_label} {r.status.upper()}: {r.message}"
         for r in group if r.status != "ok")
 
 
@@ -512,13 +511,15 @@ def _animation(group, path: Path) -> str:
 def _drawing_code() -> str:
     """A hash of the code and libraries that turn stored runs into a report."""
     from importlib.metadata import version
+
+    from ..run.plants import ENGINE_PACKAGES
     h = hashlib.sha256()
     root = Path(__file__).resolve().parents[2]
     for package in ("validation", "reduced_model", "plant_exudyn", "controllers"):
         for path in sorted((root / package).rglob("*")):
             if path.suffix in (".py", ".j2") and "__pycache__" not in path.parts:
                 h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
-    for name in ("matplotlib", "jinja2", "numpy", "scipy", "exudyn"):
+    for name in ("matplotlib", "jinja2", "numpy", "scipy", *ENGINE_PACKAGES):
         h.update(f"{name}={version(name)}".encode())
     return h.hexdigest()
 

@@ -113,7 +113,7 @@ def _trace(v: dict) -> bytes:
     for ax, (plant, key, label) in zip(axes, series):
         x = [t[plant] for t in trace if t[key] is not None]
         y = [t[key] for t in trace if t[key] is not None]
-        style = fig.PLANT_STYLE["reduced" if plant == "reduced" else "exudyn"]
+        style = fig.PLANT_STYLE[plant]
         ax.step(x, y, where="post", marker="o", ms=3, **style)
         if v["mode"] == "falsify":
             ax.axhline(0.0, color="k", lw=0.8)
@@ -124,7 +124,7 @@ def _trace(v: dict) -> bytes:
         # ρ = −∞ cannot be drawn: say where the truth plant diverged
         axes[1].annotate(f"diverged (ρ = −∞) at truth simulation {v['simulations']['truth']}",
                          xy=(0.98, 0.04), xycoords="axes fraction", ha="right", fontsize=8,
-                         color=fig.PLANT_STYLE["exudyn"]["color"])
+                         color=fig.PLANT_STYLE["truth"]["color"])
     return fig.png(figure)
 
 
@@ -153,7 +153,7 @@ def _case_figures(v: dict, store) -> list:
     what = {"falsify": "counterexample" if v.get("found") else "worst case found",
             "conform": "largest disagreement"}[v["mode"]]
     title = f"{v['system']}, {what} ({fig.describe_run(truth.config)})" + "".join(
-        f"; {fig.PLANT_NAME.get(r.plant, r.plant)} {r.status.upper()}: {r.message}"
+        f"; {r.plant_label} {r.status.upper()}: {r.message}"
         for r in both if r.status != "ok")
     transient = float(truth.config.get("transient", 2.0))
     cutoff = vibration_cutoff(ArmParameters.from_mapping(truth.config["true_params"]))

@@ -29,8 +29,6 @@ NOTE_MEANING = {
     "disturbance": "when the pulse starts",
 }
 
-_PLANT_SHORT = {"exudyn": "truth", "reduced": "reduced"}
-
 
 def margin(claim, value: float) -> float:
     """1 − value/bound (NaN without a finite value)."""
@@ -93,8 +91,9 @@ def summary_view(columns) -> list[dict]:
         pairs: dict[tuple, dict] = {}
         for c in columns:
             if c.arm == arm:
-                _, plant, Ts, start = c.key
-                pairs.setdefault((Ts, start), {})[plant] = c
+                _, _, Ts, start = c.key
+                role = next(iter(c.runs.values())).role
+                pairs.setdefault((Ts, start), {})[role] = c
         heads = [f"Ts = {1e3 * Ts:g} ms, {'from rest' if start == 'rest' else 'moving'}"
                  for Ts, start in pairs]
         rows = []
@@ -111,14 +110,14 @@ def summary_view(columns) -> list[dict]:
 
 
 def _summary_cell(claim, plants: dict) -> tuple[list[str], str]:
-    first = "exudyn" if "exudyn" in plants else next(iter(plants))
+    first = "truth" if "truth" in plants else next(iter(plants))
     v = plants[first].verdicts[claim.key]
-    lines = [f"{_PLANT_SHORT.get(first, first)}: {_short_verdict(claim, v)}"]
+    lines = [f"{first}: {_short_verdict(claim, v)}"]
     other = next((p for p in plants if p != first), None)
     if other is not None:
         w = plants[other].verdicts[claim.key]
-        line = f"{_PLANT_SHORT.get(other, other)}: {_short_verdict(claim, w)}"
-        truth, reduced = (v, w) if first == "exudyn" else (w, v)
+        line = f"{other}: {_short_verdict(claim, w)}"
+        truth, reduced = (v, w) if first == "truth" else (w, v)
         if _finite(truth.value) and _finite(reduced.value) and reduced.value != 0:
             line += f"; {_delta(truth.value, reduced.value)}"
         lines.append(line)
@@ -157,15 +156,15 @@ def pairs_table(runs, describe) -> dict | None:
     groups: dict[str, dict] = {}
     for r in runs:
         config = {k: v for k, v in r.config.items() if k != "plant"}
-        groups.setdefault(json.dumps(config, sort_keys=True), {})[r.plant] = r
-    pairs = [g for g in groups.values() if {"reduced", "exudyn"} <= set(g)]
+        groups.setdefault(json.dumps(config, sort_keys=True), {})[r.role] = r
+    pairs = [g for g in groups.values() if {"reduced", "truth"} <= set(g)]
     if not pairs:
         return None
     head = ["system", "what was run"] + [f"{name} [{display_unit(unit)[1]}]: reduced / truth (Δ)"
                                          for _, name, unit in PAIR_METRICS]
     rows, classes = [], []
     for g in sorted(pairs, key=lambda g: (g["reduced"].name, describe(g["reduced"].config))):
-        red, tru = g["reduced"], g["exudyn"]
+        red, tru = g["reduced"], g["truth"]
         cells = [red.name, describe(red.config)]
         for keys, _, unit in PAIR_METRICS:
             cells.append(_pair_cell(red, tru, keys, display_unit(unit)[0]))

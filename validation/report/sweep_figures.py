@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import math
 
-from .figures import BOUND_STYLE, PLANT_NAME, figure_title, plt, png
+from .figures import BOUND_STYLE, figure_title, plt, png
 
 __all__ = ["sweep_figures", "SWEEP_METRICS", "AXIS_UNITS", "axis_label", "short_value"]
 
@@ -97,7 +97,7 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
     series: dict[tuple, list] = {}
     for r in runs:
         other = ", ".join(f"{a.split('.')[-1]}={short_value(r.axes.get(a))}" for a in others)
-        series.setdefault((other, r.plant), []).append(r)
+        series.setdefault((other, r.plant_label, r.role), []).append(r)
     keys = sorted(series)
     others_order = sorted({k[0] for k in keys})
     any_bad = any(r.status != "ok" for r in runs)
@@ -109,10 +109,10 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
         ax = fig.add_subplot(grid[-1, col])
         strip = fig.add_subplot(grid[0, col], sharex=ax) if any_bad else None
         legend_from = legend_from or ax
-        for n, (other, plant) in enumerate(keys):
+        for n, (other, plant, role) in enumerate(keys):
             color = f"C{others_order.index(other) % 10}"
             pts, bad = [], []
-            for r in series[(other, plant)]:
+            for r in series[(other, plant, role)]:
                 xk = _key([r.axes.get(a) for a in group])
                 if numeric:
                     x = json.loads(xk)[0] * scale
@@ -125,12 +125,13 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
                 vals = [v for v in vals if isinstance(v, float) and not math.isnan(v)]
                 if vals:
                     pts.append((x, factor * max(vals)))
-            label = PLANT_NAME.get(plant, plant) + (f", {other}" if other else "")
-            style = dict(color=color, marker="o" if plant == "exudyn" else "s", ms=5,
-                         mfc=color if plant == "exudyn" else "white", label=label)
+            label = plant + (f", {other}" if other else "")
+            truth = role == "truth"
+            style = dict(color=color, marker="o" if truth else "s", ms=5,
+                         mfc=color if truth else "white", label=label)
             if pts:
                 pts.sort()
-                ax.plot(*zip(*pts), ls=("--" if plant == "exudyn" else "-") if numeric
+                ax.plot(*zip(*pts), ls=("--" if truth else "-") if numeric
                         else "none", lw=1, **style)
             if bad:
                 strip.plot(bad, [0.5] * len(bad), "x", color="crimson", ms=7, mew=2)

@@ -111,18 +111,24 @@ def _tagged(members: list, value: Any, path: str) -> Any:
     if not isinstance(value, dict):
         raise ConfigError(path, f"expected a table, got {_describe(value)}")
     kind = value.get("kind", next(iter(kinds)))
-    if kind not in kinds:
-        raise ConfigError(f"{path}.kind", f"must be one of {', '.join(map(repr, kinds))}, "
-                                          f"got {_describe(kind)}")
-    takes = {f.name for f in dataclasses.fields(kinds[kind])}
+    # A member whose kind defaults to "" takes every "package.module:Class" (a plug-in).
+    chosen = kinds.get(kind) or (kinds.get("") if isinstance(kind, str) and ":" in kind
+                                 else None)
+    if chosen is None:
+        named = [k for k in kinds if k]
+        plugin = ' or a plug-in "package.module:Class"' if "" in kinds else ""
+        raise ConfigError(f"{path}.kind", f"must be one of {', '.join(map(repr, named))}"
+                                          f"{plugin}, got {_describe(kind)}")
+    kinds = {**kinds, kind: chosen}
+    takes = {f.name for f in dataclasses.fields(chosen)}
     for key in value:
         if key not in takes:
-            owners = [k for k, m in kinds.items() if key in m.__dataclass_fields__]
+            owners = [k for k, m in kinds.items() if k and key in m.__dataclass_fields__]
             what = (f"a setting of kind {owners[0]!r}, not of kind {kind!r}" if owners
                     else f"unknown key for kind {kind!r}")
             raise ConfigError(f"{path}.{key}", f"{what} (kind {kind!r} takes: "
                                                f"{', '.join(sorted(takes))})")
-    return from_mapping(kinds[kind], value, path)
+    return from_mapping(chosen, value, path)
 
 
 def _plain(value: Any, path: str) -> Any:

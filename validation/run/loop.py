@@ -20,7 +20,7 @@ import numpy as np
 
 from controllers import ObserverFailure, PaperReference, QuinticMove, compiled_form
 from controllers._compiled import absent
-from reduced_model import ArmModel, PlantFailure, ReducedPlant, SensorConfig
+from reduced_model import ArmModel, PlantFailure, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
 from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
@@ -76,17 +76,7 @@ def build(scenario: Scenario) -> Setup:
         strain_gauges=(sens.gauges_link1, sens.gauges_link2) if sens.modal == "gauges" else None,
         strain_quantity=sens.strain_quantity or "curvature", modal=sens.modal != "none",
         rates=sens.rates, tip_position=sens.tip_position)
-    if s.plant.kind == "reduced":
-        own = s.true_params == s.nominal_params and s.plant.modes_per_link == s.model.modes_per_link
-        plant = ReducedPlant(s.true_params, modes_per_link=s.plant.modes_per_link,
-                             step=s.plant.step, modal_basis=None if own else model.mode_shapes,
-                             sensors=sensor_config)
-    else:
-        from plant_exudyn import ExudynPlant  # Exudyn is loaded by the runs that use it
-        plant = ExudynPlant(s.true_params, s.plant.mesh, step=s.plant.step,
-                            modal_basis=model.mode_shapes, sensors=sensor_config,
-                            spectral_radius=s.plant.spectral_radius,
-                            newton_tolerance=s.plant.newton_tolerance)
+    plant = s.plant.build(s.true_params, model, sensor_config)
     controller, observer = build_controller(s, model), build_observer(s, model)
     return Setup(model, plant, controller, observer, make_reference(s.reference))
 
@@ -184,10 +174,8 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
         model.coordinate_names[2:] if len(residual) == n - 2 else
         tuple(str(i + 1) for i in range(len(residual))))
     laws = _compiled_laws(controller, observer, model, Ts)
-    stepping = getattr(plant, "compiled_stepping", None)
     payload_force = any(d.target in ("tip_x", "tip_y") for d in s.disturbances)
-    plant_form = stepping() if laws is not None and stepping is not None and not payload_force \
-        else None
+    plant_form = plant.compiled_stepping() if laws is not None and not payload_force else None
     direct = plant.measurement_index()  # the measurement's place in the truth, or None
     y_idx = np.zeros(0, dtype=np.int64) if direct is None else direct
     r = _Run(s, model, reference, y.names, observer, residual_names,

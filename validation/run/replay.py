@@ -32,11 +32,13 @@ class Replay:
 
 
 def fresh_plant(scenario: Scenario):
-    """The Exudyn plant of ``scenario`` reset to the closed loop's initial state."""
-    if scenario.plant.kind != "exudyn":
-        raise ValueError(f"a bare replay runs the Exudyn plant; plant.kind is "
-                         f"{scenario.plant.kind!r}")
+    """The plant of ``scenario`` reset to the closed loop's initial state: one that holds
+    its loads and solves in steps it can be asked for (`ExudynPlant`: ``hold_loads``,
+    ``solver``)."""
     setup = build(scenario)
+    if not hasattr(setup.plant, "hold_loads"):
+        raise ValueError(f"a bare replay needs a plant with its own solver to replay on; "
+                         f"plant.kind is {scenario.plant.kind!r}")
     setup.plant.reset(plant_state(initial_state(scenario, setup.model), setup.plant,
                                   setup.model))
     return setup.plant

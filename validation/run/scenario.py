@@ -8,7 +8,6 @@ combinations before anything is simulated.  Every error names the dotted key.
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -16,12 +15,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from controllers import ReferenceKind
-from plant_exudyn import Mesh
 from reduced_model import STRAIN_QUANTITIES, ArmParameters, validate_modes_per_link
 
 from ._config import ConfigError, check, from_mapping, to_mapping
 from ._sample import DisturbanceKind, DisturbanceTarget
 from .laws import check_laws, nominal_model
+from .plants import PLANTS as REGISTERED
+from .plants import ExudynPlantSpec, PluginPlantSpec, ReducedPlantSpec, with_plant
 from .requirements import Requirement, check_requirements
 
 __all__ = [
@@ -78,55 +78,10 @@ def _modes(value) -> None:
                                             f"{list(value)!r}") from None
 
 
-@dataclass(frozen=True)
-class ReducedPlantSpec:
-    """``kind = "reduced"``: the paper's model as the plant (fixed-step RK4), with its own
-    ``modes_per_link`` and internal ``step`` [s]."""
-
-    kind: str = "reduced"
-    modes_per_link: tuple[int, int] = (2, 2)
-    step: float = 1e-3
-
-    def __post_init__(self):
-        _one_of(self.kind, ("reduced",), "kind")
-        _modes(self.modes_per_link)
-        _positive(self.step, "step")
-
-
-@dataclass(frozen=True)
-class ExudynPlantSpec:
-    """``kind = "exudyn"``: the FE truth plant — its ``mesh``, the generalised-α ``step``
-    [s] and ``spectral_radius``, and the Newton ``newton_tolerance``.  The default step,
-    0.5 ms, is half the campaigns' 1 ms period: a sign observer's chatter drives the FE
-    arm at the Nyquist frequency, where a 1 ms step moved a 5 s PBC + sign-SMO run's
-    tracking error by 40 % (0.0138 rad against 0.0094-0.0111 on finer meshes and steps)."""
-
-    kind: str = "exudyn"
-    step: float = 5e-4
-    mesh: Mesh = Mesh()
-    spectral_radius: float = 0.9
-    newton_tolerance: float = 1e-6
-
-    def __post_init__(self):
-        _one_of(self.kind, ("exudyn",), "kind")
-        _positive(self.step, "step")
-        _positive(self.newton_tolerance, "newton_tolerance")
-        check(0 < self.spectral_radius <= 1, "spectral_radius",
-              f"must be in (0, 1] (the exact zero-order hold needs alpha_f > 0), got "
-              f"{self.spectral_radius!r}")
-
-
-#: A plant is a tagged choice: each kind takes only its own settings.
-PlantSpec = ReducedPlantSpec | ExudynPlantSpec
-PLANTS = ("reduced", "exudyn")
-
-
-def with_plant(plant: dict, kind: str, **settings) -> dict:
-    """A plant table of ``kind``: the settings of ``plant`` that ``kind`` takes too (the
-    step), then ``settings`` (for sweeps and studies that switch a scenario's plant)."""
-    spec = ReducedPlantSpec if kind == "reduced" else ExudynPlantSpec
-    keys = {f.name for f in dataclasses.fields(spec)}
-    return {**{k: v for k, v in plant.items() if k in keys}, **settings, "kind": kind}
+#: A plant is a tagged choice of registered kinds (`validation.run.plants`): each kind
+#: takes only its own settings; "package.module:Class" names a plug-in plant.
+PlantSpec = ReducedPlantSpec | ExudynPlantSpec | PluginPlantSpec
+PLANTS = tuple(REGISTERED)
 
 
 @dataclass(frozen=True)
@@ -368,12 +323,13 @@ def check_scenario(s: Scenario) -> None:
     check(samples <= MAX_SAMPLES, "duration", f"{s.duration:g} s at Ts = {s.Ts:g} s is "
                                               f"{samples:.3g} samples (at most {MAX_SAMPLES:.0e}: "
                                               "they are held in memory)")
-    check(s.duration / s.plant.step <= MAX_PLANT_STEPS, "plant.step",
-          f"{s.plant.step:g} s over {s.duration:g} s is {s.duration / s.plant.step:.3g} "
-          f"internal steps (at most {MAX_PLANT_STEPS:.0e})")
-    n_steps = round(s.Ts / s.plant.step)
-    check(n_steps >= 1 and abs(n_steps * s.plant.step - s.Ts) <= 1e-9 * s.Ts, "Ts",
-          f"{s.Ts!r} s is not a whole multiple of plant.step = {s.plant.step!r} s")
+    if "step" in s.plant.__dataclass_fields__:  # a plug-in plant steps as it likes
+        check(s.duration / s.plant.step <= MAX_PLANT_STEPS, "plant.step",
+              f"{s.plant.step:g} s over {s.duration:g} s is {s.duration / s.plant.step:.3g} "
+              f"internal steps (at most {MAX_PLANT_STEPS:.0e})")
+        n_steps = round(s.Ts / s.plant.step)
+        check(n_steps >= 1 and abs(n_steps * s.plant.step - s.Ts) <= 1e-9 * s.Ts, "Ts",
+              f"{s.Ts!r} s is not a whole multiple of plant.step = {s.plant.step!r} s")
     check(s.duration >= s.Ts, "duration", f"must be at least one sample (Ts = {s.Ts}), "
                                           f"got {s.duration!r}")
     check(s.sensors.delay * s.Ts < s.duration, "sensors.delay",
@@ -381,9 +337,10 @@ def check_scenario(s: Scenario) -> None:
           f"{s.duration:g} s run")
     check(s.transient < s.duration, "transient", f"{s.transient!r} s leaves nothing of the "
                                                  f"{s.duration!r} s run to measure")
-    check(not (s.controller.kind == "pbc-idealised" and s.plant.kind == "exudyn"),
-          "controller.kind", "the Exudyn plant has two actuators; the idealised PBC (all n "
-          "rows of eq. 20 applied) runs only on the reduced plant")
+    s.plant.check()
+    check(not (s.controller.kind == "pbc-idealised" and s.plant.actuated == 2),
+          "controller.kind", f"the {s.plant.label} has two actuators; the idealised PBC "
+          "(all n rows of eq. 20 applied) runs only on the reduced plant")
     check(not (s.feedback == "estimate" and s.observer.kind == "none"), "feedback",
           "'estimate' needs an observer (observer.kind is 'none')")
     for link, name in ((1, "L1"), (2, "L2")):

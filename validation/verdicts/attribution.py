@@ -109,14 +109,14 @@ def parse_factors(names, scenario: Scenario) -> tuple[str, ...]:
         check(scenario.uses_estimate, "--factors", "'estimation' cannot be idealised: the "
               "scenario feeds the controller no estimate (no observer, or feedback = 'true')")
     if "truncation" in names:
-        check(scenario.plant.kind == "exudyn", "--factors",
-              "'truncation' needs the FE truth plant (plant.kind = 'exudyn')")
+        check(scenario.plant.role == "truth", "--factors",
+              "'truncation' needs a truth plant (the scenario's plant is the reduced one)")
     return tuple(names)
 
 
 def default_factors(scenario: Scenario) -> tuple[str, ...]:
     names = ["plant", "truncation", "parameters", "sensing", "estimation", "sampling", "actuation"]
-    if scenario.plant.kind != "exudyn":
+    if scenario.plant.role != "truth":
         names.remove("truncation")
     if not scenario.uses_estimate:
         names.remove("estimation")

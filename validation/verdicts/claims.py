@@ -34,6 +34,7 @@ import math
 from dataclasses import dataclass, field
 
 from ..run.claim_measures import CLAIMS, DISTURBED, SYSTEM, Claim
+from ..run.plants import is_truth, label_of, plant_spec
 from ..run.metrics import all_metrics
 from . import mesh as mesh_check
 
@@ -83,10 +84,10 @@ class Column:
 
     @property
     def label(self) -> str:
-        _, plant, Ts, ic = self.key
-        plant = "truth (Exudyn)" if plant == "exudyn" else "reduced"
+        _, _, Ts, ic = self.key
+        plant = label_of(next(iter(self.runs.values())).config)
         start = "from rest" if ic == "rest" else "moving with the reference"
-        return f"{plant} plant, Ts = {Ts * 1e3:g} ms, {start}"
+        return f"{plant}, Ts = {Ts * 1e3:g} ms, {start}"
 
 
 class _Measured:
@@ -123,10 +124,6 @@ def _measured(stored, cache: dict) -> _Measured:
     return cache[key]
 
 
-def _plant(stored) -> str:
-    return stored.config["plant"]["kind"]
-
-
 def _window_family(claim: Claim, run: _Measured) -> tuple:
     """(transient, value, holds/fails) of ``claim`` over `WINDOWS` (those shorter than the
     run)."""
@@ -155,7 +152,7 @@ def _mesh_values(claim: Claim, run: _Measured, checks: dict,
                  cache: dict) -> tuple[bool | None, tuple]:
     """(converged?, ((mesh label, value or status text), ...)) of ``claim`` on the run's
     mesh and its check meshes; converged is None when a check has not been run."""
-    own = mesh_check.mesh_label(run.stored.config["plant"]["mesh"])
+    own = plant_spec(run.stored.config["plant"]).discretisation()
     value = run.value(claim)[0]
     values = [(own, value)]
     converged: bool | None = True
@@ -200,7 +197,7 @@ def evaluate(claim: Claim, stored, checks: dict | None = None, *,
     if verdict == "n/a":
         return Verdict(value, verdict, note)
     meshes, estimate = (), {}
-    if _plant(stored) == "exudyn":
+    if is_truth(stored.config):
         if not checks:
             return Verdict(value, "mesh not checked", note)
         converged, meshes = _mesh_values(claim, run, checks, cache)
@@ -232,8 +229,9 @@ def claim_columns(runs) -> list[Column]:
         if short in wanted and not mesh_check.is_check(r):
             groups.setdefault(column_key(r.config), {})[short] = r
     columns, cache = [], {}
-    order = {"default": 0, "table1": 1, "reduced": 0, "exudyn": 1, "rest": 0, "reference": 1}
-    for key in sorted(groups, key=lambda k: (order.get(k[0], 9), order.get(k[1], 9), -k[2],
+    order = {"default": 0, "table1": 1, "rest": 0, "reference": 1}
+    truth = {k: is_truth(next(iter(g.values())).config) for k, g in groups.items()}
+    for key in sorted(groups, key=lambda k: (order.get(k[0], 9), truth[k], k[1], -k[2],
                                              order.get(k[3], 9))):
         runs_here = groups[key]
         checks = {name: mesh_check.checks_of(r, by_id) for name, r in runs_here.items()}
@@ -265,13 +263,13 @@ def mesh_rows(runs) -> list[MeshRow]:
     by_id = {r.run_id: r for r in runs}
     out, cache = [], {}
     for r in runs:
-        if _plant(r) != "exudyn" or mesh_check.is_check(r):
+        if not is_truth(r.config) or mesh_check.is_check(r):
             continue
         checks = mesh_check.checks_of(r, by_id)
         if not any(checks.values()):
             continue
         if r.status != "ok":
-            values = [(mesh_check.mesh_label(r.config["plant"]["mesh"]),
+            values = [(plant_spec(r.config["plant"]).discretisation(),
                        f"{r.status} at {r.end_time:g} s")]
             agree = True
             for label, other in checks.items():

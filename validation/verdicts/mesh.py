@@ -29,14 +29,14 @@ with it ("0.0096 ± 0.0001 rad").
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 from ..batch.campaign import Campaign, PlannedRun, run_campaign
 from ..batch.executor import Runner
 from ..batch.store import run_id
+from ..run.plants import LEVELS, Refinement, is_truth, plant_spec
 from ..run.scenario import scenario_from_mapping, scenario_to_mapping
 
-__all__ = ["MESH_SWEEP", "MESH_RTOL", "MESH_ATOL", "Refinement", "refinements", "mesh_label",
+__all__ = ["MESH_SWEEP", "MESH_RTOL", "MESH_ATOL", "refinements", "refined_config",
            "check_runs", "run_checks", "checks_of", "is_check", "agrees", "status_agrees",
            "richardson", "sequence_estimate"]
 
@@ -50,55 +50,17 @@ MESH_SWEEP = "mesh-check"
 #: 20 mrad — from being judged on its chatter-level digits.  Table 1 moves by 40–70 %.
 MESH_RTOL = 0.1
 MESH_ATOL = 0.05
-#: Element-count ratio of the geometrically exact beam to ANCF in the check (module
-#: docstring; open-loop 4th-mode error: GE 16 el/link 0.6 %, ANCF 4 0.04 %).
-_GE_PER_ANCF = 8
-_MAX_ELEMENTS = 64
-#: The levels of the refined sequence: level k has 2^k times the elements per link and
-#: 1/2^k of the step.
-LEVELS = (1, 2)
-
-
-def mesh_label(mesh: dict) -> str:
-    """"ANCF 4 el/link", "GE 16 el/link" (or "ANCF 4+8 el/link" if the links differ)."""
-    n1, n2 = mesh["elements_per_link"]
-    name = "ANCF" if mesh["element"] == "ancf" else "GE"
-    return f"{name} {n1 if n1 == n2 else f'{n1}+{n2}'} el/link"
-
-
-@dataclass(frozen=True)
-class Refinement:
-    """One check of a truth-plant run: its label ("ANCF 8 el/link, step/2"), resolved
-    scenario and level (k: the same element refined 2^k times in mesh and step; None: the
-    other element formulation)."""
-
-    label: str
-    config: dict
-    level: int | None
 
 
 def refinements(config: dict) -> list[Refinement]:
-    """The checks of a truth-plant run (module docstring): the same element at each of
-    `LEVELS`, then the other formulation with half the step; meshes beyond 64 el/link
-    are left out."""
-    plant = config["plant"]
-    mesh = plant["mesh"]
-    n = tuple(mesh["elements_per_link"])
-    if mesh["element"] == "ancf":
-        other = ("geometrically_exact", tuple(_GE_PER_ANCF * k for k in n))
-    else:
-        other = ("ancf", tuple(max(1, k // _GE_PER_ANCF) for k in n))
-    plans = [(mesh["element"], tuple(2 ** k * e for e in n), 2 ** k, k) for k in LEVELS]
-    plans.append((*other, 2, None))
-    out = []
-    for element, per_link, divisor, level in plans:
-        if max(per_link) > _MAX_ELEMENTS:
-            continue
-        new_mesh = dict(mesh, element=element, elements_per_link=list(per_link))
-        new_plant = dict(plant, mesh=new_mesh, step=plant["step"] / divisor)
-        out.append(Refinement(f"{mesh_label(new_mesh)}, step/{divisor}",
-                              dict(config, plant=new_plant), level))
-    return out
+    """The checks of a result on a truth plant (its kind's `PlantSpec.refinements`: the
+    refined sequence, then another formulation); none for a reduced plant."""
+    return plant_spec(config["plant"]).refinements() if is_truth(config) else []
+
+
+def refined_config(config: dict, r: Refinement) -> dict:
+    """The scenario mapping of ``config`` on the plant of check ``r``."""
+    return dict(config, plant=r.plant)
 
 
 def is_check(row) -> bool:
@@ -112,10 +74,10 @@ def check_runs(rows, *, of_checks: bool = False) -> list[PlannedRun]:
     what a coarser level stored as its checks)."""
     planned: dict[str, PlannedRun] = {}
     for row in rows:
-        if row.config["plant"]["kind"] != "exudyn" or (is_check(row) and not of_checks):
+        if not is_truth(row.config) or (is_check(row) and not of_checks):
             continue
         for r in refinements(row.config):
-            scenario = scenario_from_mapping(r.config)
+            scenario = scenario_from_mapping(refined_config(row.config, r))
             rid = run_id(scenario_to_mapping(scenario))
             planned.setdefault(rid, PlannedRun(rid, scenario, MESH_SWEEP,
                                                {"mesh": r.label, "of": row.run_id}))
@@ -135,11 +97,11 @@ def run_checks(rows, out, *, runner: Runner | None = None, progress: bool = True
 def checks_of(row, rows_by_id: dict) -> dict[str, object] | None:
     """{check label: stored check run or None (not run)} of a truth-plant run, in the
     order of `refinements`; None for a reduced-plant run."""
-    if row.config["plant"]["kind"] != "exudyn":
+    if not is_truth(row.config):
         return None
     out = {}
     for r in refinements(row.config):
-        rid = run_id(scenario_to_mapping(scenario_from_mapping(r.config)))
+        rid = run_id(scenario_to_mapping(scenario_from_mapping(refined_config(row.config, r))))
         out[r.label] = rows_by_id.get(rid)
     return out
 

@@ -42,13 +42,14 @@ from reduced_model import cached_model
 from ..run._config import ConfigError
 from ..run.laws import build_controller, nominal_model
 from ..run.loop import make_reference
+from ..run.plants import truth_spec
 from ..run.scenario import scenario_from_mapping
 from .linear import (NotLinearisable, closed_loop_matrix, growth_rate, largest_stable_period,
                      law_gain, reduced_linear_model)
 from .nugap import FactorisationError, as_statespace, gap_detail, margin_detail
 
 __all__ = ["POINTS", "Prediction", "CertificateRow", "predicted_period", "prediction",
-           "certificate", "certified_period", "case_mesh"]
+           "certificate", "certified_period"]
 
 #: Operating points per case, evenly spread over its run.
 POINTS = 5
@@ -135,10 +136,11 @@ class _Case:
                                     modal_basis=None if own else self.model.mode_shapes,
                                     generalised_forces=forces)
 
-    def fe_plant(self, point: int, mesh) -> control.StateSpace:
-        from plant_exudyn import linear_model
-        return linear_model(self.scenario.true_params, mesh, theta=self.theta(point),
-                            modal_basis=self.model.mode_shapes)
+    def fe_plant(self, point: int, spec) -> control.StateSpace:
+        """The truth plant of kind ``spec`` linearised at a point (`PlantSpec.linear_model`;
+        NotImplementedError for a kind without one)."""
+        return spec.linear_model(self.scenario.true_params, theta=self.theta(point),
+                                 modal_basis=self.model.mode_shapes)
 
 
 @functools.lru_cache(maxsize=128)
@@ -150,24 +152,13 @@ def _key(config: dict) -> str:
     return json.dumps(config, sort_keys=True)
 
 
-def case_mesh(config: dict):
-    """The FE mesh of a case (its own for an Exudyn plant, else the default `Mesh`)."""
-    from plant_exudyn import Mesh
-    mesh = config.get("plant", {}).get("mesh")
-    if not mesh:
-        return Mesh()
-    return Mesh(element=mesh["element"], elements_per_link=tuple(mesh["elements_per_link"]),
-                axial_stiffness=mesh["axial_stiffness"])
-
-
 @functools.lru_cache(maxsize=256)
 def _prediction(config_json: str) -> Prediction:
-    config = json.loads(config_json)
     try:
         case = _case(config_json)
     except (ConfigError, ValueError) as exc:
         return Prediction(math.nan, math.nan, f"the case does not build: {exc}")
-    plant_kind = case.scenario.plant.kind
+    spec = case.scenario.plant
     try:
         K0 = case.gains(case.scenario.Ts)
     except NotLinearisable as exc:
@@ -178,18 +169,21 @@ def _prediction(config_json: str) -> Prediction:
     if K0 is None:
         return Prediction(math.nan, math.nan, "the law does not build at the case's Ts")
     forces = K0[0].shape[0] > 2
-    if forces and plant_kind != "reduced":
+    if forces and spec.actuated == 2:
         return Prediction(math.nan, math.nan, "the law applies forces on the modal "
-                          "coordinates: the FE arm has two actuators")
+                          f"coordinates: the {spec.label} has two actuators")
     notes = []
     if case.scenario.observer.kind != "none":
         notes.append(f"the controller fed the true state ({case.scenario.observer.kind} "
                      "not in the loop)")
-    mesh = case_mesh(config) if plant_kind == "exudyn" else None
+    truth = spec if spec.role == "truth" else None
     limit, where = math.inf, math.nan
     for i in range(len(case.points)):
-        plant = case.fe_plant(i, mesh) if mesh is not None else \
-            case.reduced_plant(i, forces=forces)
+        try:
+            plant = case.fe_plant(i, truth) if truth is not None else \
+                case.reduced_plant(i, forces=forces)
+        except NotImplementedError as exc:
+            return Prediction(math.nan, math.nan, str(exc))
 
         def growth(Ts, i=i, plant=plant):
             gains = case.gains(Ts)
@@ -216,19 +210,22 @@ def predicted_period(config: dict) -> float:
     return prediction(config).period
 
 
-def certificate(config: dict, periods, *, mesh=None) -> list[CertificateRow]:
-    """The ν-gap certificate of a case's law against the FE arm (``mesh``; default: the
-    case's own mesh, or the default `Mesh` for a reduced-plant case) at ``periods`` [s]
+def certificate(config: dict, periods) -> list[CertificateRow]:
+    """The ν-gap certificate of a case's law against its truth plant (`truth_spec`: the
+    case's own, or the default truth kind for a reduced-plant case) at ``periods`` [s]
     in increasing order, up to the first that is not certified (module docstring).
     Empty for a law that cannot be certified (forces on the modal coordinates, an
-    observer in the loop, not linearisable)."""
+    observer in the loop, not linearisable, a truth plant without a linearisation)."""
     case = _case(_key(config))
     if case.scenario.observer.kind != "none":
         return []
-    mesh = mesh if mesh is not None else case_mesh(config)
+    spec = truth_spec(config)
     reduced = [case.reduced_plant(i, nominal=True)[case.names, :]
                for i in range(len(case.points))]
-    fe = [case.fe_plant(i, mesh)[case.names, :] for i in range(len(case.points))]
+    try:
+        fe = [case.fe_plant(i, spec)[case.names, :] for i in range(len(case.points))]
+    except NotImplementedError:
+        return []
     rows = []
     for Ts in sorted(periods):
         try:

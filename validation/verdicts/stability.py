@@ -41,8 +41,8 @@ import numpy as np
 
 from ..batch.campaign import PlannedRun, run_campaign, Campaign
 from ..batch.executor import Runner
-from ..run.scenario import (arm_parameters, scenario_from_mapping, scenario_to_mapping,
-                            with_plant)
+from ..run.plants import is_truth, plant_spec, with_plant
+from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import ResultStore, run_id
 from .sampled import predicted_period
 
@@ -84,6 +84,12 @@ class StabilityCase:
     def refined(self) -> "StabilityCase":
         """The same case one level finer."""
         return StabilityCase(self.label, self.plant, self.arm, self.base, self.level + 1)
+
+    @property
+    def truth(self) -> bool:
+        """Whether the case runs on a truth plant (its limits are checked on the refined
+        sequence)."""
+        return is_truth(self.base)
 
 
 @dataclass(frozen=True)
@@ -154,7 +160,8 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
                 params = scenario_to_mapping(arm_parameters(arm))
                 if arm != data["arm"]:  # start the parameter tables from the other arm
                     base["true_params"] = base["nominal_params"] = params
-                if plant == "exudyn" and data["controller"]["kind"] == "pbc-idealised":
+                if (plant_spec(base["plant"]).actuated == 2
+                        and data["controller"]["kind"] == "pbc-idealised"):
                     continue  # two actuators: the idealised law cannot run there
                 label = _label(base)
                 key = (label, _options_key(base), plant, arm)
@@ -170,20 +177,10 @@ def _options_key(config: dict) -> str:
     return json.dumps([config["controller"], config["observer"]], sort_keys=True)
 
 
-def _refined_plant(plant: dict, level: int) -> dict:
-    """A truth plant's settings with the mesh refined 2^level times (the step is set per
-    Ts by `_scenario_at`)."""
-    if not level:
-        return plant
-    mesh = plant["mesh"]
-    return dict(plant, mesh=dict(mesh, elements_per_link=[2 ** level * n for n in
-                                                          mesh["elements_per_link"]]))
-
-
 def _scenario_at(case: StabilityCase, Ts: float) -> dict:
     data = dict(case.base, Ts=Ts)
     steps = math.ceil(Ts / _MAX_PLANT_STEP - 1e-9) * 2 ** case.level
-    data["plant"] = dict(_refined_plant(case.base["plant"], case.level), step=Ts / steps)
+    data["plant"] = dict(plant_spec(case.base["plant"]).refined(case.level), step=Ts / steps)
     return data
 
 
@@ -300,7 +297,7 @@ def _map_level(cases: list[StabilityCase], out, *, runner, progress, mesh_check)
     if mesh_check and not summary.interrupted:
         rows = {r.run_id: r for r in store.rows()}
         defining = [rows[_planned(case, Ts).run_id] for i, case in enumerate(cases)
-                    if case.plant == "exudyn" for Ts in _defining(tested[i])]
+                    if case.truth for Ts in _defining(tested[i])]
         if defining:
             from .mesh import run_checks
             summary = summary + run_checks(defining, out, runner=runner, progress=progress,
@@ -363,18 +360,18 @@ def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[Stabili
                 found.setdefault(_case_key(case), case)
         cases = [StabilityCase(c.label, c.plant, c.arm, c.base, level)
                  for c in found.values()
-                 for level in range(MAX_LEVEL + 1 if c.plant == "exudyn" else 1)]
-    order = {"default": 0, "table1": 1, "reduced": 0, "exudyn": 1}
-    cases = sorted(cases, key=lambda c: (c.label, order.get(c.plant, 9),
-                                         order.get(c.arm, 9), c.level))
+                 for level in range(MAX_LEVEL + 1 if c.truth else 1)]
+    cases = sorted(cases, key=lambda c: (c.label, c.truth, c.plant, c.arm != "default",
+                                         c.arm, c.level))
     results: dict[tuple, StabilityResult] = {}
     for case in cases:
         tested, rows_at = {}, {}
-        mesh = _refined_plant(case.base["plant"], case.level).get("mesh")
+        plant = plant_spec(case.base["plant"]).refined(case.level)
         for row in all_rows:
             c = row.config
             if (c.get("name") != case.base.get("name") or c["arm"] != case.arm
-                    or c["plant"]["kind"] != case.plant or c["plant"].get("mesh") != mesh
+                    or c["plant"]["kind"] != case.plant
+                    or c["plant"].get("mesh") != _plain(plant.get("mesh"))
                     or _options_key(c) != _options_key(case.base)):
                 continue  # cheap tests first: the run id below builds a scenario
             Ts = float(c["Ts"])
@@ -383,7 +380,7 @@ def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[Stabili
         if not tested:
             continue
         result = _result(case, tested, next(iter(rows_at.values())).config)
-        if case.plant == "exudyn":
+        if case.truth:
             result.mesh, result.mesh_converged = _mesh_check(tested, rows_at, by_id)
             result.discretisation = _discretisation(next(iter(rows_at.values())).config,
                                                     case.level)
@@ -396,9 +393,15 @@ def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[Stabili
 
 def _discretisation(config: dict, level: int) -> str:
     """"ANCF 8 el/link, step ≤ 0.5 ms" of a stored truth-plant run at ``level``."""
-    from .mesh import mesh_label
-    return (f"{mesh_label(config['plant']['mesh'])}, step ≤ "
+    return (f"{plant_spec(config['plant']).discretisation()}, step ≤ "
             f"{1e3 * _MAX_PLANT_STEP / 2 ** level:g} ms")
+
+
+def _plain(value):
+    """A plant table's value as a resolved scenario stores it (lists, not tuples)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return [_plain(v) for v in value] if isinstance(value, (list, tuple)) else value
 
 
 def _result(case: StabilityCase, tested: dict, config: dict | None = None) -> StabilityResult:

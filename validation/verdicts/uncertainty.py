@@ -43,12 +43,13 @@ import numpy as np
 from ..batch.campaign import (RandomAxis, draw_points, expand, flatten_axes, load_study,
                               random_axis)
 from ..run._config import ConfigError, check
+from ..run.plants import ROLES, plant_for_role
 from ..run.requirements import Requirement
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from ..run.tomlfiles import set_dotted
 from .statistics import SequentialTest
 
-__all__ = ["UncertaintySet", "System", "VerifySettings", "load_systems", "plant_table"]
+__all__ = ["UncertaintySet", "System", "VerifySettings", "load_systems"]
 
 _SETTINGS = {"level", "p0", "indifference", "alpha", "beta", "sequential", "worst_case"}
 
@@ -129,7 +130,8 @@ class System:
 
     def mapping(self, point: dict, *, plant: str | None = None, seed: int | None = None) -> dict:
         """The scenario mapping at ``point`` on the nominal plant (``plant`` None) or on
-        the "reduced" / "exudyn" (truth) plant; ``seed`` replaces the noise seed."""
+        the plant of the role "reduced" or "truth" (`plant_for_role`); ``seed`` replaces
+        the noise seed."""
         data = copy.deepcopy(self.nominal)
         for path, value in point.items():
             try:
@@ -138,7 +140,7 @@ class System:
                 raise ConfigError(f"uncertainty.{path}", f"{exc.path}: {exc.message} (in "
                                                          f"{self.name})") from None
         if plant is not None:
-            data["plant"] = plant_table(self.nominal, plant)
+            data["plant"] = plant_for_role(self.nominal, plant)
         if seed is not None:
             data["seed"] = seed
         return data
@@ -152,20 +154,6 @@ class System:
             label = ", ".join(f"{p} = {v!r}" for p, v in point.items())
             raise ConfigError(f"uncertainty: {exc.path}",
                               f"{exc.message} (at {label or 'the nominal point'})") from None
-
-
-def plant_table(nominal: dict, kind: str) -> dict:
-    """The plant of one fidelity, written with only the keys its kind uses: the reduced
-    plant at the controller's own model order (the designer's model), or the truth plant
-    (the nominal one if the system runs on it, else its defaults); both at the nominal
-    internal step."""
-    plant = nominal["plant"]
-    if kind == "reduced":
-        return {"kind": "reduced", "modes_per_link": list(nominal["model"]["modes_per_link"]),
-                "step": plant["step"]}
-    if plant["kind"] == "exudyn":
-        return copy.deepcopy(plant)
-    return {"kind": "exudyn", "step": plant["step"]}
 
 
 def _settings(table: dict) -> VerifySettings:
@@ -212,7 +200,7 @@ def load_systems(path: str | Path) -> list[System]:
               f"{name} has no [[requirement]] to verify")
         system = System(name, nominal, _uncertainty(campaign.uncertainty, nominal), settings)
         for point in system.uncertainty.corners():
-            for plant in ("reduced", "exudyn"):
-                system.scenario(point, plant=plant)
+            for role in ROLES:
+                system.scenario(point, plant=role)
         systems.append(system)
     return systems

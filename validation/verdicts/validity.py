@@ -36,10 +36,11 @@ import numpy as np
 
 from reduced_model import ArmModel
 
+from ..run.plants import is_truth, truth_spec
 from ..run.scenario import scenario_from_mapping
 from .linear import law_gain, reduced_linear_model
 from .nugap import as_statespace, gap_detail
-from .sampled import POINTS, case_mesh, certificate, certified_period, prediction
+from .sampled import POINTS, certificate, certified_period, prediction
 from .stability import _label, _options_key, load_stability
 
 __all__ = ["THETA2", "FREQUENCIES_HZ", "CERTIFY_PERIODS", "STEP_CHECK", "arm_validity",
@@ -64,18 +65,17 @@ def arm_validity(config: dict) -> dict:
     resolved scenario mapping: its true parameters, FE mesh, model order and Ts), as
     JSON-able data (module docstring)."""
     from controllers import PassivityBasedController
-    from plant_exudyn import linear_model
     s = scenario_from_mapping(config)
     model = ArmModel(s.true_params, s.model.modes_per_link)
-    mesh = case_mesh(config)
+    truth = truth_spec(config)
     names = list(model.state_names)
     w = 2 * np.pi * np.asarray(FREQUENCIES_HZ)
     pbc = PassivityBasedController(model)
     responses, gaps = [], []
     for theta2 in THETA2:
         red = reduced_linear_model(model, theta=(0.0, theta2))
-        fe = linear_model(s.true_params, mesh, theta=(0.0, theta2),
-                          modal_basis=model.mode_shapes)
+        fe = truth.linear_model(s.true_params, theta=(0.0, theta2),
+                                modal_basis=model.mode_shapes)
         entry = {"theta2": theta2}
         for label, P in (("reduced", red), ("fe", fe)):
             H = P(1j * w)  # (outputs, inputs, frequencies)
@@ -104,20 +104,19 @@ def arm_validity(config: dict) -> dict:
             row[view], row[f"{view}_peak_hz"] = detail.value, detail.frequency / (2 * np.pi)
         gaps.append(row)
     return {"arm": s.arm, "Ts": s.Ts, "modes": list(s.model.modes_per_link),
-            "mesh": dataclasses.asdict(mesh), "frequencies_hz": list(FREQUENCIES_HZ),
+            "truth": _truth_text(config), "frequencies_hz": list(FREQUENCIES_HZ),
             "responses": responses, "gaps": gaps}
 
 
 def _refined(config: dict) -> dict:
-    """``config`` with the FE mesh refined twice."""
-    mesh = dataclasses.asdict(case_mesh(config))
-    mesh["elements_per_link"] = [2 * n for n in mesh["elements_per_link"]]
-    return dict(config, plant=dict(config["plant"], mesh=mesh))
+    """``config`` on its truth plant refined once (mesh and step)."""
+    return dict(config, plant=truth_spec(config).refined(1))
 
 
-def _mesh_text(config: dict) -> str:
-    m = case_mesh(config)
-    return f"{m.element} {m.elements_per_link[0]}+{m.elements_per_link[1]}"
+def _truth_text(config: dict) -> str:
+    """"truth plant (Exudyn), ANCF 4 el/link": the truth plant a case is set against."""
+    spec = truth_spec(config)
+    return ", ".join(x for x in (spec.label, spec.discretisation()) if x)
 
 
 def _step_check(config: dict, period: float) -> str:
@@ -146,11 +145,12 @@ def case_rows(cases, stability=(), *, progress=None) -> list[dict]:
         own = prediction(base)
         row = {"case": case.label, "plant": case.plant, "arm": case.arm,
                "predicted_s": own.period, "predicted_theta2": own.theta2,
-               "note": own.note, "mesh": "", "predicted_fine_s": math.nan, "mesh_fine": ""}
-        if case.plant == "exudyn":
-            row["mesh"], row["mesh_fine"] = _mesh_text(base), _mesh_text(_refined(base))
+               "note": own.note, "mesh": "", "predicted_fine_s": math.nan, "mesh_fine": "",
+               "truth": is_truth(base)}
+        if is_truth(base):
+            row["mesh"], row["mesh_fine"] = _truth_text(base), _truth_text(_refined(base))
             row["predicted_fine_s"] = prediction(_refined(base)).period
-        key = (_options_key(base), case.arm, _mesh_text(base))
+        key = (_options_key(base), case.arm, _truth_text(base))
         if key not in certificates:
             cert = certificate(base, CERTIFY_PERIODS)
             certificates[key] = (certified_period(cert), cert)
@@ -185,14 +185,14 @@ def _against_measured(row: dict, result, base: dict) -> dict:
             out["evidence"] = ("the measured bracket ends at a solver failure, not a "
                                "divergence: it says nothing about the limit")
     c = row["certified_s"]
-    if row["plant"] == "exudyn" and c == 0:
+    if row["truth"] and c == 0:
         out["sound"], out["conservatism"] = "nothing certified", 0.0
-    elif row["plant"] == "exudyn" and not math.isnan(c):
+    elif row["truth"] and not math.isnan(c):
         unstable = [Ts for Ts, (o, _) in result.tested.items() if Ts <= c and o == "diverged"]
         out["sound"] = "yes" if not unstable else f"NO: unstable at {min(unstable):g} s"
         if lo > 0:
             out["conservatism"] = c / lo
-    if (row["plant"] == "exudyn" and base["observer"]["kind"] == "none"
+    if (row["truth"] and base["observer"]["kind"] == "none"
             and math.isfinite(p) and p >= min(result.tested) and not math.isnan(lo) and p < lo):
         out["evidence"] = _step_check(base, p)
     return out
@@ -207,7 +207,7 @@ def validity_analysis(cases, *, stability_dir=None, progress=None) -> dict:
         stability = load_stability(stability_dir, fresh_only=True)
     arms = {}
     for case in cases:  # an FE case carries the mesh; any case carries the arm
-        if case.arm not in arms or case.plant == "exudyn":
+        if case.arm not in arms or case.truth:
             arms[case.arm] = case.base
     started = time.perf_counter()
     per_arm = [arm_validity(config) for config in arms.values()]

@@ -86,13 +86,13 @@ def effective_rho(row, requirement: Requirement) -> float | None:
 @dataclass
 class Evaluations:
     """Scenarios run on the campaign runner into ``out`` and read back from the store;
-    simulations counted per plant (distinct scenarios asked for)."""
+    simulations counted per plant role (distinct scenarios asked for)."""
 
     out: Path
     runner: object
     name: str
     seen: set = field(default_factory=set)
-    count: dict = field(default_factory=lambda: {"reduced": 0, "exudyn": 0})
+    count: dict = field(default_factory=lambda: {"reduced": 0, "truth": 0})
     failed: list = field(default_factory=list)
 
     def __post_init__(self):
@@ -115,7 +115,7 @@ class Evaluations:
         for p in unique:
             if p.run_id not in self.seen:
                 self.seen.add(p.run_id)
-                self.count[p.scenario.plant.kind] += 1
+                self.count[p.scenario.plant.role] += 1
                 if rows[p.run_id].status == "failed":
                     self.failed.append(p.run_id)
         return [rows[p.run_id] for p in planned]
@@ -127,7 +127,7 @@ class Evaluations:
 
     @property
     def simulations(self) -> dict:
-        return {"reduced": self.count["reduced"], "truth": self.count["exudyn"]}
+        return dict(self.count)
 
 
 def _point_axes(point: dict, **extra) -> dict:
@@ -265,7 +265,7 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
         True when the search is over."""
         nonlocal found, threshold
         point = system.uncertainty.at(u)
-        (row,) = ev.run([(system.scenario(point, plant="exudyn"), "falsify",
+        (row,) = ev.run([(system.scenario(point, plant="truth"), "falsify",
                           _point_axes(point, role="confirm"))])
         rho_truth = effective_rho(row, requirement)
         entry = {"u": u, "point": point, "rho_reduced": rho_reduced, "rho_truth": rho_truth,
@@ -285,7 +285,7 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
         return not worst_case or found["rho_truth"] == -math.inf  # nothing is worse
 
     done = False
-    while not done and ev.count["exudyn"] < budget and ev.count["reduced"] < reduced_budget:
+    while not done and ev.count["truth"] < budget and ev.count["reduced"] < reduced_budget:
         restarts = search.restarts
         U = search.ask()
         if search.restarts != restarts and best_run is not None:
@@ -310,16 +310,16 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
                 best_run = (float(value), u, float(rho))
         candidates = [i for i in np.argsort(corrected, kind="stable")
                       if corrected[i] < threshold and tuple(U[i]) not in truth]
-        if candidates and ev.count["exudyn"] < budget:
+        if candidates and ev.count["truth"] < budget:
             i = candidates[0]
             done = confirm(U[i], float(rho_r[i]), float(corrected[i]))
-        trace.append({"reduced": ev.count["reduced"], "truth": ev.count["exudyn"],
+        trace.append({"reduced": ev.count["reduced"], "truth": ev.count["truth"],
                       "best_rho_reduced": _number(best_reduced[0]) if best_reduced else None,
                       "best_rho_truth": _number(min((e["rho_truth"] for e in truth.values()
                                                      if e["rho_truth"] is not None),
                                                     default=math.inf))})
     if not done and best_run is not None and tuple(best_run[1]) not in truth \
-            and ev.count["exudyn"] < budget:
+            and ev.count["truth"] < budget:
         confirm(best_run[1], best_run[2], best_run[0])  # the last run's best case
     return _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace,
                             budget, seed, search)
@@ -400,14 +400,14 @@ def conform(system: System, out, *, runner, budget: int, seed: int, log=print) -
     ev = Evaluations(out, runner, f"verify-conform/{system.name}")
     search = CMASearch(system.uncertainty.dim, seed)
     best, trace = None, []
-    while ev.count["exudyn"] < budget:
-        U = search.ask()[:budget - ev.count["exudyn"]]
+    while ev.count["truth"] < budget:
+        U = search.ask()[:budget - ev.count["truth"]]
         points = [system.uncertainty.at(u) for u in U]
         items = []
         for p in points:
-            for plant in ("reduced", "exudyn"):
-                items.append((system.scenario(p, plant=plant), "conform",
-                              _point_axes(p, plant=plant)))
+            for role in ("reduced", "truth"):
+                items.append((system.scenario(p, plant=role), "conform",
+                              _point_axes(p, plant=role)))
         rows = ev.run(items)
         distances = []
         for k, p in enumerate(points):
@@ -418,9 +418,9 @@ def conform(system: System, out, *, runner, budget: int, seed: int, log=print) -
                 best = (d, p, reduced, truth)
         if len(U) == search.popsize:
             search.tell([-d if d is not None else None for d in distances])
-        trace.append({"reduced": ev.count["reduced"], "truth": ev.count["exudyn"],
+        trace.append({"reduced": ev.count["reduced"], "truth": ev.count["truth"],
                       "distance": _number(best[0]) if best else None})
-        log(f"  {system.name}: {ev.count['exudyn']}/{budget} points, largest |θ_truth − "
+        log(f"  {system.name}: {ev.count['truth']}/{budget} points, largest |θ_truth − "
             f"θ_reduced| {best[0] if best else float('nan'):.4g} rad")
     verdict = {"mode": "conform", "system": system.name, "distance": None, "scenario": None,
                "simulations": ev.simulations}
