@@ -230,3 +230,28 @@ def test_the_rooms_depend_in_one_direction():
             dep_room = dep.split(".")[1]
             assert dep_room in ROOMS and ROOMS.index(dep_room) <= ROOMS.index(room), \
                 f"{module} ({room}) imports {dep} ({dep_room})"
+
+
+def test_reading_results_never_loads_the_solver(tmp_path):
+    """`export`, `report` and `show` read stored results: none of them imports Exudyn (its
+    compiled module and OpenGL libraries), even for truth-plant runs.  Known bad: `run` on
+    the truth plant does."""
+    script = textwrap.dedent(f'''
+        import sys
+        from validation.cli import main
+        status = main(sys.argv[1:])
+        print("EXUDYN" if "exudyn" in sys.modules else "NO-EXUDYN")
+        sys.exit(status)
+    ''')
+    out = tmp_path / "out"
+
+    def flexarm(*args):
+        return subprocess.run([sys.executable, "-c", script, *args], capture_output=True,
+                              text=True, timeout=600, cwd=tmp_path)
+    made = flexarm("run", "--plant", "exudyn", "--duration", "0.05", "--out", str(out))
+    assert made.returncode == 0 and made.stdout.strip().endswith("EXUDYN"), made.stderr
+    assert not made.stdout.strip().endswith("NO-EXUDYN")
+    for args in (["export", str(out)], ["report", str(out)], ["show", str(out / "pbc@exudyn")]):
+        proc = flexarm(*args)
+        assert proc.returncode == 0, (args, proc.stderr)
+        assert proc.stdout.strip().endswith("NO-EXUDYN"), (args, proc.stdout[-300:])

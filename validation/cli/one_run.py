@@ -61,7 +61,7 @@ def auto_name(s: Scenario) -> str:
     "pbc+smo-paper@exudyn" (a plug-in by its class name)."""
     law = lambda kind: kind.rsplit(":", 1)[-1]  # noqa: E731
     observer = "" if s.observer.kind == "none" else "+" + law(s.observer.kind)
-    return f"{law(s.controller.kind)}{observer}@{s.plant.kind}"
+    return f"{law(s.controller.kind)}{observer}@{law(s.plant.kind)}"
 
 
 def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:

@@ -329,7 +329,7 @@ def plant_for_role(nominal: dict, role: str) -> dict:
     plant = nominal["plant"]
     if role == "reduced":
         return {"kind": "reduced", "modes_per_link": list(nominal["model"]["modes_per_link"]),
-                "step": plant["step"]}
+                "step": plant.get("step", ReducedPlantSpec.step)}
     if is_truth(nominal):
         return copy.deepcopy(plant)
     return {"kind": DEFAULT_TRUTH, "step": plant["step"]}
