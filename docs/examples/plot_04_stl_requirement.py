@@ -3,7 +3,7 @@ A requirement in Signal Temporal Logic
 ======================================
 
 A ``[[requirement]]`` is a built-in claim or an STL formula over the run's signal names;
-every run carries its robustness ρ as the metric ``rho_<name>`` (ρ ≥ 0 holds, |ρ| says by
+every run carries its robustness ρ as the metric ``rho_<name>`` (ρ ≥ 0 holds, its size says by
 how much).  Here: the paper's tracking claim, and "after 1 s, joint 1 stays within 5 mrad
 of its reference and the link-2 tip deflection within 2 mm", on a torque pulse of growing
 size.

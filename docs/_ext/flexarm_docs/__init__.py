@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .rst import escape_bars
 from . import claimsref, cliref, configref, findings, lawsref, signalref
 
 #: File name in docs/_generated → the function returning its text (given the docs folder).
@@ -36,6 +37,12 @@ def generate(app) -> None:
             path.write_text(text)
 
 
+def escape_docstring_bars(app, what, name, obj, options, lines) -> None:
+    """Docstrings write magnitudes as |x| (`rst.escape_bars`)."""
+    lines[:] = [escape_bars(line) for line in lines]
+
+
 def setup(app):
     app.connect("builder-inited", generate)
+    app.connect("autodoc-process-docstring", escape_docstring_bars)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

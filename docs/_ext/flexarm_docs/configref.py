@@ -129,8 +129,10 @@ def _table(cls, required: dict, special: dict, overrides=None) -> str:
         if overrides and f.name in overrides:
             shown += f" ({overrides[f.name]})"
         allowed = _allowed(cls, f.name, hints[f.name], required, special)
-        rows.append([literal(f.name), _type_name(hints[f.name]), unit, shown,
-                     literal(allowed) if allowed not in ("", "any") else allowed, meaning])
+        if (cls, f.name) not in special and allowed not in ("", "any"):
+            allowed = literal(allowed)  # a check's own words
+        rows.append([literal(f.name), _type_name(hints[f.name]), unit, shown, allowed,
+                     meaning])
     return list_table(["key", "type", "unit", "default", "allowed", "meaning"], rows,
                       widths=[14, 10, 8, 12, 16, 40], classes="config-table")
 

@@ -14,6 +14,19 @@ def split_unit(text: str) -> tuple[str, str]:
     return (UNIT.sub("", text, count=1), unit.group(1)) if unit else (text, "")
 
 
+_LITERAL = re.compile(r"(``.*?``)")
+
+
+def escape_bars(text: str) -> str:
+    """``|x|`` (a magnitude, as the docstrings write it) as text, not a substitution
+    reference: every ``|`` outside inline literals is escaped, except a line block's
+    leading "| "."""
+    parts = _LITERAL.split(text)
+    for i in range(0, len(parts), 2):
+        parts[i] = re.sub(r"(?!^\| )\|", r"\\|", parts[i], flags=re.M)
+    return "".join(parts)
+
+
 def heading(text: str, underline: str) -> str:
     return f"{text}\n{underline * len(text)}\n\n"
 
@@ -26,7 +39,7 @@ def literal(value) -> str:
 
 def cell(text: str) -> list[str]:
     """The lines of a list-table cell (blank lines kept: a cell may hold paragraphs)."""
-    lines = str(text).strip().splitlines() or [""]
+    lines = escape_bars(str(text)).strip().splitlines() or [""]
     return lines
 
 

@@ -81,8 +81,7 @@ def keys_by_pattern(keys) -> dict[str, list[str]]:
 
 def _where(func) -> str:
     name = func.__name__
-    module = func.__module__
-    return f":func:`~{module}.{name}`" if name == "all_metrics" else f"``{name}``"
+    return ":func:`~validation.all_metrics`" if name == "all_metrics" else f"``{name}``"
 
 
 def render_metrics(docs) -> str:
