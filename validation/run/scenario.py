@@ -595,7 +595,18 @@ def _has_positive_frequencies(params: ArmParameters, modes: tuple[int, int]) -> 
 def scenario_from_mapping(data: dict) -> Scenario:
     """Build and check a scenario from a mapping (unknown keys and bad values raise
     `ConfigError` naming the dotted key).  ``true_params`` and ``nominal_params`` start
-    from the parameters of ``arm`` and override them key by key."""
+    from the parameters of ``arm`` and override them key by key.
+
+    Parameters
+    ----------
+    data : dict
+        Any subset of the scenario keys, as a TOML file would hold them.
+
+    Returns
+    -------
+    Scenario
+        The scenario, every default filled in, checked (`check_scenario`).
+    """
     base = to_mapping(arm_parameters(data.get("arm", "default")))
     data = dict(data)
     for key in ("true_params", "nominal_params"):
@@ -607,6 +618,18 @@ def scenario_from_mapping(data: dict) -> Scenario:
 
 
 def scenario_to_mapping(s: Scenario) -> dict:
-    """The fully resolved scenario as plain data (stored next to every result)."""
+    """The fully resolved scenario as plain data (stored next to every result).
+
+    Parameters
+    ----------
+    s : Scenario
+        The scenario.
+
+    Returns
+    -------
+    dict
+        Every key, plain numbers, strings, lists and tables (TOML- and JSON-able);
+        `scenario_from_mapping` of it gives ``s`` back.
+    """
     return to_mapping(s)
 

@@ -14,17 +14,14 @@ import re
 import types
 import typing
 
-from numpydoc.docscrape import NumpyDocString
-
+from .docstrings import entries
 from .rst import heading, list_table, literal, split_unit
 
 def _field_docs(cls) -> dict[str, tuple[str, str]]:
     """Field name → (meaning without the unit, unit) from the class's Parameters."""
     out = {}
-    for param in NumpyDocString(cls.__doc__ or "")["Parameters"]:
-        meaning, unit = split_unit(" ".join(param.desc))
-        for name in param.name.split(","):
-            out[name.strip()] = (meaning, unit)
+    for param in entries(cls, "Parameters"):
+        out[param.name] = split_unit(param.desc)
     return out
 
 

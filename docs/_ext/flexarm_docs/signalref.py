@@ -13,8 +13,7 @@ from __future__ import annotations
 import functools
 import re
 
-from numpydoc.docscrape import FunctionDoc
-
+from .docstrings import entries
 from .rst import list_table, literal, split_unit
 
 #: The scenario of the sample run: an observer (estimation keys), a requirement (its ρ)
@@ -49,10 +48,10 @@ def documented_keys() -> list[tuple[str, str, str, object]]:
     metric (a table of them, ``dict``, is not)."""
     out = []
     for func in metric_functions():
-        for ret in FunctionDoc(func)["Returns"]:
+        for ret in entries(func, "Returns"):
             if ret.type == "dict":
                 continue
-            meaning, unit = split_unit(" ".join(ret.desc))
+            meaning, unit = split_unit(ret.desc)
             out.append((ret.name, unit, meaning, func))
     return out
 
@@ -68,9 +67,11 @@ def pattern(key: str) -> re.Pattern:
 
 
 def keys_by_pattern(keys) -> dict[str, list[str]]:
-    """Each documented pattern → the given keys it matches (a key goes to the first)."""
+    """Each documented pattern → the given keys it matches (a key goes to one)."""
     out = {k: [] for k, *_ in documented_keys()}
-    compiled = [(k, pattern(k)) for k in out]
+    # The most specific pattern first: est_rms_slope_rate_i before est_rms_<state>.
+    compiled = sorted(((k, pattern(k)) for k in out),
+                      key=lambda kp: -len(re.sub(r"<[a-z]+>", "", kp[0])))
     for key in keys:
         for name, regex in compiled:
             if regex.match(key):
