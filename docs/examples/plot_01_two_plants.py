@@ -17,9 +17,9 @@ for plant in ("reduced", "exudyn"):
     scenario = scenario_from_mapping({**base, "plant": {"kind": plant}})
     results[plant] = run_scenario(scenario)
     metrics = all_metrics(results[plant])
-    print(f"{plant:8s} {results[plant].status}: max |theta1 - theta1_d| after "
-          f"{metrics['transient_s']:g} s = {metrics['track_max_1'] * 1e3:.3f} mrad, "
-          f"link-1 vibration RMS = {metrics['vib_rms_1'] * 1e3:.4f} mm")
+    print(f"{plant:8s} {results[plant].status}: after {metrics['transient_s']:g} s, "
+          f"max |θ1 − θ1d| = {metrics['track_max_1'] * 1e3:.3f} mrad, "
+          f"vibration RMS = {metrics['vib_rms_1'] * 1e3:.4f} mm")
 
 # %%
 # The reduced plant is drawn wide and light under the truth plant, thin and dark, so that

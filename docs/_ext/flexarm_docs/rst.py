@@ -5,7 +5,7 @@ import re
 
 #: A unit in a docstring's meaning: the first ``[...]`` that is not a list, a literal or a
 #: TOML array-of-tables name ("[s]", "[N m]", "[the state's unit]").
-UNIT = re.compile(r"\s*\[([^\]\[`\d][^\]\[`]*)\]")
+UNIT = re.compile(r"\s*(?<![\[`])\[([^\]\[`\d][^\]\[`]*)\](?!\])")
 
 
 def split_unit(text: str) -> tuple[str, str]:
