@@ -1,16 +1,21 @@
 # Two commands matter: `make demo` and `make test`.  Both bootstrap .venv from PyPI with
 # the pinned set in constraints.txt (every package, transitive ones, pip and setuptools
 # included); `make lock` regenerates it from what PyPI serves today, `make test-latest`
-# runs the tests against that newest set without touching .venv.
+# runs the tests against that newest set without touching .venv.  `make docs` builds the
+# documentation site into docs/_build/html (index.html), running the examples gallery.
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 PYTEST := $(BIN)/python -m pytest
 EXTRAS := test,cluster
+# The docs extra is pinned with the rest but installed only by `make docs`: the test
+# suite needs none of Sphinx.
+DOCS_EXTRAS := $(EXTRAS),docs
+DOCS_STAMP  := $(VENV)/.installed-docs
 PINS   := constraints.txt
 
-.PHONY: demo test test-all test-latest lock bench clean
+.PHONY: demo test test-all test-latest lock bench docs clean
 
 # pip and setuptools first (pinned), then the project against the venv's own setuptools
 # (no build isolation: the build backend is pinned too).
@@ -50,15 +55,26 @@ lock:
 	rm -rf .venv-lock
 	$(PYTHON) -m venv .venv-lock
 	.venv-lock/bin/python -m pip install --quiet --upgrade pip setuptools
-	.venv-lock/bin/python -m pip install --quiet --no-build-isolation '.[$(EXTRAS)]'
-	{ echo "# Every package make demo / make test install, pinned (regenerate: make lock)."; \
+	.venv-lock/bin/python -m pip install --quiet --no-build-isolation '.[$(DOCS_EXTRAS)]'
+	{ echo "# Every package make demo / make test / make docs install, pinned (regenerate: make lock)."; \
 	  echo "# $$(.venv-lock/bin/python --version), $$(date -u +%Y-%m-%d)"; \
 	  .venv-lock/bin/python -m pip freeze --all --exclude flexarm-validation; } > $(PINS)
 	rm -rf .venv-lock build
+
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -c $(PINS) --no-build-isolation -e '.[$(DOCS_EXTRAS)]'
+	touch $(DOCS_STAMP)
+
+# Warnings are errors (-W) and every cross-reference must resolve (-n); --keep-going
+# lists them all before failing.  The gallery's examples run during the build.
+docs: $(DOCS_STAMP)
+	$(BIN)/python -m sphinx -W -n --keep-going -b html docs docs/_build/html
+	@echo "make docs: open docs/_build/html/index.html"
 
 bench: $(STAMP)
 	for script in bench/bench_*.py; do $(BIN)/python $$script || exit 1; done
 
 clean:
 	rm -rf $(VENV) .venv-latest .venv-lock build *.egg-info .pytest_cache bench/results
+	rm -rf docs/_build docs/_generated docs/auto_examples docs/reference/api
 	find . -name __pycache__ -prune -exec rm -rf {} +

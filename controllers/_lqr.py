@@ -68,7 +68,7 @@ class GainScheduledLQR:
     |z| = 6.6 and 13 (measured).  The ZOH-discretised Riccati equation is exact for
     the sampled linear loop, so K(θ2) stabilises it at the design ``Ts`` by
     construction (checked at every grid point: a slowest decay rate below
-`MIN_DECAY_RATE` raises ValueError).  Use the
+    `MIN_DECAY_RATE` raises ValueError).  Use the
     controller at the ``Ts`` it was designed for.
 
     Tuning (defaults; numbers at θ2 = 0, Ts = 1 ms, 2+2 modes).  R = I and q_theta =

@@ -28,42 +28,61 @@ _POSITIVE = ("L1", "L2", "rho1", "rho2", "EI1", "EI2")
 class ArmParameters:
     """Planar two-link flexible arm, SI units, horizontal plane (no gravity).
 
-    Defaults are Table 1 of the paper plus the two choices below (`table1` gives Table 1
-    alone).  Link i is a uniform Euler–Bernoulli beam of
-    length ``Li`` [m], mass per length ``rhoi`` [kg/m] and bending stiffness ``EIi``
-    [N m²], clamped to hub i.  Hub 1 (``mh1`` [kg], ``Jh1`` [kg m²]) turns about the fixed
-    base; hub 2 (``mh2``, ``Jh2``: the motor-2 *rotor*) turns on a revolute joint at the
-    link-1 tip; the payload (``Mp`` [kg], ``Jp`` [kg m²]) sits rigidly at the link-2 tip.
+    Defaults are Table 1 of the paper plus two choices the paper leaves implicit, a motor-2
+    stator inertia and structural damping (`table1` gives Table 1 alone).  Link i is a
+    uniform Euler–Bernoulli beam clamped to hub i; hub 1 turns about the fixed base,
+    hub 2 (the motor-2 *rotor*) on a revolute joint at the link-1 tip; the payload sits
+    rigidly at the link-2 tip.
 
-    Parameters the paper leaves implicit (`table1` sets both to zero)
-    --------------------------------------------------------------------
-    stator_mass, stator_inertia : float
-        Motor-2 stator, rigidly fixed to the link-1 tip [kg], [kg m²].  Default mass 0
-        (Table 1's mh2 is the whole motor) and inertia 0.01 kg m², in addition to the
-        rotor's Jh2 (1 % of it: a ~1 kg housing of 0.1 m radius).  The motor-2 reaction
-        torque acts on the link-1 tip; with no rotary inertia there, a sampled (1 kHz)
-        joint-2 PD with Kd2 = 4 N m s/rad diverges within 10 ms on *both* plants, and
-        damping alone does not cure it.  3e-3 kg m² is the smallest value measured to
-        keep Kd2 = 4 and 6 stable on the reduced and the FE plant; 0.01 leaves a 3×
-        margin.  It lowers the locked frequencies by ≤ 0.4 % and adds a 13.7 Hz mode of
-        the free arm (the stator turning with the link-1 tip slope).
+    Parameters
+    ----------
+    L1, L2 : float
+        Link lengths [m].
+    rho1, rho2 : float
+        Link masses per length [kg/m].
+    EI1, EI2 : float
+        Link bending stiffnesses [N m²].
+    Jh1, Jh2 : float
+        Hub inertias [kg m²]: hub 1, and the motor-2 rotor.
+    mh1, mh2 : float
+        Hub masses [kg] (mh1 sits on the fixed axis and does not enter the planar
+        dynamics).
+    Mp : float
+        Payload mass [kg].
+    Jp : float
+        Payload inertia [kg m²].
+    stator_mass : float
+        Motor-2 stator mass rigidly at the link-1 tip [kg] (0: Table 1's mh2 is the whole
+        motor).
+    stator_inertia : float
+        Motor-2 stator inertia at the link-1 tip [kg m²], in addition to the rotor's Jh2
+        (Notes).
     bending_damping1, bending_damping2 : float
-        Kelvin–Voigt material damping of link i, given as its bending damping d_i
-        [N m² s] (bending moment EI w'' + d ẇ'').  The material's retardation time
-        β_i = d_i / EI_i damps every strain of the link alike (bending, axial, shear), so
-        every mode of the arm — bending and axial, on both plants — has the damping
-        ratio ζ = π f β (stiffness-proportional damping).  Default 2e-3, β = 2e-4 s:
-        ζ = 0.04 % at the 0.63 Hz locked mode, 0.14–0.38 % at the free arm's 2.2 and
-        6.1 Hz, 2 % at 34 Hz, 33 % at the first axial mode (522 Hz); light structural
-        damping of a metal link, not a measured value — calibrate it to your arm
-        (`flexarm calibrate`).  Exudyn gets d as ``bendingDamping`` and β EA (β GA) as
-        its axial (shear) damping; the reduced model uses D = β_i·K per link.
+        Kelvin–Voigt material damping of each link, as its bending damping d_i [N m² s]
+        (Notes).
 
     Notes
     -----
+    *The stator.*  Default inertia 0.01 kg m² (1 % of Jh2: a ~1 kg housing of 0.1 m
+    radius).  The motor-2 reaction torque acts on the link-1 tip; with no rotary inertia
+    there, a sampled (1 kHz) joint-2 PD with Kd2 = 4 N m s/rad diverges within 10 ms on
+    *both* plants, and damping alone does not cure it.  3e-3 kg m² is the smallest value
+    measured to keep Kd2 = 4 and 6 stable on the reduced and the FE plant; 0.01 leaves a
+    3× margin.  It lowers the locked frequencies by ≤ 0.4 % and adds a 13.7 Hz mode of
+    the free arm (the stator turning with the link-1 tip slope).
+
+    *The damping.*  The bending moment is EI w'' + d ẇ''.  The material's retardation
+    time β_i = d_i / EI_i damps every strain of the link alike (bending, axial, shear), so
+    every mode of the arm — bending and axial, on both plants — has the damping ratio
+    ζ = π f β (stiffness-proportional damping).  Default 2e-3, β = 2e-4 s: ζ = 0.04 % at
+    the 0.63 Hz locked mode, 0.14–0.38 % at the free arm's 2.2 and 6.1 Hz, 2 % at 34 Hz,
+    33 % at the first axial mode (522 Hz); light structural damping of a metal link, not
+    a measured value — calibrate it to your arm.  Exudyn gets d as ``bendingDamping`` and
+    β EA (β GA) as its axial (shear) damping; the reduced model uses D = β_i·K per link.
+
     The paper's Table 1 lists J01 = J02 = 0.0415 kg m²; that is ρL³/3 = 0.041667
     rounded.  Here it is derived (`J01`, `J02`), never stored, so it cannot disagree
-    with ρ and L.  ``mh1`` sits on the fixed axis and does not enter the planar dynamics.
+    with ρ and L.
     """
 
     L1: float = 0.5

@@ -43,7 +43,15 @@ __all__ = ["Plant"]
 
 
 class Plant:
-    """Base class of every plant (module docstring: the contract)."""
+    """Base class of every plant (module docstring: the contract).
+
+    Parameters
+    ----------
+    sensors : SensorConfig
+        What the plant measures.
+    modal_basis : (LinkModes, LinkModes)
+        The mode shapes its modal coordinates q are expressed in.
+    """
 
     name: str = "plant"
     role: str = "truth"

@@ -236,7 +236,7 @@ def test_reading_results_never_loads_the_solver(tmp_path):
     """`export`, `report` and `show` read stored results: none of them imports Exudyn (its
     compiled module and OpenGL libraries), even for truth-plant runs.  Known bad: `run` on
     the truth plant does."""
-    script = textwrap.dedent(f'''
+    script = textwrap.dedent('''
         import sys
         from validation.cli import main
         status = main(sys.argv[1:])

@@ -100,7 +100,18 @@ def is_campaign(data: dict) -> bool:
 
 
 def load_campaign(path: str | Path) -> Campaign:
-    """Read a campaign TOML (with includes) and check its structure."""
+    """Read a campaign TOML (with includes) and check its structure.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The campaign file.
+
+    Returns
+    -------
+    Campaign
+        Its base scenario, sweeps and sections (expand it with `expand`).
+    """
     return campaign_from_mapping(load_toml(path), source=str(path))
 
 
@@ -123,6 +134,21 @@ def load_study(path: str | Path) -> Campaign:
 
 
 def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
+    """A campaign from a mapping with a campaign file's keys (``name``, ``[scenario]``,
+    ``[[sweep]]``, ``[report]``, …); unknown keys raise `ConfigError`.
+
+    Parameters
+    ----------
+    data : dict
+        The campaign, as a TOML file would hold it.
+    source : str
+        Where it comes from: named in errors, and its stem is the default ``name``.
+
+    Returns
+    -------
+    Campaign
+        The campaign, its structure checked (its runs are checked by `expand`).
+    """
     for key in data:
         check(key in _TOP_KEYS, key, f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})")
     name = data.get("name", Path(source).stem)
@@ -338,7 +364,18 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
 def expand(campaign: Campaign) -> list[PlannedRun]:
     """All runs of a campaign, each scenario resolved and checked; duplicates (the same
     resolved scenario reached twice) are kept once.  ``[report] figures`` must name runs
-    of the campaign."""
+    of the campaign.
+
+    Parameters
+    ----------
+    campaign : Campaign
+        The campaign.
+
+    Returns
+    -------
+    list of PlannedRun
+        Each run's id, name, sweep, swept values and checked scenario.
+    """
     runs = _expand(campaign)
     names = {r.scenario.name for r in runs}
     for wanted in campaign.report.get("figures", []):

@@ -194,7 +194,13 @@ def _set_wal(db: sqlite3.Connection) -> None:
 
 
 class ResultStore:
-    """Reads and writes one results folder (created on the first write)."""
+    """Reads and writes one results folder (created on the first write).
+
+    Parameters
+    ----------
+    out : str or pathlib.Path
+        The results folder: ``index.sqlite`` and ``runs/``.
+    """
 
     def __init__(self, out: str | Path) -> None:
         self.out = Path(out)

@@ -22,7 +22,15 @@ __all__ = ["ConfigError", "from_mapping", "to_mapping", "check", "check_label"]
 
 
 class ConfigError(ValueError):
-    """A bad configuration value; ``path`` is the dotted key (e.g. ``plant.mesh.element``)."""
+    """A bad configuration value.
+
+    Parameters
+    ----------
+    path : str
+        The dotted key (e.g. ``plant.mesh.element``).
+    message : str
+        What is wrong with it.
+    """
 
     def __init__(self, path: str, message: str) -> None:
         self.path, self.message = path, message

@@ -100,17 +100,18 @@ class DisturbanceTarget(IntEnum):
 class Group(IntEnum):
     """The groups of signals in a recorded row, in their order (`signal_layout`)."""
 
-    TRUTH = 0  # the state [θ, q, θ̇, q̇] in the model's coordinates
-    TIPS = 1  # reduced_model's TRUTH_EXTRAS: tips, tip deflections, projection residuals
-    REF = 2
-    REF_RATE = 3
-    TIP_REF = 4
-    XHAT = 5
-    Y = 6
-    TAU_CMD = 7
-    TAU = 8
-    RESIDUAL = 9
-    DIST = 10
+    # Each member's `#:` comment is its meaning in the signal-name reference of the docs.
+    TRUTH = 0  #: The true state [θ, q, θ̇, q̇] in the laws' model coordinates [rad, m, rad/s, m/s].
+    TIPS = 1  #: Tip positions in the base frame, tip deflections, modal projection residuals [m].
+    REF = 2  #: The reference angles θ_d [rad].
+    REF_RATE = 3  #: The reference rates θ̇_d [rad/s].
+    TIP_REF = 4  #: The rigid arm's tip at θ_d [m].
+    XHAT = 5  #: The observer's estimate of each state (only with an observer) [the state's unit].
+    Y = 6  #: What the sensors read, noise and quantisation included [the reading's unit].
+    TAU_CMD = 7  #: The controller's torque command [N m].
+    TAU = 8  #: The torque the motors apply: the command saturated at the torque limit [N m].
+    RESIDUAL = 9  #: The PBC's unrealisable flexible-coordinate forces (eq. 20, rows 2…) [N].
+    DIST = 10  #: The disturbances on the joints [N m] and on the payload [N].
 
 
 def signal_layout(state_names, truth_extras, measured, has_observer: bool,

@@ -66,7 +66,20 @@ def make_reference(spec):
 
 
 def build(scenario: Scenario) -> Setup:
-    """Plant from ``true_params``, controller and observer from ``nominal_params``."""
+    """The objects of a run: the plant from ``true_params``, the controller and observer
+    from ``nominal_params``.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The run, checked again here.
+
+    Returns
+    -------
+    Setup
+        The laws' model, the plant, the controller, the observer (None if the scenario
+        has none) and the reference.
+    """
     check_scenario(scenario)
     s = scenario
     model = nominal_model(s.nominal_params, s.model.modes_per_link)
@@ -82,7 +95,19 @@ def build(scenario: Scenario) -> Setup:
 
 
 def run_scenario(scenario: Scenario) -> RunResult:
-    """Build the objects of ``scenario`` and simulate it."""
+    """Build the objects of ``scenario`` (`build`) and simulate it (`simulate`).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        The run.
+
+    Returns
+    -------
+    RunResult
+        Its named signals, status (``ok``, ``diverged`` or ``failed``) and resolved
+        scenario.
+    """
     setup = build(scenario)
     return simulate(setup.plant, setup.controller, setup.observer, scenario,
                     reference=setup.reference, model=setup.model)

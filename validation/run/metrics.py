@@ -111,9 +111,28 @@ def _f64(result: RunResult, names) -> np.ndarray:
 
 
 def tracking(result: RunResult, transient: float) -> dict[str, float]:
-    """RMS and max |θ_i − θ_i,d| after ``transient``; the rate error max |θ̇_i − θ̇_i,d|
-    and its ratio to the reference's peak rate (the phase portrait's distance from the
-    reference's own orbit)."""
+    """Tracking: the angle error after ``transient``, and the rate error with its ratio to
+    the reference's peak rate (the phase portrait's distance from the reference's own
+    orbit).
+
+    Parameters
+    ----------
+    result : RunResult
+        The run.
+    transient : float
+        Start of the window measured [s].
+
+    Returns
+    -------
+    track_rms_i : float
+        RMS of θ_i − θ_i,d after the transient [rad], joint i = 1, 2.
+    track_max_i : float
+        Max |θ_i − θ_i,d| after the transient [rad].
+    rate_err_max_i : float
+        Max |θ̇_i − θ̇_i,d| after the transient [rad/s].
+    rate_err_rel : float
+        The larger of rate_err_max_i ÷ the reference's peak rate of joint i [ratio].
+    """
     window = _after(result, transient)
     err = (_f64(result, ["theta1", "theta2"]) - _f64(result, ["theta1_ref", "theta2_ref"]))
     rate_ref = _f64(result, ["theta1_dot_ref", "theta2_dot_ref"])[:, window]
@@ -130,7 +149,22 @@ def tracking(result: RunResult, transient: float) -> dict[str, float]:
 
 
 def tip_error(result: RunResult, transient: float) -> dict[str, float]:
-    """Cartesian distance between the payload and the rigid arm's tip at θ_d."""
+    """Cartesian distance between the payload and the rigid arm's tip at θ_d.
+
+    Parameters
+    ----------
+    result : RunResult
+        The run.
+    transient : float
+        Start of the window measured [s].
+
+    Returns
+    -------
+    tip_err_rms : float
+        Its RMS after the transient [m].
+    tip_err_max : float
+        Its max after the transient [m].
+    """
     window = _after(result, transient)
     d = np.hypot(result["tip2_x"].astype(float) - result["tip_ref_x"],
                  result["tip2_y"].astype(float) - result["tip_ref_y"])[window]
@@ -138,7 +172,24 @@ def tip_error(result: RunResult, transient: float) -> dict[str, float]:
 
 
 def deflection(result: RunResult, transient: float) -> dict[str, float]:
-    """Tip deflections: max over the whole run and after ``transient``, RMS after it."""
+    """Tip deflections: max over the whole run and after ``transient``, RMS after it.
+
+    Parameters
+    ----------
+    result : RunResult
+        The run.
+    transient : float
+        Start of the window measured [s].
+
+    Returns
+    -------
+    defl_max_i : float
+        Max |tip deflection| of link i over the whole run [m].
+    defl_late_max_i : float
+        Max |tip deflection| of link i after the transient [m].
+    defl_rms_i : float
+        RMS tip deflection of link i after the transient [m].
+    """
     w = _f64(result, ["tip_defl1", "tip_defl2"])
     late = _after(result, transient)
     out = {}
@@ -173,8 +224,27 @@ def oscillatory(result: RunResult, cutoff_hz: float) -> np.ndarray:
 
 
 def vibration(result: RunResult, transient: float, cutoff_hz: float) -> dict[str, float]:
-    """RMS and max of the oscillatory tip deflection after ``transient``, and its decay
-    (`vibration_decay`)."""
+    """The oscillatory tip deflection (module docstring) after ``transient``, and its
+    decay (`vibration_decay`).
+
+    Parameters
+    ----------
+    result : RunResult
+        The run.
+    transient : float
+        Start of the window measured [s].
+    cutoff_hz : float
+        The high-pass frequency that separates vibration from quasi-static bending [Hz].
+
+    Returns
+    -------
+    vib_cutoff_hz : float
+        That frequency [Hz].
+    vib_rms_i : float
+        RMS of link i's oscillatory tip deflection after the transient [m].
+    vib_max_i : float
+        Its max after the transient [m].
+    """
     late = _after(result, transient)
     out = {"vib_cutoff_hz": cutoff_hz}
     if result.time.size < 16 or not late.any():
@@ -187,10 +257,29 @@ def vibration(result: RunResult, transient: float, cutoff_hz: float) -> dict[str
 
 
 def vibration_decay(time: np.ndarray, oscillation: np.ndarray, transient: float) -> dict:
-    """Per link: the RMS of ``oscillation`` (2, n_samples) in each full
-    `VIBRATION_WINDOW` from t = 0, the decay rate [1/s] between the first two windows
-    that start at or after ``transient``, and the RMS over the run's second half (module
-    docstring); NaN where the run is too short."""
+    """Per link: how the oscillatory tip deflection decays (module docstring); NaN where
+    the run is too short.
+
+    Parameters
+    ----------
+    time : ndarray
+        Sample times [s].
+    oscillation : ndarray
+        The oscillatory tip deflections (2, n_samples) [m].
+    transient : float
+        Where the decay is measured from [s].
+
+    Returns
+    -------
+    vib_win_i_TT : float
+        RMS of link i's oscillation in the full `VIBRATION_WINDOW` starting at TT
+        seconds [m].
+    vib_decay_i : float
+        Decay rate between the first two windows that start at or after the transient
+        [1/s] (ln of their RMS ratio ÷ the window).
+    vib_late_i : float
+        RMS over the run's second half: what stays [m].
+    """
     dt = time[1] - time[0]
     k = max(1, int(round(VIBRATION_WINDOW / dt)))
     n = time.size // k
@@ -261,10 +350,41 @@ def _sensor_sigma(config: dict, state: str) -> float:
 
 
 def estimation(result: RunResult, transient: float, model=None) -> dict[str, float]:
-    """Per estimated state: error RMS and max after ``transient``, the raw measurement's
-    error RMS and the signal RMS with the two ratios, the convergence tolerance
-    (``est_tol_*``) and time (``est_conv_*``; module docstring — ``model`` gives the
-    flexible rates the paper's bound).  Empty if the run had no observer."""
+    """Estimation against the measurement, per estimated state (module docstring).
+    Empty if the run had no observer.
+
+    Parameters
+    ----------
+    result : RunResult
+        The run.
+    transient : float
+        Start of the window measured [s].
+    model : reduced_model.ArmModel, optional
+        The laws' model: gives the flexible rates the paper's bound.
+
+    Returns
+    -------
+    est_rms_<state> : float
+        RMS of the estimation error after the transient [the state's unit].
+    est_max_<state> : float
+        Its max [the state's unit].
+    signal_rms_<state> : float
+        RMS of the state itself [the state's unit].
+    est_to_signal_<state> : float
+        est_rms ÷ signal_rms [ratio]; ≥ 1: no better than x̂ ≡ 0.
+    noise_rms_<state> : float
+        RMS of the raw measurement's own error, for a measured state [the state's unit].
+    est_to_noise_<state> : float
+        est_rms ÷ noise_rms [ratio]; > 1: worse than the measurement it is fed.
+    est_tol_<state> : float
+        Convergence tolerance (`convergence_tolerances`) [the state's unit].
+    est_conv_<state> : float
+        Convergence time, NaN if never [s].
+    est_worse : str
+        The states worse than their measurement, space-separated.
+    est_worse_zero : str
+        The states worse than x̂ ≡ 0, space-separated.
+    """
     states = [n.removeprefix("xhat_") for n in result.names_with("xhat_")]
     if not states:
         return {}
@@ -300,9 +420,24 @@ def estimation(result: RunResult, transient: float, model=None) -> dict[str, flo
 
 
 def tip_slope_rate_error(result: RunResult, transient: float, model) -> dict[str, float]:
-    """RMS after ``transient`` of the estimation error of each link's tip-slope rate
-    Σ_j φ'_ij(L_i) q̇_ij [rad/s]: the flexible-rate error in the paper's unit, independent
-    of how the modes are normalised."""
+    """The flexible-rate estimation error in the paper's unit, independent of how the
+    modes are normalised.  Empty if the run had no observer.
+
+    Parameters
+    ----------
+    result : RunResult
+        The run.
+    transient : float
+        Start of the window measured [s].
+    model : reduced_model.ArmModel
+        The laws' model (its mode shapes' tip slopes φ'_ij(L_i)).
+
+    Returns
+    -------
+    est_rms_slope_rate_i : float
+        RMS after the transient of the error of link i's tip-slope rate
+        Σ_j φ'_ij(L_i) q̇_ij [rad/s].
+    """
     if "xhat_theta1" not in result:
         return {}
     window = _after(result, transient)
@@ -319,7 +454,22 @@ def tip_slope_rate_error(result: RunResult, transient: float, model) -> dict[str
 
 
 def torque(result: RunResult) -> dict[str, float]:
-    """Applied joint torques: RMS, max, and total variation Σ|Δτ| per second (chattering)."""
+    """Applied joint torques over the whole run.
+
+    Parameters
+    ----------
+    result : RunResult
+        The run.
+
+    Returns
+    -------
+    tau_rms_i : float
+        RMS of the torque applied to joint i [N m].
+    tau_max_i : float
+        Its max magnitude [N m].
+    tau_tv_i : float
+        Its total variation Σ|Δτ| per second of run [N m/s]: chattering.
+    """
     out = {}
     span = max(result.time[-1] - result.time[0], 1e-12) if result.time.size > 1 else math.nan
     for i in (1, 2):
@@ -338,7 +488,18 @@ def growth_rate(result: RunResult) -> dict[str, float]:
     holds (≈ 0), an unstable one grows (the default arm's PBC at 2.76 ms: +4 1/s, long
     before it leaves the divergence bounds).  0 when the last window's Δ²τ is below
     ``GROWTH_FLOOR`` of the torques' RMS: a smooth torque's Δ²τ ≈ τ̈ Ts² (1e-8 N m at
-    0.2 ms) varies with the reference, not with the loop's stability."""
+    0.2 ms) varies with the reference, not with the loop's stability.
+
+    Parameters
+    ----------
+    result : RunResult
+        The run.
+
+    Returns
+    -------
+    growth_rate : float
+        Growth rate of the loop's fastest motion over the run's second half [1/s].
+    """
     tau = np.vstack([result["tau1"], result["tau2"]]).astype(float)
     if tau.shape[1] < 3:
         return {"growth_rate": math.nan}
@@ -355,14 +516,52 @@ def growth_rate(result: RunResult) -> dict[str, float]:
 
 
 def residual(result: RunResult) -> dict[str, float]:
-    """RMS of the PBC's unrealisable flexible-coordinate forces, per coordinate."""
+    """The PBC's unrealisable flexible-coordinate forces (rows 2… of eq. 20).
+
+    Parameters
+    ----------
+    result : RunResult
+        The run.
+
+    Returns
+    -------
+    residual_rms_<coordinate> : float
+        RMS of the force on modal coordinate q_ij that no actuator produces [N].
+    """
     return {f"residual_rms_{n.removeprefix('residual_')}": float(_rms(result[n].astype(float)))
             for n in result.names_with("residual_")}
 
 
 def all_metrics(result: RunResult, transient: float | None = None) -> dict[str, float]:
-    """Every metric of a run, using its stored scenario (arm, model, and its transient
-    unless ``transient`` [s] is given: the claims evaluate a family of them)."""
+    """Every metric of a run, using its stored scenario.
+
+    Parameters
+    ----------
+    result : RunResult
+        The run; its ``config`` is the resolved scenario (arm, model, transient).
+    transient : float, optional
+        The start of the window measured [s]; default the scenario's (the claims
+        evaluate a family of them).
+
+    Returns
+    -------
+    status : str
+        "ok", "diverged" or "failed".
+    end_time : float
+        Simulated time reached [s].
+    transient_s : float
+        The scenario's transient: the window measured is [transient_s, end_time] [s].
+    wall_s : float
+        Wall-clock time of the run [s].
+    startup_s : float
+        Of which setting up the run [s].
+    realtime_factor : float
+        Simulated time ÷ wall-clock time [ratio].
+    metrics : dict
+        And the keys of `tracking`, `tip_error`, `deflection`, `vibration`,
+        `vibration_decay`, `estimation`, `tip_slope_rate_error`, `torque`, `growth_rate`
+        and `residual`.
+    """
     from .laws import nominal_model
     config = result.config
     base = {"status": result.status, "end_time": result.end_time,

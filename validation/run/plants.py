@@ -105,8 +105,17 @@ class PlantSpec:
 
 @dataclass(frozen=True)
 class ReducedPlantSpec(PlantSpec):
-    """``kind = "reduced"``: the paper's model as the plant (fixed-step RK4), with its own
-    ``modes_per_link`` and internal ``step`` [s]."""
+    """``kind = "reduced"``: the paper's model as the plant (fixed-step RK4).
+
+    Parameters
+    ----------
+    kind : {"reduced"}
+        Selects this plant.
+    modes_per_link : (int, int)
+        The plant's own model order, assumed modes of link 1 and link 2 (1..4 each).
+    step : float
+        Internal RK4 step [s]; ``Ts`` must be a whole multiple of it.
+    """
 
     role: ClassVar[str] = "reduced"
     label: ClassVar[str] = "reduced plant"
@@ -144,11 +153,26 @@ def mesh_label(mesh: dict) -> str:
 
 @dataclass(frozen=True)
 class ExudynPlantSpec(PlantSpec):
-    """``kind = "exudyn"``: the FE truth plant — its ``mesh``, the generalised-α ``step``
-    [s] and ``spectral_radius``, and the Newton ``newton_tolerance``.  The default step,
-    0.5 ms, is half the campaigns' 1 ms period: a sign observer's chatter drives the FE
-    arm at the Nyquist frequency, where a 1 ms step moved a 5 s PBC + sign-SMO run's
-    tracking error by 40 % (0.0138 rad against 0.0094-0.0111 on finer meshes and steps)."""
+    """``kind = "exudyn"``: the FE truth plant.
+
+    The default step, 0.5 ms, is half the campaigns' 1 ms period: a sign observer's
+    chatter drives the FE arm at the Nyquist frequency, where a 1 ms step moved a 5 s
+    PBC + sign-SMO run's tracking error by 40 % (0.0138 rad against 0.0094-0.0111 on
+    finer meshes and steps).
+
+    Parameters
+    ----------
+    kind : {"exudyn"}
+        Selects this plant.
+    step : float
+        Generalised-α integration step [s]; ``Ts`` must be a whole multiple of it.
+    mesh : Mesh
+        The finite elements of both links (`plant_exudyn.Mesh`).
+    spectral_radius : float
+        Generalised-α ρ∞ (1: no numerical damping).
+    newton_tolerance : float
+        Relative tolerance of Exudyn's Newton iterations.
+    """
 
     role: ClassVar[str] = "truth"
     label: ClassVar[str] = "truth plant (Exudyn)"
@@ -213,12 +237,25 @@ class ExudynPlantSpec(PlantSpec):
 
 @dataclass(frozen=True)
 class PluginPlantSpec(PlantSpec):
-    """``kind = "package.module:Class"``: a user's plant, a `reduced_model.Plant`
-    subclass, constructed as ``Class(params, model=..., sensors=..., **options)``
-    (``params``: the true arm; ``model``: the controller's nominal `ArmModel`, whose mode
-    shapes its q are expressed in).  ``role`` ("truth" or "reduced") must be the class's
-    own; it is written in the scenario so that a stored run says what it was without its
-    code being imported.  ``step_cost_s`` [s] per control period bounds the time limits."""
+    """``kind = "package.module:Class"``: a user's plant.
+
+    A `reduced_model.Plant` subclass, constructed as ``Class(params, model=...,
+    sensors=..., **options)`` (``params``: the true arm; ``model``: the controller's
+    nominal `ArmModel`, whose mode shapes its q are expressed in).
+
+    Parameters
+    ----------
+    kind : str
+        ``"package.module:Class"``, importable from the working directory or
+        ``PYTHONPATH``.
+    role : {"truth", "reduced"}
+        The class's own role, written in the scenario so that a stored run says what it
+        was without its code being imported.
+    options : dict
+        Keyword options of its constructor.
+    step_cost_s : float
+        A pessimistic wall time per control period [s], for the runs' time limits.
+    """
 
     label: ClassVar[str] = "plug-in plant"
 

@@ -46,8 +46,19 @@ RHO_PREFIX = "rho_"
 
 @dataclass(frozen=True)
 class Requirement:
-    """One ``[[requirement]]``: a ``name`` (its metric is ``rho_<name>``) and either
-    ``claim`` (a built-in claim's key) or ``formula`` (STL over the run's signals)."""
+    """One ``[[requirement]]``: what must hold, with its robustness ρ as a metric.
+
+    Parameters
+    ----------
+    name : str
+        A plain name; the run's metric ``rho_<name>`` holds its robustness.
+    claim : str
+        A built-in claim's key (ρ = bound − value, in the claim's unit); give either this
+        or ``formula``.
+    formula : str
+        A Signal Temporal Logic formula over the run's signal names, time bounds in
+        seconds (ρ in the signals' unit); give either this or ``claim``.
+    """
 
     name: str
     claim: str = ""
@@ -251,7 +262,21 @@ def robustness(requirement: Requirement, result, metrics: dict) -> tuple[float, 
 
 
 def requirement_metrics(result, metrics: dict) -> dict[str, float]:
-    """``rho_<name>`` of every requirement in the run's scenario (NaN if it does not apply)."""
+    """The robustness of every requirement in the run's scenario.
+
+    Parameters
+    ----------
+    result : RunResult
+        The run; its ``config`` holds the ``[[requirement]]`` entries.
+    metrics : dict
+        Its metrics (`validation.run.metrics.all_metrics`): a claim's ρ is computed from them.
+
+    Returns
+    -------
+    rho_<name> : float
+        Robustness ρ of requirement ``name`` [the claim's or the signals' unit]: ≥ 0 holds,
+        < 0 fails, NaN if it does not apply.
+    """
     out = {}
     for data in result.config.get("requirement", ()):
         req = Requirement(**data)

@@ -86,7 +86,13 @@ PLANTS = tuple(REGISTERED)
 
 @dataclass(frozen=True)
 class ModelSpec:
-    """The controller's and observer's model: assumed modes per link (1..4 each)."""
+    """The controller's and observer's model.
+
+    Parameters
+    ----------
+    modes_per_link : (int, int)
+        Assumed modes of link 1 and link 2 in the model the laws are built on (1..4 each).
+    """
 
     modes_per_link: tuple[int, int] = (2, 2)
 
@@ -101,9 +107,17 @@ def _law_kind(value) -> None:
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    """``kind``: a built-in controller ("pbc", "pbc-idealised", "pd", "ct", "lqr") or a
-    plug-in ``"package.module:Class"``; ``options``: its keyword options (the class's own
-    defaults for the rest; unknown options are refused)."""
+    """The controller: a built-in law or a plug-in.
+
+    Parameters
+    ----------
+    kind : str
+        A built-in controller ("pbc", "pbc-idealised", "pd", "ct", "lqr") or a plug-in
+        ``"package.module:Class"``.
+    options : dict
+        Its keyword options; the class's own defaults for the rest (an option it does not
+        take is refused).
+    """
 
     kind: str = "pbc"
     options: dict = field(default_factory=dict)
@@ -114,13 +128,21 @@ class ControllerSpec:
 
 @dataclass(frozen=True)
 class ObserverSpec:
-    """``kind``: "none", a built-in observer ("smo-paper": sign, full state measured;
-    "smo-bl": boundary layer; "smo-pos": positions measured, Barbot's step-by-step
-    injection; "ekf", "ekf-pos": extended Kalman filter) or a plug-in
-    ``"package.module:Class"``; ``options``: its keyword options.  ``initial_error`` =
-    x̂(0) − x(0): empty (exact start), the full 2n-vector, or four values (angles, modal
-    positions, angle rates, modal rates) applied to every state of their group with
-    alternating signs — valid for any model order."""
+    """The observer: none, a built-in one or a plug-in.
+
+    Parameters
+    ----------
+    kind : str
+        "none", a built-in observer ("smo-paper": sign, full state measured; "smo-bl":
+        boundary layer; "smo-pos": positions measured, Barbot's step-by-step injection;
+        "ekf", "ekf-pos": extended Kalman filter) or a plug-in ``"package.module:Class"``.
+    options : dict
+        Its keyword options; the class's own defaults for the rest.
+    initial_error : tuple of float
+        x̂(0) − x(0) [rad, m, rad/s, m/s]: empty (exact start), the full 2n-vector, or four
+        values (angles, modal positions, angle rates, modal rates) applied to every state
+        of their group with alternating signs — valid for any model order.
+    """
 
     kind: str = "none"
     options: dict = field(default_factory=dict)
@@ -134,8 +156,24 @@ class ObserverSpec:
 
 @dataclass(frozen=True)
 class ReferenceSpec:
-    """"paper": eq. (37) θ_d = amplitude·sin(omega·t); "quintic": rest-to-rest from
-    ``start`` to ``goal`` in ``move_time`` seconds, then hold."""
+    """The reference trajectory of the joint angles.
+
+    Parameters
+    ----------
+    kind : {"paper", "quintic"}
+        "paper": eq. (37), θ_d = amplitude·sin(omega·t); "quintic": rest-to-rest from
+        ``start`` to ``goal`` in ``move_time``, then hold.
+    amplitude : (float, float)
+        Amplitudes of eq. (37) per joint [rad] ("paper").
+    omega : (float, float)
+        Angular frequencies of eq. (37) per joint [rad/s] ("paper").
+    start : (float, float)
+        Joint angles at the start of the move [rad] ("quintic").
+    goal : (float, float)
+        Joint angles at its end [rad] ("quintic").
+    move_time : float
+        Duration of the move [s] ("quintic").
+    """
 
     kind: str = "paper"
     amplitude: tuple[float, float] = (2.0, 2.0)
@@ -169,11 +207,33 @@ _GAUGE_DEFAULTS = {"gauges_link1": (0.05, 0.2, 0.35), "gauges_link2": (0.05, 0.2
 
 @dataclass(frozen=True)
 class SensorSpec:
-    """``modal``: "direct" (q read exactly, the paper's assumption), "gauges" (q fitted
-    to strain gauges at ``gauges_link1``/``gauges_link2`` [m] reading
-    ``strain_quantity``; default three per link at 0.05, 0.2, 0.35 m reading curvature;
-    these three keys only with "gauges"), "none" (encoders only).  Noise standard
-    deviations are per reading; ``delay`` is in whole samples."""
+    """What the sensors measure, and how badly.
+
+    Parameters
+    ----------
+    modal : {"direct", "gauges", "none"}
+        How the modal coordinates q are measured: "direct" (read exactly, the paper's
+        assumption), "gauges" (fitted to strain gauges), "none" (encoders only).
+    gauges_link1, gauges_link2 : tuple of float
+        Gauge positions on each link, from its root [m]; only with ``modal = "gauges"``
+        (default three per link, at 0.05, 0.2 and 0.35 m).
+    strain_quantity : {"curvature", "deflection"}
+        What the gauges read; only with ``modal = "gauges"`` (default curvature).
+    rates : bool
+        Whether θ̇ and q̇ are measured too (the paper's full-state SMO needs them).
+    tip_position : bool
+        Whether the payload position is measured.
+    encoder_resolution : float
+        Encoder quantisation [rad per count]; 0: none.
+    encoder_noise : float
+        Standard deviation of the encoder noise per reading [rad].
+    modal_noise : float
+        Standard deviation of the modal-coordinate noise per reading [m].
+    rate_noise : float
+        Standard deviation of the rate noise per reading [rad/s, m/s].
+    delay : int
+        Measurement delay [samples].
+    """
 
     modal: str = "direct"
     gauges_link1: tuple[float, ...] | None = None
@@ -211,12 +271,28 @@ _DISTURBANCE_DEFAULTS = {"duration": 0.1, "frequency": 1.0, "bandwidth": 5.0}
 
 @dataclass(frozen=True)
 class DisturbanceSpec:
-    """A disturbance on a joint torque (``tau1``, ``tau2`` [N m]) or on the payload
-    (``tip_x``, ``tip_y`` [N], base frame): "step" from ``start``; "pulse" during
-    [``start``, ``start`` + ``duration``] (default 0.1 s); "sine"
-    amplitude·sin(2π·frequency·(t − start)) (default 1 Hz); "noise": Gaussian, standard
-    deviation ``amplitude``, low-passed at ``bandwidth`` Hz (default 5).  Each kind takes
-    only its own settings."""
+    """A disturbance on a joint torque or on the payload.  Each kind takes only its own
+    settings.
+
+    Parameters
+    ----------
+    kind : {"step", "pulse", "sine", "noise"}
+        "step" from ``start``; "pulse" during [``start``, ``start`` + ``duration``];
+        "sine": amplitude·sin(2π·frequency·(t − start)); "noise": Gaussian, standard
+        deviation ``amplitude``, low-passed at ``bandwidth``.
+    target : {"tau1", "tau2", "tip_x", "tip_y"}
+        A joint torque, or a force on the payload in the base frame.
+    amplitude : float
+        Its size [N m on a joint, N on the payload].
+    start : float
+        When it starts [s].
+    duration : float
+        Length of a pulse [s] (only "pulse"; default 0.1).
+    frequency : float
+        Frequency of a sine [Hz] (only "sine"; default 1).
+    bandwidth : float
+        Low-pass cut-off of the noise [Hz] (only "noise"; default 5).
+    """
 
     kind: str = "step"
     target: str = "tau1"
@@ -239,8 +315,17 @@ class DisturbanceSpec:
 
 @dataclass(frozen=True)
 class DivergenceSpec:
-    """The run ends as "diverged" when |θ| > ``max_angle`` [rad], |θ̇| > ``max_rate``
-    [rad/s] or a tip deflection exceeds ``max_deflection`` × its link length."""
+    """When a run ends as "diverged".
+
+    Parameters
+    ----------
+    max_angle : float
+        Largest |θ| of either joint [rad].
+    max_rate : float
+        Largest |θ̇| of either joint [rad/s].
+    max_deflection : float
+        Largest tip deflection [× its link's length].
+    """
 
     max_angle: float = 50.0
     max_rate: float = 100.0
@@ -254,13 +339,57 @@ class DivergenceSpec:
 
 @dataclass(frozen=True)
 class Scenario:
-    """One closed-loop run.  ``arm`` ("default" or "table1", see `ARMS`) is the arm both
-    parameter tables start from; ``true_params`` builds the plant, ``nominal_params`` the
-    controller's and observer's model (they differ only if a scenario says so).
-    ``feedback``: the state the controller sees — "true", "estimate" (the observer's),
-    or "auto" (the estimate when there is an observer).  ``torque_limit`` [N m] saturates
-    each joint (0: none).  ``transient`` [s]: metrics start after it; unset, it is
-    `default_transient` of the duration (2 s, or half of a run shorter than 4 s)."""
+    """One closed-loop run: everything it needs, from a TOML file or a mapping
+    (`scenario_from_mapping`).
+
+    Parameters
+    ----------
+    name : str
+        The run's name in results and reports.
+    arm : {"default", "table1"}
+        The arm both parameter tables start from: the practical default (Table 1 + a
+        motor-2 stator inertia + structural damping) or the paper's Table 1 exactly
+        (`ARMS`).
+    plant : ReducedPlantSpec or ExudynPlantSpec
+        The plant simulated, chosen by its ``kind``.
+    true_params : reduced_model.ArmParameters
+        The arm simulated: ``arm``'s parameters, overridden key by key.
+    nominal_params : reduced_model.ArmParameters
+        The arm the controller and observer believe in (the same unless a scenario says
+        otherwise).
+    model : ModelSpec
+        The order of the laws' model.
+    controller : ControllerSpec
+        The controller and its options.
+    observer : ObserverSpec
+        The observer, its options and its initial error.
+    feedback : {"auto", "true", "estimate"}
+        The state the controller sees: "true", "estimate" (the observer's), or "auto"
+        (the estimate when there is an observer).
+    reference : ReferenceSpec
+        The reference trajectory.
+    sensors : SensorSpec
+        What is measured, with which noise.
+    disturbances : tuple of DisturbanceSpec
+        ``[[disturbances]]`` entries, any number.
+    torque_limit : float
+        Saturation of each joint torque [N m]; 0: none.
+    Ts : float
+        Control period [s]; a whole multiple of ``plant.step``.
+    duration : float
+        Simulated time [s].
+    initial_state : {"rest", "reference"}
+        Start at rest, or moving with the reference.
+    seed : int
+        Seeds the measurement noise and noise disturbances.
+    divergence : DivergenceSpec
+        The bounds beyond which the run ends as "diverged".
+    transient : float
+        Metrics are taken after it [s]; unset: 2 s, or half of a run shorter than 4 s
+        (`default_transient`).
+    requirement : tuple of Requirement
+        ``[[requirement]]`` entries: each run carries their robustness as ``rho_<name>``.
+    """
 
     name: str = "paper"
     arm: str = "default"
@@ -281,7 +410,6 @@ class Scenario:
     seed: int = 0
     divergence: DivergenceSpec = DivergenceSpec()
     transient: float | None = None
-    #: ``[[requirement]]`` entries: each run carries their robustness as ``rho_<name>``.
     requirement: tuple[Requirement, ...] = ()
 
     def __post_init__(self):
@@ -400,7 +528,18 @@ def _has_positive_frequencies(params: ArmParameters, modes: tuple[int, int]) -> 
 def scenario_from_mapping(data: dict) -> Scenario:
     """Build and check a scenario from a mapping (unknown keys and bad values raise
     `ConfigError` naming the dotted key).  ``true_params`` and ``nominal_params`` start
-    from the parameters of ``arm`` and override them key by key."""
+    from the parameters of ``arm`` and override them key by key.
+
+    Parameters
+    ----------
+    data : dict
+        Any subset of the scenario keys, as a TOML file would hold them.
+
+    Returns
+    -------
+    Scenario
+        The scenario, every default filled in, checked (`check_scenario`).
+    """
     base = to_mapping(arm_parameters(data.get("arm", "default")))
     data = dict(data)
     for key in ("true_params", "nominal_params"):
@@ -412,6 +551,18 @@ def scenario_from_mapping(data: dict) -> Scenario:
 
 
 def scenario_to_mapping(s: Scenario) -> dict:
-    """The fully resolved scenario as plain data (stored next to every result)."""
+    """The fully resolved scenario as plain data (stored next to every result).
+
+    Parameters
+    ----------
+    s : Scenario
+        The scenario.
+
+    Returns
+    -------
+    dict
+        Every key, plain numbers, strings, lists and tables (TOML- and JSON-able);
+        `scenario_from_mapping` of it gives ``s`` back.
+    """
     return to_mapping(s)
 

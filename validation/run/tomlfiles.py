@@ -44,7 +44,18 @@ MAX_FILE_BYTES = 1 << 20
 def load_toml(path: str | Path) -> dict:
     """Read ``path`` and its includes; errors name the file.  Each file is parsed once
     however often it is included; chains deeper than `MAX_INCLUDE_DEPTH`, more than
-    `MAX_INCLUDED_FILES` files or files over 1 MiB are refused."""
+    `MAX_INCLUDED_FILES` files or files over 1 MiB are refused.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        A scenario, campaign or baselines file.
+
+    Returns
+    -------
+    dict
+        Its tables, the included files' keys merged under its own.
+    """
     cache: dict[Path, dict] = {}
     return _load(Path(path), (), cache)
 
