@@ -101,3 +101,15 @@ def test_plugins_and_payload_forces_take_the_python_path():
     assert r.status == "ok" and r.timings["compiled_loop"] is False
     assert r.timings["paths"]["loop"] == "python"
     assert ReducedPlant().compiled_stepping() is not None
+
+
+def test_the_sample_context_is_built_by_field_name():
+    """The compiled constructor takes the fields in `CONTEXT_FIELDS` order; `context`
+    passes them by name, so a reordered or renamed field cannot shift the others."""
+    import inspect
+
+    from validation.run._sample import CONTEXT_FIELDS, context, new_context
+    assert list(inspect.signature(new_context.py_func).parameters) == [
+        name for name, _ in CONTEXT_FIELDS]
+    with pytest.raises(TypeError, match=r"missing \['Ts'.*unknown \['ts'\]"):
+        context(**{name: None for name, _ in CONTEXT_FIELDS if name != "Ts"}, ts=1e-3)

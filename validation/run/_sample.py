@@ -36,7 +36,8 @@ from reduced_model._kernels import (rk4_advance, tip_kinematics_packed, unpack_m
                                     unpack_workspace)
 
 __all__ = ["SampleStatus", "status_message", "DisturbanceKind", "DisturbanceTarget", "Group",
-           "signal_layout", "noise_stream", "SampleContext", "new_context", "pre_sample",
+           "signal_layout", "noise_stream", "SampleContext", "new_context", "context",
+           "law_fields", "pre_sample",
            "post_sample", "check_bounds", "sample_laws", "run_reduced"]
 
 
@@ -192,6 +193,26 @@ class SampleContext(structref.StructRefProxy):
 
 structref.define_boxing(_ContextType, SampleContext)
 _CONTEXT = _ContextType(CONTEXT_FIELDS)
+
+
+def context(**fields) -> SampleContext:
+    """A `SampleContext` from its fields by name: every name of `CONTEXT_FIELDS` once, no
+    other (TypeError naming the difference); the compiled constructor takes them in that
+    order."""
+    names = [name for name, _ in CONTEXT_FIELDS]
+    missing, unknown = set(names) - set(fields), set(fields) - set(names)
+    if missing or unknown:
+        raise TypeError(f"sample context: missing {sorted(missing)}, unknown {sorted(unknown)}")
+    return new_context(*(fields[name] for name in names))
+
+
+def law_fields(prefix: str, role: str, law) -> dict:
+    """The context fields of a compiled law (`controllers.CompiledLaw`) by name:
+    ``role`` (its kernel) and ``{prefix}_ints`` … ``{prefix}_wr``."""
+    return {role: law.pointer, f"{prefix}_ints": law.ints, f"{prefix}_reals": law.reals,
+            f"{prefix}_state": law.state, f"{prefix}_mi": law.model_ints,
+            f"{prefix}_mr": law.model_reals, f"{prefix}_wc": law.work_complex,
+            f"{prefix}_wr": law.work_real}
 
 
 @njit(cache=True)

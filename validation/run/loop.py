@@ -24,7 +24,7 @@ from reduced_model import ArmModel, PlantFailure, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
 from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
-                      check_bounds, new_context, noise_stream, post_sample, pre_sample,
+                      check_bounds, context, law_fields, noise_stream, post_sample, pre_sample,
                       run_reduced, sample_laws, signal_layout, status_message)
 from .laws import build_controller, build_observer, nominal_model
 from .results import RunResult
@@ -147,14 +147,19 @@ class _Run:
         self.force = np.zeros(2)
         self.counts = np.array([0, 2], dtype=np.int64)  # noise draws used, torques applied
         (controller, observer_law), self.failure = laws
-        self.context = new_context(
-            n, Ts, int(reference.kind), reference.spec, self.bounds,
-            np.array([s.true_params.L1, s.true_params.L2]), self.info, self.truth, y_idx,
-            self.yv, self.std, noise, np.zeros((s.sensors.delay + 1, len(measured))),
-            self.y_used, self.ref, self.off, float(s.torque_limit), dspec,
-            np.zeros(len(s.disturbances)), dnoise, self.counts, observer is not None,
-            s.uses_estimate, self.obs_idx, np.zeros(len(self.obs_idx)), self.x_hat, self.tau,
-            self.tau_plant, self.force, self.last_tau, *controller[:-1], *observer_law[:-1])
+        self.context = context(
+            n=n, Ts=Ts, refkind=int(reference.kind), refspec=reference.spec,
+            bounds=self.bounds, lengths=np.array([s.true_params.L1, s.true_params.L2]),
+            info=self.info, truth=self.truth, y_idx=y_idx, yv=self.yv, std=self.std,
+            noise=noise, dbuf=np.zeros((s.sensors.delay + 1, len(measured))),
+            y_used=self.y_used, ref=self.ref, off=self.off, limit=float(s.torque_limit),
+            dspec=dspec, dstate=np.zeros(len(s.disturbances)), dnoise=dnoise,
+            counts=self.counts, has_observer=observer is not None,
+            use_estimate=s.uses_estimate, obs_idx=self.obs_idx,
+            y_obs=np.zeros(len(self.obs_idx)), x_hat=self.x_hat, tau=self.tau,
+            tau_plant=self.tau_plant, force=self.force, last_tau=self.last_tau,
+            **law_fields("c", "controller", controller),
+            **law_fields("o", "observer", observer_law))
 
 
 def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
