@@ -19,6 +19,8 @@ import json
 import re
 from pathlib import Path
 
+from ._imports import imports
+
 _PACKAGES = ("reduced_model", "controllers", "plant_exudyn", "validation")
 _ROOT = Path(__file__).resolve().parent.parent
 _STAMP = Path(__file__).resolve().parent / "__pycache__" / "numba_kernels.json"
@@ -36,22 +38,13 @@ def _module_file(name: str) -> Path | None:
 def _imported_files(path: Path) -> set[Path]:
     """Project files defining the names ``path`` imports (following ``from .x import``
     re-exports of package ``__init__`` files)."""
-    module = ".".join(path.relative_to(_ROOT).with_suffix("").parts)
-    package = module.removesuffix(".__init__") if path.name == "__init__.py" \
-        else module.rpartition(".")[0]
+    module = ".".join(path.relative_to(_ROOT).with_suffix("").parts).removesuffix(".__init__")
     out = set()
-    for node in ast.walk(ast.parse(path.read_bytes())):
-        if not isinstance(node, ast.ImportFrom):
-            continue
-        if node.level:
-            base = package.split(".")[:len(package.split(".")) - node.level + 1]
-            source = ".".join(base + ([node.module] if node.module else []))
-        else:
-            source = node.module or ""
+    for source, names in imports(path, module):
         if source.split(".")[0] not in _PACKAGES:
             continue
-        for alias in node.names:
-            found = _defining_file(source, alias.name, depth=0)
+        for name in names:  # ``import X`` names none: only ``from X import name`` counts
+            found = _defining_file(source, name, depth=0)
             if found is not None:
                 out.add(found)
     return out
@@ -66,7 +59,7 @@ def _defining_file(module: str, name: str, depth: int) -> Path | None:
     path = _module_file(module)
     if path is None or path.name != "__init__.py" or depth > 8:
         return path
-    for node in ast.walk(ast.parse(path.read_bytes())):
+    for node in ast.walk(ast.parse(path.read_bytes())):  # the names an alias re-exports
         if isinstance(node, ast.ImportFrom) and node.level == 1 and node.module and any(
                 (a.asname or a.name) == name for a in node.names):
             return _defining_file(f"{module}.{node.module}", name, depth + 1)

@@ -5,14 +5,12 @@ import math
 from validation.batch.store import ResultStore, StoreError
 
 
-#: Wall-clock metrics (also: any metric named like one of the run's timings).
-_WALL_CLOCK = {"wall_s", "startup_s", "realtime_factor"}
 
 
 def metrics_table(out) -> dict:
     """The index of a results folder as {run id: {field: value}} — name, status, message,
-    end time and every metric — without wall-clock metrics, which differ between two
-    executions of the same run, nor the code fingerprint (this process caches its own, a
+    end time and every metric (wall-clock times are timings, not metrics), not the code
+    fingerprint (this process caches its own, a
     subprocess computes it afresh).  NaN (a metric that does not apply) becomes the string
     "nan" so that equal tables compare equal.  Asserts there are no duplicate rows and
     that every run file verifies."""
@@ -29,7 +27,7 @@ def metrics_table(out) -> dict:
     for r in rows:
         entry = {"name": r.name, "status": r.status, "message": r.message,
                  "end_time": r.end_time}
-        entry |= {k: clean(v) for k, v in r.metrics.items() if k not in _WALL_CLOCK | set(r.timings)}
+        entry |= {k: clean(v) for k, v in r.metrics.items()}
         table[r.run_id] = entry
     return table
 

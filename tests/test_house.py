@@ -1,7 +1,6 @@
 """The structure of the code: the fingerprint covers everything a run loads, each setting
 belongs to what it sets, every command reads a file the same way, and the rooms of
 `validation` import each other in one direction only."""
-import ast
 import json
 import subprocess
 import sys
@@ -10,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from reduced_model._imports import imports
 from validation.batch import compiling
 from validation.batch.fingerprint import (_ROOT, code_fingerprint, plugin_sources,
                                           result_sources, run_fingerprint)
@@ -34,19 +34,10 @@ PLUGIN = textwrap.dedent('''
 
 
 @pytest.fixture
-def plugin_package(tmp_path, monkeypatch):
-    """A plug-in package with a helper module, importable from tmp_path."""
-    package = tmp_path / "houselab"
-    package.mkdir()
-    (package / "__init__.py").write_text("")
-    (package / "helpers.py").write_text(HELPER)
-    (package / "control.py").write_text(PLUGIN)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    plugin_sources.cache_clear()
-    yield package
-    plugin_sources.cache_clear()
-    for name in [m for m in sys.modules if m == "houselab" or m.startswith("houselab.")]:
-        del sys.modules[name]
+def plugin_package(plugin_lab):
+    """A plug-in package with a helper module, importable from its folder."""
+    return plugin_lab({"houselab/__init__.py": "", "houselab/helpers.py": HELPER,
+                       "houselab/control.py": PLUGIN}) / "houselab"
 
 
 LOADED = textwrap.dedent('''
@@ -172,23 +163,12 @@ def test_every_command_reads_a_scenario_file_the_same_way(tmp_path, monkeypatch)
 def _module_imports(path: Path, *, lazy: bool = False) -> set[str]:
     """validation.* modules that ``path`` imports at module level (with ``lazy``, inside
     functions too: they cannot make a cycle at import time, but they are dependencies)."""
-    module = ".".join(path.relative_to(_ROOT).with_suffix("").parts)
-    package = module.rpartition(".")[0] if path.name != "__init__.py" else module
-    tree = ast.parse(path.read_text())
+    module = ".".join(path.relative_to(_ROOT).with_suffix("").parts).removesuffix(".__init__")
     out = set()
-    for node in (ast.walk(tree) if lazy else tree.body):
-        if isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")[:len(package.split(".")) - node.level + 1]
-                source = ".".join(base + ([node.module] if node.module else []))
-            else:
-                source = node.module or ""
-            for alias in node.names:
-                full = f"{source}.{alias.name}"
-                out.add(full if (_ROOT / Path(*full.split("."))).with_suffix(".py").exists()
-                        else source)
-        elif isinstance(node, ast.Import):
-            out.update(a.name for a in node.names)
+    for source, names in imports(path, module, nested=lazy):
+        for full in (f"{source}.{name}" for name in names) if names else (source,):
+            out.add(full if (_ROOT / Path(*full.split("."))).with_suffix(".py").exists()
+                    else source)
     return {m for m in out if m.startswith("validation.") and m.count(".") >= 2}
 
 

@@ -9,6 +9,7 @@ import textwrap
 
 import pytest
 
+from conftest import write_files
 from validation.batch.store import ResultStore
 
 PLANT = textwrap.dedent('''
@@ -56,11 +57,8 @@ def flexarm(cwd, *args):
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory):
-    path = tmp_path_factory.mktemp("plantlab")
-    (path / "labplants.py").write_text(PLANT)
-    (path / "fine.toml").write_text(SCENARIO)
-    (path / "study.toml").write_text(STUDY)
-    return path
+    return write_files(tmp_path_factory.mktemp("plantlab"),
+                       {"labplants.py": PLANT, "fine.toml": SCENARIO, "study.toml": STUDY})
 
 
 def test_a_plugin_plant_runs_and_is_reported_as_the_truth(lab):

@@ -256,7 +256,7 @@ def test_workers_beyond_the_cores_need_force(capsys, tmp_path):
 
 
 def test_a_full_disk_is_one_line_naming_the_folder(tmp_path, capsys, monkeypatch):
-    import validation.batch.store as store_module
+    import validation.batch.runfiles as store_module
 
     def full(path, *a, **k):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))

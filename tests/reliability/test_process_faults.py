@@ -15,6 +15,7 @@ import time
 import pytest
 
 from campaign_testing import wait_gone
+from conftest import write_files
 from validation.batch.store import ResultStore
 
 FAULTS = textwrap.dedent('''
@@ -111,10 +112,8 @@ def flexarm(cwd, *args, **kw):
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory):
-    path = tmp_path_factory.mktemp("lab")
-    (path / "faultlaws.py").write_text(FAULTS)
-    (path / "faults.toml").write_text(campaign_text())
-    return path
+    return write_files(tmp_path_factory.mktemp("lab"),
+                       {"faultlaws.py": FAULTS, "faults.toml": campaign_text()})
 
 
 @pytest.fixture(scope="module", params=["1", "2"], ids=["serial", "2-workers"])

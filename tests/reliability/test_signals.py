@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from campaign_testing import wait_gone
+from conftest import write_files
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -54,8 +55,7 @@ def assert_interrupted(done):
 
 @pytest.fixture()
 def lab(tmp_path):
-    (tmp_path / "hanglaws.py").write_text(HANGS)
-    return tmp_path
+    return write_files(tmp_path, {"hanglaws.py": HANGS})
 
 
 # 0.1 s: the interpreter imports the libraries; 2 s: the scenario is checked, the worker

@@ -48,17 +48,8 @@ FILES = {
 
 
 @pytest.fixture()
-def lab(tmp_path, monkeypatch):
-    for name, text in FILES.items():
-        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
-        (tmp_path / name).write_text(text)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    for module in ("lablaw", "labgains", "labpkg", "labpkg.tuning", "labpkg.limits",
-                   "labpkg.shapes"):
-        monkeypatch.delitem(sys.modules, module, raising=False)
-    plugin_sources.cache_clear()
-    yield tmp_path
-    plugin_sources.cache_clear()
+def lab(plugin_lab):
+    return plugin_lab(FILES)
 
 
 CONFIG = {"duration": 1.0, "transient": 0.5, "controller": {"kind": "lablaw:HelperPD"}}

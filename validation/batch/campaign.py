@@ -532,6 +532,17 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
     return todo, summary
 
 
+def run_planned(planned, out: str | Path, *, name: str, description: str = "",
+                runner: Runner | None = None, progress: bool = True, label: str | None = None,
+                export: bool = True) -> CampaignSummary:
+    """Run the runs ``planned`` (`PlannedRun`: made by a verdict — checks, bisections,
+    searches — not expanded from a campaign file) into ``out`` under the campaign
+    ``name``, as `run_campaign` runs a campaign's."""
+    campaign = Campaign(name=name, base={}, sweeps=(), description=description)
+    return run_campaign(campaign, out, runner=runner, progress=progress, only=list(planned),
+                        label=label, export=export)
+
+
 def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
                  retry_failed: bool = False, reuse_stale: bool = False,
                  progress: bool = True, only: list[PlannedRun] | None = None,

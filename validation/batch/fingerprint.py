@@ -16,7 +16,6 @@ plug-in's code.  The package and Exudyn versions enter too.
 """
 from __future__ import annotations
 
-import ast
 import functools
 import hashlib
 import importlib.machinery
@@ -24,6 +23,8 @@ import sys
 import sysconfig
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
+
+from reduced_model._imports import imports
 
 __all__ = ["code_fingerprint", "run_fingerprint", "result_sources", "plugin_sources"]
 
@@ -43,21 +44,10 @@ def _version(name: str) -> str:
 def _imports(path: Path, module: str) -> set[str]:
     """Absolute names of every module ``path`` (the module ``module``) imports, including
     the names ``from X import name`` may mean as submodules."""
-    tree = ast.parse(path.read_bytes(), filename=str(path))
-    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     out = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            out.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")
-                base = base[:len(base) - node.level + 1]
-                stem = ".".join(base + ([node.module] if node.module else []))
-            else:
-                stem = node.module or ""
-            out.add(stem)
-            out.update(f"{stem}.{alias.name}" for alias in node.names)
+    for source, names in imports(path, module):
+        out.add(source)
+        out.update(f"{source}.{name}" for name in names)
     return out
 
 

@@ -23,82 +23,36 @@ or empty file — is named with the cure (`repair`, which rebuilds it from the r
 whatever the damage); a full disk and a read-only folder are named as such (a healthy
 read-only folder can still be read).  Nothing here imports a plug-in.  The run id is a
 hash of the resolved scenario; the row also records the code fingerprint
-(`validation.fingerprint`), so a result made by other code is *stale* and is not reused.
+(`validation.batch.fingerprint`), so a result made by other code is *stale* and is not reused.
+
+This module reads and writes; the index itself (schema, transactions, rows) is
+`validation.batch.index`, a run's file `validation.batch.runfiles`, rebuilding the index
+`validation.batch.repair`, the exports `validation.batch.export`.
 """
 from __future__ import annotations
 
-import csv
 import errno
 import functools
 import hashlib
-import io
 import json
-import math
 import os
 import platform
-import re
 import sqlite3
 import subprocess
 import time
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-from .fingerprint import run_fingerprint
-from ..run.results import RunResult, write_atomic
+from ..run.results import RunResult
+from . import export, repair
+from .index import (BUSY_TIMEOUT, COLUMNS, INDEX_NAME, JSON_COLUMNS, SCHEMA, SCHEMA_VERSION,
+                    StoreError, insert_row, is_run_id, json_table, metric_values, run_id,
+                    set_wal, transaction)
+from .runfiles import write_run
 
 __all__ = ["ResultStore", "StoredRun", "StoreError", "run_id", "is_run_id", "environment",
            "INDEX_NAME"]
-
-INDEX_NAME = "index.sqlite"
-_SCHEMA_VERSION = 1
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS campaigns (name TEXT PRIMARY KEY, info TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS runs (
-    run_id TEXT PRIMARY KEY,
-    name TEXT NOT NULL,
-    campaign TEXT NOT NULL DEFAULT '',
-    sweep TEXT NOT NULL DEFAULT '',
-    axes TEXT NOT NULL DEFAULT '{}',
-    status TEXT NOT NULL,
-    message TEXT NOT NULL DEFAULT '',
-    end_time REAL,
-    fingerprint TEXT NOT NULL,
-    scenario TEXT NOT NULL,
-    metrics TEXT NOT NULL,
-    timings TEXT NOT NULL DEFAULT '{}',
-    environment TEXT NOT NULL DEFAULT '{}',
-    file TEXT NOT NULL,
-    sha256 TEXT NOT NULL,
-    size INTEGER NOT NULL,
-    finished TEXT NOT NULL
-);
-"""
-_COLUMNS = ("run_id", "name", "campaign", "sweep", "axes", "status", "message", "end_time",
-            "fingerprint", "scenario", "metrics", "timings", "environment", "file", "sha256",
-            "size", "finished")
-_JSON_COLUMNS = ("axes", "scenario", "metrics", "timings", "environment")
-#: How long a writer waits for another process's transaction before giving up [s].
-_BUSY_TIMEOUT = 120.0
-#: What `run_id` makes: 12 lowercase hex digits.
-_RUN_ID = re.compile(r"[0-9a-f]{12}")
-
-
-class StoreError(ValueError):
-    """A results folder that cannot be used (one line naming the folder or file)."""
-
-
-def is_run_id(text) -> bool:
-    """Whether ``text`` is a run id (12 lowercase hex digits): safe in a path."""
-    return isinstance(text, str) and _RUN_ID.fullmatch(text) is not None
-
-
-def run_id(resolved_scenario: dict) -> str:
-    """12 hex digits of the SHA-256 of the scenario's canonical JSON."""
-    text = json.dumps(resolved_scenario, sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 @functools.lru_cache(maxsize=1)
@@ -120,6 +74,7 @@ def environment() -> dict:
     except (OSError, subprocess.SubprocessError):
         env["git"] = None
     return env
+
 
 
 @dataclass
@@ -165,6 +120,7 @@ class StoredRun:
         return label_of(self.config)
 
 
+
 def _sqlite_errors(method):
     """``method`` with SQLite's errors turned into what they mean here
     (`ResultStore._error`): one line naming the folder."""
@@ -176,21 +132,6 @@ def _sqlite_errors(method):
             raise self._error(exc) from None
     return wrapper
 
-
-def _set_wal(db: sqlite3.Connection) -> None:
-    """Switch ``db`` to a WAL journal.  SQLite refuses the switch with SQLITE_BUSY at once,
-    without its busy handler, while another connection is making the same switch (two
-    processes opening one new index together: 28 of 60 connections refused, measured),
-    so it is retried here until `_BUSY_TIMEOUT`."""
-    deadline = time.monotonic() + _BUSY_TIMEOUT
-    while True:
-        try:
-            db.execute("PRAGMA journal_mode=WAL")
-            return
-        except sqlite3.OperationalError as exc:
-            if exc.sqlite_errorname != "SQLITE_BUSY" or time.monotonic() > deadline:
-                raise
-            time.sleep(0.005)
 
 
 class ResultStore:
@@ -237,9 +178,9 @@ class ResultStore:
 
     def _open(self) -> sqlite3.Connection:
         existed = self.exists()
-        db = sqlite3.connect(self.index_path, timeout=_BUSY_TIMEOUT, isolation_level=None)
+        db = sqlite3.connect(self.index_path, timeout=BUSY_TIMEOUT, isolation_level=None)
         try:
-            _set_wal(db)
+            set_wal(db)
             # NORMAL: a transaction is durable once the WAL is checkpointed; an
             # application crash never loses a committed run, a power cut may lose the
             # last ones (they are then redone on resume: their files fail verification).
@@ -249,16 +190,16 @@ class ResultStore:
                 # An index without its table (an empty or truncated file) next to run
                 # files: not a new index but a lost one — never read as "no runs".
                 raise sqlite3.DatabaseError("the index holds no table of runs")
-            db.executescript(_SCHEMA)
-            db.execute("INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (str(_SCHEMA_VERSION),))
+            db.executescript(SCHEMA)
+            db.execute("INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
             (schema,) = db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
         except BaseException:
             db.close()
             raise
-        if schema != str(_SCHEMA_VERSION):
+        if schema != str(SCHEMA_VERSION):
             db.close()
             raise StoreError(f"{self.index_path}: index schema {schema}, this version reads "
-                             f"{_SCHEMA_VERSION}; 'flexarm repair {self.out}' rebuilds the index "
+                             f"{SCHEMA_VERSION}; 'flexarm repair {self.out}' rebuilds the index "
                              "from the run files")
         return db
 
@@ -307,7 +248,7 @@ class ResultStore:
             return StoreError(f"{self.out}: read-only, runs cannot be stored here ({exc})")
         if name == "SQLITE_BUSY":
             return StoreError(f"{self.index_path}: busy: another process kept it locked for "
-                              f"{_BUSY_TIMEOUT:g} s ({exc})")
+                              f"{BUSY_TIMEOUT:g} s ({exc})")
         return StoreError(f"{self.index_path}: the index is damaged ({exc}); "
                           f"'flexarm repair {self.out}' rebuilds it from runs/")
 
@@ -333,50 +274,24 @@ class ResultStore:
     @_sqlite_errors
     def add(self, rid: str, result: RunResult, metrics: dict, *, campaign: str = "",
             sweep: str = "", axes: dict | None = None, env: dict | None = None) -> Path:
-        """Store one run: its file (written under a temporary name, then renamed), then
-        its row, in one transaction (replacing an older row of the same id).  Signals are
-        stored as float32 (7 digits, for plots; metrics come from the float64 signals)."""
+        """Store one run: its file (`runfiles.write_run`: written under a temporary name,
+        then renamed), then its row (replacing an older row of the same id)."""
         if not is_run_id(rid):
             raise StoreError(f"{rid!r} is not a run id (12 hex digits)")
         db = self._connect(create=True)
-        fingerprint = run_fingerprint(result.config)
-        row = {"run_id": rid, "name": result.config.get("name", ""), "campaign": campaign,
-               "sweep": sweep, "axes": axes or {}, "status": result.status,
-               "message": result.message, "end_time": result.end_time,
-               "fingerprint": fingerprint, "scenario": result.config,
-               "metrics": _finite_or_none(metrics), "timings": _finite_or_none(result.timings),
-               "environment": env or environment(), "file": f"runs/{rid}.npz",
-               "finished": datetime.now(timezone.utc).isoformat(timespec="seconds")}
-        result.signals = result.signals.astype("float32", copy=False)
-        extra = {k: row[k] for k in ("campaign", "sweep", "axes", "fingerprint", "metrics",
-                                     "environment", "finished")}
-        data = result.to_bytes(extra)
-        row["sha256"], row["size"] = hashlib.sha256(data).hexdigest(), len(data)
-        path = self.out / row["file"]
-        write_atomic(path, lambda fh: fh.write(data), binary=True, sync=False)
-        self._insert(db, row)
-        return path
-
-    def _insert(self, db: sqlite3.Connection, row: dict) -> None:
-        values = [json.dumps(row[c], allow_nan=False) if c in _JSON_COLUMNS else row[c]
-                  for c in _COLUMNS]
-        db.execute(f"INSERT OR REPLACE INTO runs ({', '.join(_COLUMNS)}) VALUES "
-                   f"({', '.join('?' * len(_COLUMNS))})", values)
+        row = write_run(self.out, rid, result, metrics, campaign=campaign, sweep=sweep,
+                        axes=axes, env=env or environment())
+        insert_row(db, row)
+        return self.out / row["file"]
 
     @_sqlite_errors
     def set_campaign(self, name: str, info: dict) -> None:
         """Record a campaign that stores runs here (description, report settings, …);
         keys already recorded for it and not in ``info`` are kept."""
-        db = self._connect(create=True)
-        db.execute("BEGIN IMMEDIATE")
-        try:
+        with transaction(self._connect(create=True)) as db:
             old = db.execute("SELECT info FROM campaigns WHERE name = ?", (name,)).fetchone()
-            merged = {**(_json_table(old[0]) if old else {}), **info}
+            merged = {**(json_table(old[0]) if old else {}), **info}
             db.execute("INSERT OR REPLACE INTO campaigns VALUES (?, ?)", (name, json.dumps(merged)))
-            db.execute("COMMIT")
-        except BaseException:
-            db.execute("ROLLBACK")
-            raise
 
     def remove_stale_temporaries(self, older_than: float = 3600.0) -> int:
         """Delete temporary files a killed writer left behind more than ``older_than``
@@ -398,19 +313,19 @@ class ResultStore:
         A row whose id or file could name a path outside runs/, or whose contents are
         not what the store writes, is refused (StoreError naming it and the cure)."""
         db = self._connect(create=False)
-        sql = f"SELECT {', '.join(_COLUMNS)} FROM runs {'WHERE ' + where if where else ''} " \
+        sql = f"SELECT {', '.join(COLUMNS)} FROM runs {'WHERE ' + where if where else ''} " \
               "ORDER BY name, run_id"
         return [self._stored_run(values) for values in db.execute(sql, params)]
 
     def _stored_run(self, values) -> StoredRun:
-        row = dict(zip(_COLUMNS, values))
+        row = dict(zip(COLUMNS, values))
         rid = row["run_id"]
         try:
             if not is_run_id(rid) or row["file"] != f"runs/{rid}.npz":
                 raise ValueError("its id must be 12 hex digits and its file runs/<id>.npz")
-            for c in _JSON_COLUMNS:
-                row[c] = _json_table(row[c])
-            row["metrics"] = _metric_values(row["metrics"])
+            for c in JSON_COLUMNS:
+                row[c] = json_table(row[c])
+            row["metrics"] = metric_values(row["metrics"])
         except (ValueError, TypeError, AttributeError) as exc:
             raise StoreError(f"{self.index_path}: row {str(rid)[:40]!r} is not a stored run "
                              f"({exc}); 'flexarm repair {self.out}' drops it") from None
@@ -437,7 +352,7 @@ class ResultStore:
         out = {}
         for name, info in db.execute("SELECT * FROM campaigns"):
             try:
-                out[name] = _json_table(info)
+                out[name] = json_table(info)
             except ValueError:
                 out[name] = {}  # descriptive only: a damaged entry is left out
         return out
@@ -497,205 +412,16 @@ class ResultStore:
 
     # --- repair and export ----------------------------------------------------------------
     def repair(self) -> dict[str, list[str]]:
-        """Rebuild the index from the run files, whatever the damage: an index SQLite
-        cannot read or check (a corrupt page, an empty or truncated file) is set aside
-        as ``index.sqlite.damaged`` and rebuilt; rows that are not stored runs are
-        dropped without touching any path; rows whose file is missing or damaged are
-        dropped (their files kept as ``runs/<id>.npz.damaged``); every readable run file
-        without a row is adopted if its scenario hashes to its name; directories and
-        files not named by a run id are skipped.  Returns the run ids (or names) per
-        action."""
-        report = {"rebuilt": [], "adopted": [], "dropped": [], "unreadable": [], "skipped": []}
-        if self.exists() and not self._index_sound():
-            self.close()
-            self.index_path.replace(self.index_path.with_name(INDEX_NAME + ".damaged"))
-            for suffix in ("-wal", "-shm"):
-                Path(f"{self.index_path}{suffix}").unlink(missing_ok=True)
-            report["rebuilt"].append(f"{INDEX_NAME} (unreadable; kept as {INDEX_NAME}.damaged)")
+        """Rebuild the index from the run files, whatever the damage (`repair.repair`)."""
+        return repair.repair(self)
+
+    def adopt(self, path: Path) -> StoredRun:
+        """Index a run file that has no row (`repair.adopt`)."""
         try:
-            db = self._connect(create=True)
-            for values in db.execute(f"SELECT {', '.join(_COLUMNS)} FROM runs").fetchall():
-                try:
-                    self._stored_run(values)
-                except StoreError:  # no path is built from it: its id may be anything
-                    db.execute("DELETE FROM runs WHERE run_id = ?", (values[0],))
-                    report["dropped"].append(f"{str(values[0])[:40]!r} (not a stored run)")
-            for rid, why in self.verify().items():
-                db.execute("DELETE FROM runs WHERE run_id = ?", (rid,))
-                path = self.runs_dir / f"{rid}.npz"
-                if path.is_file():
-                    path.replace(path.with_name(path.name + ".damaged"))
-                report["dropped"].append(f"{rid} ({why})")
+            return repair.adopt(self, path)
         except sqlite3.Error as exc:
             raise self._error(exc) from None
-        for path in self._run_files():
-            if not path.is_file() or not is_run_id(path.stem):
-                report["skipped"].append(f"runs/{path.name} (not a run file)")
-        for path in self.unindexed_files():
-            try:
-                self.adopt(path)
-            except ValueError as exc:
-                path.replace(path.with_name(path.name + ".damaged"))
-                report["unreadable"].append(f"{path.stem} ({exc})")
-                continue
-            report["adopted"].append(path.stem)
-        return report
-
-    def _index_sound(self) -> bool:
-        """Whether SQLite can open the index, finds every page of it sound and can read
-        every row (a full disk or a read-only folder is raised, not taken for damage)."""
-        self.close()
-        try:
-            db = self._connect(create=False)
-            sound = db.execute("PRAGMA quick_check").fetchone()[0] == "ok"
-            db.execute(f"SELECT {', '.join(_COLUMNS)} FROM runs").fetchall()
-        except sqlite3.Error as exc:
-            error = self._error(exc)
-            if isinstance(error, OSError) or not self.writable():
-                raise error from None
-            return False
-        except StoreError:
-            if not self.writable():
-                raise
-            return False
-        return sound
-
-    @_sqlite_errors
-    def adopt(self, path: Path) -> StoredRun:
-        """Index a run file that has no row (its metadata holds everything); ValueError if
-        it is not a readable run file, or its scenario does not hash to its name."""
-        path = Path(path)
-        if not is_run_id(path.stem):
-            raise ValueError(f"{path.name} is not named by a run id")
-        try:
-            data = path.read_bytes()
-        except OSError as exc:
-            raise ValueError(f"unreadable ({exc.strerror or exc})") from None
-        result, meta = RunResult.from_bytes(data)
-        if not isinstance(result.config, dict) or run_id(result.config) != path.stem:
-            raise ValueError(f"its scenario does not hash to its name {path.stem} (a copy of "
-                             "another run's file?)")
-        row = {"run_id": path.stem, "name": result.config.get("name", ""),
-               "campaign": meta.get("campaign", ""), "sweep": meta.get("sweep", ""),
-               "axes": meta.get("axes", {}), "status": result.status,
-               "message": result.message, "end_time": result.end_time,
-               "fingerprint": meta.get("fingerprint", ""), "scenario": result.config,
-               "metrics": meta.get("metrics", {}), "timings": result.timings,
-               "environment": meta.get("environment", {}), "file": f"runs/{path.name}",
-               "sha256": hashlib.sha256(data).hexdigest(), "size": len(data),
-               "finished": meta.get("finished", "")}
-        self._insert(self._connect(create=True), row)
-        return self.row(path.stem)
 
     def export(self, *, allow_fewer: bool = False) -> tuple[Path, Path]:
-        """Write metrics.csv (one row per run: identity, what was run, swept values,
-        status, every metric) and manifest.json from the index, holding its write lock
-        (of two processes exporting at once, the later one reads every row the earlier
-        one wrote).  An index that lacks runs the previous export listed (a damaged
-        index reads as fewer runs) is refused (StoreError, the old export kept) unless
-        ``allow_fewer`` (after `repair`, which says what it dropped)."""
-        db = self._connect(create=False)
-        if not self.writable():
-            raise StoreError(f"{self.out}: read-only, metrics.csv and manifest.json cannot "
-                             "be written here")
-        try:
-            db.execute("BEGIN IMMEDIATE")
-        except sqlite3.Error as exc:
-            raise self._error(exc) from None
-        try:
-            return self._export(allow_fewer)
-        finally:
-            db.execute("ROLLBACK")  # nothing was written to the index
-
-    def _export(self, allow_fewer: bool) -> tuple[Path, Path]:
-        rows = self.rows()
-        csv_path, json_path = self.out / "metrics.csv", self.out / "manifest.json"
-        if not allow_fewer:
-            lost = _previous_runs(json_path) - {r.run_id for r in rows}
-            if lost:
-                raise StoreError(f"{self.out}: the index lacks {len(lost)} of the runs the "
-                                 f"last export listed (e.g. {min(lost)}); metrics.csv and "
-                                 f"manifest.json kept; 'flexarm repair {self.out}' rebuilds "
-                                 "the index from runs/")
-        table = [export_row(r) for r in rows]
-        columns: dict[str, None] = {}  # first-seen order; a list would be quadratic
-        for r in table:
-            columns.update(dict.fromkeys(r))
-        buf = io.StringIO()
-        writer = csv.DictWriter(buf, fieldnames=columns, restval="", lineterminator="\n")
-        writer.writeheader()
-        for r in table:
-            writer.writerow({k: _format(v) for k, v in r.items()})
-        write_atomic(csv_path, lambda fh: fh.write(buf.getvalue()))
-        manifest = {"campaigns": self.campaigns(), "runs": {
-            r.run_id: {"name": r.name, "campaign": r.campaign, "sweep": r.sweep,
-                       "axes": r.axes, "status": r.status, "message": r.message,
-                       "end_time": r.end_time, "fingerprint": r.fingerprint,
-                       "timings": r.timings, "environment": r.environment, "file": r.file,
-                       "sha256": r.sha256, "size": r.size, "finished": r.finished}
-            for r in rows}}
-        write_atomic(json_path, lambda fh: json.dump(manifest, fh, indent=1))
-        return csv_path, json_path
-
-
-def _previous_runs(manifest: Path) -> set[str]:
-    """Run ids the manifest of the last export lists (none if there is none, or it cannot
-    be read)."""
-    try:
-        runs = json.loads(manifest.read_text())["runs"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return set()
-    return {rid for rid in runs if is_run_id(rid)} if isinstance(runs, dict) else set()
-
-
-def _json_table(text):
-    """A JSON column's value; ValueError unless it is JSON of the kind the store writes."""
-    value = json.loads(text)
-    if not isinstance(value, dict):
-        raise ValueError("a JSON column is not a table")
-    return value
-
-
-#: Columns of metrics.csv that say what was run, before the swept values and metrics.
-IDENTITY_COLUMNS = ("run_id", "name", "campaign", "sweep", "arm", "plant", "controller",
-                    "observer", "Ts", "initial_state", "status", "message")
-
-
-def export_row(r: StoredRun) -> dict:
-    c = r.config
-    out = {"run_id": r.run_id, "name": r.name, "campaign": r.campaign, "sweep": r.sweep,
-           "arm": c.get("arm", "default"), "plant": r.plant,
-           "controller": c.get("controller", {}).get("kind", ""),
-           "observer": c.get("observer", {}).get("kind", ""), "Ts": c.get("Ts"),
-           "initial_state": c.get("initial_state", ""), "status": r.status,
-           "message": r.message}
-    out |= {f"axis:{k}": json.dumps(v) if isinstance(v, (list, dict)) else v
-            for k, v in r.axes.items()}
-    out |= {k: v for k, v in r.metrics.items() if k != "status"}
-    return out
-
-
-#: JSON has no infinities: a metric of ±∞ (a requirement's robustness can be: ``always``
-#: over an empty window, a claim's "never") is stored as one of these strings.
-_INFINITIES = {"inf": math.inf, "-inf": -math.inf}
-
-
-def _finite_or_none(metrics: dict) -> dict:
-    """JSON has no NaN/inf: NaN is stored as null (read back as NaN), ±∞ as "inf"/"-inf"
-    (read back as floats by `_metric_values`)."""
-    return {k: (None if math.isnan(v) else repr(v)) if isinstance(v, float)
-            and not math.isfinite(v) else v for k, v in metrics.items()}
-
-
-def _metric_values(stored: dict) -> dict:
-    """Metrics as read from the index: null → NaN, "inf"/"-inf" → ±∞."""
-    return {k: math.nan if v is None else _INFINITIES.get(v, v) if isinstance(v, str) else v
-            for k, v in stored.items()}
-
-
-def _format(value) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, float):
-        return "nan" if math.isnan(value) else repr(value)
-    return str(value)
+        """Write metrics.csv and manifest.json from the index (`export.export`)."""
+        return export.export(self, allow_fewer=allow_fewer)

@@ -12,6 +12,7 @@ stepped from Python.  Every path computes the same numbers (tested).
 """
 from __future__ import annotations
 
+import functools
 import math
 import time as _time
 from dataclasses import dataclass
@@ -59,7 +60,9 @@ class _SampledReference:
         return self.reference(t)
 
 
+@functools.lru_cache(maxsize=128)  # one object per reference: a run asks three times
 def make_reference(spec):
+    """The reference object of a `ReferenceSpec` (eq. 37, or a quintic move)."""
     if spec.kind == "paper":
         return PaperReference(amplitude=spec.amplitude, omega=spec.omega)
     return QuinticMove(start=spec.start, goal=spec.goal, duration=spec.move_time)

@@ -551,12 +551,6 @@ def all_metrics(result: RunResult, transient: float | None = None) -> dict[str, 
         Simulated time reached [s].
     transient_s : float
         The scenario's transient: the window measured is [transient_s, end_time] [s].
-    wall_s : float
-        Wall-clock time of the run [s].
-    startup_s : float
-        Of which setting up the run [s].
-    realtime_factor : float
-        Simulated time ÷ wall-clock time [ratio].
     metrics : dict
         And the keys of `tracking`, `tip_error`, `deflection`, `vibration`,
         `vibration_decay`, `estimation`, `tip_slope_rate_error`, `torque`, `growth_rate`
@@ -573,12 +567,8 @@ def all_metrics(result: RunResult, transient: float | None = None) -> dict[str, 
     true_params = ArmParameters.from_mapping(config["true_params"])
     model = nominal_model(ArmParameters.from_mapping(config["nominal_params"]),
                           tuple(config["model"]["modes_per_link"]))
-    timings = result.timings
     return (base | tracking(result, transient) | tip_error(result, transient)
             | deflection(result, transient)
             | vibration(result, transient, vibration_cutoff(true_params))
             | estimation(result, transient, model) | tip_slope_rate_error(result, transient, model)
-            | torque(result) | growth_rate(result) | residual(result)
-            | {"wall_s": timings.get("wall_s", math.nan),
-               "startup_s": timings.get("startup_s", math.nan),
-               "realtime_factor": timings.get("realtime_factor", math.nan)})
+            | torque(result) | growth_rate(result) | residual(result))

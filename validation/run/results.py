@@ -3,7 +3,7 @@
 Arrays of time series are ``(n_signals, n_samples)`` with a tuple of names (SI units,
 radians).  A result unpacks like python-control's responses: ``t, y = result``.
 Stored as one uncompressed ``.npz`` per run (no pickle; metadata as a JSON string),
-written atomically (see `validation.store`).
+written atomically (`validation.batch.runfiles`; the store: `validation.batch.store`).
 """
 from __future__ import annotations
 

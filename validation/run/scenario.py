@@ -446,7 +446,10 @@ class Scenario:
 
 
 def check_scenario(s: Scenario) -> None:
-    """Reject combinations that cannot run, before anything is simulated."""
+    """Reject combinations that cannot run, before anything is simulated (once per
+    scenario object: a frozen scenario checked stays valid)."""
+    if s.__dict__.get("_checked"):
+        return
     samples = s.duration / s.Ts
     check(samples <= MAX_SAMPLES, "duration", f"{s.duration:g} s at Ts = {s.Ts:g} s is "
                                               f"{samples:.3g} samples (at most {MAX_SAMPLES:.0e}: "
@@ -499,6 +502,7 @@ def check_scenario(s: Scenario) -> None:
                   f"gauges at {list(gauges)} cannot tell the link's {modes} modes apart "
                   "(coincident, or at nodes of a mode)")
     check_requirements(s)
+    object.__setattr__(s, "_checked", True)  # frozen: what passed once passes again
 
 
 def arm_parameters(arm: str) -> ArmParameters:

@@ -38,7 +38,7 @@ import math
 from dataclasses import dataclass, field
 
 from ..run._config import ConfigError, check
-from ..batch.campaign import Campaign, PlannedRun, run_campaign
+from ..batch.campaign import PlannedRun, run_planned
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping, with_plant
 from ..batch.store import ResultStore, run_id
 
@@ -325,15 +325,14 @@ def attribute(scenario: Scenario, factors: tuple[str, ...], out, *, name: str | 
     (attribution, campaign summary)."""
     name = name or scenario.name.replace("/", "-")
     worlds = plan(scenario, factors, name)
-    campaign = Campaign(name="attribution", base={}, sweeps=(),
-                        description="Shapley attribution of the truth-vs-design gap")
     store = ResultStore(out)
     store.prepare()
     info = store.campaigns().get("attribution", {"studies": {}})
     info.setdefault("studies", {})[name] = {"factors": list(factors)}
     store.set_campaign("attribution", info)
-    summary = run_campaign(campaign, out, runner=runner, progress=progress,
-                           only=[w.run for w in worlds])
+    summary = run_planned([w.run for w in worlds], out, name="attribution",
+                          description="Shapley attribution of the truth-vs-design gap",
+                          runner=runner, progress=progress)
     if summary.interrupted:
         return None, summary
     return attribution_from_store(out, name, factors), summary

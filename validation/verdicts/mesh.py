@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 
-from ..batch.campaign import Campaign, PlannedRun, run_campaign
+from ..batch.campaign import PlannedRun, run_planned
 from ..batch.executor import Runner
 from ..batch.store import run_id
 from ..run.plants import LEVELS, Refinement, is_truth, plant_spec
@@ -88,10 +88,9 @@ def run_checks(rows, out, *, runner: Runner | None = None, progress: bool = True
                of_checks: bool = False):
     """Run the check runs of ``rows`` (`check_runs`) into the results folder ``out``
     (what it holds already is skipped); returns the campaign summary."""
-    campaign = Campaign(name=MESH_SWEEP, base={}, sweeps=(),
-                        description="closed-loop mesh convergence of the truth-plant runs")
-    return run_campaign(campaign, out, runner=runner, progress=progress,
-                        only=check_runs(rows, of_checks=of_checks))
+    return run_planned(check_runs(rows, of_checks=of_checks), out, name=MESH_SWEEP,
+                       description="closed-loop convergence of the truth-plant runs",
+                       runner=runner, progress=progress)
 
 
 def checks_of(row, rows_by_id: dict) -> dict[str, object] | None:

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..batch.campaign import PlannedRun, run_campaign, Campaign
+from ..batch.campaign import PlannedRun, run_planned
 from ..batch.executor import Runner
 from ..run.plants import is_truth, plant_spec, with_plant
 from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
@@ -270,15 +270,14 @@ def _case_key(case: StabilityCase) -> tuple:
 def _map_level(cases: list[StabilityCase], out, *, runner, progress, mesh_check):
     """The grid, the bisections and (with ``mesh_check``) the checks of ``cases``, each at
     its own level."""
-    campaign = Campaign(name="stability", base={}, sweeps=(),
-                        description="sampled-data stability map")
     tested: dict[int, dict[float, tuple[str, str]]] = {i: {} for i in range(len(cases))}
     store = ResultStore(out)
 
     def run(points: list[tuple[int, float]], label: str):
         planned = {(i, Ts): _planned(cases[i], Ts) for i, Ts in points}
-        summary = run_campaign(campaign, out, runner=runner, progress=progress,
-                               only=list(planned.values()), label=label)
+        summary = run_planned(planned.values(), out, name="stability",
+                              description="sampled-data stability map", runner=runner,
+                              progress=progress, label=label)
         if summary.interrupted:
             return summary
         rows = {r.run_id: r for r in store.rows()}

@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..batch.campaign import Campaign, PlannedRun, run_campaign
+from ..batch.campaign import PlannedRun, run_planned
 from ..batch.interrupts import Interrupted
 from ..batch.store import ResultStore, run_id
 from ..run._config import ConfigError
@@ -97,8 +97,6 @@ class Evaluations:
 
     def __post_init__(self):
         self.store = ResultStore(self.out)
-        self.campaign = Campaign(name=self.name, base={}, sweeps=(),
-                                 description="verdicts over uncertainty (flexarm verify)")
 
     def run(self, items: list[tuple]) -> list:
         """Rows of ``items`` = [(scenario, sweep, axes)], in order (run if not stored)."""
@@ -107,8 +105,9 @@ class Evaluations:
             data = scenario_to_mapping(scenario)
             planned.append(PlannedRun(run_id(data), scenario, sweep, axes))
         unique = list({p.run_id: p for p in planned}.values())
-        summary = run_campaign(self.campaign, self.out, runner=self.runner, progress=False,
-                               only=unique, export=False)
+        summary = run_planned(unique, self.out, name=self.name,
+                              description="verdicts over uncertainty (flexarm verify)",
+                              runner=self.runner, progress=False, export=False)
         if summary.interrupted:
             raise Interrupted(summary.interrupted)
         rows = {r.run_id: r for r in self.store.rows_of(p.run_id for p in unique)}

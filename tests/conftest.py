@@ -1,0 +1,35 @@
+"""What the plug-in tests share: a folder of plug-in modules importable by this process
+(and by the `flexarm` commands the tests start there)."""
+import sys
+from pathlib import Path
+
+import pytest
+
+from validation.batch.fingerprint import plugin_sources
+
+
+def write_files(folder: Path, files: dict[str, str]) -> Path:
+    """Write ``files`` ({path relative to ``folder``: text}) into ``folder``; returns it."""
+    for name, text in files.items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text(text)
+    return folder
+
+
+@pytest.fixture()
+def plugin_lab(tmp_path, monkeypatch):
+    """``plugin_lab(files)``: the plug-in modules ``files`` written into a fresh folder on
+    ``sys.path``, no earlier copy of them imported, the plug-in fingerprint cache empty
+    (before and after the test); returns the folder."""
+    def make(files: dict[str, str]) -> Path:
+        write_files(tmp_path, files)
+        monkeypatch.syspath_prepend(str(tmp_path))
+        modules = {str(Path(name).with_suffix("")).replace("/", ".").removesuffix(".__init__")
+                   for name in files}
+        for name in [m for m in sys.modules
+                     if any(m == mod or m.startswith(mod + ".") for mod in modules)]:
+            monkeypatch.delitem(sys.modules, name)
+        plugin_sources.cache_clear()
+        return tmp_path
+    yield make
+    plugin_sources.cache_clear()

@@ -1,0 +1,94 @@
+"""Repairing a results folder: rebuild its index from the run files whatever the damage,
+and adopt a run file that has no row (`ResultStore.repair`, `ResultStore.adopt`)."""
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+from ..run.results import RunResult
+from .index import COLUMNS, INDEX_NAME, StoreError, insert_row, is_run_id, run_id
+from .runfiles import run_row
+
+__all__ = ["repair", "adopt"]
+
+
+def repair(store) -> dict[str, list[str]]:
+    """Rebuild the index from the run files, whatever the damage: an index SQLite
+    cannot read or check (a corrupt page, an empty or truncated file) is set aside
+    as ``index.sqlite.damaged`` and rebuilt; rows that are not stored runs are
+    dropped without touching any path; rows whose file is missing or damaged are
+    dropped (their files kept as ``runs/<id>.npz.damaged``); every readable run file
+    without a row is adopted if its scenario hashes to its name; directories and
+    files not named by a run id are skipped.  Returns the run ids (or names) per
+    action."""
+    report = {"rebuilt": [], "adopted": [], "dropped": [], "unreadable": [], "skipped": []}
+    if store.exists() and not _index_sound(store):
+        store.close()
+        store.index_path.replace(store.index_path.with_name(INDEX_NAME + ".damaged"))
+        for suffix in ("-wal", "-shm"):
+            Path(f"{store.index_path}{suffix}").unlink(missing_ok=True)
+        report["rebuilt"].append(f"{INDEX_NAME} (unreadable; kept as {INDEX_NAME}.damaged)")
+    try:
+        db = store._connect(create=True)
+        for values in db.execute(f"SELECT {', '.join(COLUMNS)} FROM runs").fetchall():
+            try:
+                store._stored_run(values)
+            except StoreError:  # no path is built from it: its id may be anything
+                db.execute("DELETE FROM runs WHERE run_id = ?", (values[0],))
+                report["dropped"].append(f"{str(values[0])[:40]!r} (not a stored run)")
+        for rid, why in store.verify().items():
+            db.execute("DELETE FROM runs WHERE run_id = ?", (rid,))
+            path = store.runs_dir / f"{rid}.npz"
+            if path.is_file():
+                path.replace(path.with_name(path.name + ".damaged"))
+            report["dropped"].append(f"{rid} ({why})")
+    except sqlite3.Error as exc:
+        raise store._error(exc) from None
+    for path in store._run_files():
+        if not path.is_file() or not is_run_id(path.stem):
+            report["skipped"].append(f"runs/{path.name} (not a run file)")
+    for path in store.unindexed_files():
+        try:
+            adopt(store, path)
+        except ValueError as exc:
+            path.replace(path.with_name(path.name + ".damaged"))
+            report["unreadable"].append(f"{path.stem} ({exc})")
+            continue
+        report["adopted"].append(path.stem)
+    return report
+
+def _index_sound(store) -> bool:
+    """Whether SQLite can open the index, finds every page of it sound and can read
+    every row (a full disk or a read-only folder is raised, not taken for damage)."""
+    store.close()
+    try:
+        db = store._connect(create=False)
+        sound = db.execute("PRAGMA quick_check").fetchone()[0] == "ok"
+        db.execute(f"SELECT {', '.join(COLUMNS)} FROM runs").fetchall()
+    except sqlite3.Error as exc:
+        error = store._error(exc)
+        if isinstance(error, OSError) or not store.writable():
+            raise error from None
+        return False
+    except StoreError:
+        if not store.writable():
+            raise
+        return False
+    return sound
+
+def adopt(store, path: Path):
+    """Index a run file that has no row (its metadata holds everything); ValueError if
+    it is not a readable run file, or its scenario does not hash to its name."""
+    path = Path(path)
+    if not is_run_id(path.stem):
+        raise ValueError(f"{path.name} is not named by a run id")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"unreadable ({exc.strerror or exc})") from None
+    result, meta = RunResult.from_bytes(data)
+    if not isinstance(result.config, dict) or run_id(result.config) != path.stem:
+        raise ValueError(f"its scenario does not hash to its name {path.stem} (a copy of "
+                         "another run's file?)")
+    insert_row(store._connect(create=True), run_row(path.stem, result, meta, data))
+    return store.row(path.stem)
