@@ -69,11 +69,16 @@ def main(argv: list[str] | None = None) -> int:
             if getattr(args, "tier", "") is None:
                 args.tier = "full" if args.campaign else "short"
             # Plug-ins named "package.module:Class" are found like `python -m` finds
-            # modules: the current directory first (spawned workers inherit this path;
-            # commands that only read results locate plug-in files for the code
-            # fingerprint on the same path, without importing them).
+            # modules: the current directory first (spawned workers inherit this path).
+            # Commands that only read results never import a plug-in; they locate its
+            # files for the code fingerprint on the same path, with the current directory
+            # last: a module shipped inside a results folder read from there cannot stand
+            # in for a library the command imports.
             if os.getcwd() not in sys.path:
-                sys.path.insert(0, os.getcwd())
+                if getattr(args, "reads_only", False):
+                    sys.path.append(os.getcwd())
+                else:
+                    sys.path.insert(0, os.getcwd())
             return _command(args)
     except Interrupted as exc:
         print("flexarm: interrupted", file=sys.stderr)

@@ -184,7 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--no-open", action="store_true",
                       help="do not open the figures in a browser (never opened without a "
                            "display)")
-    show.set_defaults(func=cmd_show)
+    show.set_defaults(func=cmd_show, reads_only=True)
 
     camp = sub.add_parser("campaign", help="run a campaign of scenarios (resumable)")
     camp.add_argument("file", metavar="CAMPAIGN.toml")
@@ -207,7 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-progress", action="store_true", help="no progress bar")
     rep.add_argument("--force", action="store_true",
                      help="render even if the report is up to date (same runs, same code)")
-    rep.set_defaults(func=cmd_report)
+    rep.set_defaults(func=cmd_report, reads_only=True)
 
     paper = sub.add_parser("reproduce-paper",
                            help="run campaigns/paper.toml, the stability map, the claims "
@@ -245,11 +245,11 @@ def build_parser() -> argparse.ArgumentParser:
     exp.add_argument("results", metavar="RESULTS_DIR")
     exp.add_argument("--format", choices=("csv", "json"), default="csv",
                      help="the file to name in the output (both are written)")
-    exp.set_defaults(func=cmd_export)
+    exp.set_defaults(func=cmd_export, reads_only=True)
 
     rep = sub.add_parser("repair", help="rebuild a results folder's index from its run files")
     rep.add_argument("results", metavar="RESULTS_DIR")
-    rep.set_defaults(func=cmd_repair)
+    rep.set_defaults(func=cmd_repair, reads_only=True)
 
     att = sub.add_parser("attribute", help="which modelling assumption costs how much "
                                            "(Shapley attribution over 2^k runs)")

@@ -144,28 +144,10 @@ def _metrics_table(runs) -> dict:
     return _table(head, rows, [r.status for r in runs])
 
 
-@functools.lru_cache(maxsize=64)
-def _observer_inputs(observer_json: str, params_json: str, modes: tuple) -> frozenset:
-    """The states an observer is fed (its ``measured``), built like the run built it (from
-    its stored scenario, which was checked when it ran)."""
-    from ..run._config import from_mapping
-    from ..run.laws import build_observer, nominal_model
-    from ..run.scenario import Scenario
-    scenario = from_mapping(Scenario, {"observer": json.loads(observer_json),
-                                       "nominal_params": json.loads(params_json),
-                                       "model": {"modes_per_link": list(modes)}})
-    model = nominal_model(scenario.nominal_params, scenario.model.modes_per_link)
-    return frozenset(build_observer(scenario, model).measured)
-
-
 def _fed(run) -> frozenset:
-    c = run.config
-    try:
-        return _observer_inputs(json.dumps(c["observer"], sort_keys=True),
-                                json.dumps(c["nominal_params"], sort_keys=True),
-                                tuple(c["model"]["modes_per_link"]))
-    except (ValueError, ImportError):  # a plug-in no longer importable: nothing marked
-        return frozenset()
+    """The states the run's observer was fed, as the run recorded them (a report never
+    builds a law: that would import and run a plug-in's code)."""
+    return frozenset(run.timings.get("observer_measured") or ())
 
 
 def _estimation_table(runs) -> dict | None:

@@ -135,17 +135,18 @@ def _case_figures(v: dict, store) -> list:
     if truth_id is None:
         return []
     from ..batch.store import run_id
+    from ..run._config import to_mapping
     from ..run.metrics import vibration_cutoff
-    from ..run.scenario import scenario_from_mapping, scenario_to_mapping
+    from ..run.plants import plant_for_role, plant_spec
     from reduced_model import ArmParameters
     truth = store.row(truth_id)
     if truth is None:
         return []
     reduced_id = (v.get("runs") or {}).get("reduced")
     if reduced_id is None:  # a falsification's case: its reduced twin, if it was run
-        config = dict(truth.config, plant={"kind": "reduced", "step": truth.config["plant"]["step"],
-                                           "modes_per_link": truth.config["model"]["modes_per_link"]})
-        reduced_id = run_id(scenario_to_mapping(scenario_from_mapping(config)))
+        # (its id from the stored, resolved scenario: checking it would build its laws)
+        plant = to_mapping(plant_spec(plant_for_role(truth.config, "reduced")))
+        reduced_id = run_id(dict(truth.config, plant=plant))
     both = [r for r in (truth, store.row(reduced_id)) if r is not None]
     group = [r for r in both if r.status == "ok"]  # a run that diverged is named, not drawn
     if not group:

@@ -186,8 +186,9 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
     Returns
     -------
     RunResult
-        Named signals at every sample, status, message, timings, and ``timings["paths"]``:
-        which parts ran compiled.
+        Named signals at every sample, status, message, timings, ``timings["paths"]``:
+        which parts ran compiled, and ``timings["observer_measured"]``: the measurements
+        the observer was fed.
     """
     s = scenario
     model = model or nominal_model(s.nominal_params, s.model.modes_per_link)
@@ -236,6 +237,8 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
         timings={"wall_s": wall, "startup_s": wall - steady, **timings,
                  "loop_s": wall - sum(timings.values()),
                  "compiled_loop": plant_form is not None, "paths": paths,
+                 # what the observer was fed: read by reports without building it
+                 "observer_measured": [] if observer is None else list(observer.measured),
                  # simulated time per wall second, without the first sample (kernel
                  # loading or compilation is not simulation speed)
                  "realtime_factor": (simulated - Ts) / steady if steady > 0 else math.nan})
