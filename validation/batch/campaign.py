@@ -40,7 +40,7 @@ from .executor import Runner, SerialRunner
 from .interrupts import Interrupted
 from .fingerprint import run_fingerprint
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
-from .store import ResultStore, environment, run_id
+from .store import ResultStore, StoreError, environment, run_id
 from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
@@ -456,6 +456,7 @@ class CampaignSummary:
     stale: list = field(default_factory=list)
     damaged: dict = field(default_factory=dict)
     failed_before: list = field(default_factory=list)
+    unstored: list = field(default_factory=list)  # why a finished run could not be stored
     interrupted: int = 0  # the signal number, 0 if not interrupted
 
     @property
@@ -464,7 +465,7 @@ class CampaignSummary:
 
     @property
     def any_failed(self) -> bool:
-        return bool(self.failed or self.failed_before)
+        return bool(self.failed or self.failed_before or self.unstored)
 
     def __add__(self, other: "CampaignSummary") -> "CampaignSummary":
         """Two invocations' summaries as one (e.g. the rounds of a stability map)."""
@@ -474,6 +475,7 @@ class CampaignSummary:
             failed=self.failed + other.failed, stale=self.stale + other.stale,
             damaged={**self.damaged, **other.damaged},
             failed_before=self.failed_before + other.failed_before,
+            unstored=self.unstored + other.unstored,
             interrupted=other.interrupted or self.interrupted)
 
     def line(self, name: str, out) -> str:
@@ -492,6 +494,9 @@ class CampaignSummary:
             parts.append(f"{len(self.stale)} made by other code, rerun")
         if self.damaged:
             parts.append(f"{len(self.damaged)} damaged, rerun ({', '.join(self.damaged)})")
+        if self.unstored:
+            parts.append(f"{len(self.unstored)} NOT STORED ({'; '.join(self.unstored[:3])}"
+                         f"{'; ...' if len(self.unstored) > 3 else ''})")
         return "; ".join(parts) + f" -> {out}"
 
 
@@ -571,8 +576,13 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
             tasks = ((r.run_id, r.scenario) for r in todo)  # checked: not parsed again
             for rid, result, metrics in runner.results(tasks):
                 run = by_id[rid]
-                store.add(rid, result, metrics, campaign=campaign.name, sweep=run.sweep,
-                          axes={k: _jsonable(v) for k, v in run.axes.items()}, env=env)
+                try:
+                    store.add(rid, result, metrics, campaign=campaign.name, sweep=run.sweep,
+                              axes={k: _jsonable(v) for k, v in run.axes.items()}, env=env)
+                except StoreError as exc:  # this run's place only (a folder in the way)
+                    summary.unstored.append(str(exc))
+                    bar.update(1)
+                    continue
                 setattr(summary, result.status, getattr(summary, result.status) + 1)
                 bar.update(1)
                 bar.set_postfix(ok=summary.ok, diverged=summary.diverged, failed=summary.failed)

@@ -14,6 +14,9 @@ from .index import StoreError, is_run_id, transaction
 
 __all__ = ["export", "export_row", "IDENTITY_COLUMNS"]
 
+#: The largest manifest read back (~1 KB a run: 10⁵ runs are ~100 MB).
+MAX_MANIFEST_BYTES = 1 << 30
+
 
 def export(store, *, allow_fewer: bool = False) -> tuple[Path, Path]:
     """Write metrics.csv (one row per run: identity, what was run, swept values,
@@ -67,7 +70,9 @@ def _export(store, allow_fewer: bool) -> tuple[Path, Path]:
 def _previous_runs(manifest: Path) -> set[str]:
     """Run ids the manifest of the last export lists (none if there is none, or it cannot
     be read)."""
-    try:
+    try:  # a FIFO, a device or a giant in its place is not read: no previous export
+        if not manifest.is_file() or manifest.stat().st_size > MAX_MANIFEST_BYTES:
+            return set()
         runs = json.loads(manifest.read_text())["runs"]
     except (OSError, ValueError, KeyError, TypeError):
         return set()

@@ -10,10 +10,11 @@ import re
 import sqlite3
 import time
 from contextlib import contextmanager
+from pathlib import Path
 
 __all__ = ["StoreError", "INDEX_NAME", "SCHEMA", "SCHEMA_VERSION", "COLUMNS", "JSON_COLUMNS", "BUSY_TIMEOUT", "run_id", "is_run_id",
            "set_wal", "transaction", "insert_row", "json_table", "finite_or_none",
-           "metric_values", "RUN_ID"]
+           "metric_values", "RUN_ID", "set_aside"]
 
 class StoreError(ValueError):
     """A results folder that cannot be used (one line naming the folder or file)."""
@@ -131,3 +132,13 @@ def metric_values(stored: dict) -> dict:
     return {k: math.nan if v is None else _INFINITIES.get(v, v) if isinstance(v, str) else v
             for k, v in stored.items()}
 
+
+def set_aside(path: Path) -> Path:
+    """Rename ``path`` (a file, a folder or a link: never followed) to the first free
+    ``<name>.damaged[.k]`` beside it; returns the new path."""
+    for k in range(1000):
+        new = path.with_name(path.name + ".damaged" + (f".{k}" if k else ""))
+        if not (new.exists() or new.is_symlink()):
+            path.replace(new)
+            return new
+    raise StoreError(f"{path}: cannot be set aside (1000 damaged copies beside it)")

@@ -6,28 +6,36 @@ import sqlite3
 from pathlib import Path
 
 from ..run.results import RunResult
-from .index import COLUMNS, INDEX_NAME, StoreError, insert_row, is_run_id, run_id
+from .index import COLUMNS, INDEX_NAME, StoreError, insert_row, is_run_id, run_id, set_aside
 from .runfiles import run_row
 
-__all__ = ["repair", "adopt"]
+__all__ = ["repair", "adopt", "MAX_RUN_BYTES"]
+
+#: The largest run file adopted: the largest run a scenario may ask for (5e6 samples of
+#: ~60 float32 signals, `validation.run.scenario.MAX_SAMPLES`) takes 1.2 GB.
+MAX_RUN_BYTES = 4 << 30
 
 
 def repair(store) -> dict[str, list[str]]:
-    """Rebuild the index from the run files, whatever the damage: an index SQLite
-    cannot read or check (a corrupt page, an empty or truncated file) is set aside
-    as ``index.sqlite.damaged`` and rebuilt; rows that are not stored runs are
-    dropped without touching any path; rows whose file is missing or damaged are
-    dropped (their files kept as ``runs/<id>.npz.damaged``); every readable run file
-    without a row is adopted if its scenario hashes to its name; directories and
-    files not named by a run id are skipped.  Returns the run ids (or names) per
-    action."""
+    """Rebuild the index from the run files, whatever the damage: an index that is not a
+    file (a folder, a link) or that SQLite cannot read or check (a corrupt page, an empty
+    or truncated file) is set aside as ``index.sqlite.damaged`` and rebuilt; rows that
+    are not stored runs are dropped without touching any path; rows whose file is
+    missing or damaged are dropped; every run file without a row (those included) is
+    adopted if it is a readable run file whose scenario hashes to its name — an intact
+    file is kept whatever its row said — else kept as ``runs/<id>.npz.damaged``;
+    directories and files not named by a run id are skipped.  Returns the run ids (or
+    names) per action."""
     report = {"rebuilt": [], "adopted": [], "dropped": [], "unreadable": [], "skipped": []}
-    if store.exists() and not _index_sound(store):
+    index = store.index_path
+    odd = index.is_symlink() or (index.exists() and not index.is_file())
+    if odd or (store.exists() and not _index_sound(store)):
         store.close()
-        store.index_path.replace(store.index_path.with_name(INDEX_NAME + ".damaged"))
+        kept = set_aside(index)
         for suffix in ("-wal", "-shm"):
-            Path(f"{store.index_path}{suffix}").unlink(missing_ok=True)
-        report["rebuilt"].append(f"{INDEX_NAME} (unreadable; kept as {INDEX_NAME}.damaged)")
+            Path(f"{index}{suffix}").unlink(missing_ok=True)
+        why = "not a file" if odd else "unreadable"
+        report["rebuilt"].append(f"{INDEX_NAME} ({why}; kept as {kept.name})")
     try:
         db = store._connect(create=True)
         for values in db.execute(f"SELECT {', '.join(COLUMNS)} FROM runs").fetchall():
@@ -36,11 +44,8 @@ def repair(store) -> dict[str, list[str]]:
             except StoreError:  # no path is built from it: its id may be anything
                 db.execute("DELETE FROM runs WHERE run_id = ?", (values[0],))
                 report["dropped"].append(f"{str(values[0])[:40]!r} (not a stored run)")
-        for rid, why in store.verify().items():
+        for rid, why in store.verify().items():  # the file, if intact, is adopted below
             db.execute("DELETE FROM runs WHERE run_id = ?", (rid,))
-            path = store.runs_dir / f"{rid}.npz"
-            if path.is_file():
-                path.replace(path.with_name(path.name + ".damaged"))
             report["dropped"].append(f"{rid} ({why})")
     except sqlite3.Error as exc:
         raise store._error(exc) from None
@@ -51,11 +56,12 @@ def repair(store) -> dict[str, list[str]]:
         try:
             adopt(store, path)
         except ValueError as exc:
-            path.replace(path.with_name(path.name + ".damaged"))
+            set_aside(path)
             report["unreadable"].append(f"{path.stem} ({exc})")
             continue
         report["adopted"].append(path.stem)
     return report
+
 
 def _index_sound(store) -> bool:
     """Whether SQLite can open the index, finds every page of it sound and can read
@@ -82,7 +88,9 @@ def adopt(store, path: Path):
     path = Path(path)
     if not is_run_id(path.stem):
         raise ValueError(f"{path.name} is not named by a run id")
-    try:
+    try:  # a FIFO, a device or a sparse giant is never read
+        if not path.is_file() or path.stat().st_size > MAX_RUN_BYTES:
+            raise ValueError(f"not a regular run file of at most {MAX_RUN_BYTES >> 30} GiB")
         data = path.read_bytes()
     except OSError as exc:
         raise ValueError(f"unreadable ({exc.strerror or exc})") from None

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..run.results import RunResult, write_atomic
 from .fingerprint import run_fingerprint
-from .index import finite_or_none
+from .index import finite_or_none, set_aside
 
 __all__ = ["write_run", "run_row", "META_KEYS"]
 
@@ -43,6 +43,8 @@ def write_run(out: Path, rid: str, result: RunResult, metrics: dict, *, campaign
             "finished": datetime.now(timezone.utc).isoformat(timespec="seconds")}
     result.signals = result.signals.astype("float32", copy=False)
     data = result.to_bytes(meta)
-    write_atomic(Path(out) / "runs" / f"{rid}.npz", lambda fh: fh.write(data), binary=True,
-                 sync=False)
+    path = Path(out) / "runs" / f"{rid}.npz"
+    if path.is_symlink() or (path.exists() and not path.is_file()):
+        set_aside(path)  # a folder, link or FIFO in the run's place: kept, never followed
+    write_atomic(path, lambda fh: fh.write(data), binary=True, sync=False)
     return run_row(rid, result, meta, data)

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-from ..run.results import RunResult
+from ..run.results import STATUSES, LinkedFolder, RunResult, own_folder
 from . import export, repair
 from .index import (BUSY_TIMEOUT, COLUMNS, INDEX_NAME, JSON_COLUMNS, SCHEMA, SCHEMA_VERSION,
                     StoreError, insert_row, is_run_id, json_table, metric_values, run_id,
@@ -159,11 +159,15 @@ class ResultStore:
         read a read-only folder)."""
         if self._db is not None:
             return self._db
-        if not create and not self.exists():
-            raise StoreError(f"{self.out}: not a results folder (no {INDEX_NAME}; "
-                             f"'flexarm repair {self.out}' rebuilds it from runs/)")
+        if not create:
+            self.check()
+        self._check_layout()
         if create:
-            self.runs_dir.mkdir(parents=True, exist_ok=True)
+            self.out.mkdir(parents=True, exist_ok=True)
+            try:
+                own_folder(self.out, "runs")
+            except LinkedFolder as exc:
+                raise StoreError(str(exc)) from None
         try:
             db = self._open()
         except sqlite3.Error as exc:
@@ -175,6 +179,26 @@ class ResultStore:
                 raise self._error(exc) from None
         self._db = db
         return db
+
+    def check(self) -> None:
+        """StoreError unless this is a results folder that can be read (its own index and
+        runs/, no links in their place)."""
+        self._check_layout()
+        if not self.exists():
+            raise StoreError(f"{self.out}: not a results folder (no {INDEX_NAME}; "
+                             f"'flexarm repair {self.out}' rebuilds it from runs/)")
+
+    def _check_layout(self) -> None:
+        """The folder's own files are its own: the index and runs/ are no symbolic links
+        (reading or writing would go through them, out of the folder), and the index is a
+        file (StoreError naming what to move away otherwise)."""
+        for path in (self.index_path, self.runs_dir):
+            if path.is_symlink():
+                raise StoreError(f"{path}: a symbolic link where the results folder keeps "
+                                 "its own; nothing is read or written through it")
+        if self.index_path.exists() and not self.index_path.is_file():
+            raise StoreError(f"{self.index_path}: not a file; move it away, then "
+                             f"'flexarm repair {self.out}' rebuilds the index from runs/")
 
     def _open(self) -> sqlite3.Connection:
         existed = self.exists()
@@ -323,6 +347,11 @@ class ResultStore:
         try:
             if not is_run_id(rid) or row["file"] != f"runs/{rid}.npz":
                 raise ValueError("its id must be 12 hex digits and its file runs/<id>.npz")
+            if row["status"] not in STATUSES:
+                raise ValueError(f"status {str(row['status'])[:20]!r} is none of {STATUSES}")
+            if not (isinstance(row["size"], int) and row["size"] > 0
+                    and isinstance(row["sha256"], str) and len(row["sha256"]) == 64):
+                raise ValueError("its file's size and checksum are not a size and a SHA-256")
             for c in JSON_COLUMNS:
                 row[c] = json_table(row[c])
             row["metrics"] = metric_values(row["metrics"])
@@ -368,7 +397,10 @@ class ResultStore:
 
     def _verified_bytes(self, row: StoredRun) -> bytes:
         path = self.out / row.file
-        try:
+        try:  # a FIFO, a device or a sparse giant in its place is never read
+            if not path.is_file() or path.stat().st_size != row.size:
+                raise StoreError(f"run {row.run_id}: {path} is damaged (not a regular file "
+                                 "of the size the index records)")
             data = path.read_bytes()
         except OSError as exc:
             raise StoreError(f"run {row.run_id}: {path} unreadable ({exc.strerror or exc})") from None

@@ -11,6 +11,7 @@ from ..batch.interrupts import signals_interrupt
 from ..batch.store import ResultStore, StoreError
 from ..run._config import ConfigError
 from ..run.plants import ROLES
+from ..run.results import own_folder
 from ..run.scenario import ARMS, PLANTS, scenario_from_mapping
 
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
@@ -82,9 +83,9 @@ def cmd_validity(args: argparse.Namespace) -> int:
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     out = Path(args.out or Path("results") / f"validity-{Path(args.file).stem}")
     stability = _stability_folder(args, out)
-    folder = out / "validity"
     try:
-        folder.mkdir(parents=True, exist_ok=True)
+        out.mkdir(parents=True, exist_ok=True)
+        folder = own_folder(out, "validity")
     except OSError as exc:
         raise StoreError(f"--out {out}: cannot write ({exc.strerror or exc})") from None
 

@@ -11,6 +11,7 @@ fork).
 from __future__ import annotations
 
 import multiprocessing
+import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 __all__ = ["draw_all"]
@@ -30,6 +31,7 @@ def draw_all(tasks: list, *, stores=(), progress: bool = True,
     from tqdm import tqdm
 
     from ..batch.executor import available_cores
+    from ..batch.limits import die_with_parent
     workers = min(available_cores(), len(tasks))
     if workers < 2 or "fork" not in multiprocessing.get_all_start_methods():
         return [make() for make in tqdm(tasks, desc=label, unit="fig", disable=not progress)]
@@ -38,7 +40,9 @@ def draw_all(tasks: list, *, stores=(), progress: bool = True,
     tqdm.monitor_interval = 0  # no monitor thread across the fork
     _TASKS = tasks
     try:
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork")) as pool:
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
+                                 initializer=die_with_parent,
+                                 initargs=(os.getpid(),)) as pool:  # a killed report ends them
             pool.submit(int).result()  # every worker forked now, before any thread starts
             futures = {pool.submit(_draw, i): i for i in range(len(tasks))}
             results = [None] * len(tasks)

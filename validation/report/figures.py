@@ -340,13 +340,16 @@ def phase_portrait(group, title: str, rate_bound: float | None = None) -> bytes:
 
 
 # --- animation -----------------------------------------------------------------------------------
-def animation(group, params, model, title: str, path, *, fps: int = 8) -> str:
+def animation(group, params, model, title: str, path, *, fps: int = 8) -> str | None:
     """A GIF of the whole run, truth and reduced plant, deflection magnified; returns the
-    caption.  The axes, legend and title are drawn once; each frame redraws only the arms
-    and the clock over them (matplotlib's blitting), and Pillow writes the GIF."""
+    caption (None: no run has two samples to move between).  The axes, legend and title
+    are drawn once; each frame redraws only the arms and the clock over them
+    (matplotlib's blitting), and Pillow writes the GIF."""
     from PIL import Image
     coords = model.coordinate_names
     ok = [(r, res) for r, res in group if res.time.size > 1]
+    if not ok:
+        return None
     typical = max(float(np.percentile(np.abs(res.select(["tip_defl1", "tip_defl2"]).astype(float)), 95))
                   for _, res in ok)
     magnify = float(max(1, round(0.1 * params.L1 / max(typical, 1e-9))))

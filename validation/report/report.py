@@ -37,7 +37,7 @@ from .drawing import draw_all
 from ..batch.fingerprint import run_fingerprint
 from .render import fmt_number, render
 from .robust import robust_section
-from ..run.results import write_atomic
+from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
 from ..verdicts.mesh import MESH_SWEEP, is_check
@@ -432,7 +432,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     for (section, caption, _), made in zip(tasks, drawn):
         items = made if isinstance(made, list) else [(caption, made)]
         data.figures += [Figure(section, c, p) for c, p in items]
-    if len(drawn) > len(tasks):
+    if len(drawn) > len(tasks) and drawn[-1] is not None:
         data.animation = {"caption": drawn[-1], "file": animation_path.name}
     return data
 
@@ -547,15 +547,14 @@ def write_report(results_dir, *, animate: bool = True, progress: bool = True,
     """Write report.html and report.md for ``results_dir``, unless they are current
     (`report_is_current`; ``force`` renders anyway); returns their paths."""
     store = ResultStore(results_dir)
-    if not store.exists():
-        raise StoreError(f"{results_dir}: not a results folder (no index.sqlite)")
+    store.check()
     html_path, md_path, key_path = _paths(results_dir)
     if not force and report_is_current(results_dir, animate=animate):
         return html_path, md_path
     out = html_path.parent
     key = content_key(results_dir, animate=animate)
     try:
-        (out / "figures").mkdir(parents=True, exist_ok=True)
+        own_folder(store.out, "report", "figures")
         key_path.unlink(missing_ok=True)  # written last: a report cut short is redone
     except OSError as exc:
         raise StoreError(f"{out}: cannot write the report ({exc.strerror or exc})") from None

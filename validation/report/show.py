@@ -11,7 +11,7 @@ import os
 import sys
 from pathlib import Path
 
-from ..run.results import write_atomic
+from ..run.results import own_folder, write_atomic
 from .render import render
 
 __all__ = ["show_run", "open_in_browser"]
@@ -33,8 +33,7 @@ def show_run(row) -> tuple[Path, list[Path], str]:
                    for r in others)
     if row.fingerprint != run_fingerprint(row.config):
         note += "note: this run was stored by other code than this installation\n"
-    folder = store.out / "show" / row.run_id
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = own_folder(store.out, "show", row.run_id)
     files, figures = [], []
     for _, caption, draw in paper_figure_tasks(group, claim_bounds()):
         name = next(v for k, v in _FILES.items() if caption.endswith(k)) + ".png"

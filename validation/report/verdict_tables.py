@@ -13,7 +13,7 @@ from pathlib import Path
 from reduced_model import ArmParameters
 
 from ..batch.store import ResultStore
-from ..run.results import write_atomic
+from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
 from ..verdicts import mesh as mesh_check
 from ..verdicts.attribution import (DIVERGED_RULE, FACTORS, METRIC_NAMES, METRICS,
@@ -319,7 +319,7 @@ def write_validity(data: dict, out) -> str:
     """Write ``out``/validity.json (the data), validity.md, validity.csv (the cases),
     nugap.csv (ν-gap over θ2) and the figures (figures/*.png); return the markdown."""
     out = Path(out)
-    (out / "figures").mkdir(parents=True, exist_ok=True)
+    own_folder(out, "figures")
     write_atomic(out / "validity.json", lambda fh: json.dump(data, fh, indent=1))
     head, rows = table_rows(data)
     ghead, grows = gap_rows(data)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
 import secrets
 import zipfile
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["RunResult", "STATUSES", "write_atomic"]
+__all__ = ["RunResult", "STATUSES", "write_atomic", "own_folder", "LinkedFolder"]
 
 STATUSES = ("ok", "diverged", "failed")
 
@@ -99,8 +100,11 @@ class RunResult:
 
     @classmethod
     def from_bytes(cls, data: bytes) -> tuple["RunResult", dict]:
-        """(result, meta) from `to_bytes` output; ValueError if it is not one."""
+        """(result, meta) from `to_bytes` output; ValueError if it is not one (an array
+        whose header declares more data than its file holds included: checked before
+        anything is allocated)."""
         try:
+            _check_declared_sizes(data)
             with np.load(io.BytesIO(data), allow_pickle=False) as npz:
                 meta = json.loads(str(npz["meta"]))
                 result = cls(time=npz["time"], names=tuple(str(n) for n in npz["names"]),
@@ -121,6 +125,42 @@ class RunResult:
     @classmethod
     def load(cls, path: str | Path) -> "RunResult":
         return cls.from_bytes(Path(path).read_bytes())[0]
+
+
+def _check_declared_sizes(data: bytes) -> None:
+    """ValueError unless every array of the .npz ``data`` declares no more bytes than its
+    member of the archive holds (a crafted header could ask numpy for terabytes)."""
+    with zipfile.ZipFile(io.BytesIO(data)) as archive:
+        for info in archive.infolist():
+            with archive.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                        else np.lib.format.read_array_header_2_0)
+                shape, _, dtype = read(member)
+                header = member.tell()
+            if dtype.hasobject or math.prod(shape) * dtype.itemsize > info.file_size - header:
+                raise ValueError(f"{info.filename}: its header declares {shape} of {dtype}, "
+                                 f"more than its {info.file_size} bytes")
+
+
+class LinkedFolder(ValueError):
+    """A folder inside a results folder is a symbolic link (or not a folder): writing
+    through it would write outside the folder the user chose."""
+
+
+def own_folder(root: Path, *parts: str) -> Path:
+    """``root``/``parts``, created if missing, after checking that nothing below ``root``
+    on the way is a symbolic link or a file (`LinkedFolder` naming it otherwise): what is
+    written there stays inside ``root`` (``root`` itself may be a link: the user chose it)."""
+    path = Path(root)
+    for part in parts:
+        path = path / part
+        if path.is_symlink() or (path.exists() and not path.is_dir()):
+            raise LinkedFolder(f"{path}: a {'symbolic link' if path.is_symlink() else 'file'}"
+                               " where the results folder keeps a folder of its own; "
+                               "nothing is written through it")
+        path.mkdir(exist_ok=True)
+    return path
 
 
 def write_atomic(path: Path, write, *, binary: bool = False, sync: bool = True) -> None:
