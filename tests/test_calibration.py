@@ -250,10 +250,11 @@ def test_the_command_writes_a_runnable_scenario_and_a_verify_set(tmp_path, capsy
     (tmp_path / "model.toml").write_text(
         'include = "arm.toml"\n[true_params]\nEI1 = 11.0\n[calibrate]\n'
         'fit = ["true_params.EI1", "true_params.Mp"]\n')
-    assert cli.main(["calibrate", "e1.csv", "--config", "model.toml", "--out", "cal",
-                     "--workers", "1", "--no-progress"]) == 0
+    # the CSV and the stored run it came from: two experiments of the same run
+    assert cli.main(["calibrate", "e1.csv", f"runs/{rid}", "--config", "model.toml", "--out",
+                     "cal", "--workers", "1", "--no-progress"]) == 0
     out = capsys.readouterr().out
-    assert "true_params.EI1" in out and "residual RMS / noise" in out
+    assert "true_params.EI1" in out and f"residual RMS / noise, {rid}" in out
     calibrated = load_toml(tmp_path / "cal" / "calibrated.toml")
     scenario_from_mapping(calibrated)  # flexarm run --config takes it
     (tmp_path / "verify.toml").write_text(
@@ -263,6 +264,11 @@ def test_the_command_writes_a_runnable_scenario_and_a_verify_set(tmp_path, capsy
     system, = load_systems(tmp_path / "verify.toml")
     assert {p for a in system.uncertainty.axes for p in a.paths} == {"true_params.EI1",
                                                                      "true_params.Mp"}
+    # the report: a section of its own, the simulations not listed as runs
+    assert cli.main(["report", "cal", "--no-animation", "--no-progress"]) == 0
+    report = (tmp_path / "cal" / "report" / "report.md").read_text()
+    assert "## Calibration" in report and "measured and fitted signals" in report
+    assert "calibrate/" not in report
 
 
 def test_export_signals_reads_back_exactly(tmp_path):

@@ -52,8 +52,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         else:
             print(f"  {name:<{width}}  {p['estimate']:.7g}  NOT IDENTIFIABLE: {p['reason']}")
     for exp, signals in result["residual_rms"].items():
+        if "relative_rms" in signals:  # a frequency response
+            print(f"  residual RMS / noise, {exp}: "
+                  f"{signals['relative_rms'] / signals['noise']:.3g} (relative)")
+            continue
         ratios = [f"{s} {v['rms'] / v['noise']:.3g}" for s, v in signals.items()
-                  if isinstance(v, dict) and v.get("noise")]
+                  if v["noise"]]
         if ratios:
             print(f"  residual RMS / noise, {exp}: {', '.join(ratios)}")
     written = [f for f in ("calibration.json", "calibrated.toml", "uncertainty.toml")

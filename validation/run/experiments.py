@@ -174,17 +174,17 @@ def from_run(result: RunResult, name: str, source: str) -> Experiment:
                       signals=result.select([f"y_{n}" for n in names]).astype(np.float64))
 
 
-def write_experiment(exp: Experiment, fh, comment: str = "") -> None:
+def write_experiment(exp: Experiment, fh, comment: str = "", *, digits: int = 9) -> None:
     """Write ``exp`` as an experiment CSV to the text file ``fh`` (``comment``: lines
-    written first, each as a '#' line).  Values with 9 significant digits: every float32
-    the store keeps reads back exactly."""
+    written first, each as a '#' line).  Values with ``digits`` significant digits: with
+    9, every float32 the store keeps reads back exactly."""
     for line in comment.splitlines():
         fh.write(f"# {line}\n".replace("# \n", "#\n"))
     fh.write(",".join((*INPUTS, *exp.names)) + "\n")
     t = np.arange(exp.samples) * exp.Ts
     table = np.column_stack([t, exp.torques, exp.signals.T])
     for row in table:
-        fh.write(",".join(f"{v:.9g}" for v in row) + "\n")
+        fh.write(",".join(f"{v:.{digits}g}" for v in row) + "\n")
 
 
 def check_experiment(exp: Experiment, scenario, measurable: tuple[str, ...]) -> None:
