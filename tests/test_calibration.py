@@ -8,6 +8,7 @@ truth is known exactly; every fit starts away from it.  Simulations run in this 
 """
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -367,3 +368,47 @@ def test_a_scenario_file_with_calibrate_still_runs(tmp_path):
     assert study.calibrate == {"fit": ["true_params.EI1"]}
     assert scenario_from_mapping(study.base).duration == 1.0
     assert math.isfinite(study.base["duration"])
+
+
+# --- the shipped example ---------------------------------------------------------------------------
+EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "calibration"
+
+
+def test_the_shipped_example_is_labelled_small_and_plans():
+    """Every data file says it is synthetic, the set stays small (issue: a few hundred
+    KB), and its files pass every check of a calibration."""
+    from validation.run.experiments import read_frequency_response
+    from validation.verdicts.calibration import base_scenario
+    files = sorted(EXAMPLE.glob("*.csv"))
+    assert {f.name for f in files} == {"tracking.csv", "moving.csv", "frf.csv"}
+    assert sum(f.stat().st_size for f in files) < 400_000
+    for f in files:
+        assert f.read_text().startswith("# SYNTHETIC")
+    base, table = base_scenario(EXAMPLE / "arm.toml")
+    settings = calibration_settings(table, None, base)
+    plan = plan_calibration(base, settings, [(read_experiment(EXAMPLE / f"{n}.csv"), None)
+                                             for n in ("tracking", "moving")],
+                            [read_frequency_response(EXAMPLE / "frf.csv")])
+    moving = next(t for t in plan.targets if t.experiment.name == "moving")
+    assert moving.scenario["initial_state"] == "reference"  # its own setting
+
+
+@pytest.mark.slow
+def test_the_python_walk_through_recovers_the_stated_arm(tmp_path):
+    """examples/calibration/calibrate.py as written (two workers): the stated parameters
+    (EI1 9.2, EI2 10.6, Mp 0.23) within 0.5 %, each inside its 95 % interval."""
+    import os
+    import runpy
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        runpy.run_path(str(EXAMPLE / "calibrate.py"), run_name="__main__")
+    finally:
+        os.chdir(cwd)
+    result = json.loads((tmp_path / "results" / "calibrate-example" /
+                         "calibration.json").read_text())
+    truth = {"true_params.EI1": 9.2, "true_params.EI2": 10.6, "true_params.Mp": 0.23}
+    assert max(relative_errors(result, truth).values()) <= 5e-3
+    for name, value in truth.items():
+        lo, hi = result["parameters"][name]["ci95"]
+        assert lo <= value <= hi, (name, lo, hi)
