@@ -56,7 +56,9 @@ before each step (`_without_invisible`).
 1e-3): the simulations of one Jacobian are independent runs, submitted together to the
 campaign runner (local worker processes or Dask), stored in the output folder like any
 run (sweep ``calibrate``) and read back from it — so an interrupted calibration, rerun,
-replays what is stored and continues to the same answer.
+replays what is stored and continues to the same answer.  A replayed experiment's
+torques are a file in the output folder, named in the scenario by path and SHA-256: Dask
+workers must see that folder at the same path.
 
 **Uncertainty.**  At the estimate the Jacobian is recomputed by central differences
 (truncation error O(h²), so an exact degeneracy shows as one), and with the residual
@@ -92,7 +94,6 @@ import scipy.stats
 
 from reduced_model import ArmParameters, cached_model
 
-from ..batch.interrupts import Interrupted
 from ..batch.store import run_id
 from ..run._config import ConfigError, check
 from ..run.experiments import Experiment, FrequencyResponse, check_experiment, write_experiment
@@ -524,7 +525,6 @@ def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
     settings = plan.settings
     inputs = _write_inputs(plan, out)
     problem = _Problem(plan, out, runner, inputs)
-    p = len(settings.parameters)
     lower = np.array([q.lower for q in settings.parameters]) / problem.scale
     upper = np.array([q.upper for q in settings.parameters]) / problem.scale
     u = np.array([q.start for q in settings.parameters]) / problem.scale
@@ -554,16 +554,17 @@ def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
                        "status": int(res.status), "message": res.message})
         where = ", ".join(f"{k} {stage[k]:g} {unit}" for k, unit, on in (
             ("horizon", "s", plan.targets), ("band", "Hz", plan.responses)) if on)
-        log(f"  {where}: cost {res.cost:.6g} after {res.njev} iterations "
-            f"({', '.join(f'{q.short} = {x:.6g}' for q, x in zip(settings.parameters, u * problem.scale))})")
+        values = ", ".join(f"{q.short} = {x:.6g}"
+                           for q, x in zip(settings.parameters, u * problem.scale))
+        log(f"  {where}: cost {res.cost:.6g} after {res.njev} iterations ({values})")
     problem.horizon = problem.band = math.inf
     cache.clear()
     r = fun(u)
     J = problem.jacobian(u, r, lower, upper, central=True)
     floor = _RESOLUTION_MARGIN * problem.resolution(central=True) if plan.targets else 0.0
     estimate = u * problem.scale
-    stats = parameter_uncertainty(J, r, settings.names, estimate, problem.scale,
-                                  floor=floor, bounds=[(q.lower, q.upper) for q in settings.parameters])
+    stats = parameter_uncertainty(J, r, settings.names, estimate, problem.scale, floor=floor,
+                                  bounds=[(q.lower, q.upper) for q in settings.parameters])
     result = {
         "parameters": stats["parameters"], "correlation": stats["correlation"],
         "residual_rms": _residual_rms(plan, problem, u),
