@@ -146,8 +146,9 @@ def _law_kind(value) -> None:
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    """``kind``: a built-in controller ("pbc", "pbc-idealised", "pd", "ct", "lqr") or a
-    plug-in ``"package.module:Class"``; ``options``: its keyword options (the class's own
+    """``kind``: a built-in controller ("pbc", "pbc-idealised", "pd", "ct", "lqr", or
+    "replay": recorded torques, what ``flexarm calibrate`` runs) or a plug-in
+    ``"package.module:Class"``; ``options``: its keyword options (the class's own
     defaults for the rest; unknown options are refused)."""
 
     kind: str = "pbc"
