@@ -11,13 +11,14 @@ from ._ekf import ExtendedKalmanFilter, PositionEKF
 from ._interface import Controller, Observer, ObserverFailure
 from ._lqr import GainScheduledLQR
 from ._pbc import IdealisedPBC, PassivityBasedController
+from ._replay import TorqueReplay
 from ._reference import PaperReference, QuinticMove, ReferenceKind, reference_into
 from ._registry import CONTROLLERS, OBSERVERS, PluginError, accepted_options, resolve
 from ._smo import BoundaryLayerSMO, PaperSMO, PositionOnlySMO
 
 __all__ = ["Controller", "Observer", "PassivityBasedController", "IdealisedPBC", "PaperSMO",
            "BoundaryLayerSMO", "PositionOnlySMO", "ExtendedKalmanFilter", "PositionEKF",
-           "JointPD", "RigidComputedTorque", "GainScheduledLQR", "RigidArm",
+           "JointPD", "RigidComputedTorque", "GainScheduledLQR", "RigidArm", "TorqueReplay",
            "PaperReference", "QuinticMove", "ReferenceKind", "reference_into", "CONTROLLERS",
            "OBSERVERS", "PluginError", "resolve", "accepted_options", "CompiledLaw",
            "compiled_form", "CONTROLLER_SIGNATURE", "OBSERVER_SIGNATURE", "ObserverFailure"]

@@ -14,13 +14,14 @@ from ._baselines import JointPD, RigidComputedTorque
 from ._ekf import ExtendedKalmanFilter, PositionEKF
 from ._lqr import GainScheduledLQR
 from ._pbc import IdealisedPBC, PassivityBasedController
+from ._replay import TorqueReplay
 from ._smo import BoundaryLayerSMO, PaperSMO, PositionOnlySMO
 
 __all__ = ["CONTROLLERS", "OBSERVERS", "PluginError", "resolve", "accepted_options"]
 
 CONTROLLERS: dict[str, type] = {
     "pbc": PassivityBasedController, "pbc-idealised": IdealisedPBC, "pd": JointPD,
-    "ct": RigidComputedTorque, "lqr": GainScheduledLQR,
+    "ct": RigidComputedTorque, "lqr": GainScheduledLQR, "replay": TorqueReplay,
 }
 OBSERVERS: dict[str, type] = {
     "smo-paper": PaperSMO, "smo-bl": BoundaryLayerSMO, "smo-pos": PositionOnlySMO,

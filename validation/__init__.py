@@ -30,6 +30,9 @@ _EXPORTS = {
     "ResultStore": "batch.store",
     "nu_gap": "verdicts.nugap", "stability_margin": "verdicts.nugap",
     "reduced_linear_model": "verdicts.linear", "law_gain": "verdicts.linear",
+    "read_experiment": "run.experiments", "read_frequency_response": "run.experiments",
+    "base_scenario": "verdicts.calibration", "calibration_settings": "verdicts.calibration",
+    "plan_calibration": "verdicts.calibration", "calibrate": "verdicts.calibration",
 }
 
 __all__ = sorted(_EXPORTS)

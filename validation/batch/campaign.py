@@ -53,12 +53,13 @@ __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign
 MAX_RUNS = 100_000
 
 _TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution",
-             "requirement", "uncertainty", "verify"}
+             "requirement", "uncertainty", "verify", "calibrate"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
 _SPEC_KEYS = {"scale", "uniform", "loguniform", "choices", "also"}
 #: Sections a scenario file may have too (``flexarm verify`` reads a scenario file's
-#: ``[uncertainty]`` and ``[verify]``; ``[[requirement]]`` is a scenario key).
-_VERIFY_KEYS = ("uncertainty", "verify")
+#: ``[uncertainty]`` and ``[verify]``, ``flexarm calibrate`` its ``[calibrate]``;
+#: ``[[requirement]]`` is a scenario key).
+_VERIFY_KEYS = ("uncertainty", "verify", "calibrate")
 
 
 @dataclass(frozen=True)
@@ -85,6 +86,7 @@ class Campaign:
     attribution: dict = field(default_factory=dict)
     uncertainty: dict = field(default_factory=dict)
     verify: dict = field(default_factory=dict)
+    calibrate: dict = field(default_factory=dict)
 
 
 # --- loading ------------------------------------------------------------------------------
@@ -187,7 +189,8 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
         check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
                     description=str(data.get("description", "")), attribution=attribution,
-                    uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}))
+                    uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}),
+                    calibrate=data.get("calibrate", {}))
 
 
 # --- expansion --------------------------------------------------------------------------------

@@ -9,7 +9,8 @@ command ran (a plug-in) called ``sys.exit``.
 `main` runs a command; `parser` declares every command's arguments; the commands live
 by what they work on: `modes`, `one_run` (run, show), `campaigns` (campaign,
 reproduce-paper), `verdicts` (stability, validity, attribute, verify, baseline),
-`results` (report, export, repair), with what they share in `common`.
+`results` (report, export, repair), `calibrate` (calibrate, export --signals), with
+what they share in `common`.
 """
 from __future__ import annotations
 

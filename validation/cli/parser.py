@@ -10,6 +10,7 @@ from controllers import CONTROLLERS, OBSERVERS
 from ..batch.executor import available_cores
 from ..run.scenario import ARMS, DEFAULT_TRANSIENT, PLANTS, Scenario
 
+from .calibrate import cmd_calibrate
 from .campaigns import cmd_campaign, cmd_reproduce_paper
 from .common import EXIT_USAGE
 from .modes import cmd_modes
@@ -241,8 +242,13 @@ def build_parser() -> argparse.ArgumentParser:
     val.add_argument("--no-progress", action="store_true", help="no line per case")
     val.set_defaults(func=cmd_validity)
 
-    exp = sub.add_parser("export", help="write metrics.csv and manifest.json from the index")
-    exp.add_argument("results", metavar="RESULTS_DIR")
+    exp = sub.add_parser("export", help="write metrics.csv and manifest.json from the index "
+                                        "(--signals: one run as an experiment CSV)")
+    exp.add_argument("results", metavar="RESULTS_DIR", nargs="?")
+    exp.add_argument("--signals", metavar="RESULTS/RUN",
+                     help="write this run's torques and measurements as the CSV flexarm "
+                          "calibrate reads (to stdout, or --to FILE)")
+    exp.add_argument("--to", metavar="FILE", help="with --signals: the CSV file to write")
     exp.add_argument("--format", choices=("csv", "json"), default="csv",
                      help="the file to name in the output (both are written)")
     exp.set_defaults(func=cmd_export, reads_only=True)
@@ -289,6 +295,26 @@ def build_parser() -> argparse.ArgumentParser:
                      help="results folder (default results/verify-<file>-<mode>)")
     _add_execution(ver)
     ver.set_defaults(func=cmd_verify)
+
+    cal = sub.add_parser("calibrate", help="fit the plant's parameters to measured experiments "
+                                           "(time series, frequency responses), with standard "
+                                           "errors, intervals and identifiability")
+    cal.add_argument("data", metavar="DATA", nargs="*",
+                     help="experiments: CSV files (t, tau1, tau2, measured signals) or stored "
+                          "runs RESULTS/RUN")
+    cal.add_argument("--config", required=True, metavar="SCENARIO.toml",
+                     help="the scenario the experiments ran (plant, arm and start values; "
+                          "[calibrate] settings)")
+    cal.add_argument("--fit", metavar="NAME[,NAME...]",
+                     help="scenario fields to fit, e.g. true_params.EI1,true_params.Mp "
+                          "(default: [calibrate] fit)")
+    cal.add_argument("--frf", action="append", metavar="FILE.csv",
+                     help="a frequency response (f [Hz], OUT/IN.re, OUT/IN.im), fitted on the "
+                          "linearised plant")
+    cal.add_argument("--out", metavar="DIR",
+                     help="results folder (default results/calibrate-<config name>)")
+    _add_execution(cal)
+    cal.set_defaults(func=cmd_calibrate)
 
     base = sub.add_parser("baseline", help="error-bound regression checks (baselines.toml)")
     bsub = base.add_subparsers(dest="action", required=True, parser_class=_Parser)

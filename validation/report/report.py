@@ -7,7 +7,9 @@ figures embedded, no network; a print stylesheet keeps every table on the page) 
 Sections: what was run; the summary (each claim, its margin and the truth plant's
 difference from the reduced one; the main metrics of every system run on both plants);
 the paper's claims (if the folder holds the paper's system); the sampled-data stability
-map (if ``stability/`` holds one); attribution; estimation against the measurement;
+map (if ``stability/`` holds one); attribution; the verdicts over uncertainty and the
+calibration (if ``flexarm verify`` or ``flexarm calibrate`` wrote one); estimation
+against the measurement;
 runs; metrics; the paper's figures; sweeps; the reduced model's validity map (with the
 linear analysis of ``validity/`` if `flexarm validity` wrote one); the animation.  Runs whose file fails verification or that were made by other code are
 left out and named.
@@ -36,6 +38,7 @@ from . import linear_figures
 from .drawing import draw_all
 from ..batch.fingerprint import run_fingerprint
 from .render import fmt_number, render
+from .calibration import calibration_section
 from .robust import robust_section
 from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
@@ -90,6 +93,7 @@ class ReportData:
     attribution: list = field(default_factory=list)
     validity: dict | None = None
     robust: dict | None = None
+    calibration: dict | None = None
 
 
 def _table(head: list[str], rows: list[list], classes: list[str] | None = None) -> dict:
@@ -291,7 +295,9 @@ def _included(store: ResultStore):
     """(rows, runs to report, warnings, evaluations of `flexarm verify`): runs whose file
     verifies and that this code made (mesh-check runs are in ``rows``: they check the
     runs, they are not reported as runs; the evaluations of a verdict over uncertainty
-    have their own section, `robust_section`, not a row each)."""
+    have their own section, `robust_section`, not a row each; so do a calibration's
+    simulations, `calibration_section`)."""
+    from ..verdicts.calibration import FIT_SWEEP
     from ..verdicts.verify import ROBUST_SWEEPS
     all_rows = store.rows()
     if not all_rows:
@@ -300,7 +306,7 @@ def _included(store: ResultStore):
     stale = [r for r in all_rows if r.fingerprint != run_fingerprint(r.config)]
     fresh = [r for r in all_rows if r.run_id not in damaged and r not in stale]
     runs = [r for r in fresh if r.sweep != "stability" and not is_check(r)
-            and r.sweep not in ROBUST_SWEEPS]
+            and r.sweep not in (*ROBUST_SWEEPS, FIT_SWEEP)]
     evaluations = [r for r in fresh if r.sweep in ROBUST_SWEEPS]
     warnings = [f"run {rid} left out: {why} (rerun the campaign to redo it)"
                 for rid, why in damaged.items()]
@@ -393,6 +399,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                               s * a.totals[m["key"]])))
     data.robust, robust_tasks = robust_section(store, evaluations)
     tasks += robust_tasks
+    data.calibration, calibration_tasks = calibration_section(store)
+    tasks += calibration_tasks
     data.estimation = _estimation_table(runs)
     if runs:  # a folder of `flexarm verify` alone has its section instead
         data.runs, data.metrics = _runs_table(runs), _metrics_table(runs)
@@ -520,7 +528,10 @@ def content_key(results_dir, *, animate: bool) -> str:
     """The hash of everything a report of ``results_dir`` shows (module docstring)."""
     store = ResultStore(results_dir)
     validity = store.out / "validity" / "validity.json"
+    calibration = store.out / "calibration.json"
     parts = {"runs": _rows_digest(store), "campaigns": store.campaigns(),
+             "calibration": hashlib.sha256(calibration.read_bytes()).hexdigest()
+             if calibration.is_file() else "",
              "stability": _rows_digest(ResultStore(store.out / "stability")),
              "validity": hashlib.sha256(validity.read_bytes()).hexdigest()
              if validity.is_file() else "",

@@ -31,7 +31,8 @@ from .laws import build_controller, build_observer, nominal_model
 from .results import RunResult
 from .scenario import Scenario, check_scenario, scenario_to_mapping
 
-__all__ = ["Setup", "build", "simulate", "run_scenario", "make_reference"]
+__all__ = ["Setup", "build", "simulate", "run_scenario", "make_reference",
+           "measurement_noise"]
 
 
 @dataclass
@@ -126,10 +127,7 @@ class _Run:
         n, Ts = model.n, s.Ts
         self.n, self.N = n, int(round(s.duration / Ts))
         seeds = np.random.SeedSequence(s.seed).spawn(2)
-        self.std = np.array([s.sensors.rate_noise if m.endswith("_dot") else
-                             s.sensors.encoder_noise if m.startswith("theta") else
-                             s.sensors.modal_noise if m.startswith("q") else 0.0
-                             for m in measured])
+        self.std = measurement_noise(s.sensors, measured)
         noise = (noise_stream(np.random.default_rng(seeds[0]), (self.N, len(measured)))
                  if np.any(self.std > 0) else np.zeros((0, len(measured))))
         dspec = _disturbance_spec(s.disturbances, Ts)
@@ -398,6 +396,15 @@ def _noise_draws(dspec: np.ndarray, n_samples: int, Ts: float) -> int:
 def _one_line(exc: BaseException) -> str:
     text = str(exc).strip()
     return text.splitlines()[0] if text else "(no message)"
+
+
+def measurement_noise(sensors, measured) -> np.ndarray:
+    """The noise standard deviation of each of the ``measured`` readings with the
+    scenario's ``sensors``: rates, angles [rad] and modal coordinates [m] each their own;
+    the payload position is read without noise."""
+    return np.array([sensors.rate_noise if m.endswith("_dot") else
+                     sensors.encoder_noise if m.startswith("theta") else
+                     sensors.modal_noise if m.startswith("q") else 0.0 for m in measured])
 
 
 def initial_state(scenario: Scenario, model: ArmModel) -> np.ndarray:

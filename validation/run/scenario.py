@@ -112,7 +112,8 @@ class ControllerSpec:
     Parameters
     ----------
     kind : str
-        A built-in controller ("pbc", "pbc-idealised", "pd", "ct", "lqr") or a plug-in
+        A built-in controller ("pbc", "pbc-idealised", "pd", "ct", "lqr", or "replay":
+        recorded torques, what ``flexarm calibrate`` runs) or a plug-in
         ``"package.module:Class"``.
     options : dict
         Its keyword options; the class's own defaults for the rest (an option it does not

@@ -1,0 +1,85 @@
+"""``flexarm calibrate``: the plant's parameters fitted to measured experiments, and
+``flexarm export --signals``: a stored run written as such an experiment."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..run.experiments import from_run, read_experiment, read_frequency_response, write_experiment
+
+from .common import EXIT_FAILED, runner_for
+from .one_run import stored_run
+
+
+def _experiment(spec: str):
+    """DATA: a CSV file, or a stored run RESULTS/RUN (with its own scenario)."""
+    path = Path(spec)
+    if path.suffix.lower() == ".csv" or path.is_file():
+        return read_experiment(path), None
+    row = stored_run(spec, "DATA")
+    return from_run(row.load(), row.run_id, spec), row.config
+
+
+def _fit_names(text: str | None) -> list[str] | None:
+    return None if text is None else [n.strip() for n in text.split(",") if n.strip()]
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from ..verdicts.calibration import base_scenario, calibrate, calibration_settings, \
+        plan_calibration
+    base, table = base_scenario(args.config)
+    settings = calibration_settings(table, _fit_names(args.fit), base)
+    experiments = [_experiment(spec) for spec in args.data]
+    responses = [read_frequency_response(f) for f in args.frf or []]
+    plan = plan_calibration(base, settings, experiments, responses)
+    out = Path(args.out or Path("results") / f"calibrate-{Path(args.config).stem}")
+    scenarios = [base] if plan.targets else []  # its plant's kernels, compiled before the fork
+    with runner_for(args, scenarios, out) as runner:
+        print(f"calibrating {', '.join(settings.names)} on {len(plan.targets)} experiment(s)"
+              f"{f' and {len(responses)} frequency response(s)' if responses else ''} "
+              f"({settings.inputs}, {base.plant.kind} plant) into {out}")
+        result = calibrate(plan, out, runner=runner)
+    print(f"{result['iterations']} iterations, {result['simulations']} simulations, cost "
+          f"{result['cost']:.6g} (residual variance {result['residual_variance']:.3g}, in units "
+          "of the noise levels)")
+    width = max(len(n) for n in result["parameters"])
+    for name, p in result["parameters"].items():
+        if p["identifiable"]:
+            lo, hi = p["ci95"]
+            print(f"  {name:<{width}}  {p['estimate']:.7g} ± {p['std']:.2g}  "
+                  f"(95 %: {lo:.7g} .. {hi:.7g})")
+        else:
+            print(f"  {name:<{width}}  {p['estimate']:.7g}  NOT IDENTIFIABLE: {p['reason']}")
+    for exp, signals in result["residual_rms"].items():
+        if "relative_rms" in signals:  # a frequency response
+            print(f"  residual RMS / noise, {exp}: "
+                  f"{signals['relative_rms'] / signals['noise']:.3g} (relative)")
+            continue
+        ratios = [f"{s} {v['rms'] / v['noise']:.3g}" for s, v in signals.items()
+                  if v["noise"]]
+        if ratios:
+            print(f"  residual RMS / noise, {exp}: {', '.join(ratios)}")
+    written = [f for f in ("calibration.json", "calibrated.toml", "uncertainty.toml")
+               if (out / f).is_file()]
+    print(f"wrote {', '.join(str(out / f) for f in written)}; report: flexarm report {out}")
+    if result["failed_runs"]:
+        print(f"flexarm: {len(result['failed_runs'])} simulation(s) failed: "
+              f"{', '.join(result['failed_runs'][:8])}", file=sys.stderr)
+        return EXIT_FAILED
+    return 0
+
+
+def export_signals(args: argparse.Namespace) -> int:
+    """``flexarm export --signals RESULTS/RUN [--to FILE]``: the run as an experiment CSV."""
+    row = stored_run(args.signals, "--signals")
+    exp = from_run(row.load(), row.run_id, args.signals)
+    comment = (f"run {row.run_id} ({row.name}) of {row.store.out}, as flexarm calibrate reads "
+               f"an experiment: t [s], the joint torques applied [N m], the measurements")
+    if args.to is None:
+        write_experiment(exp, sys.stdout, comment)
+        return 0
+    from ..run.results import write_atomic
+    write_atomic(Path(args.to), lambda fh: write_experiment(exp, fh, comment))
+    print(f"wrote {args.to}: {exp.samples} samples of {', '.join(exp.names)}")
+    return 0

@@ -1,0 +1,95 @@
+"""The report's "Calibration" section: what ``flexarm calibrate`` found in a results folder.
+
+Read from ``OUT/calibration.json``, the experiments as the calibration read them
+(``OUT/experiments/NAME.csv``) and the stored simulation of each at the estimate: the
+parameters with their intervals (or why the data cannot determine them), the residual
+RMS of every signal against its noise level, and for every experiment its measured and
+fitted signals and their residuals.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..run.experiments import read_experiment
+from . import figures as fig
+from .render import fmt_number
+
+__all__ = ["calibration_section", "SECTION"]
+
+SECTION = "Calibration"
+
+
+def calibration_section(store) -> tuple[dict | None, list]:
+    """(table data for the templates, figure tasks (section, caption, make)) of the
+    calibration in ``store``'s folder; (None, []) if there is none."""
+    path = Path(store.out) / "calibration.json"
+    if not path.is_file():
+        return None, []
+    result = json.loads(path.read_text())
+    rows = []
+    for name, p in result["parameters"].items():
+        if p["identifiable"]:
+            lo, hi = p["ci95"]
+            # as many digits as the interval needs to show its width
+            rows.append([name, f"{p['estimate']:.7g}", f"{p['std']:.2g}",
+                         f"[{lo:.7g}, {hi:.7g}]", "yes"])
+        else:
+            rows.append([name, f"{p['estimate']:.7g}", "—", "—",
+                         f"NOT IDENTIFIABLE: {p['reason']}"])
+    residuals = []
+    for exp, signals in result["residual_rms"].items():
+        if "relative_rms" in signals:
+            residuals.append([exp, "(frequency response, relative)",
+                              fmt_number(signals["relative_rms"]), fmt_number(signals["noise"]),
+                              fmt_number(signals["relative_rms"] / signals["noise"])])
+            continue
+        for signal, v in signals.items():
+            residuals.append([exp, signal, fmt_number(v["rms"]),
+                              fmt_number(v["noise"]) if v["noise"] else "not declared",
+                              fmt_number(v["rms"] / v["noise"]) if v["noise"] else "—"])
+    data = {"rows": rows, "residuals": residuals, "inputs": result["inputs"],
+            "summary": f"{result['iterations']} iterations, {result['simulations']} "
+                       f"simulations, cost {fmt_number(result['cost'])}, residual variance "
+                       f"{fmt_number(result['residual_variance'])} (in units of the noise "
+                       f"levels), {result['dof']} degrees of freedom",
+            "experiments": [f"{e['name']}: {e['source']}, {e['samples']} samples" for e in
+                            result["experiments"]] + [f"{r['name']}: {r['source']} "
+                                                      f"({', '.join(r['pairs'])})"
+                                                      for r in result["responses"]]}
+    tasks = []
+    for e in result["experiments"]:
+        csv = Path(store.out) / "experiments" / f"{e['name']}.csv"
+        row = store.row(e["run"])
+        if not csv.is_file() or row is None or row.status != "ok":
+            continue
+        tasks.append((SECTION, f"experiment {e['name']}: measured and fitted signals (top), "
+                               "residuals (bottom)",
+                      lambda csv=csv, row=row, name=e["name"]: _fit_figure(csv, row, name)))
+    return data, tasks
+
+
+def _fit_figure(csv: Path, row, name: str) -> bytes:
+    import matplotlib.pyplot as plt
+    measured = read_experiment(csv)
+    fitted = row.load()
+    t = np.arange(measured.samples) * measured.Ts
+    k = min(measured.samples, len(fitted.time))
+    n = len(measured.names)
+    figure, axes = plt.subplots(2, n, figsize=(3.2 * n, 4.4), squeeze=False,
+                                constrained_layout=True)
+    for j, signal in enumerate(measured.names):
+        sim = fitted[f"y_{signal}"][:k]
+        top, bottom = axes[0, j], axes[1, j]
+        top.plot(t, measured.signals[j], color="0.55", lw=0.8, label="measured")
+        top.plot(t[:k], sim, **fig.PLANT_STYLE.get(fitted.config["plant"]["kind"],
+                                                    {"color": "C1"}), label="fitted")
+        top.set_title(signal, fontsize=9)
+        bottom.plot(t[:k], sim - measured.signals[j, :k], color="C3", lw=0.6)
+        bottom.set_xlabel("t [s]")
+    axes[0, 0].legend(fontsize=8)
+    axes[1, 0].set_ylabel("fitted − measured")
+    figure.suptitle(f"{name}: the calibrated plant against the experiment", fontsize=10)
+    return fig.png(figure)
