@@ -128,8 +128,24 @@ def _read_table(path: Path) -> dict[str, np.ndarray]:
 
 
 def read_experiment(path: str | Path, name: str | None = None) -> Experiment:
-    """Read an experiment CSV (module docstring); `ConfigError` naming the file and
-    column for any defect."""
+    """Read an experiment CSV (format in the module docstring).
+
+    Parameters
+    ----------
+    path : path-like
+        The CSV file: columns ``t``, ``tau1``, ``tau2`` and the measured signals.
+    name : str, optional
+        The experiment's name; the file's stem by default.
+
+    Returns
+    -------
+    Experiment
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and column of any defect.
+    """
     path = Path(path)
     src = str(path)
     columns = _read_table(path)
@@ -235,8 +251,23 @@ class FrequencyResponse:
 
 
 def read_frequency_response(path: str | Path) -> FrequencyResponse:
-    """Read a frequency-response CSV (module docstring); `ConfigError` naming the file
-    and column for any defect."""
+    """Read a frequency-response CSV (format in the module docstring).
+
+    Parameters
+    ----------
+    path : path-like
+        The CSV file: column ``f`` [Hz] and the real and imaginary parts of each
+        output's response to a joint torque.
+
+    Returns
+    -------
+    FrequencyResponse
+
+    Raises
+    ------
+    ConfigError
+        Naming the file and column of any defect.
+    """
     path = Path(path)
     src = str(path)
     columns = _read_table(path)

@@ -210,8 +210,27 @@ def _parameter(name: str, table: dict, base: Scenario) -> Parameter:
 
 
 def calibration_settings(table: dict, fit: list[str] | None, base: Scenario) -> CalibrationSettings:
-    """The settings of ``[calibrate]`` (``table``) with ``--fit`` names (``fit`` wins over
-    ``calibrate.fit``), checked against the scenario ``base``; `ConfigError` naming the key."""
+    """The settings of a ``[calibrate]`` table, checked against a scenario.
+
+    Parameters
+    ----------
+    table : dict
+        The ``[calibrate]`` table of a scenario or campaign file.
+    fit : list of str or None
+        Scenario fields named by ``--fit``; they win over ``calibrate.fit``.
+    base : Scenario
+        The scenario the fitted fields must exist in.
+
+    Returns
+    -------
+    CalibrationSettings
+        The parameters with their start values and bounds, the noise and the weights.
+
+    Raises
+    ------
+    ConfigError
+        Naming the offending key.
+    """
     check(isinstance(table, dict), "calibrate", "must be a table")
     for key in table:
         check(key in _SETTINGS, f"calibrate.{key}", f"unknown key (allowed: "
@@ -299,10 +318,32 @@ def _experiment_mapping(base: dict, exp: Experiment, own: dict | None,
 def plan_calibration(base: Scenario, settings: CalibrationSettings,
                      experiments: list[tuple[Experiment, dict | None]],
                      responses: list[FrequencyResponse] = ()) -> Plan:
-    """Check every experiment against its scenario (``experiments``: each with a stored
-    run's resolved scenario, or None for a file) and every frequency response against the
-    plant's linear outputs; nothing is written.  `ConfigError` naming the file, column
-    or key."""
+    """Check every experiment and frequency response before anything runs.
+
+    Nothing is written.
+
+    Parameters
+    ----------
+    base : Scenario
+        The scenario being calibrated.
+    settings : CalibrationSettings
+        From `calibration_settings`.
+    experiments : list of (Experiment, dict or None)
+        Each experiment with the resolved scenario of the stored run it came from, or
+        None for a file.
+    responses : list of FrequencyResponse
+        Frequency responses, checked against the plant's linear outputs.
+
+    Returns
+    -------
+    Plan
+        What `calibrate` runs.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, column or key.
+    """
     check(bool(experiments) or bool(responses), "DATA", "no experiment and no --frf file")
     names = [e.name for e, _ in experiments] + [r.name for r in responses]
     twice = sorted({n for n in names if names.count(n) > 1})
@@ -517,10 +558,27 @@ class _Problem:
 
 
 def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
-    """Fit the plan's parameters (module docstring), writing ``out``: the experiments
-    (``experiments/NAME.csv`` and the torques replayed, ``.npy``), the simulations
-    (``runs/``, index), ``calibration.json``, ``calibrated.toml``, ``uncertainty.toml``.
-    Returns what ``calibration.json`` holds."""
+    """Fit the plan's parameters with scipy's ``least_squares`` (module docstring).
+
+    Parameters
+    ----------
+    plan : Plan
+        From `plan_calibration`.
+    out : path-like
+        The results folder: the experiments (``experiments/NAME.csv`` and the torques
+        replayed, ``.npy``), the simulations (``runs/``, index), ``calibration.json``,
+        ``calibrated.toml`` and ``uncertainty.toml`` are written there.
+    runner : callable
+        Runs a list of planned scenarios (`make_runner`).
+    log : callable
+        Receives one line per iteration.
+
+    Returns
+    -------
+    dict
+        What ``calibration.json`` holds: estimates, standard errors, correlations,
+        residuals and the verdict on the fit.
+    """
     out = Path(out)
     settings = plan.settings
     inputs = _write_inputs(plan, out)
@@ -785,8 +843,18 @@ def _write_results(out: Path, plan: Plan, result: dict) -> None:
 
 
 def base_scenario(path) -> tuple[Scenario, dict]:
-    """The scenario a calibration starts from (a scenario file, or a campaign file's
-    ``[scenario]`` base) and its ``[calibrate]`` table."""
+    """The scenario a calibration starts from and its ``[calibrate]`` table.
+
+    Parameters
+    ----------
+    path : path-like
+        A scenario file, or a campaign file (its ``[scenario]`` base).
+
+    Returns
+    -------
+    (Scenario, dict)
+        The scenario and the ``[calibrate]`` table (empty when there is none).
+    """
     from ..batch.campaign import load_study
     study = load_study(path)
     return scenario_from_mapping(study.base), study.calibrate
