@@ -39,6 +39,7 @@ from ..run._config import ConfigError, check, check_label
 from .executor import Runner, SerialRunner
 from .interrupts import Interrupted
 from .fingerprint import run_fingerprint
+from .progress import progress as progress_bar
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .store import ResultStore, StoreError, environment, run_id
 from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
@@ -574,7 +575,7 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
         runner = runner or SerialRunner()
         env = environment()
         by_id = {r.run_id: r for r in todo}
-        bar = _progress(len(todo), label or campaign.name, enabled=progress)
+        bar = progress_bar(len(todo), label or campaign.name, enabled=progress)
         try:
             tasks = ((r.run_id, r.scenario) for r in todo)  # checked: not parsed again
             for rid, result, metrics in runner.results(tasks):
@@ -587,8 +588,8 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
                     bar.update(1)
                     continue
                 setattr(summary, result.status, getattr(summary, result.status) + 1)
-                bar.update(1)
                 bar.set_postfix(ok=summary.ok, diverged=summary.diverged, failed=summary.failed)
+                bar.update(1)
         except Interrupted as exc:
             summary.interrupted = exc.signum
         finally:
@@ -603,9 +604,3 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
 
 def _jsonable(value):
     return value.item() if isinstance(value, np.generic) else value
-
-
-def _progress(total: int, name: str, *, enabled: bool):
-    from tqdm import tqdm
-    tqdm.monitor_interval = 0  # no monitor thread: worker processes may still be forked
-    return tqdm(total=total, desc=name, unit="run", disable=not enabled, dynamic_ncols=True)

@@ -50,19 +50,23 @@ def compile_groups(groups: list[tuple[str, Callable[[], object]]], *,
 
     A group that takes more than ``quiet_below`` seconds compiled: the first such group
     is preceded by a line saying what is happening, and each is followed by a line with
-    its time and the estimated time left, the ``reference`` times (default
+    its time, how many groups are ready (those loaded from the cache since the last line
+    counted and said), and the estimated time left: the ``reference`` times (default
     `REFERENCE_SECONDS`) of the groups still to come scaled by (time taken by the
-    compiled groups) / (their reference time).  ``stream=None`` compiles silently.
+    compiled groups) / (their reference time); an estimate is not repeated.
+    ``stream=None`` compiles silently.
     """
     reference = REFERENCE_SECONDS if reference is None else reference
     mean = sum(reference.values()) / len(reference) if reference else 1.0
     expected = [reference.get(label, mean) for label, _ in groups]
     taken, spent, spent_reference, announced = {}, 0.0, 0.0, False
+    cached, last_tail = 0, ""
     for i, (label, build) in enumerate(groups):
         start = clock()
         build()
         taken[label] = clock() - start
         if taken[label] <= quiet_below or stream is None:
+            cached += 1
             continue
         if not announced:
             print(f"compiling the simulation kernels ({COMPILE_NOTE}): {len(groups)} groups, "
@@ -71,10 +75,14 @@ def compile_groups(groups: list[tuple[str, Callable[[], object]]], *,
             announced = True
         spent += taken[label]
         spent_reference += expected[i]
-        left = sum(expected[i + 1:]) * spent / spent_reference
-        tail = f"; at most about {_duration(left)} left" if i + 1 < len(groups) else ""
-        print(f"  [{i + 1}/{len(groups)}] {label}: {_duration(taken[label])}{tail}",
-              file=stream, flush=True)
+        ready = f"{i + 1} of {len(groups)} groups ready" + (
+            f" ({cached} loaded from the cache)" if cached else "")
+        cached = 0
+        tail = ""
+        if i + 1 < len(groups):
+            tail = f", about {_duration(sum(expected[i + 1:]) * spent / spent_reference)} left"
+            tail, last_tail = ("" if tail == last_tail else tail), tail
+        print(f"  {label}: {_duration(taken[label])} — {ready}{tail}", file=stream, flush=True)
     return taken
 
 

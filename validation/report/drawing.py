@@ -25,19 +25,37 @@ def _draw(index: int):
 
 def draw_all(tasks: list, *, stores=(), progress: bool = True,
              label: str = "report figures") -> list:
-    """The result of every task, in order.  ``stores``: results folders whose
-    connections to close before forking (they reopen on their next use)."""
-    global _TASKS
-    from tqdm import tqdm
-
+    """The result of every task, in order, with progress on stderr
+    (`validation.batch.progress`).  ``stores``: results folders whose connections to close
+    before forking (they reopen on their next use)."""
     from ..batch.executor import available_cores
-    from ..batch.limits import die_with_parent
     workers = min(available_cores(), len(tasks))
     if workers < 2 or "fork" not in multiprocessing.get_all_start_methods():
-        return [make() for make in tqdm(tasks, desc=label, unit="fig", disable=not progress)]
+        return _collect(((i, make()) for i, make in enumerate(tasks)), len(tasks), label,
+                        progress)
     for store in stores:
         store.close()
-    tqdm.monitor_interval = 0  # no monitor thread across the fork
+    return _in_workers(tasks, workers, label, progress)
+
+
+def _collect(done, n: int, label: str, progress: bool) -> list:
+    """The results of ``done`` ((index, result) pairs, in any order) as a list, counted
+    on a progress bar."""
+    from ..batch.progress import progress as progress_bar
+    bar = progress_bar(n, label, unit="figure", enabled=progress)
+    results = [None] * n
+    try:
+        for i, result in done:
+            results[i] = result
+            bar.update(1)
+    finally:
+        bar.close()
+    return results
+
+
+def _in_workers(tasks: list, workers: int, label: str, progress: bool) -> list:
+    global _TASKS
+    from ..batch.limits import die_with_parent
     _TASKS = tasks
     try:
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
@@ -45,10 +63,7 @@ def draw_all(tasks: list, *, stores=(), progress: bool = True,
                                  initargs=(os.getpid(),)) as pool:  # a killed report ends them
             pool.submit(int).result()  # every worker forked now, before any thread starts
             futures = {pool.submit(_draw, i): i for i in range(len(tasks))}
-            results = [None] * len(tasks)
-            for future in tqdm(as_completed(futures), total=len(futures), desc=label,
-                               unit="fig", disable=not progress):
-                results[futures[future]] = future.result()
-        return results
+            return _collect(((futures[f], f.result()) for f in as_completed(futures)),
+                            len(tasks), label, progress)
     finally:
         _TASKS = []
