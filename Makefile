@@ -25,12 +25,12 @@ $(STAMP): pyproject.toml $(PINS)
 	$(BIN)/python -m pip install --quiet -c $(PINS) --no-build-isolation -e '.[$(EXTRAS)]'
 	touch $(STAMP)
 
-# The main job: the paper's scenario on both plants, its claims table and the report.
-# Exit status 1 means some runs failed (e.g. Exudyn's solver on an arm already diverging):
-# they are named in the output and the report, and the demo has done its job.
+# The main job: the paper's scenario on both plants, its claims table and the report.  It
+# prints a short summary (the verdicts, where the files are) and fails only when a verdict
+# is missing: runs that fail but decide nothing (Exudyn's solver on an arm far beyond its
+# stability limit) are counted in the summary and named in the report.
 demo: $(STAMP)
-	$(BIN)/flexarm reproduce-paper --out results/paper || { rc=$$?; [ $$rc -eq 1 ] || exit $$rc; \
-	  echo "make demo: done; the failed runs named above are results too (see results/paper/report)"; }
+	$(BIN)/flexarm reproduce-paper --out results/paper
 
 # pytest exits 5 when it collects nothing: say so and fail rather than pass silently.
 test: $(STAMP)

@@ -142,6 +142,45 @@ def test_rerun_like_an_ambiguous_name_lists_the_ids(stored, capsys):
     assert err.count("\n") == 1 and "2 runs of" in err and "give one's id" in err
 
 
+def test_a_truth_plant_run_says_whether_it_converged(tmp_path, capsys):
+    """A plain truth-plant run says that its convergence was not checked; --mesh-check
+    runs its 3 checks and says whether its judged values agree; --like by its name then
+    means the nominal run, not one of the checks that share the name."""
+    from validation.batch.store import ResultStore
+    short = ["--plant", "exudyn", "--duration", "0.05", "--observer", "none"]
+    assert main(["run", *short, "--out", str(tmp_path / "plain")]) == 0
+    assert "convergence not checked: these are the FE model's numbers on ANCF 4 el/link" \
+        in capsys.readouterr().out
+    out = tmp_path / "checked"
+    assert main(["run", *short, "--mesh-check", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "converged against ANCF 8 el/link, step/2; ANCF 16 el/link, step/4; GE 32 " \
+           "el/link, step/2" in printed
+    rows = ResultStore(out).rows()
+    (nominal,) = [r for r in rows if r.sweep != "mesh-check"]
+    assert len(rows) == 4 and {r.name for r in rows} == {"pbc@exudyn"}
+    assert main(["run", "--like", f"{out}/pbc@exudyn", "--out", str(tmp_path / "again")]) == 0
+    printed = capsys.readouterr().out
+    assert f"rerunning {nominal.run_id} (pbc@exudyn, stored in {out}; the nominal run: its 3 " \
+           "mesh/step check(s) share its name" in printed
+    assert main(["run", *short[2:], "--mesh-check"]) == 2  # the reduced plant has no mesh
+    assert "--mesh-check: the reduced plant is not a discretisation" in capsys.readouterr().err
+
+
+def test_a_failed_run_names_no_window_and_no_figures(tmp_path, capsys, plugin_lab):
+    """A plug-in returning torques of the wrong shape fails at t = 0: no "window over
+    0.5–0 s", no negative real-time factor, no `flexarm show` hint (it draws ok runs)."""
+    plugin_lab({"wronglab.py": "import numpy as np\n\nclass Wrong:\n    def __init__(self, m):"
+                               "\n        pass\n\n    def __call__(self, t, x, ref):\n"
+                               "        return np.zeros(3)\n"})
+    assert main(["run", "--controller", "wronglab:Wrong", "--duration", "1",
+                 "--out", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "no metrics after the transient: the run ended at 0 s, before its 0.5 s " \
+           "transient did" in out
+    assert "0.5–0 s" not in out and "real-time factor" not in out and "flexarm show" not in out
+
+
 def test_run_config_takes_a_campaigns_scenario_base(tmp_path, capsys):
     from validation.batch.store import ResultStore
     camp = tmp_path / "camp.toml"

@@ -1,5 +1,6 @@
 """Progress that tells the truth: the kernel compile reports each group with an estimate
-of the rest, the stability map names its round, and failed runs make the command exit 1;
+of the rest, the stability map names its round, and a limit a failed run leaves missing
+makes the command exit 1;
 a bar on a terminal, a few plain lines in a log."""
 import io
 
@@ -63,7 +64,7 @@ def test_a_stability_map_with_failed_runs_exits_1(tmp_path, monkeypatch, capsys)
     status = main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
                    "--workers", "1", "--no-progress", "--out", str(tmp_path / "o")])
     assert status == 1
-    assert "run(s) failed" in capsys.readouterr().err
+    assert "limit(s) missing: a run failed where the limit is" in capsys.readouterr().out
 
 
 def test_the_stability_map_names_its_round(tmp_path, capsys):

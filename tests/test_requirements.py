@@ -195,7 +195,8 @@ def test_requirements_enter_the_claims_table():
     rows = {row["key"]: row for row in table["rows"]}
     assert rows["rho_loose"]["verdicts"] == ["holds"]
     assert rows["rho_tight"]["verdicts"] == ["fails"]
-    assert rows["rho_loose"]["cells"][0] == f"ρ = {metrics['rho_loose']:.3g} — holds"
+    assert rows["rho_loose"]["cells"][0] == \
+        f"ρ = {metrics['rho_loose']:.4g} (in the signals' units) — holds"
     assert rows["rho_loose"]["claim"] == \
         "requirement loose: always[1,3](abs(theta1 - theta1_ref) <= 0.5)"
 
@@ -218,3 +219,14 @@ def test_a_campaign_files_requirements_apply_to_every_run(tmp_path):
     assert study.uncertainty and study.verify == {"level": 0.9}
     (run,) = expand(study)
     assert [r.name for r in run.scenario.requirement] == ["a"]
+
+
+def test_rho_is_said_with_its_unit():
+    """ρ = bound − value is in the claim's unit (a formula's: its signals'); never a bare
+    17-digit number."""
+    claim = Requirement(name="track", claim="tracking")
+    assert claim.rho_text(0.006922997845848383) == "0.006923 rad"
+    assert claim.rho_text(-math.inf) == "−inf (diverged)"
+    assert claim.rho_text(None) == "— (no run)"
+    stl = Requirement(name="f", formula="always(abs(theta1) <= 3)")
+    assert stl.rho_text(1.5) == "1.5 (in the signals' units)"

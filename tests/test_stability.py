@@ -76,7 +76,8 @@ def test_a_failed_run_is_failed_not_unstable():
 
 def test_a_stability_campaign_with_a_solver_failure_exits_1(tmp_path, monkeypatch, capsys):
     """A Newton tolerance below ANCF's round-off makes Exudyn give up (as in the
-    reliability suite): the command says which run failed and exits 1."""
+    reliability suite) where the limit lies: the command says which run failed, that the
+    limit is missing, and exits 1."""
     from validation.cli import main
     monkeypatch.setattr(stability, "GRID", (1e-3,))
     monkeypatch.setattr(stability, "BISECTIONS", 0)
@@ -86,8 +87,8 @@ def test_a_stability_campaign_with_a_solver_failure_exits_1(tmp_path, monkeypatc
     status = main(["stability", str(cfg), "--plant", "exudyn", "--arm", "default",
                    "--out", str(tmp_path / "out"), "--workers", "1", "--no-progress"])
     assert status == 1
-    err = capsys.readouterr().err
-    assert "1 stability run(s) failed" in err and "1 ms" in err
+    out = capsys.readouterr().out
+    assert "1 limit(s) missing: a run failed where the limit is" in out and "at 1 ms" in out
     text = (tmp_path / "out" / "stability.md").read_text()
     assert "FAILED at 1 ms" in text
 

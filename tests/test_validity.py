@@ -37,12 +37,12 @@ def synthetic_analysis() -> dict:
     """A validity analysis as `validity_analysis` returns it, with made-up numbers."""
     f = [0.1, 1.0, 10.0, 100.0]
     curve = {f"{i}->{o}": [1.0, 0.1, 0.01, 0.001] for i, o in CHANNELS}
-    arm = {"arm": "default", "Ts": 1e-3, "modes": [2, 2],
+    arm = {"arm": "default", "Ts": 1e-3, "modes": [2, 2], "law": "mylab:MyPD",
            "truth": "truth plant (Exudyn), ANCF 4 el/link",
            "frequencies_hz": f,
            "responses": [{"theta2": t, "reduced": curve, "fe": curve} for t in (0.0, 1.0, 2.0, 3.0)],
            "gaps": [{"theta2": t, "theta": 0.1, "theta_peak_hz": 3.0, "tip": 0.2,
-                     "tip_peak_hz": 30.0, "pbc_loop": math.nan, "pbc_loop_peak_hz": math.nan}
+                     "tip_peak_hz": 30.0, "loop": math.nan, "loop_peak_hz": math.nan}
                     for t in (0.0, 1.0)]}
     case = {"case": "pbc", "plant": "exudyn", "arm": "default", "predicted_s": 2.7e-3,
             "predicted_theta2": 0.0, "note": "FE linearisation, ancf 4+4 elements",
@@ -63,12 +63,14 @@ def test_written_analysis_reads_back_and_is_reported(tmp_path):
     spec = {"name": "v", "scenario": {"duration": 0.2, "transient": 0.1}}
     run_campaign(campaign_from_mapping(spec), out, progress=False)
     data = synthetic_analysis()
+    (out / "validity").mkdir()  # as `flexarm validity` makes it (own_folder)
     text = write_validity(data, out / "validity")
     assert "| pbc | exudyn | default | 2.7 | truth plant (Exudyn), ANCF 4 el/link | 2.71 | 0.7 | 3.5 | 4 | no | yes | 0.2 |" \
         in text
+    assert "δν mylab:MyPD loop at Ts" in text  # the scenario's own controller, named
     back = load_validity(out / "validity")
     assert back["cases"][0]["certified_s"] == 7e-4
-    assert math.isnan(back["arms"][0]["gaps"][0]["pbc_loop"])  # not computed stays empty
+    assert math.isnan(back["arms"][0]["gaps"][0]["loop"])  # not computed stays empty
     assert sorted(p.name for p in (out / "validity" / "figures").iterdir()) == \
         ["validity00.png", "validity01.png", "validity02.png"]
     html_path, md_path = write_report(out, animate=False, progress=False)
@@ -92,3 +94,9 @@ def test_validity_of_a_scenario_end_to_end(tmp_path, capsys):
     assert 0 < row["certified_s"] < row["predicted_s"]
     gaps = data["arms"][0]["gaps"]
     assert len(gaps) == 7 and all(0 < g["theta"] < 1 for g in gaps)
+    assert data["arms"][0]["law"] == "pbc"
+    # The terminal gets a summary: no markdown table, no image link (they are in the files).
+    printed = capsys.readouterr().out
+    assert "|" not in printed and "![" not in printed
+    assert "pbc · reduced · default: predicted 3.05 ms" in printed
+    assert len(printed.splitlines()) == 4

@@ -1,7 +1,8 @@
 """The ``flexarm`` command line: a thin layer over the library.
 
 Bad input ends with one line on stderr and exit status 2, before anything is written;
-a run or campaign with failed runs exits 1; SIGINT/SIGTERM exit 130/143 after keeping
+a run or campaign with failed runs exits 1, a verdict command one whose verdict a failed
+run left missing; SIGINT/SIGTERM exit 130/143 after keeping
 what finished (at once, while the program is still starting); a full disk is one line
 naming the folder, exit 1.  Never a traceback, and never status 0 because code a
 command ran (a plug-in) called ``sys.exit``.

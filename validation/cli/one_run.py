@@ -9,13 +9,15 @@ import math
 import sys
 from pathlib import Path
 
-from ..batch.executor import check_runner, make_runner
+from ..batch.executor import available_cores, check_runner, make_runner
 from ..batch.store import ResultStore, run_id
 from ..run._config import ConfigError
+from ..run.plants import is_truth, plant_spec
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
+from ..verdicts.mesh import is_check
 
-from .common import EXIT_FAILED, open_output
+from .common import EXIT_FAILED, mesh_checks, open_output
 
 
 _RUN_FLAGS = {"plant": "plant.kind", "controller": "controller.kind", "arm": "arm",
@@ -26,7 +28,8 @@ _RUN_FLAGS = {"plant": "plant.kind", "controller": "controller.kind", "arm": "ar
 def stored_run(spec: str, flag: str):
     """The stored run ``RESULTS/RUN``: RESULTS is the leading part of the path that holds
     a results index; RUN is a run id (or a unique prefix of one, at least 4 characters)
-    or a run name (in full, or its part after the campaign's "/")."""
+    or a run name (in full, or its part after the campaign's "/").  A name shared by a
+    run and its mesh/step checks (which keep its name) means the run itself."""
     from ..batch.store import INDEX_NAME
     parts = Path(spec).parts
     for k in range(len(parts) - 1, 0, -1):
@@ -45,13 +48,32 @@ def stored_run(spec: str, flag: str):
         names = sorted({r.name for r in rows})
         raise ConfigError(flag, f"{folder} has no run {selector!r} (names: "
                                 f"{', '.join(names[:12])}{', ...' if len(names) > 12 else ''})")
+    nominal = [r for r in found if not is_check(r)]
+    if len(found) > 1 and len(nominal) == 1:
+        return nominal[0]
     if len(found) > 1:
-        from ..report.figures import describe_run
-        choices = "; ".join(f"{r.run_id} ({r.plant} plant, {describe_run(r.config)})"
-                            for r in found[:12])
+        choices = "; ".join(f"{r.run_id} ({_kind_of_run(r)})" for r in found[:12])
         raise ConfigError(flag, f"{len(found)} runs of {folder} are named {selector!r}; give "
                                 f"one's id: {choices}{'; ...' if len(found) > 12 else ''}")
     return found[0]
+
+
+def _kind_of_run(row) -> str:
+    """"nominal run, exudyn plant, default arm, Ts = 1 ms, from rest" or "mesh/step check
+    ANCF 8 el/link, step/2 of <id>": what tells runs of one name apart."""
+    from ..report.figures import describe_run
+    if is_check(row):
+        return f"mesh/step check {row.axes.get('mesh', '')} of {row.axes.get('of', '?')}"
+    return f"nominal run, {row.plant} plant, {describe_run(row.config)}"
+
+
+def _checks_note(row) -> str:
+    """What --like says about the mesh/step checks stored under the same name."""
+    checks = [r.run_id for r in row.store.rows() if is_check(r) and r.axes.get("of") == row.run_id]
+    if not checks:
+        return ""
+    return (f"; the nominal run: its {len(checks)} mesh/step check(s) share its name "
+            f"({', '.join(checks)}: give one's id to rerun it)")
 
 
 def auto_name(s: Scenario) -> str:
@@ -106,7 +128,8 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
         old, new = flatten(row.config), flatten(scenario_to_mapping(scenario))
         changed = [f"{k} = {new.get(k)!r} (was {old.get(k)!r})" for k in sorted(old | new)
                    if old.get(k) != new.get(k)]
-        head = f"rerunning {row.run_id} ({row.name}, stored in {row.store.out})"
+        head = f"rerunning {row.run_id} ({row.name}, stored in {row.store.out}" \
+               f"{_checks_note(row) if not is_check(row) else ''})"
         notes.append(head + (" exactly" if not changed else
                              f" with {len(changed)} change(s): " + "; ".join(changed)))
         if row.fingerprint != run_fingerprint(row.config):
@@ -134,15 +157,21 @@ _TABLE = [("status", "status", "{}"),
 _TIMINGS = ("wall_s", "realtime_factor")
 
 
-def format_metrics(metrics: dict) -> str:
+def format_metrics(metrics: dict, units: dict | None = None) -> str:
+    """The metrics of a run as lines to print; ``units``: the requirements (their ρ's
+    unit), by metric key."""
     lines = []
-    if "transient_s" in metrics and "end_time" in metrics:
-        lines.append(f"  metrics after the {metrics['transient_s']:g} s transient, over "
-                     f"{metrics['transient_s']:g}–{metrics['end_time']:g} s (maxima of "
-                     "deflection and torque, torque variation: the whole run)")
+    transient, end = metrics.get("transient_s"), metrics.get("end_time")
+    if transient is not None and end is not None:
+        lines.append(f"  metrics after the {transient:g} s transient, over {transient:g}–"
+                     f"{end:g} s (maxima of deflection and torque, torque variation: the "
+                     "whole run)" if end > transient else
+                     f"  no metrics after the transient: the run ended at {end:g} s, before "
+                     f"its {transient:g} s transient did")
     for key, label, fmt, *scale in _TABLE:
         value = metrics.get(key)
-        if value is None or (isinstance(value, float) and math.isnan(value)):
+        if value is None or (isinstance(value, float) and not value >= 0 and key in _TIMINGS) \
+                or (isinstance(value, float) and math.isnan(value)):
             continue
         lines.append(f"  {label:<44} {fmt.format(value * scale[0] if scale else value)}")
     ratios = {k.removeprefix("est_to_noise_"): v for k, v in metrics.items()
@@ -157,8 +186,10 @@ def format_metrics(metrics: dict) -> str:
     for key, value in metrics.items():  # the requirements' robustness (rho >= 0 holds)
         if key.startswith("rho_") and isinstance(value, float) and not math.isnan(value):
             verdict = "holds" if value >= 0 else "fails"
-            lines.append(f"  {'requirement ' + key.removeprefix('rho_') + ': rho':<44} "
-                         f"{value:.6g} ({verdict})")
+            requirement = (units or {}).get(key)
+            text = requirement.rho_text(value) if requirement else f"{value:.4g}"
+            lines.append(f"  {'requirement ' + key.removeprefix('rho_') + ': ρ':<44} "
+                         f"{text} ({verdict})")
     return "\n".join(lines)
 
 
@@ -189,11 +220,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     data = scenario_to_mapping(scenario)
     rid = run_id(data)
     check_runner(run_timeout=args.run_timeout, memory_limit=args.memory_limit)
+    truth = is_truth(data)
+    if args.mesh_check and not truth:
+        raise ConfigError("--mesh-check", f"the {scenario.plant.kind} plant is not a "
+                                          "discretisation: only a truth plant has mesh checks")
     store = open_output(args.out or Path("results") / f"run-{rid}")  # bad --out: nothing ran
-    with make_runner("local", 1, run_timeout=args.run_timeout, memory_limit=args.memory_limit,
-                     scenarios=[scenario], progress=sys.stderr) as runner:  # a worker process
+    workers = min(available_cores(), 3) if args.mesh_check else 1  # the 3 checks side by side
+    with make_runner("local", workers, run_timeout=args.run_timeout,
+                     memory_limit=args.memory_limit, scenarios=[scenario],
+                     progress=sys.stderr) as runner:  # worker processes
         (_, result, metrics), = runner.results([(rid, scenario)])
-    path = store.add(rid, result, metrics)
+        path = store.add(rid, result, metrics)
+        if args.mesh_check:
+            checked = mesh_checks(runner, store.out, {rid}, progress=True)
     store.export()
     s = scenario
     obs = "" if s.observer.kind == "none" else f" + {s.observer.kind}"
@@ -201,12 +240,42 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"{s.duration:g} s at Ts = {s.Ts:g} s, from {s.initial_state}")
     if result.message:
         print(f"  {result.status}: {result.message}")
-    print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS}))
+    units = {r.metric: r for r in s.requirement}
+    print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS},
+                         units))
     if getattr(args, "like_row", None) is not None and result.status == "ok":
         print(_compare_with_stored(args.like_row, metrics))
-    print(f"results: {path} (index and metrics.csv in {store.out}); figures: "
-          f"flexarm show {store.out}/{rid}")
+    if truth:
+        print("  " + (convergence_line(store, rid) if args.mesh_check else
+                      f"convergence not checked: these are the FE model's numbers on "
+                      f"{plant_spec(data['plant']).discretisation()}; --mesh-check runs the "
+                      "same loop on refined meshes and steps"))
+    print(f"results: {path} (index and metrics.csv in {store.out})" + (
+        f"; figures: flexarm show {store.out}/{rid}" if result.status == "ok" else ""))
+    if args.mesh_check and checked:
+        return checked
     return 0 if result.status != "failed" else EXIT_FAILED
+
+
+def convergence_line(store, rid: str) -> str:
+    """Whether the stored truth-plant run ``rid`` survived its mesh/step checks: every
+    judged value (a claim's measure) within the tolerance on every check, or which moved."""
+    from ..verdicts.claims import mesh_rows
+    from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
+    rows = mesh_rows(store.rows())
+    mine = [r for r in rows if r.run.run_id == rid]
+    labels = [label for label, _ in mine[0].values[1:]] if mine else []
+    against = f"against {'; '.join(labels)}"
+    moved = [r for r in mine if r.converged is False]
+    if any(r.converged is None for r in mine) or not mine:
+        return f"convergence: checks incomplete ({against})"
+    if moved:
+        return f"NOT CONVERGED {against}: " + "; ".join(
+            (r.claim.key if r.claim else "status") + " (" + ", ".join(
+                f"{label}: {v if isinstance(v, str) else f'{v:.3g}'}" for label, v in r.values)
+            + ")" for r in moved)
+    return (f"converged {against}: {len(mine)} judged value(s), each within {MESH_RTOL:.0%} "
+            f"+ {MESH_ATOL:.0%} of its bound")
 
 
 def cmd_show(args: argparse.Namespace) -> int:

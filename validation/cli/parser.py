@@ -146,8 +146,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="scenario file, or a campaign file (its [scenario] base); flags "
                           "override it")
     run.add_argument("--like", metavar="RESULTS/RUN",
-                     help="rerun a stored run exactly (RUN: its id or name), with the flags "
-                          "and --set as changes")
+                     help="rerun a stored run exactly (RUN: its id or name; a name shared "
+                          "with mesh/step checks means the nominal run), with the flags and "
+                          "--set as changes")
     run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm or the paper's table1 "
                                                         f"(default: {d.arm})")
     run.add_argument("--plant", choices=PLANTS, help=f"reduced model or Exudyn truth plant "
@@ -176,6 +177,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="any scenario field by dotted key, value in TOML syntax, e.g. "
                           "--set true_params.Mp=0.5 --set sensors.encoder_noise=1e-4")
     run.add_argument("--out", metavar="DIR", help="results folder (default: results/run-<id>)")
+    run.add_argument("--mesh-check", action="store_true",
+                     help="truth plant: also run the same loop on refined meshes and steps "
+                          "and say whether its numbers converged")
     _add_limits(run)
     run.set_defaults(func=cmd_run)
 
@@ -239,7 +243,7 @@ def build_parser() -> argparse.ArgumentParser:
     val.add_argument("--stability", metavar="DIR",
                      help="stability map to compare with (default: DIR/stability or DIR)")
     _add_cases(val)
-    val.add_argument("--no-progress", action="store_true", help="no line per case")
+    val.add_argument("--no-progress", action="store_true", help="no progress bar")
     val.set_defaults(func=cmd_validity)
 
     exp = sub.add_parser("export", help="write metrics.csv and manifest.json from the index "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from pathlib import Path
 
@@ -19,24 +20,20 @@ from .common import EXIT_FAILED, finish, mesh_checks, runner_for
 
 def stability_map_into(runner, scenarios, out: Path, *, progress: bool, plants=None,
                        arms=None) -> int:
-    """Run the stability map into ``out`` (opened by the caller) and print it; the exit
-    status: 130/143 if it was interrupted, 1 if some of its runs failed (a failure is no
-    verdict on stability: the map is incomplete there)."""
+    """Run the stability map into ``out`` (opened by the caller) and print its summary;
+    the exit status: 130/143 if it was interrupted, 1 if a limit is missing because a run
+    failed where it lies (a failure above a limit found decides nothing: counted only)."""
     from ..report.verdict_tables import write_stability
     from ..verdicts.stability import cases_from_scenarios, stability_map
+    from .summaries import stability_summary
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     results, summary = stability_map(cases, out, runner=runner, progress=progress)
     if summary.interrupted:
         return finish(summary, "stability", out)
-    print(write_stability(results, out))
-    print(f"stability map: {out / 'stability.md'} and stability.csv")
-    failed = [f"{r.case.label} ({r.case.plant}, {r.case.arm}) at {1e3 * Ts:.3g} ms"
-              for r in results for Ts in r.failed]
-    if failed or summary.any_failed:
-        print(f"flexarm: {len(failed)} stability run(s) failed — no verdict on stability "
-              f"there: {'; '.join(failed) or 'mesh-check runs'}", file=sys.stderr)
-        return EXIT_FAILED
-    return 0
+    write_stability(results, out)
+    lines, missing = stability_summary(results, out / "stability.md")
+    print("\n".join(lines))
+    return EXIT_FAILED if missing else 0
 
 
 def _stability_scenarios(args: argparse.Namespace) -> tuple[list, list | None, list | None]:
@@ -78,7 +75,9 @@ def _stability_folder(args, out: Path) -> Path | None:
 def cmd_validity(args: argparse.Namespace) -> int:
     from ..verdicts.stability import cases_from_scenarios
     from ..report.verdict_tables import write_validity
+    from ..batch.progress import progress as progress_bar
     from ..verdicts.validity import validity_analysis
+    from .summaries import validity_summary
     scenarios, plants, arms = _stability_scenarios(args)
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     out = Path(args.out or Path("results") / f"validity-{Path(args.file).stem}")
@@ -89,22 +88,23 @@ def cmd_validity(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise StoreError(f"--out {out}: cannot write ({exc.strerror or exc})") from None
 
-    def progress(row):
-        if not args.no_progress:
-            print(f"  {row['case']} · {row['plant']} · {row['arm']}: predicted "
-                  f"{1e3 * row['predicted_s']:.4g} ms, certified {1e3 * row['certified_s']:.3g} ms "
-                  f"({row['seconds']:.1f} s)", flush=True)
     print(f"linear validity of {len(cases)} cases"
           + (f", measured map: {stability}" if stability else ", no measured stability map"))
-    data = validity_analysis(cases, stability_dir=stability, progress=progress)
-    print(write_validity(data, folder))
-    print(f"validity: {folder / 'validity.md'}, validity.csv, nugap.csv, validity.json, figures/")
+    bar = progress_bar(len(cases), "validity", unit="case", enabled=not args.no_progress)
+    try:
+        data = validity_analysis(cases, stability_dir=stability,
+                                 progress=lambda row: bar.update(1))
+    finally:
+        bar.close()
+    write_validity(data, folder)
+    print("\n".join(validity_summary(data, folder)))
     return 0
 
 
 def cmd_attribute(args: argparse.Namespace) -> int:
     from ..batch.campaign import expand, load_study
-    from ..report.verdict_tables import write_attribution
+    from ..report.verdict_tables import study_view, write_attribution
+    from .summaries import attribution_summary
     from ..verdicts.attribution import attribute, default_factors, parse_factors
     study = load_study(args.file)
     systems = [(r.scenario.name.split("/")[-1], r.scenario) for r in expand(study)]
@@ -135,9 +135,10 @@ def cmd_attribute(args: argparse.Namespace) -> int:
                                   progress=not args.no_progress)
             if status:
                 return status
-    print(write_attribution(results, out))
-    print(f"attribution: {out / 'attribution.csv'} and attribution.md; "
-          f"'flexarm report {out}' draws the waterfalls")
+    write_attribution(results, out)
+    print("\n".join(attribution_summary([study_view(a) for a in results],
+                                         out / "attribution.md")))
+    print(f"  attribution.csv beside it; 'flexarm report {out}' draws the waterfalls")
     return 0
 
 
@@ -180,15 +181,16 @@ def cmd_verify(args: argparse.Namespace) -> int:
                 v = falsify(system, requirement, where, runner=runner, budget=args.budget,
                             seed=args.seed)
                 what = "counterexample" if v["found"] else "no counterexample; worst case"
-                truth = (f"{v['rho_truth']:.6g}" if v["rho_truth"] is not None else
-                         f"-inf ({v.get('truth_status', 'no run')})")
-                reduced = (f"{v['rho_reduced']:.6g}" if v["rho_reduced"] is not None
-                           else "-inf (diverged)")
-                print(f"  {requirement.name}: {what}: rho truth {truth}, reduced {reduced} "
+                truth = (requirement.rho_text(v["rho_truth"]) if v["rho_truth"] is not None
+                         else f"−inf ({v.get('truth_status', 'no run')})")
+                reduced = requirement.rho_text(v["rho_reduced"] if v["rho_reduced"] is not None
+                                               else -math.inf)
+                print(f"  {requirement.name}: {what}: ρ truth {truth}, reduced {reduced} "
                       f"({v['counterexample'] or v['worst_case']}); simulations "
                       f"{v['simulations']}")
                 if "convergence" in v:
-                    print(f"  truth plant under refinement: {_checks_line(v['convergence'])}")
+                    print(f"  truth plant under refinement: "
+                          f"{_checks_line(v['convergence'], requirement)}")
             else:
                 v = conform(system, where, runner=runner, budget=args.budget, seed=args.seed)
                 print(f"  largest |theta_truth - theta_reduced| = {v['distance']} rad "
@@ -198,10 +200,11 @@ def cmd_verify(args: argparse.Namespace) -> int:
     return EXIT_FAILED if failed else 0
 
 
-def _checks_line(convergence: dict) -> str:
-    """"converged (ANCF 8 el/link: -0.0123; ...)": a verdict's checks and their ρ (or the
-    status of a check whose run did not complete)."""
-    checks = "; ".join(f"{label}: " + (c["status"] if c["rho"] is None else f"{c['rho']:.6g}")
+def _checks_line(convergence: dict, requirement) -> str:
+    """"converged (ANCF 8 el/link: -0.0123 rad; ...)": a verdict's checks and their ρ (or
+    the status of a check whose run did not complete)."""
+    checks = "; ".join(f"{label}: " + (c["status"] if c["rho"] is None
+                                       else requirement.rho_text(c["rho"]))
                        for label, c in convergence["checks"].items())
     return f"{convergence['verdict']} ({checks})"
 

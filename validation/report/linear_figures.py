@@ -44,7 +44,7 @@ def gap_map(arm: dict) -> bytes:
     th = [g["theta2"] for g in arm["gaps"]]
     fig, ax = plt.subplots(figsize=(8, 3.6), constrained_layout=True)
     labels = {"theta": "τ → θ (continuous)", "tip": "τ → tip deflections (continuous)",
-              "pbc_loop": f"PBC loop at the plant input (ZOH, Ts = {1e3 * arm['Ts']:g} ms)"}
+              "loop": f"{arm['law']} loop at the plant input (ZOH, Ts = {1e3 * arm['Ts']:g} ms)"}
     for k, (view, label) in enumerate(labels.items()):
         ax.plot(th, [g[view] for g in arm["gaps"]], marker="o", color=f"C{k}", label=label)
     ax.set_ylim(0, 1.05)

@@ -13,6 +13,7 @@ from pathlib import Path
 from reduced_model import ArmParameters
 
 from ..batch.store import ResultStore
+from ..run.requirements import Requirement
 from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
 from ..verdicts import mesh as mesh_check
@@ -123,9 +124,11 @@ def arm_notes(columns: list[Column]) -> list[str]:
 def _requirement_rows(cols: list[Column]) -> list[dict]:
     """A row per ``[[requirement]]`` of the system's runs: its robustness ρ (≥ 0 holds)."""
     texts: dict[str, str] = {}
+    requirements: dict[str, Requirement] = {}
     for c in cols:
         for r in (c.runs[SYSTEM].config.get("requirement", []) if SYSTEM in c.runs else []):
             texts.setdefault(r["name"], r["formula"] or f"claim {r['claim']}")
+            requirements.setdefault(r["name"], Requirement(**r))
     rows = []
     for name, text in texts.items():
         cells, verdicts = [], []
@@ -138,7 +141,7 @@ def _requirement_rows(cols: list[Column]) -> list[dict]:
                 verdict = cell = "not run" if rho is None else "n/a"
             else:
                 verdict = "holds" if rho >= 0 else "fails"
-                cell = f"ρ = {fmt_number(rho)} — {verdict}"
+                cell = f"ρ = {requirements[name].rho_text(rho)} — {verdict}"
             cells.append(cell)
             verdicts.append(verdict)
         rows.append({"claim": f"requirement {name}: {text}", "key": f"rho_{name}",
@@ -154,12 +157,11 @@ def run_text(run) -> str:
     return f"{run.status.upper()}: {run.message}"
 
 
-def write_claims(results_dir) -> str:
-    """Write claims.md and claims.csv in ``results_dir`` from its stored runs; return the
-    markdown."""
-    store = ResultStore(results_dir)
-    rows = store.rows()
-    columns = claim_columns(rows)
+def write_claims(results_dir, columns: list[Column] | None = None) -> str:
+    """Write claims.md and claims.csv in ``results_dir`` from its stored runs (their
+    ``columns``, if the caller has them: `claim_columns`); return the markdown."""
+    if columns is None:
+        columns = claim_columns(ResultStore(results_dir).rows())
     if not columns:
         raise ValueError(f"{results_dir}: no run named {SYSTEM!r}; the claims need the paper "
                          "campaign (flexarm reproduce-paper)")
@@ -305,8 +307,9 @@ def table_rows(data: dict) -> tuple[list[str], list[list[str]]]:
 
 def gap_rows(data: dict) -> tuple[list[str], list[list[str]]]:
     """(header, rows) of the ν-gap over θ2 table."""
+    laws = " / ".join(dict.fromkeys(arm["law"] for arm in data["arms"]))
     head = ["arm", "θ₂ [rad]", "δν τ→θ", "peak [Hz]", "δν τ→tip", "peak [Hz]",
-            "δν PBC loop at Ts", "peak [Hz]"]
+            f"δν {laws} loop at Ts", "peak [Hz]"]
     rows = []
     for arm in data["arms"]:
         for g in arm["gaps"]:

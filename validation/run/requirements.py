@@ -88,6 +88,16 @@ class Requirement:
     def text(self) -> str:
         return f"claim {self.claim}" if self.claim else self.formula
 
+    def rho_text(self, rho: float | None) -> str:
+        """ρ with its unit, 4 significant digits: "0.006923 rad", "−inf (diverged)" for a
+        run that left the bounds, "— (no run)" for None."""
+        if rho is None:
+            return "— (no run)"
+        if math.isinf(rho):
+            return ("inf" if rho > 0 else "−inf (diverged)")
+        unit = "in the signals' units" if self.formula else self.unit
+        return f"{rho:.4g} {unit}" if not self.formula else f"{rho:.4g} ({unit})"
+
 
 # --- STL through RTAMT ------------------------------------------------------------------------
 @functools.cache

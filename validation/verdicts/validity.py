@@ -6,8 +6,8 @@ Per arm (`arm_validity`): on a θ2 grid (θ1 = 0), the reduced model and the FE 
 linearised (`reduced_linear_model`, `plant_exudyn.linear_model`, the FE modes projected
 on the reduced model's mode shapes), their frequency responses τ → θ and τ → tip
 deflection, and δν of three views of the pair: τ → θ (what the encoders see), τ → tip
-deflections, and the PBC's loop broken at the plant input at the scenario's Ts (what
-feedback with the paper's law sees, `sampled`).  A view whose coprime factorisation
+deflections, and the loop of the scenario's controller broken at the plant input at its Ts
+(what feedback with that law sees, `sampled`).  A view whose coprime factorisation
 cannot be computed (`nugap.FactorisationError`: on Table 1's arm, which has no damping at
 all, the undamped FE modes that two outputs barely see) is left empty, not guessed;
 where it is computed there, δν = 1 — two undamped plants whose resonances differ are as
@@ -36,6 +36,7 @@ import numpy as np
 
 from reduced_model import ArmModel
 
+from ..run.laws import build_controller
 from ..run.plants import is_truth, truth_spec
 from ..run.scenario import scenario_from_mapping
 from .linear import law_gain, reduced_linear_model
@@ -57,20 +58,19 @@ STEP_CHECK = ((0.97, 1.05), 200)
 #: (input, output) channels of the frequency responses.
 CHANNELS = (("tau1", "theta1"), ("tau2", "theta2"), ("tau1", "tip_defl1"),
             ("tau2", "tip_defl2"))
-_GAP_VIEWS = ("theta", "tip", "pbc_loop")
+_GAP_VIEWS = ("theta", "tip", "loop")
 
 
 def arm_validity(config: dict) -> dict:
     """The frequency responses and ν-gaps over `THETA2` of the arm of ``config`` (a
     resolved scenario mapping: its true parameters, FE mesh, model order and Ts), as
     JSON-able data (module docstring)."""
-    from controllers import PassivityBasedController
     s = scenario_from_mapping(config)
     model = ArmModel(s.true_params, s.model.modes_per_link)
     truth = truth_spec(config)
     names = list(model.state_names)
     w = 2 * np.pi * np.asarray(FREQUENCIES_HZ)
-    pbc = PassivityBasedController(model)
+    law = build_controller(s, model)
     responses, gaps = [], []
     for theta2 in THETA2:
         red = reduced_linear_model(model, theta=(0.0, theta2))
@@ -84,15 +84,15 @@ def arm_validity(config: dict) -> dict:
                             for i, o in CHANNELS}
         responses.append(entry)
         x = np.zeros(2 * model.n)
-        x[1] = theta2  # the PBC holding the arm at rest at θ2
+        x[1] = theta2  # the law holding the arm at rest at θ2
 
         def hold(t, x=x):
             return x[:2].copy(), np.zeros(2), np.zeros(2)
-        gain = as_statespace(law_gain(pbc, x, 0.0, hold, shared=(model,)))
+        gain = as_statespace(law_gain(law, x, 0.0, hold, shared=(model,)))
         views = {"theta": (red[["theta1", "theta2"], :], fe[["theta1", "theta2"], :]),
                  "tip": (red[["tip_defl1", "tip_defl2"], :],
                          fe[["tip_defl1", "tip_defl2"], :]),
-                 "pbc_loop": (gain * control.sample_system(red[names, :], s.Ts),
+                 "loop": (gain * control.sample_system(red[names, :], s.Ts),
                               gain * control.sample_system(fe[names, :], s.Ts))}
         row = {"theta2": theta2}
         for view, (a, b) in views.items():
@@ -104,6 +104,7 @@ def arm_validity(config: dict) -> dict:
             row[view], row[f"{view}_peak_hz"] = detail.value, detail.frequency / (2 * np.pi)
         gaps.append(row)
     return {"arm": s.arm, "Ts": s.Ts, "modes": list(s.model.modes_per_link),
+            "law": s.controller.kind,
             "truth": _truth_text(config), "frequencies_hz": list(FREQUENCIES_HZ),
             "responses": responses, "gaps": gaps}
 

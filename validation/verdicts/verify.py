@@ -270,7 +270,8 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
         entry = {"u": u, "point": point, "rho_reduced": rho_reduced, "rho_truth": rho_truth,
                  "row": row}
         truth[tuple(u)] = entry
-        log(f"  truth plant at {_label(point)}: ρ = {rho_truth} (reduced {rho_reduced:.4g})")
+        log(f"  truth plant at {_label(point)}: ρ = {requirement.rho_text(rho_truth)} "
+            f"(reduced {requirement.rho_text(rho_reduced)})")
         if rho_truth is None:
             return False  # the run failed: nothing learnt
         correction.add(u, rho_truth - rho_reduced)
