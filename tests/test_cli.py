@@ -203,3 +203,20 @@ def test_show_draws_the_paper_figures_of_one_run(stored, capsys):
                      "fig7_estimation_errors.png", "fig8_phase_portrait.png"]
     assert all((folder / n).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for n in names)
     assert str(folder / "index.html") in capsys.readouterr().out
+
+
+def test_show_overlays_the_same_scenario_on_the_other_plant_whatever_the_names(tmp_path, capsys):
+    """`flexarm run` names runs by their plant ("pd@reduced", "pd@exudyn"): `show` of
+    either draws the other over it, as the same scenario but the plant."""
+    from validation.batch.store import ResultStore
+    out = tmp_path / "o"
+    for plant in ("reduced", "exudyn"):
+        assert main(["run", "--plant", plant, "--controller", "pd", "--observer", "none",
+                     "--duration", "0.1", "--out", str(out)]) == 0
+    rows = {r.plant: r for r in ResultStore(out).rows()}
+    assert {r.name for r in rows.values()} == {"pd@reduced", "pd@exudyn"}
+    capsys.readouterr()
+    assert main(["show", f"{out}/pd@reduced", "--no-open"]) == 0
+    printed = capsys.readouterr().out
+    assert f"with {rows['exudyn'].run_id}, the same scenario on the exudyn plant, overlaid" \
+        in printed

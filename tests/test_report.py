@@ -137,8 +137,10 @@ def test_a_diverged_run_is_never_a_data_point(report, monkeypatch):
     assert 8.0 in [x for _, args in marks for x in args[0]]  # ...it is marked as diverged
     data_axes = {id(ax) for ax, _ in data}
     assert marks and all(id(ax) not in data_axes for ax, _ in marks)
-    for ax, _ in marks:  # the strip has a y-range of its own, shown without a scale
-        assert ax.get_ylim() == (0.0, 1.0) and not ax.get_yticks().size
+    for ax, args in marks:  # the strip has rows of its own, no scale: one per series
+        assert ax.get_ylim() == (0.6, -0.6) and list(args[1]) == [0]
+    named = [t.get_text() for ax, _ in marks for t in ax.get_yticklabels()]
+    assert "truth plant (Exudyn)" in named or "reduced plant" in named  # which plant diverged
 
 
 def test_attribution_rule_is_whole():
@@ -216,3 +218,21 @@ def test_the_printed_report_shows_every_column_of_every_table(report, tmp_path):
         missing = [h for h in table["headers"] if not all(w in block for w in word_pieces(h))]
         assert not missing, f"headers cut from the printed table: {missing}"
         at = found + 1
+
+
+def test_a_sweep_over_the_plant_table_draws_both_plants_titled_in_words(tmp_path):
+    """A campaign sweeping whole plant tables (not plant.kind): each scenario's runs on
+    the two plants are one figure group, its title names no plant table."""
+    from validation.report.report import _figure_groups, _title, plant_groups
+    spec = {"name": "p", "scenario": {"duration": 0.1, "transient": 0.05,
+                                      "observer": {"kind": "none"}},
+            "sweep": [{"name": "plants", "grid": {"plant": [{"kind": "reduced"},
+                                                            {"kind": "exudyn"}],
+                                                  "seed": [1, 2]}}]}
+    run_campaign(campaign_from_mapping(spec), tmp_path, progress=False)
+    runs = ResultStore(tmp_path).rows()
+    groups = plant_groups(runs)
+    assert len(groups) == 2 and all([r.role for r in g] == ["truth", "reduced"] for g in groups)
+    (drawn,), _ = _figure_groups(runs, None)
+    assert len(drawn) == 2
+    assert "plant=" not in _title(drawn) and "{" not in _title(drawn)

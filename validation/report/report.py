@@ -51,9 +51,10 @@ __all__ = ["write_report", "report_data", "content_key", "report_is_current", "f
            "claim_bounds",
            "paper_figure_tasks"]
 
-#: Axes shown in their own columns (not repeated among the swept values).
-_OWN_COLUMNS = {"name", "arm", "plant.kind", "initial_state", "Ts", "controller.kind",
-                "observer.kind"}
+#: Axes shown in their own columns (not repeated among the swept values); a swept plant
+#: table is the plant column and the figures' legend.
+_OWN_COLUMNS = {"name", "arm", "plant", "plant.kind", "initial_state", "Ts",
+                "controller.kind", "observer.kind"}
 _KEY_FILE = ".content-key"
 
 
@@ -242,43 +243,55 @@ def _mesh_table(runs) -> dict | None:
                          "of the claim's bound"}
 
 
-def _group_key(r) -> tuple:
-    """Runs drawn together in the paper's figures: the same name, arm, Ts, initial
-    condition and swept values except the plant (truth and reduced overlaid)."""
-    return (r.name, _key(r.config.get("arm")), r.config["Ts"], r.config.get("initial_state"),
-            _key({k: v for k, v in r.axes.items() if k not in ("plant.kind",)}))
+def _scenario_key(r) -> str:
+    """What a run is, but its plant and its name: runs of one key are the same scenario
+    on different plants (their default names differ: "pbc@reduced", "pbc@exudyn")."""
+    return _key({k: v for k, v in r.config.items() if k not in ("plant", "name")})
 
 
 def _order(rs) -> list:
     return sorted(rs, key=lambda r: r.role != "truth")
 
 
+def plant_groups(runs) -> list[list]:
+    """``runs`` in groups drawn together: the same scenario but the plant, one run per
+    plant role (by name where a role has several), truth plant first."""
+    by_key: dict[str, dict[str, list]] = {}
+    for r in sorted(runs, key=lambda r: (r.name, r.run_id)):
+        by_key.setdefault(_scenario_key(r), {}).setdefault(r.role, []).append(r)
+    groups = []
+    for roles in by_key.values():
+        for i in range(max(len(rs) for rs in roles.values())):
+            groups.append(_order([rs[i] for rs in roles.values() if i < len(rs)]))
+    return groups
+
+
 def figure_group(row, rows) -> list:
-    """The runs among ``rows`` drawn with ``row`` (itself, and the same scenario on the
-    other plant when the folder holds it), truth plant first."""
-    key = _group_key(row)
-    same = [r for r in rows if _group_key(r) == key and r.run_id != row.run_id
-            and {k: v for k, v in r.config.items() if k != "plant"}
-            == {k: v for k, v in row.config.items() if k != "plant"}]
-    return _order([row, *same])
+    """The runs among ``rows`` drawn with ``row``: itself and, for each other plant role,
+    the same scenario on that plant when the folder holds it (the one of the same name if
+    there are several), whatever the names; truth plant first."""
+    key = _scenario_key(row)
+    others: dict[str, object] = {}
+    for r in sorted(rows, key=lambda r: (r.name != row.name, r.name, r.run_id)):
+        if r.role != row.role and _scenario_key(r) == key and not is_check(r):
+            others.setdefault(r.role, r)
+    return _order([row, *others.values()])
 
 
 def _figure_groups(runs, wanted: list[str] | None):
-    groups: dict[tuple, list] = {}
-    for r in runs:
-        if r.status == "failed":
-            continue
-        groups.setdefault(_group_key(r), []).append(r)
+    groups = plant_groups([r for r in runs if r.status != "failed"])
     if wanted:
-        chosen = [k for k in groups if any(k[0] == w or k[0].endswith("/" + w) for w in wanted)]
+        groups = [g for g in groups if any(r.name == w or r.name.endswith("/" + w)
+                                           for r in g for w in wanted)]
     else:
-        both = [k for k, rs in groups.items() if len({r.plant for r in rs}) > 1]
-        chosen = (both or list(groups))[:1]
+        both = [g for g in groups if len({r.plant for r in g}) > 1]
+        groups = (both or groups)[:1]
     order = {"default": 0, "table1": 1, "rest": 0, "reference": 1}
-    chosen.sort(key=lambda k: (k[0], order.get(json.loads(k[1]), 9), -k[2], order.get(k[3], 9), k[4]))
-    drawable = [k for k in chosen if any(r.status == "ok" for r in groups[k])]
-    skipped = [k for k in chosen if k not in drawable]
-    return [_order(groups[k]) for k in drawable], [groups[k][0] for k in skipped]
+    groups.sort(key=lambda g: (g[0].name, order.get(g[0].config.get("arm"), 9),
+                               -g[0].config["Ts"], order.get(g[0].config.get("initial_state"), 9),
+                               _swept(g[0])))
+    drawable = [g for g in groups if any(r.status == "ok" for r in g)]
+    return drawable, [g[0] for g in groups if g not in drawable]
 
 
 def _key(value) -> str:
@@ -452,7 +465,8 @@ def _loaded(group):
 def _title(group) -> str:
     head = next(r for r in group if r.status == "ok")
     swept = _swept(head)
-    return f"{head.name} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})" + "".join(
+    names = " / ".join(dict.fromkeys(r.name for r in group))
+    return f"{names} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})" + "".join(
         f"; {r.plant_label} {r.status.upper()}: {r.message}"
         for r in group if r.status != "ok")
 

@@ -71,9 +71,13 @@ def sweep_figures(sweep: str, runs, bounds: dict | None = None) -> list[tuple[st
     group of three or more values (the other groups become series, one per combination
     and plant); with no such group, the largest group is the x axis.  Constant axes are
     not drawn; list-valued axes are categories labelled by their value; diverged and
-    failed runs are a crimson × in a strip above the panel, never a data point."""
+    failed runs are a crimson × in a strip above the panel, never a data point, on a row
+    naming their series (plant and the other axes).  The plant (``plant.kind``, or whole
+    plant tables, one per plant) is a series, not an axis."""
     axes = sorted({a for r in runs for a in r.axes})
+    plants = len({r.plant_label for r in runs})
     varying = [a for a in axes if a != "plant.kind"
+               and not (a == "plant" and len({_key(r.axes.get(a)) for r in runs}) == plants)
                and len({_key(r.axes.get(a)) for r in runs}) > 1]
     groups = _groups_of_axes(runs, varying)
     values = {tuple(g): sorted({_key([r.axes.get(a) for a in g]) for r in runs},
@@ -100,10 +104,13 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
         series.setdefault((other, r.plant_label, r.role), []).append(r)
     keys = sorted(series)
     others_order = sorted({k[0] for k in keys})
-    any_bad = any(r.status != "ok" for r in runs)
-    fig = plt.figure(figsize=(3.9 * len(metrics) + 2.8, 4.0), layout="constrained")
+    # A row of the strip per series with a run that diverged or failed, named.
+    bad_rows = [k for k in keys if any(r.status != "ok" for r in series[k])]
+    any_bad = bool(bad_rows)
+    fig = plt.figure(figsize=(3.9 * len(metrics) + 2.8, 4.0 + 0.2 * len(bad_rows)),
+                     layout="constrained")
     grid = fig.add_gridspec(2 if any_bad else 1, len(metrics),
-                            height_ratios=[1, 7] if any_bad else [1])
+                            height_ratios=[0.4 + 0.6 * len(bad_rows), 7] if any_bad else [1])
     legend_from = None
     for col, (key, title, names, factor, unit) in enumerate(metrics):
         ax = fig.add_subplot(grid[-1, col])
@@ -125,7 +132,7 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
                 vals = [v for v in vals if isinstance(v, float) and not math.isnan(v)]
                 if vals:
                     pts.append((x, factor * max(vals)))
-            label = plant + (f", {other}" if other else "")
+            label = _series_label((other, plant, role))
             truth = role == "truth"
             style = dict(color=color, marker="o" if truth else "s", ms=5,
                          mfc=color if truth else "white", label=label)
@@ -134,7 +141,8 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
                 ax.plot(*zip(*pts), ls=("--" if truth else "-") if numeric
                         else "none", lw=1, **style)
             if bad:
-                strip.plot(bad, [0.5] * len(bad), "x", color="crimson", ms=7, mew=2)
+                row = bad_rows.index((other, plant, role))
+                strip.plot(bad, [row] * len(bad), "x", color="crimson", ms=7, mew=2)
         bound = bounds.get(key)
         if bound is not None:
             ax.axhline(factor * bound, label="claim bound", **BOUND_STYLE)
@@ -160,17 +168,17 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
                                rotation=30, ha="right", fontsize=7)
         ax.tick_params(labelsize=7)
         if strip is not None:
-            strip.set_ylim(0, 1)
-            strip.set_yticks([])
-            strip.tick_params(labelbottom=False, labelsize=7)
+            strip.set_ylim(len(bad_rows) - 0.4, -0.6)
+            strip.set_yticks(range(len(bad_rows)))
+            strip.set_yticklabels([_series_label(k) for k in bad_rows] if col == 0 else [],
+                                  fontsize=7, color="crimson")
+            strip.tick_params(labelbottom=False, labelsize=7, left=False)
             strip.set_title(f"{title} [{unit}]", fontsize=9)
             ax.set_title("")
-            strip.set_ylabel("diverged,\nfailed", rotation=0, ha="right", va="center",
-                             fontsize=7, color="crimson")
     handles, labels = legend_from.get_legend_handles_labels()
     if any_bad:
         handles.append(plt.Line2D([], [], ls="none", marker="x", color="crimson", mew=2))
-        labels.append("diverged / failed (no value; top strip)")
+        labels.append("diverged / failed (no value; top strip, a row per series)")
     fig.legend(handles, labels, loc="outside right center", fontsize=7,
                title="filled: truth plant; hollow: reduced", title_fontsize=7)
     caption = f"sweep '{sweep}': metrics vs {' / '.join(group)}"
@@ -178,13 +186,24 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
     return caption, png(fig)
 
 
+def _series_label(key: tuple) -> str:
+    """"truth plant (Exudyn), arm=table1": a series of a sweep figure, in words."""
+    other, plant, _ = key
+    return plant + (f", {other}" if other else "")
+
+
 def _sort_key(values):
     return [(0, v) if isinstance(v, (int, float)) else (1, _key(v)) for v in values]
 
 
 def short_value(value) -> str:
+    """A swept value in a few words: numbers as %g, disturbances by kind, a plant table by
+    its kind and what it sets ("exudyn, step=0.00025"), other lists and tables as JSON."""
     if isinstance(value, float):
         return f"{value:g}"
+    if isinstance(value, dict) and isinstance(value.get("kind"), str):
+        return ", ".join([value["kind"], *(f"{k}={short_value(v)}" for k, v in
+                                           sorted(value.items()) if k != "kind")])
     if isinstance(value, list) and value and all(isinstance(v, dict) for v in value):
         return "; ".join(f"{d.get('kind', '?')} {d.get('target', '')} {d.get('amplitude', '')}"
                          .strip() for d in value)
