@@ -123,3 +123,38 @@ def test_a_bound_keeps_the_metric_precision_clear_of_its_value():
     # A run metric far above its precision keeps the relative policy (25 %).
     track = next(c for c in BASELINES.checks if c.name == "pbc-tracking-reduced")
     assert updated_bound(track, 0.01, BASELINES) == 0.0125
+
+
+def test_add_a_check_from_a_measured_run(tmp_path, capsys):
+    """`baseline add RESULTS/RUN --metric KEY --margin 25%`: the run's value times 1.25 is
+    the bound, its scenario (the keys that differ from the defaults) joins [scenarios],
+    and `baseline check` measures the same value again.  Bad input writes nothing."""
+    from validation.batch.store import ResultStore
+    from validation.cli import main
+    file = tmp_path / "b.toml"
+    file.write_text("# mine\n[policy]\nrelative = 0.25\n")
+    out = tmp_path / "r"
+    assert main(["run", "--controller", "pd", "--observer", "none", "--duration", "0.5",
+                 "--out", str(out)]) == 0
+    (row,) = ResultStore(out).rows()
+    measured = row.metrics["track_max_1"]
+    for bad, text in ((["--margin", "lots"], "--margin: expected a share such as 25%"),
+                      (["--metric", "track_max_9"], "has no finite metric 'track_max_9'")):
+        capsys.readouterr()
+        argv = ["baseline", "add", f"{out}/pd@reduced", "--file", str(file), *bad]
+        assert main(argv + (["--metric", "track_max_1"] if "--metric" not in bad else [])) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and text in err[0]
+        assert file.read_text() == "# mine\n[policy]\nrelative = 0.25\n"
+    assert main(["baseline", "add", f"{out}/pd@reduced", "--metric", "track_max_1",
+                 "--margin", "25%", "--file", str(file)]) == 0
+    printed = capsys.readouterr().out
+    assert "added check pd-reduced-track-max-1: track_max_1 <= " in printed
+    (check,) = load_baselines(file).checks
+    assert check.bound == float(f"{measured * 1.25:.4g}") and check.margin == 0.25
+    assert load_baselines(file).scenarios["pd-reduced"] == {
+        "duration": 0.5, "controller": {"kind": "pd"}}
+    assert main(["baseline", "check", "--file", str(file), "--out", str(tmp_path / "m")]) == 0
+    assert f"{measured:.4g}" in capsys.readouterr().out  # measured again, the same value
+    assert main(["baseline", "add", f"{out}/pd@reduced", "--metric", "track_max_1",
+                 "--file", str(file)]) == 2  # a second check of that name: refused

@@ -16,8 +16,8 @@ from .common import EXIT_USAGE
 from .modes import cmd_modes
 from .one_run import cmd_run, cmd_show
 from .results import cmd_export, cmd_repair, cmd_report
-from .verdicts import (cmd_attribute, cmd_baseline_check, cmd_baseline_update,
-                       cmd_stability, cmd_validity, cmd_verify)
+from .verdicts import (cmd_attribute, cmd_baseline_add, cmd_baseline_check,
+                       cmd_baseline_update, cmd_stability, cmd_validity, cmd_verify)
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, status 2 (argparse's own convention)
@@ -343,4 +343,20 @@ def build_parser() -> argparse.ArgumentParser:
             b.add_argument("--allow-loosen", action="store_true",
                            help="accept bounds looser than the stored ones")
             b.set_defaults(func=cmd_baseline_update)
+    add = bsub.add_parser("add", help="add a check from a measured run: its value and a "
+                                      "margin make the bound")
+    add.add_argument("run", metavar="RESULTS/RUN",
+                     help="a stored run (a results folder, then a run id or name), made by "
+                          "this code")
+    add.add_argument("--metric", action="append", required=True, metavar="KEY",
+                     help="the metric to bound (repeat: their maximum), e.g. track_max_1")
+    add.add_argument("--margin", default="25%", metavar="SHARE",
+                     help="headroom of the bound over the measured value, e.g. 25%% or 0.25 "
+                          "(default 25%%)")
+    add.add_argument("--op", choices=("<=", ">="), default="<=",
+                     help="the value must stay <= the bound (default) or >= it")
+    add.add_argument("--name", help="the check's name (default: scenario-metric)")
+    add.add_argument("--file", default=str(DEFAULT_FILE), metavar="TOML",
+                     help="the checks (default: the repository's baselines.toml)")
+    add.set_defaults(func=cmd_baseline_add, reads_only=True)
     return parser

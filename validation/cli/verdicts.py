@@ -283,3 +283,25 @@ def cmd_baseline_update(args: argparse.Namespace) -> int:
     write_baselines(baselines, checks)
     print(f"updated {len(changed)} bound(s) in {baselines.path}")
     return 0
+
+
+def cmd_baseline_add(args: argparse.Namespace) -> int:
+    from ..verdicts.baselines import check_from_run, load_baselines, parse_margin, write_baselines
+    from .one_run import stored_run
+    margin = parse_margin(args.margin)
+    row = stored_run(args.run, "RESULTS/RUN")
+    baselines = load_baselines(args.file)
+    metric = tuple(k.strip() for k in args.metric)
+    updated, added = check_from_run(baselines, row, metric, margin=margin, op=args.op,
+                                    name=args.name)
+    write_baselines(updated, updated.checks)
+    what = metric[0] if len(metric) == 1 else f"max({', '.join(metric)})"
+    print(f"added check {added.name}: {what} {added.op} {added.bound:.4g} (measured "
+          f"{added.measured:.4g} in {row.run_id}, margin {100 * margin:g} %) on scenario "
+          f"{added.scenario}, in {updated.path}")
+    duration = row.config["duration"]
+    if duration > 5:
+        print(f"  note: a {duration:g} s scenario: `make test` measures every short check; "
+              "a scenario of 5 s or less keeps it short")
+    print(f"  flexarm baseline check --only {added.name}   # measures it again")
+    return 0

@@ -28,22 +28,23 @@ from __future__ import annotations
 
 import fnmatch
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from ..run._config import ConfigError, check
+from ..run._config import ConfigError, check, check_label
 from ..batch.campaign import expand, load_campaign
 from ..batch.worker import execute_run
 from ..batch.fingerprint import run_fingerprint
 from ..run.results import write_atomic
 from ..run.scenario import PLANTS, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import INDEX_NAME, ResultStore, StoreError, run_id
-from ..run.tomlfiles import flatten, load_toml, toml_value
+from ..run.tomlfiles import flatten, load_toml, set_dotted, toml_value
 
 __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",
-           "proposed_bounds", "write_baselines", "DEFAULT_FILE"]
+           "proposed_bounds", "write_baselines", "check_from_run", "parse_margin",
+           "DEFAULT_FILE"]
 
 DEFAULT_FILE = Path(__file__).resolve().parents[2] / "baselines.toml"
 #: The numerical precision of each kind of metric (glob of its key, first match): two
@@ -304,6 +305,92 @@ def proposed_bounds(rows: list[dict], baselines: Baselines) -> dict[str, dict]:
         out[c.name] = {"bound": bound, "measured": _stored(value), "looser": looser,
                        "changed": bound != c.bound}
     return out
+
+
+# --- a check from a measured run ---------------------------------------------------------------
+def parse_margin(text: str) -> float:
+    """"25%" or "0.25" → 0.25; ConfigError naming ``--margin`` otherwise."""
+    number = text.strip().removesuffix("%")
+    try:
+        value = float(number) / (100 if text.strip().endswith("%") else 1)
+    except ValueError:
+        raise ConfigError("--margin", f"expected a share such as 25% or 0.25, got {text!r}") \
+            from None
+    check(math.isfinite(value) and 0 <= value < 10, "--margin",
+          f"must be between 0 % and 1000 %, got {text!r}")
+    return value
+
+
+def _scenario_name(run_name: str) -> str:
+    """A run's name as a bare TOML key: "pbc+smo-paper@exudyn" → "pbc-smo-paper-exudyn"."""
+    return "".join(c if c.isascii() and (c.isalnum() or c in "_-") else "-"
+                   for c in run_name.split("/")[-1]).strip("-") or "run"
+
+
+def check_from_run(baselines: Baselines, row, metric: tuple[str, ...], *, margin: float,
+                   op: str = "<=", name: str | None = None) -> tuple[Baselines, Check]:
+    """A new check of a stored run's ``metric`` (several: their maximum) at the value it
+    measured, its bound set by ``margin`` (`updated_bound`); the run's scenario joins
+    ``[scenarios]`` as the keys that differ from the defaults.  Returns the baselines with
+    both added (not yet written: `write_baselines`) and the check.
+
+    Parameters
+    ----------
+    baselines : Baselines
+        The file to add to (`load_baselines`).
+    row : StoredRun
+        A run that completed, made by this code (its numbers are what a check measures).
+    metric : tuple of str
+        Metric keys of the run.
+    margin : float
+        Relative headroom of the bound (0.25: 25 %).
+    op : {"<=", ">="}
+        Which side of the bound holds.
+    name : str, optional
+        The check's name (default: the scenario's name and the metric).
+
+    Returns
+    -------
+    (Baselines, Check)
+    """
+    where = f"{row.store.out}/{row.run_id}"
+    check(row.status == "ok", "RESULTS/RUN", f"{where} {row.status}: a check needs a run that "
+                                             "completed")
+    check(row.fingerprint == run_fingerprint(row.config), "RESULTS/RUN",
+          f"{where} was made by other code: its numbers are not what a check would measure "
+          f"now (rerun it: flexarm run --like {where})")
+    values = []
+    for key in metric:
+        value = row.metrics.get(key)
+        check(isinstance(value, float) and math.isfinite(value), "--metric",
+              f"{where} has no finite metric {key!r}" + ("" if key in row.metrics else
+                                                         " (metric keys: docs/reference/metrics)"))
+        values.append(value)
+    # The defaults of a run as long (the transient's follows the duration).
+    duration = {"duration": row.config["duration"]}
+    defaults = flatten(scenario_to_mapping(scenario_from_mapping(duration)))
+    spec = {k: v for k, v in flatten(row.config).items()
+            if k != "name" and v is not None and defaults.get(k) != v}
+    if scenario_from_mapping({}).duration != duration["duration"]:
+        spec = duration | spec
+    scenarios = dict(baselines.scenarios)
+    label = next((n for n, s in scenarios.items() if flatten(s) == spec), None)
+    if label is None:
+        label = _scenario_name(row.name)
+        label = next(f"{label}-{k}" if k else label for k in range(1000)
+                     if (f"{label}-{k}" if k else label) not in scenarios)
+        scenarios[label] = {}
+        for key, value in spec.items():
+            set_dotted(scenarios[label], key, value)
+    name = name or f"{label}-{'-'.join(k.replace('_', '-') for k in metric)}"
+    check_label(name, "--name")
+    check(name not in {c.name for c in baselines.checks}, "--name",
+          f"{baselines.path} already has a check named {name!r}")
+    new = Check(name=name, metric=tuple(metric), op=op, bound=math.nan, scenario=label,
+                margin=margin)
+    measured = max(values)
+    new = replace(new, bound=updated_bound(new, measured, baselines), measured=_stored(measured))
+    return replace(baselines, scenarios=scenarios, checks=[*baselines.checks, new]), new
 
 
 # --- writing --------------------------------------------------------------------------------
