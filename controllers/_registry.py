@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import importlib
 import inspect
+import os
 import types
 
 from ._baselines import JointPD, RigidComputedTorque
@@ -46,7 +47,13 @@ def resolve(kind: str, builtins: dict[str, type], role: str) -> type:
     try:
         module = importlib.import_module(module_name)
     except Exception as exc:  # noqa: BLE001 - any import failure is the user's to see
-        raise PluginError(f"cannot import {module_name!r}: {type(exc).__name__}: {exc}") from None
+        hint = ""
+        if isinstance(exc, ModuleNotFoundError) and module_name.split(".")[0] == (
+                exc.name or "").split(".")[0]:
+            hint = (f" (a plug-in's module must be importable: installed, on PYTHONPATH, or "
+                    f"in the directory the command runs from, here {os.getcwd()})")
+        raise PluginError(f"cannot import {module_name!r}: {type(exc).__name__}: {exc}{hint}") \
+            from None
     cls = module
     for part in attr.split("."):
         cls = getattr(cls, part, None)

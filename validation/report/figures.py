@@ -29,6 +29,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ..run.plotting import (BOUND_STYLE, DPI, PLANT_STYLE, SUB, bound_lines,  # noqa: E402
+                             draw_deflections, draw_tracking, envelope, figure_legend,
+                             figure_title, fit_ylim, plant_trace, trace)
 from ..run.results import write_atomic  # noqa: E402
 
 __all__ = ["png", "state_label", "state_unit", "state_display", "tracking", "deflections",
@@ -36,13 +39,7 @@ __all__ = ["png", "state_label", "state_unit", "state_display", "tracking", "def
            "envelope", "figure_title", "figure_legend", "PLANT_STYLE",
            "BOUND_STYLE"]
 
-#: Reduced plant wide and light underneath, truth plant thin and dark on top.
-PLANT_STYLE = {"reduced": dict(color="tab:blue", lw=2.4, alpha=0.45, zorder=2),
-               "truth": dict(color="darkred", lw=0.8, alpha=1.0, zorder=3)}
-BOUND_STYLE = dict(color="crimson", lw=0.9, ls=(0, (5, 3)), zorder=4)
-_SUB = str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉")
-
-def png(fig, dpi: int = 90) -> bytes:
+def png(fig, dpi: int = DPI) -> bytes:
     """The figure as PNG bytes (its layout engine already fits everything in: no second
     "tight" layout pass)."""
     buf = io.BytesIO()
@@ -56,7 +53,7 @@ def state_label(state: str) -> str:
     rate = state.endswith("_dot")
     base = state.removesuffix("_dot")
     symbol, index = ("θ", base[5:]) if base.startswith("theta") else (base[0], base[1:])
-    return symbol + ("\u0307" if rate else "") + index.translate(_SUB)
+    return symbol + ("\u0307" if rate else "") + index.translate(SUB)
 
 
 def state_unit(state: str) -> str:
@@ -76,108 +73,14 @@ def describe_run(config: dict) -> str:
     return f"{config.get('arm', 'default')} arm, Ts = {1e3 * config['Ts']:g} ms, {start}"
 
 
-def figure_title(fig, text: str, fontsize: float = 10) -> None:
-    """A figure title wrapped to the figure's width (never wider than the plots)."""
-    chars = max(40, int(fig.get_figwidth() * 72 / (0.55 * fontsize)))
-    fig.suptitle(textwrap.fill(text, chars), fontsize=fontsize)
-
-
-def figure_legend(fig, axes) -> None:
-    """One legend for a grid of panels, below them (never over the data); entries of
-    every panel, each label once."""
-    seen = {}
-    for ax in np.ravel(axes):
-        for h, label in zip(*ax.get_legend_handles_labels()):
-            seen.setdefault(label, h)
-    if seen:
-        fig.legend(list(seen.values()), list(seen), loc="outside lower center",
-                   ncol=min(len(seen), 4), fontsize=8)
-
-
-# --- drawing a series -----------------------------------------------------------------------
-def _columns(ax) -> int:
-    """Pixel columns of a panel at the saved resolution (90 dpi)."""
-    return max(60, int(ax.get_position().width * ax.figure.get_figwidth() * 90))
-
-
-def envelope(t: np.ndarray, y: np.ndarray, columns: int):
-    """(column centres, min, max, mean) of ``y`` over ``columns`` equal bins of samples."""
-    n = t.size
-    starts = np.linspace(0, n, columns + 1).astype(int)[:-1]
-    counts = np.diff(np.append(starts, n))
-    tc = np.add.reduceat(t, starts) / counts
-    return (tc, np.minimum.reduceat(y, starts), np.maximum.reduceat(y, starts),
-            np.add.reduceat(y, starts) / counts)
-
-
-def _trace(ax, t, y, *, color, lw=0.8, alpha=1.0, zorder=2, label=None, ls="-"):
-    """A time series: a plain line if it has at most two samples per pixel column, else
-    its min/max envelope (light) and the column mean (line)."""
-    y = np.asarray(y, dtype=float)
-    columns = _columns(ax)
-    if t.size <= 2 * columns:
-        ax.plot(t, y, color=color, lw=lw, alpha=alpha, zorder=zorder, label=label, ls=ls)
-        return
-    tc, lo, hi, mean = envelope(np.asarray(t, float), y, columns)
-    ax.fill_between(tc, lo, hi, color=color, alpha=0.25 if alpha == 1.0 else 0.5 * alpha,
-                    lw=0, zorder=zorder - 0.5)
-    ax.plot(tc, mean, color=color, lw=lw, alpha=alpha, zorder=zorder, label=label, ls=ls)
-
-
-def _plant_trace(ax, run, t, y, *, label=True, suffix="") -> None:
-    st = PLANT_STYLE.get(run.role, dict(color="k", lw=1.0))
-    _trace(ax, t, y, label=(run.plant_label + suffix) if label else None,
-           **st)
-
-
-def _fit_ylim(ax, series, transient: float, bound: float | None = None, unit: str = "") -> None:
-    """y-range from the samples after the transient (the start-up may leave the frame);
-    a symmetric ±bound joins the range if it is within 4× the data's extent, else it
-    is named in the panel."""
-    late = [y[t >= transient] for t, y in series if (t >= transient).any()]
-    if not late:
-        return
-    lo = min(float(np.nanmin(s)) for s in late)
-    hi = max(float(np.nanmax(s)) for s in late)
-    if bound is not None:
-        extent = max(abs(lo), abs(hi), 1e-300)
-        if bound <= 4 * extent:
-            lo, hi = min(lo, -bound), max(hi, bound)
-        else:
-            ax.text(0.99, 0.97, f"bound ±{bound:.3g} {unit}: off this scale", ha="right",
-                    va="top", transform=ax.transAxes, fontsize=7, color=BOUND_STYLE["color"])
-    pad = 0.08 * (hi - lo) or 1e-12
-    ax.set_ylim(lo - pad, hi + pad)
-
-
-def _bound_lines(ax, bound: float, label: str) -> None:
-    ax.axhline(bound, label=label, **BOUND_STYLE)
-    ax.axhline(-bound, **BOUND_STYLE)
-
-
 # --- the paper's figures ------------------------------------------------------------------------
 def tracking(group, title: str, transient: float, bound: float | None = None) -> bytes:
     """Fig. 3 analogue: θ and θ − θ_d per joint, every plant of the group overlaid; the
     errors in mrad with the tracking claim's bound ``bound`` [rad]."""
-    fig, axes = plt.subplots(2, 2, figsize=(10, 5.8), sharex=True, layout="constrained")
-    errs = {0: [], 1: []}
-    for run, res in group:
-        for j in (0, 1):
-            _plant_trace(axes[0, j], run, res.time, res[f"theta{j + 1}"])
-            e = 1e3 * (res[f"theta{j + 1}"].astype(float) - res[f"theta{j + 1}_ref"])
-            _plant_trace(axes[1, j], run, res.time, e, label=False)
-            errs[j].append((res.time, e))
-    ref = group[0][1]
-    for j in (0, 1):
-        axes[0, j].plot(ref.time, ref[f"theta{j + 1}_ref"], color="k", lw=0.6, ls=":",
-                        label="reference, eq. (37)", zorder=4)
-        axes[0, j].set_ylabel(f"θ{j + 1} [rad]".translate(_SUB))
-        axes[1, j].set_ylabel(f"θ{j + 1} − θ{j + 1},d [mrad]".translate(_SUB))
-        axes[1, j].set_xlabel("t [s]")
-        axes[1, j].axvline(transient, color="grey", lw=0.5, ls=":")
-        if bound is not None:
-            _bound_lines(axes[1, j], 1e3 * bound, f"tracking bound ±{1e3 * bound:g} mrad")
-        _fit_ylim(axes[1, j], errs[j], transient, None if bound is None else 1e3 * bound, "mrad")
+    fig, axes = plt.subplots(2, 2, figsize=(7, 4.6), sharex=True, layout="constrained")
+    draw_tracking(axes, group, transient, bound)
+    for ax in axes[1]:
+        ax.set_xlabel("t [s]")
     figure_legend(fig, axes)
     figure_title(fig, f"{title}: joint tracking (cf. the paper's Fig. 3); error axis scaled after "
                 f"the {transient:g} s transient (grey line)")
@@ -188,36 +91,12 @@ def deflections(group, title: str, transient: float, cutoff_hz: float | None,
                 bound: float | None = None) -> bytes:
     """Fig. 4 analogue: tip deflections [mm], and their oscillatory part (the vibration)
     with the vibration claim's bound on its RMS, ``bound`` [m]."""
-    from ..run.metrics import oscillatory
     rows = 2 if cutoff_hz else 1
-    fig, axes = plt.subplots(rows, 2, figsize=(10, 2.9 * rows + 0.6), sharex=True,
+    fig, axes = plt.subplots(rows, 2, figsize=(7, 2.0 * rows + 0.6), sharex=True,
                              squeeze=False, layout="constrained")
-    vib, rms = {0: [], 1: []}, {0: [], 1: []}
-    for run, res in group:
-        for j in (0, 1):
-            _plant_trace(axes[0, j], run, res.time, 1e3 * res[f"tip_defl{j + 1}"].astype(float))
-        if cutoff_hz and res.time.size > 16:
-            v = 1e3 * oscillatory(res, cutoff_hz)
-            late = res.time >= transient
-            for j in (0, 1):
-                _plant_trace(axes[1, j], run, res.time, v[j], label=False)
-                vib[j].append((res.time, v[j]))
-                if late.any():
-                    rms[j].append(f"{'truth' if run.plant == 'exudyn' else run.plant} "
-                                  f"{np.sqrt(np.mean(v[j][late] ** 2)):.3g}")
-    for j in (0, 1):
-        axes[0, j].set_ylabel(f"tip deflection, link {j + 1} [mm]")
-        axes[-1, j].set_xlabel("t [s]")
-        if cutoff_hz:
-            axes[1, j].set_ylabel(f"vibration, link {j + 1} [mm]")
-            axes[1, j].axvline(transient, color="grey", lw=0.5, ls=":")
-            limit = f"; bound {1e3 * bound:g}" if bound is not None else ""
-            axes[1, j].set_title(f"link {j + 1}, > {cutoff_hz:.2f} Hz — RMS after "
-                                 f"{transient:g} s [mm]: {', '.join(rms[j])}{limit}", fontsize=8)
-            if bound is not None:
-                _bound_lines(axes[1, j], 1e3 * bound, f"vibration bound (on the RMS) "
-                                                      f"±{1e3 * bound:g} mm")
-            _fit_ylim(axes[1, j], vib[j], transient, None if bound is None else 1e3 * bound, "mm")
+    draw_deflections(axes, group, transient, cutoff_hz, bound)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]")
     figure_legend(fig, axes)
     figure_title(fig, f"{title}: tip deflections (cf. Fig. 4) and their oscillatory part (the "
                 "vibration the claim judges)")
@@ -253,12 +132,12 @@ def rates(group, title: str, transient: float) -> bytes:
             name = run.plant_label
             estimate = scale * res[f"xhat_{s}"].astype(float)
             true = scale * res[s].astype(float)
-            _trace(ax, res.time, estimate, color=estimate_color, lw=0.8, zorder=2,
+            trace(ax, res.time, estimate, color=estimate_color, lw=0.8, zorder=2,
                    label=f"{name}: estimate")
-            _trace(ax, res.time, true, color=true_color, lw=0.7, zorder=4,
+            trace(ax, res.time, true, color=true_color, lw=0.7, zorder=4,
                    label=f"{name}: true")
             series += [(res.time, estimate), (res.time, true)]
-        _fit_ylim(ax, series, transient)
+        fit_ylim(ax, series, transient)
         ax.axvline(transient, color="grey", lw=0.5, ls=":")
         ax.set_title(state_label(s), fontsize=10)
         ax.set_ylabel(f"[{unit}]")
@@ -284,7 +163,7 @@ def estimation_errors(group, title: str, transient: float, bound: float | None =
         for run, res in observed:
             e = scale * (res[f"xhat_{s}"].astype(float) - res[s])
             series.append((res.time, e))
-            _plant_trace(ax, run, res.time, e)
+            plant_trace(ax, run, res.time, e)
             if f"y_{s}" in res:
                 late = res.time >= transient
                 sigma = scale * float(np.sqrt(np.mean(
@@ -296,8 +175,8 @@ def estimation_errors(group, title: str, transient: float, bound: float | None =
                                    label="measurement error, ±1 RMS" if y > 0 else None)
         angle_bound = bound is not None and s in ("theta1", "theta2")
         if angle_bound:
-            _bound_lines(ax, 1e3 * bound, f"angle-estimation bound ±{1e3 * bound:g} mrad")
-        _fit_ylim(ax, series, transient, 1e3 * bound if angle_bound else None, unit)
+            bound_lines(ax, 1e3 * bound, f"angle-estimation bound ±{1e3 * bound:g} mrad")
+        fit_ylim(ax, series, transient, 1e3 * bound if angle_bound else None, unit)
         ax.set_title(f"{state_label(s)} error", fontsize=10)
         ax.set_ylabel(f"[{unit}]")
         ax.tick_params(labelsize=7)
@@ -329,8 +208,8 @@ def phase_portrait(group, title: str, rate_bound: float | None = None) -> bytes:
                 axes[j].plot(th, dth + sign * band, label=f"phase bound: reference ± "
                              f"{100 * rate_bound:g} % of its peak rate" if sign > 0 else None,
                              **BOUND_STYLE)
-        axes[j].set_xlabel(f"θ{j + 1} [rad]".translate(_SUB))
-        axes[j].set_ylabel(f"θ̇{j + 1} [rad/s]".translate(_SUB))
+        axes[j].set_xlabel(f"θ{j + 1} [rad]".translate(SUB))
+        axes[j].set_ylabel(f"θ̇{j + 1} [rad/s]".translate(SUB))
         for y in (1.2, -1.2):
             axes[j].axhline(y, color="grey", lw=0.5, ls=":",
                             label="the paper's ±1.2 rad/s" if y > 0 else None)

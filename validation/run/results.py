@@ -85,6 +85,48 @@ class RunResult:
     def ok(self) -> bool:
         return self.status == "ok"
 
+    # --- looking at it --------------------------------------------------------------
+    def plot(self, *others: "RunResult", transient: float | None = None):
+        """The paper's Figs. 3–4 layout: θ per joint with the reference, θ − θ_d [mrad]
+        and the tip deflections [mm], with ``others`` overlaid (the same scenario on the
+        other plant, say: the reduced plant wide and light, the truth plant thin and dark).
+
+        Parameters
+        ----------
+        *others : RunResult
+            Results drawn on the same axes.
+        transient : float, optional
+            The error axes are scaled to the samples after it [s] (default: the
+            scenario's transient).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            Made with pyplot (a notebook shows it; ``fig.savefig(path)`` writes it).
+        """
+        from .plotting import plot_results
+        return plot_results([self, *others], transient=transient)
+
+    def to_dataframe(self):
+        """The signals as a pandas DataFrame: a column per signal name, indexed by time
+        ``t`` [s] (pandas is optional: ``pip install pandas``).
+
+        Returns
+        -------
+        pandas.DataFrame
+            ``(n_samples, n_signals)``; the status, message and scenario in ``attrs``.
+        """
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("RunResult.to_dataframe needs pandas, which flexarm-validation "
+                              "does not install: pip install pandas (or use result.time, "
+                              "result.names and result.signals, numpy arrays)") from None
+        frame = pd.DataFrame(self.signals.T, columns=list(self.names),
+                             index=pd.Index(self.time, name="t"))
+        frame.attrs.update(status=self.status, message=self.message, config=self.config)
+        return frame
+
     # --- storage --------------------------------------------------------------------
     def to_bytes(self, extra: dict | None = None) -> bytes:
         """The result as an uncompressed ``.npz`` (no pickle): arrays ``time``,

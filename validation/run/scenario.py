@@ -9,6 +9,7 @@ combinations before anything is simulated.  Every error names the dotted key.
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 from dataclasses import dataclass, field
 
@@ -98,6 +99,21 @@ class ModelSpec:
 
     def __post_init__(self):
         _modes(self.modes_per_link)
+
+
+def law_path(law, where: str) -> str:
+    """The import path ``"module:Class"`` of a law's class given from Python (a class
+    defined in a notebook or a script: ``"__main__:Class"``, found in the process that
+    runs it); ConfigError naming ``where`` for anything else."""
+    if not inspect.isclass(law):
+        hint = (f"the class {type(law).__name__}, not an instance of it (a law is built "
+                "for each run as Cls(model, **options): its settings go in options)"
+                if callable(law) or hasattr(law, "update") else "a class or its name")
+        raise ConfigError(where, f"give {hint}, got {law!r}")
+    check("<locals>" not in law.__qualname__, where,
+          f"{law.__qualname__} is defined inside a function: define it at module level, "
+          "where its import path finds it")
+    return f"{law.__module__}:{law.__qualname__}"
 
 
 def _law_kind(value) -> None:
@@ -538,7 +554,9 @@ def scenario_from_mapping(data: dict) -> Scenario:
     Parameters
     ----------
     data : dict
-        Any subset of the scenario keys, as a TOML file would hold them.
+        Any subset of the scenario keys, as a TOML file would hold them; from Python,
+        ``controller.kind`` and ``observer.kind`` may also be a law's class (it becomes
+        its import path, ``"__main__:MyPD"`` for a class defined in a notebook or script).
 
     Returns
     -------
@@ -547,6 +565,10 @@ def scenario_from_mapping(data: dict) -> Scenario:
     """
     base = to_mapping(arm_parameters(data.get("arm", "default")))
     data = dict(data)
+    for role in ("controller", "observer"):
+        spec = data.get(role)
+        if isinstance(spec, dict) and "kind" in spec and not isinstance(spec["kind"], str):
+            data[role] = dict(spec, kind=law_path(spec["kind"], f"{role}.kind"))
     for key in ("true_params", "nominal_params"):
         given = data.get(key, {})
         data[key] = {**base, **given} if isinstance(given, dict) else given

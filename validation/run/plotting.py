@@ -1,0 +1,195 @@
+"""Drawing runs' signals (matplotlib), shared by `RunResult.plot` and the reports
+(`validation.report.figures`, whose docstring states the conventions): the plants' styles,
+a dense series as its envelope, y-ranges after the transient, the claims' bounds, and the
+panels of the paper's Figs. 3 and 4.
+
+pyplot is imported where a figure is made, and the backend is never chosen here: a
+notebook keeps its own (the reports choose Agg).
+"""
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+
+__all__ = ["PLANT_STYLE", "BOUND_STYLE", "SUB", "DPI", "figure_title", "figure_legend",
+           "envelope", "trace", "plant_trace", "fit_ylim", "bound_lines", "draw_tracking",
+           "draw_deflections", "plot_results"]
+
+#: Reduced plant wide and light underneath, truth plant thin and dark on top.
+PLANT_STYLE = {"reduced": dict(color="tab:blue", lw=2.4, alpha=0.45, zorder=2),
+               "truth": dict(color="darkred", lw=0.8, alpha=1.0, zorder=3)}
+BOUND_STYLE = dict(color="crimson", lw=0.9, ls=(0, (5, 3)), zorder=4)
+SUB = str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉")
+#: Resolution of the saved figures [dots per inch]: a dense series is binned to its
+#: pixel columns at it.
+DPI = 110
+
+
+def figure_title(fig, text: str, fontsize: float = 10) -> None:
+    """A figure title wrapped to the figure's width (never wider than the plots)."""
+    chars = max(40, int(fig.get_figwidth() * 72 / (0.55 * fontsize)))
+    fig.suptitle(textwrap.fill(text, chars), fontsize=fontsize)
+
+
+def figure_legend(fig, axes) -> None:
+    """One legend for a grid of panels, below them (never over the data); entries of
+    every panel, each label once."""
+    seen = {}
+    for ax in np.ravel(axes):
+        for h, label in zip(*ax.get_legend_handles_labels()):
+            seen.setdefault(label, h)
+    if seen:
+        fig.legend(list(seen.values()), list(seen), loc="outside lower center",
+                   ncol=min(len(seen), 4), fontsize=8)
+
+
+# --- drawing a series -----------------------------------------------------------------------
+def _columns(ax) -> int:
+    """Pixel columns of a panel at the saved resolution (`DPI`)."""
+    return max(60, int(ax.get_position().width * ax.figure.get_figwidth() * DPI))
+
+
+def envelope(t: np.ndarray, y: np.ndarray, columns: int):
+    """(column centres, min, max, mean) of ``y`` over ``columns`` equal bins of samples."""
+    n = t.size
+    starts = np.linspace(0, n, columns + 1).astype(int)[:-1]
+    counts = np.diff(np.append(starts, n))
+    tc = np.add.reduceat(t, starts) / counts
+    return (tc, np.minimum.reduceat(y, starts), np.maximum.reduceat(y, starts),
+            np.add.reduceat(y, starts) / counts)
+
+
+def trace(ax, t, y, *, color, lw=0.8, alpha=1.0, zorder=2, label=None, ls="-"):
+    """A time series: a plain line if it has at most two samples per pixel column, else
+    its min/max envelope (light) and the column mean (line)."""
+    y = np.asarray(y, dtype=float)
+    columns = _columns(ax)
+    if t.size <= 2 * columns:
+        ax.plot(t, y, color=color, lw=lw, alpha=alpha, zorder=zorder, label=label, ls=ls)
+        return
+    tc, lo, hi, mean = envelope(np.asarray(t, float), y, columns)
+    ax.fill_between(tc, lo, hi, color=color, alpha=0.25 if alpha == 1.0 else 0.5 * alpha,
+                    lw=0, zorder=zorder - 0.5)
+    ax.plot(tc, mean, color=color, lw=lw, alpha=alpha, zorder=zorder, label=label, ls=ls)
+
+
+def plant_trace(ax, run, t, y, *, label=True, suffix="") -> None:
+    """`trace` of a run in its plant's style (`PLANT_STYLE`), labelled by its plant."""
+    st = PLANT_STYLE.get(run.role, dict(color="k", lw=1.0))
+    trace(ax, t, y, label=(run.plant_label + suffix) if label else None, **st)
+
+
+def fit_ylim(ax, series, transient: float, bound: float | None = None, unit: str = "") -> None:
+    """y-range from the samples after the transient (the start-up may leave the frame);
+    a symmetric ±bound joins the range if it is within 4× the data's extent, else it
+    is named in the panel."""
+    late = [y[t >= transient] for t, y in series if (t >= transient).any()]
+    if not late:
+        return
+    lo = min(float(np.nanmin(s)) for s in late)
+    hi = max(float(np.nanmax(s)) for s in late)
+    if bound is not None:
+        extent = max(abs(lo), abs(hi), 1e-300)
+        if bound <= 4 * extent:
+            lo, hi = min(lo, -bound), max(hi, bound)
+        else:
+            ax.text(0.99, 0.97, f"bound ±{bound:.3g} {unit}: off this scale", ha="right",
+                    va="top", transform=ax.transAxes, fontsize=7, color=BOUND_STYLE["color"])
+    pad = 0.08 * (hi - lo) or 1e-12
+    ax.set_ylim(lo - pad, hi + pad)
+
+
+def bound_lines(ax, bound: float, label: str) -> None:
+    """A symmetric bound ±``bound`` in `BOUND_STYLE`."""
+    ax.axhline(bound, label=label, **BOUND_STYLE)
+    ax.axhline(-bound, **BOUND_STYLE)
+
+
+# --- the paper's Figs. 3 and 4 -------------------------------------------------------------
+def draw_tracking(axes, group, transient: float, bound: float | None = None) -> None:
+    """The panels of the paper's Fig. 3 into ``axes`` (2 × 2: θ per joint above, θ − θ_d
+    [mrad] below), every run of ``group`` ((run, result) pairs) overlaid, with the
+    tracking claim's bound ``bound`` [rad]; the error axes scaled after ``transient``."""
+    errs = {0: [], 1: []}
+    for run, res in group:
+        for j in (0, 1):
+            plant_trace(axes[0, j], run, res.time, res[f"theta{j + 1}"])
+            e = 1e3 * (res[f"theta{j + 1}"].astype(float) - res[f"theta{j + 1}_ref"])
+            plant_trace(axes[1, j], run, res.time, e, label=False)
+            errs[j].append((res.time, e))
+    ref = group[0][1]
+    for j in (0, 1):
+        axes[0, j].plot(ref.time, ref[f"theta{j + 1}_ref"], color="k", lw=0.6, ls=":",
+                        label="reference, eq. (37)", zorder=4)
+        axes[0, j].set_ylabel(f"θ{j + 1} [rad]".translate(SUB))
+        axes[1, j].set_ylabel(f"θ{j + 1} − θ{j + 1},d [mrad]".translate(SUB))
+        axes[1, j].axvline(transient, color="grey", lw=0.5, ls=":")
+        if bound is not None:
+            bound_lines(axes[1, j], 1e3 * bound, f"tracking bound ±{1e3 * bound:g} mrad")
+        fit_ylim(axes[1, j], errs[j], transient, None if bound is None else 1e3 * bound, "mrad")
+
+
+def draw_deflections(axes, group, transient: float, cutoff_hz: float | None = None,
+                     bound: float | None = None) -> None:
+    """The panels of the paper's Fig. 4 into ``axes`` (a row per link's tip deflection
+    [mm], and with ``cutoff_hz`` a second row: its oscillatory part above that frequency,
+    the vibration the claim judges, with the bound ``bound`` [m] on its RMS)."""
+    from .metrics import oscillatory
+    vib, rms = {0: [], 1: []}, {0: [], 1: []}
+    for run, res in group:
+        for j in (0, 1):
+            plant_trace(axes[0, j], run, res.time, 1e3 * res[f"tip_defl{j + 1}"].astype(float))
+        if cutoff_hz and res.time.size > 16:
+            v = 1e3 * oscillatory(res, cutoff_hz)
+            late = res.time >= transient
+            for j in (0, 1):
+                plant_trace(axes[1, j], run, res.time, v[j], label=False)
+                vib[j].append((res.time, v[j]))
+                if late.any():
+                    rms[j].append(f"{run.role} {np.sqrt(np.mean(v[j][late] ** 2)):.3g}")
+    for j in (0, 1):
+        axes[0, j].set_ylabel(f"tip deflection {j + 1} [mm]")
+        if cutoff_hz:
+            axes[1, j].set_ylabel(f"vibration {j + 1} [mm]")
+            axes[1, j].axvline(transient, color="grey", lw=0.5, ls=":")
+            limit = f"; bound {1e3 * bound:g}" if bound is not None else ""
+            axes[1, j].set_title(f"> {cutoff_hz:.2f} Hz, RMS after {transient:g} s [mm]: "
+                                 f"{', '.join(rms[j])}{limit}", fontsize="small")
+            if bound is not None:
+                bound_lines(axes[1, j], 1e3 * bound, f"vibration bound (on the RMS) "
+                                                     f"±{1e3 * bound:g} mm")
+            fit_ylim(axes[1, j], vib[j], transient, None if bound is None else 1e3 * bound, "mm")
+
+
+def plot_results(results, *, transient: float | None = None):
+    """One figure of the paper's Figs. 3–4 layout for ``results`` (RunResults, overlaid:
+    the same scenario on two plants, say): θ per joint with the reference, θ − θ_d [mrad]
+    and the tip deflections [mm], a column per joint.  The error axes are scaled after
+    ``transient`` (default: the first result's)."""
+    import matplotlib.pyplot as plt
+    results = [r for r in results if r.time.size]
+    group = [(_View(r.config), r) for r in results]
+    if transient is None:
+        transient = float(results[0].config.get("transient", 0.0))
+    fig, axes = plt.subplots(3, 2, figsize=(9, 7), sharex=True, layout="constrained")
+    draw_tracking(axes[:2], group, transient)
+    draw_deflections(axes[2:], group, transient)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [s]")
+    figure_legend(fig, axes)
+    names = " / ".join(dict.fromkeys(str(r.config.get("name", "")) for r in results))
+    stopped = "".join(f"; {v.plant_label} {r.status.upper()} at {r.end_time:g} s"
+                      for v, r in group if r.status != "ok")
+    figure_title(fig, f"{names}: joint tracking and tip deflections (cf. the paper's Figs. "
+                      f"3–4){stopped}")
+    return fig
+
+
+class _View:
+    """What the drawing asks of a run, from its resolved scenario: its plant's role and
+    label."""
+
+    def __init__(self, config: dict):
+        from .plants import label_of, role_of
+        self.role, self.plant_label = role_of(config), label_of(config)
