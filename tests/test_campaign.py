@@ -219,7 +219,7 @@ def test_failed_runs_are_redone_only_on_request(tmp_path):
 
 
 # --- reports ----------------------------------------------------------------------------
-REPORT_SECTIONS = ("Estimation against the measurement", "Runs", "Metrics", "Paper figures",
+REPORT_SECTIONS = ("Estimation against the measurement", "Runs and metrics", "Paper figures",
                    "Sweeps", "Validity of the reduced model", "Animation")
 
 
@@ -231,8 +231,11 @@ def test_report_from_stored_results(tmp_path):
     run_campaign(campaign_from_mapping(spec), tmp_path, progress=False)
     html_path, md_path = write_report(tmp_path, progress=False)
     md, page = md_path.read_text(), html_path.read_text()
-    for section in REPORT_SECTIONS:
-        assert f"## {section}" in md and f"<h2>{section}</h2>" in page, section
+    for section in REPORT_SECTIONS:  # the HTML's sections: collapsible, titles as labels
+        assert f">{section}</label>" in page, section
+    for section in ("Estimation against the measurement", "Runs", "Metrics", "Paper figures",
+                    "Sweeps", "Validity of the reduced model", "Animation"):
+        assert f"## {section}" in md, section
     assert "Fig. 3" in md and "Fig. 7" in md and "metrics vs true_params.Mp" in md
     # Every stored run is in the runs table (4: the sweeps name their runs differently).
     rows = ResultStore(tmp_path).rows()

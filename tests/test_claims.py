@@ -17,6 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from validation.report.render import md_cell
 from validation.report.verdict_tables import claims_tables
 from validation.verdicts.claims import CLAIMS, SYSTEM, claim_columns, evaluate
 from validation.run.loop import run_scenario
@@ -283,12 +284,12 @@ def test_mesh_check_marks_table1_not_converged_and_the_default_arm_converged(mes
     for label, _ in v.meshes:
         assert label in v.note
     tables = {t["arm"]: t for t in claims_tables(list(columns.values()))}
-    assert tables["table1"]["rows"][1]["cells"][0].startswith("NOT CONVERGED")
+    assert md_cell(tables["table1"]["rows"][1]["cells"][0]).startswith("NOT CONVERGED")
     assert any("no mesh limit" in n for n in tables["table1"]["notes"])
     # The default arm (stator 0.01 kg m²): every judged value agrees on the three meshes.
     for key, verdict in default.verdicts.items():
         assert verdict.verdict not in ("not converged", "mesh not checked"), (key, verdict)
-    assert tables["default"]["rows"][1]["cells"][0].startswith("converged against")
+    assert md_cell(tables["default"]["rows"][1]["cells"][0]).startswith("converged against")
     assert tables["default"]["notes"] == []
     # Without its checks a truth-plant run gets no verdict at all.
     alone = claim_columns([r for r in rows if r.sweep != "mesh-check"])

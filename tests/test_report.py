@@ -26,16 +26,24 @@ SPEC = {"name": "rep", "description": "report test",
 
 
 class Tables(HTMLParser):
-    """Every <table>: its header cells (count and texts) and the cell count of each body
-    row."""
+    """Every <table>: its header cells (count and texts), the cell count of each body row,
+    and whether it is printed (not inside an element the print stylesheet leaves out:
+    class ``noprint`` or a collapsed ``detail``)."""
+
+    BLOCKS = ("div", "section")
 
     def __init__(self):
         super().__init__()
         self.tables, self._row, self._in_head, self._th = [], None, False, None
+        self._hidden = []  # per open div/section: whether print leaves it out
 
     def handle_starttag(self, tag, attrs):
+        if tag in self.BLOCKS:
+            classes = (dict(attrs).get("class") or "").split()
+            self._hidden.append("noprint" in classes or "detail" in classes)
         if tag == "table":
-            self.tables.append({"head": 0, "rows": [], "headers": []})
+            self.tables.append({"head": 0, "rows": [], "headers": [],
+                                "printed": not any(self._hidden)})
         elif tag == "thead":
             self._in_head = True
         elif tag == "tr":
@@ -50,6 +58,8 @@ class Tables(HTMLParser):
             self._th.append(data)
 
     def handle_endtag(self, tag):
+        if tag in self.BLOCKS:
+            self._hidden.pop()
         if tag == "thead":
             self._in_head = False
         elif tag == "th" and self._th is not None:
@@ -187,7 +197,9 @@ def test_the_printed_report_shows_every_column_of_every_table(report, tmp_path):
     word of every header cell, left to right (headers are top-aligned, so their first
     lines share a line), with every word of every header in it or the 4 lines below.  A
     table cut at the page's edge loses its right columns, collapsed sections that stay
-    collapsed lose their tables: either fails here."""
+    collapsed lose their tables: either fails here.  Tables the print leaves out on
+    purpose (runs and metrics, the folded details: in the HTML and the CSV files) are said
+    to be left out, on the printed page."""
     out, page, _ = report
     pdf = tmp_path / "report.pdf"
     subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu",
@@ -199,9 +211,12 @@ def test_the_printed_report_shows_every_column_of_every_table(report, tmp_path):
     lines = text.splitlines()
     parser = Tables()
     parser.feed(page)
-    assert len(parser.tables) >= 6
+    printed = [t for t in parser.tables if t["printed"]]
+    assert len(printed) >= 3 and len(printed) < len(parser.tables)
+    assert "Runs and metrics: not printed (in report.html, metrics.csv and manifest.json)" \
+        in " ".join(text.split())
     at = 0
-    for table in parser.tables:
+    for table in printed:
         firsts = [word_pieces(h)[0] for h in table["headers"]]
 
         def holds_in_order(line):
@@ -236,3 +251,58 @@ def test_a_sweep_over_the_plant_table_draws_both_plants_titled_in_words(tmp_path
     (drawn,), _ = _figure_groups(runs, None)
     assert len(drawn) == 2
     assert "plant=" not in _title(drawn) and "{" not in _title(drawn)
+
+
+def test_the_report_is_navigable_and_its_figures_named_by_content(report):
+    """A table of contents whose every entry is a section (collapsible: a checkbox, open at
+    first); the summary counts verdicts and does not repeat the claims table; figure
+    files say what they show; the animation prints as a still, not its first frame."""
+    out, page, md = report
+    toc = re.search(r'<nav class="toc".*?</nav>', page, flags=re.S).group(0)
+    anchors = re.findall(r'href="#([\w-]+)"', toc)
+    assert anchors[:2] == ["summary", "claims"] and "paper-figures" in anchors
+    for anchor in anchors:
+        assert re.search(rf'<section class="fold section[^"]*" id="{anchor}"><input '
+                         rf'type="checkbox" id="sec-{anchor}" checked', page), anchor
+    summary = page[page.index('id="summary"'):page.index('id="claims"')]
+    assert "1 window-sensitive" in summary or "holds" in summary
+    counts = summary.split("<tbody>")[1].split("</tbody>")[0]
+    assert "margin" not in counts and "mrad" not in counts  # counts, not the claims' cells
+    files = sorted(p.name for p in (out / "report" / "figures").iterdir())
+    assert not [f for f in files if re.fullmatch(r"fig\d+\.png", f)]
+    assert any(f.endswith("joint-tracking-fig-3.png") for f in files)
+    assert any(f.endswith("phase-portrait-fig-8.png") for f in files)
+    assert 'class="screen-only"><img src="data:image/gif' in page
+    assert 'class="print-only"><img src="data:image/png' in page
+
+
+def test_a_chattering_rate_is_drawn_as_its_mean_and_band(monkeypatch):
+    """A θ̇₂ that chatters ±35 rad/s around the reference (Table 1 on the truth plant) is
+    not a solid block: its mean per pixel column is the line, the chatter a light band,
+    and the y-range stays the orbit's, with the chatter's extent named."""
+    import numpy as np
+    from types import SimpleNamespace
+    from validation.report import figures
+    from validation.run.results import RunResult
+    t = np.arange(0, 20, 2e-4)
+    ref = {f"theta{j}_ref": 2 * np.sin(0.1 * j * np.pi * t) for j in (1, 2)}
+    rates = {f"theta{j}_dot_ref": 0.2 * j * np.pi * np.cos(0.1 * j * np.pi * t) for j in (1, 2)}
+    chatter = 35.0 * np.where(np.arange(t.size) % 2, 1.0, -1.0)
+    signals = {**ref, **rates, "theta1": ref["theta1_ref"], "theta2": ref["theta2_ref"],
+               "theta1_dot": rates["theta1_dot_ref"], "theta2_dot": rates["theta2_dot_ref"] + chatter}
+    res = RunResult(t, tuple(signals), np.array(list(signals.values())))
+    run = SimpleNamespace(role="truth", plant_label="truth plant (Exudyn)")
+    texts, limits = [], []
+    real_png = figures.png
+
+    def spy(fig):
+        ax = fig.axes[1]
+        texts.extend(t.get_text() for t in ax.texts)
+        limits.append(ax.get_ylim())
+        return real_png(fig)
+    monkeypatch.setattr(figures, "png", spy)
+    figures.phase_portrait([(run, res)], "table1", 2.0, 0.05)
+    assert any(re.search(r"truth: θ̇₂ chatters over -3\d\.?\d*…3\d\.?\d* rad/s", text)
+               for text in texts), texts
+    lo, hi = limits[0]
+    assert -6 < lo < -1.2 and 1.2 < hi < 6  # at most 3× the orbit's ±1.26 rad/s, not ±35

@@ -5,7 +5,8 @@ import math
 from pathlib import Path
 from types import SimpleNamespace
 
-from validation.cli.summaries import claims_summary, counted, stability_summary
+from validation.cli.summaries import claims_summary, stability_summary
+from validation.report.summary import counted
 from validation.verdicts.claims import CLAIMS, Verdict
 from validation.verdicts.stability import Limit, StabilityCase, StabilityResult
 

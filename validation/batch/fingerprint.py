@@ -7,7 +7,8 @@ or through other modules — found by a static walk of the import statements (`a
 plus the ``__init__`` of every package on the way.  A module that can change a stored
 signal or metric is imported by the run path, so none can be left out; modules the run
 path never imports (the command line, the store, the reports, the verdicts computed
-from stored metrics) stay out, and editing them leaves stored runs valid.
+from stored metrics) stay out, and so does what it imports only to show a result
+(`PRESENTATION`): editing them leaves stored runs valid.
 
 A plug-in law adds its own module and every module that one imports from outside the
 Python installation (its helpers), found the same way: files are located on
@@ -31,6 +32,9 @@ __all__ = ["code_fingerprint", "run_fingerprint", "result_sources", "plugin_sour
 _ROOT = Path(__file__).resolve().parents[2]
 #: Where executing a run starts: everything it can import decides results.
 RUN_ENTRY = "validation.batch.worker"
+#: What the run path imports only to show a result, never to make one (`RunResult.plot`
+#: draws with it): not hashed, so that editing a figure leaves stored runs valid.
+PRESENTATION = ("validation.run.plotting",)
 _PROJECT_PACKAGES = ("reduced_model", "plant_exudyn", "controllers", "validation")
 
 
@@ -74,18 +78,19 @@ def _locate(name: str, inside: tuple[str, ...] | None) -> Path | None:
     return path
 
 
-def _walk(start: list[str], inside) -> dict[str, Path]:
+def _walk(start: list[str], inside, skip: tuple[str, ...] = ()) -> dict[str, Path]:
     """Module name → file of ``start`` and everything it imports (transitively) whose file
     lies under ``inside`` (None: anywhere but the Python installation).  Each name is
     looked up once; with ``inside``, only names of packages that live there are (the
-    rest of the world cannot), without it the standard library is skipped by name."""
+    rest of the world cannot), without it the standard library is skipped by name; the
+    modules ``skip`` are not followed."""
     found: dict[str, Path] = {}
     seen: set[str] = set()
     local = None if inside is None else {root.name for root in inside}
     todo = list(start)
     while todo:
         name = todo.pop()
-        if not name or name in seen:
+        if not name or name in seen or name in skip:
             continue
         seen.add(name)
         top = name.partition(".")[0]
@@ -115,7 +120,7 @@ def _installed(path: Path) -> bool:
 def result_sources() -> tuple[Path, ...]:
     """The project files the run path can import (module docstring), sorted."""
     inside = tuple(_ROOT / p for p in _PROJECT_PACKAGES)
-    return tuple(sorted(set(_walk([RUN_ENTRY], inside).values())))
+    return tuple(sorted(set(_walk([RUN_ENTRY], inside, PRESENTATION).values())))
 
 
 def _hash_files(h, files) -> None:

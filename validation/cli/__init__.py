@@ -11,7 +11,7 @@ command ran (a plug-in) called ``sys.exit``.
 by what they work on: `modes`, `one_run` (run, show), `campaigns` (campaign,
 reproduce-paper), `verdicts` (stability, validity, attribute, verify, baseline),
 `results` (report, export, repair), `calibrate` (calibrate, export --signals), with
-what they share in `common`.
+what they share in `common` and what the verdict commands print in `summaries`.
 """
 from __future__ import annotations
 

@@ -12,20 +12,10 @@ import math
 from collections import Counter
 from pathlib import Path
 
+from ..report.summary import counted
+
 __all__ = ["claims_summary", "stability_summary", "validity_summary",
-           "attribution_summary", "counted"]
-
-#: Verdicts in the order a summary lists them.
-_ORDER = ("holds", "fails", "window-sensitive", "not converged", "mesh not checked",
-          "diverged", "failed", "not run", "n/a")
-
-
-def counted(verdicts) -> str:
-    """"3 holds, 1 fails, 2 diverged": each verdict with how often it occurs."""
-    counts = Counter(verdicts)
-    order = [v for v in _ORDER if v in counts] + sorted(set(counts) - set(_ORDER))
-    return ", ".join(f"{counts[v]} {v}" for v in order)
-
+           "attribution_summary"]
 
 def claims_summary(columns, path: Path) -> tuple[list[str], int]:
     """One line per claim: its verdicts over the columns of each arm; the claims a failed

@@ -30,12 +30,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..run.plotting import (BOUND_STYLE, DPI, PLANT_STYLE, SUB, bound_lines,  # noqa: E402
-                             draw_deflections, draw_tracking, envelope, figure_legend,
-                             figure_title, fit_ylim, plant_trace, trace)
+                             draw_deflections, draw_tracking, envelope, pixel_columns,
+                             figure_legend, figure_title, fit_ylim, plant_trace, trace)
 from ..run.results import write_atomic  # noqa: E402
 
 __all__ = ["png", "state_label", "state_unit", "state_display", "tracking", "deflections",
-           "rates", "estimation_errors", "phase_portrait", "animation", "describe_run",
+           "rates", "estimation_errors", "phase_portrait", "animation", "arm_snapshots",
+           "describe_run",
            "envelope", "figure_title", "figure_legend", "PLANT_STYLE",
            "BOUND_STYLE"]
 
@@ -105,9 +106,9 @@ def deflections(group, title: str, transient: float, cutoff_hz: float | None,
 
 def _state_grid(states):
     """A grid of panels, one per state: positions in the first rows, rates after."""
-    cols = min(3, len(states))
+    cols = min(3 if len(states) <= 6 else 4, len(states))
     rows = math.ceil(len(states) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols + 0.5, 2.3 * rows + 1.2),
+    fig, axes = plt.subplots(rows, cols, figsize=(7, 1.2 * rows + 1.0),
                              sharex=True, layout="constrained", squeeze=False)
     for ax in axes.ravel()[len(states):]:
         ax.set_visible(False)
@@ -189,32 +190,69 @@ def estimation_errors(group, title: str, transient: float, bound: float | None =
     return png(fig)
 
 
-def phase_portrait(group, title: str, rate_bound: float | None = None) -> bytes:
+def phase_portrait(group, title: str, transient: float,
+                   rate_bound: float | None = None) -> bytes:
     """Fig. 8 analogue, with the reference's own orbit, the phase claim's band (the
-    reference's rate ± ``rate_bound`` × its peak) and the paper's ±1.2 rad/s."""
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4.4), layout="constrained")
-    for run, res in group:
-        for j in (0, 1):
-            st = PLANT_STYLE.get(run.role, {})
-            axes[j].plot(res[f"theta{j + 1}"], res[f"theta{j + 1}_dot"],
-                         label=run.plant_label, **st)
+    reference's rate ± ``rate_bound`` × its peak) and the paper's ±1.2 rad/s.  The
+    y-range is the orbit's after ``transient`` (a start-up beyond it is named, not
+    drawn to scale); a rate that chatters (its band within a pixel column wider than a
+    quarter of the reference's peak rate, after the transient) is drawn as its mean per
+    pixel column with the band light behind it, the y-range at most 3× the orbit's and
+    the chatter's extent named."""
+    fig, axes = plt.subplots(1, 2, figsize=(7, 3.5), layout="constrained")
     ref = group[0][1]
-    for j in (0, 1):
-        th, dth = ref[f"theta{j + 1}_ref"], ref[f"theta{j + 1}_dot_ref"].astype(float)
-        axes[j].plot(th, dth, color="k", lw=0.6, ls=":", label="reference orbit", zorder=4)
+    for j, ax in enumerate(axes):
+        name = f"θ̇{j + 1}".translate(SUB)
+        th_ref, w_ref = ref[f"theta{j + 1}_ref"], ref[f"theta{j + 1}_dot_ref"].astype(float)
+        peak = float(np.max(np.abs(w_ref))) or 1.0
+        lo, hi, notes = -peak, peak, []
+        for run, res in group:
+            st = PLANT_STYLE.get(run.role, {})
+            th, w = res[f"theta{j + 1}"].astype(float), res[f"theta{j + 1}_dot"].astype(float)
+            late = res.time >= transient
+            columns = 4 * pixel_columns(ax)
+            band = None
+            if late.sum() > 2 * columns:
+                band = envelope(res.time[late], w[late], columns)
+            if band is not None and np.median(band[2] - band[1]) > 0.25 * peak:  # chatter
+                _, w_lo, w_hi, w_mean = band
+                th_mean = envelope(res.time[late], th[late], columns)[3]
+                ax.vlines(th_mean, w_lo, w_hi, color=st.get("color"), alpha=0.12, lw=0.5)
+                ax.plot(th_mean, w_mean, label=f"{run.plant_label}: mean, chatter as a band",
+                        **st)
+                # the band joins the y-range up to 3× the orbit's: beyond, it is named
+                lo = min(lo, max(float(np.percentile(w_lo, 5)), -3 * peak))
+                hi = max(hi, min(float(np.percentile(w_hi, 95)), 3 * peak))
+                notes.append(f"{run.role}: {name} chatters over {w[late].min():.3g}…"
+                             f"{w[late].max():.3g} rad/s")
+            else:
+                ax.plot(th, w, label=run.plant_label, **st)
+                if late.any():
+                    lo, hi = min(lo, float(w[late].min())), max(hi, float(w[late].max()))
+            early = w[~late]
+            if early.size and (early.min() < lo - 0.5 * peak or early.max() > hi + 0.5 * peak):
+                notes.append(f"{run.role}: start-up reaches {early.min():.3g}…{early.max():.3g} "
+                             "rad/s")
+        ax.plot(th_ref, w_ref, color="k", lw=0.6, ls=":", label="reference orbit", zorder=4)
         if rate_bound is not None:
-            band = rate_bound * float(np.max(np.abs(dth)))
+            band = rate_bound * peak
             for sign in (1, -1):
-                axes[j].plot(th, dth + sign * band, label=f"phase bound: reference ± "
-                             f"{100 * rate_bound:g} % of its peak rate" if sign > 0 else None,
-                             **BOUND_STYLE)
-        axes[j].set_xlabel(f"θ{j + 1} [rad]".translate(SUB))
-        axes[j].set_ylabel(f"θ̇{j + 1} [rad/s]".translate(SUB))
+                ax.plot(th_ref, w_ref + sign * band, label=f"phase bound: reference ± "
+                        f"{100 * rate_bound:g} % of its peak rate" if sign > 0 else None,
+                        **BOUND_STYLE)
+        ax.set_xlabel(f"θ{j + 1} [rad]".translate(SUB))
+        ax.set_ylabel(f"{name} [rad/s]")
         for y in (1.2, -1.2):
-            axes[j].axhline(y, color="grey", lw=0.5, ls=":",
-                            label="the paper's ±1.2 rad/s" if y > 0 else None)
+            ax.axhline(y, color="grey", lw=0.5, ls=":",
+                       label="the paper's ±1.2 rad/s" if y > 0 else None)
+        pad = 0.15 * (hi - lo)
+        ax.set_ylim(min(lo, -1.2) - pad, max(hi, 1.2) + pad)
+        if notes:
+            ax.text(0.01, 0.99, "\n".join(notes), transform=ax.transAxes, va="top",
+                    fontsize=7, color="0.25")
     figure_legend(fig, axes)
-    figure_title(fig, f"{title}: phase portrait (cf. Fig. 8)")
+    figure_title(fig, f"{title}: phase portrait (cf. Fig. 8), y-range after the "
+                      f"{transient:g} s transient")
     return png(fig)
 
 
@@ -229,9 +267,7 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str | 
     ok = [(r, res) for r, res in group if res.time.size > 1]
     if not ok:
         return None
-    typical = max(float(np.percentile(np.abs(res.select(["tip_defl1", "tip_defl2"]).astype(float)), 95))
-                  for _, res in ok)
-    magnify = float(max(1, round(0.1 * params.L1 / max(typical, 1e-9))))
+    magnify = _magnification(ok, params)
     t_end = max(res.time[-1] for _, res in ok)
     frames = np.arange(0.0, t_end, 1.0 / fps * 2)  # 2 s of motion per second of GIF
     fig, ax = plt.subplots(figsize=(5, 5.6), layout="constrained", dpi=80)
@@ -249,22 +285,10 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str | 
                     animated=True)
     ax.set_title(f"{textwrap.fill(title, 70)}\ndeflection ×{magnify:g}", fontsize=8)
     fig.legend(loc="outside lower center", fontsize=7, ncol=3)
-    n1 = model.modes_per_link[0]
-    x1, x2 = np.linspace(0, params.L1, 15), np.linspace(0, params.L2, 15)
-    m1, m2 = model.mode_shapes
-    phi1, phi2, slope = m1.phi(x1).T, m2.phi(x2).T, m1.tip_values[1]
+    shape = _arm_shape(params, model, magnify)
     states = [(res.time, res.select(coords).astype(float)) for _, res in ok]
     longest = max((res for _, res in ok), key=lambda r: r.time.size)
     reference = (longest.time, longest.select(["theta1_ref", "theta2_ref"]).astype(float))
-
-    def sample(time, values, t):
-        return values[:, min(int(round(t / (time[1] - time[0]))), time.size - 1)]
-
-    def shape(Q):
-        w1, w2 = magnify * (phi1 @ Q[2:2 + n1]), magnify * (phi2 @ Q[2 + n1:])
-        z1 = np.exp(1j * Q[0]) * (x1 + 1j * w1)
-        z2 = z1[-1] + np.exp(1j * (Q[0] + Q[1] + magnify * (slope @ Q[2:2 + n1]))) * (x2 + 1j * w2)
-        return np.concatenate([[0], z1, z2])
 
     fig.canvas.draw()  # the static parts, laid out once
     fig.set_layout_engine("none")
@@ -273,9 +297,9 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str | 
     for t in frames:
         fig.canvas.restore_region(background)
         for line, (time, values) in zip(lines, states):
-            z = shape(sample(time, values, t))
+            z = shape(_sample(time, values, t))
             line.set_data(z.real, z.imag)
-        th = sample(*reference, t)
+        th = _sample(*reference, t)
         zr = np.cumsum([0, params.L1 * np.exp(1j * th[0]), params.L2 * np.exp(1j * th.sum())])
         ref_line.set_data(zr.real, zr.imag)
         clock.set_text(f"t = {t:4.1f} s")
@@ -290,3 +314,60 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str | 
                  binary=True)
     return (f"{title}: arm motion over the whole {t_end:.0f} s run (2× speed), truth and "
             f"reduced plant, deflection ×{magnify:g}")
+
+
+def _magnification(ok, params) -> float:
+    """How much the deflections are magnified to be seen: to a tenth of link 1 (95th
+    percentile of the tips' deflections)."""
+    typical = max(float(np.percentile(np.abs(res.select(["tip_defl1", "tip_defl2"])
+                                             .astype(float)), 95)) for _, res in ok)
+    return float(max(1, round(0.1 * params.L1 / max(typical, 1e-9))))
+
+
+def _sample(time, values, t):
+    """The column of ``values`` at the sample nearest to ``t``."""
+    return values[:, min(int(round(t / (time[1] - time[0]))), time.size - 1)]
+
+
+def _arm_shape(params, model, magnify: float):
+    """``shape(Q)``: the arm's centre line at the coordinates Q as complex points (x + iy),
+    the deflections (assumed modes) magnified ``magnify`` times."""
+    n1 = model.modes_per_link[0]
+    x1, x2 = np.linspace(0, params.L1, 15), np.linspace(0, params.L2, 15)
+    m1, m2 = model.mode_shapes
+    phi1, phi2, slope = m1.phi(x1).T, m2.phi(x2).T, m1.tip_values[1]
+
+    def shape(Q):
+        w1, w2 = magnify * (phi1 @ Q[2:2 + n1]), magnify * (phi2 @ Q[2 + n1:])
+        z1 = np.exp(1j * Q[0]) * (x1 + 1j * w1)
+        z2 = z1[-1] + np.exp(1j * (Q[0] + Q[1] + magnify * (slope @ Q[2:2 + n1]))) * (x2 + 1j * w2)
+        return np.concatenate([[0], z1, z2])
+    return shape
+
+
+def arm_snapshots(group, params, model, title: str, *, count: int = 9) -> bytes | None:
+    """The animation's still for print: the arm at ``count`` instants over the run, one
+    panel per plant, later instants darker, each labelled with its time at the tip, the
+    deflection magnified as in the animation (None: no run has two samples)."""
+    coords = model.coordinate_names
+    ok = [(r, res) for r, res in group if res.time.size > 1]
+    if not ok:
+        return None
+    magnify = _magnification(ok, params)
+    shape = _arm_shape(params, model, magnify)
+    reach = 1.1 * (params.L1 + params.L2)
+    fig, axes = plt.subplots(1, len(ok), figsize=(3.5 * len(ok), 3.6), squeeze=False,
+                             layout="constrained")
+    for ax, (run, res) in zip(axes[0], ok):
+        values = res.select(coords).astype(float)
+        color = PLANT_STYLE.get(run.role, {}).get("color", "k")
+        for k, t in enumerate(np.linspace(0.0, res.time[-1], count)):
+            z = shape(_sample(res.time, values, t))
+            ax.plot(z.real, z.imag, color=color, lw=1.4, alpha=0.25 + 0.75 * k / (count - 1))
+            ax.annotate(f"{t:.3g} s", (z[-1].real, z[-1].imag), fontsize=6.5,
+                        textcoords="offset points", xytext=(2, 2))
+        ax.set(xlim=(-reach, reach), ylim=(-reach, reach), aspect="equal", xlabel="x [m]",
+               ylabel="y [m]", title=run.plant_label)
+    figure_title(fig, f"{title}: the arm at {count} instants (later: darker), deflection "
+                      f"×{magnify:g}", fontsize=9)
+    return png(fig)

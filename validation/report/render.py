@@ -10,7 +10,8 @@ import math
 
 import jinja2
 
-__all__ = ["environment", "render", "fmt_number", "md_cell", "display_unit"]
+__all__ = ["environment", "render", "fmt_number", "md_cell", "display_unit", "folded",
+           "folded_text", "FOLD_AT"]
 
 #: SI unit → (factor, unit) a reader expects for the small values a report shows.
 _DISPLAY = {"rad": (1e3, "mrad"), "m": (1e3, "mm"), "rad/s": (1e3, "mrad/s"),
@@ -36,8 +37,41 @@ def fmt_number(value, digits: int = 3) -> str:
     return f"{value:.{digits}g}"
 
 
+#: A detail longer than this [characters] is folded away in the HTML report (a cell's
+#: list of numbers: every mesh's value, the vibration per window).
+FOLD_AT = 60
+
+
+def folded(text: str, detail: str):
+    """A table cell: ``text`` with ``detail`` in brackets, or, if the detail is longer than
+    `FOLD_AT`, ``{"text", "detail", "full"}``: the HTML report shows the detail on demand,
+    the markdown the ``full`` text."""
+    if not detail:
+        return text
+    full = f"{text} ({detail})"
+    return full if len(detail) <= FOLD_AT else {"text": text, "detail": detail, "full": full}
+
+
+def folded_text(text: str):
+    """`folded` of a sentence longer than `FOLD_AT`, split at its first ": ", " against "
+    or " (": "converged against ANCF 8 el/link, …" → "converged" + "against ANCF 8 …"."""
+    if len(text) <= FOLD_AT:
+        return text
+    cuts = [(text.find(sep), sep) for sep in (": ", " against ", " (") if sep in text]
+    if not cuts:
+        return text
+    at, sep = min(cuts)
+    detail = text[at:].removeprefix(": ").strip()
+    if sep == " (" and detail.startswith("(") and detail.endswith(")"):
+        detail = detail[1:-1]
+    return {"text": text[:at], "detail": detail, "full": text}
+
+
 def md_cell(value) -> str:
-    """Text safe inside a markdown table cell: pipes escaped, no line breaks."""
+    """Text safe inside a markdown table cell: pipes escaped, no line breaks; a `folded`
+    cell with its detail in brackets."""
+    if isinstance(value, dict):
+        value = value["full"]
     text = fmt_number(value) if isinstance(value, float) else str(value)
     return text.replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ").replace("\r", " ")
 

@@ -26,6 +26,7 @@ import functools
 import hashlib
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,7 +38,7 @@ from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
 from .drawing import draw_all
 from ..batch.fingerprint import run_fingerprint
-from .render import fmt_number, render
+from .render import fmt_number, folded, folded_text, render
 from .calibration import calibration_section
 from .robust import robust_section
 from ..run.results import own_folder, write_atomic
@@ -98,7 +99,7 @@ class ReportData:
 
 
 def _table(head: list[str], rows: list[list], classes: list[str] | None = None) -> dict:
-    cells = [[c if isinstance(c, str) else fmt_number(c) for c in row] for row in rows]
+    cells = [[c if isinstance(c, (str, dict)) else fmt_number(c) for c in row] for row in rows]
     return {"head": head, "rows": cells, "classes": classes or [""] * len(rows)}
 
 
@@ -232,7 +233,7 @@ def _mesh_table(runs) -> dict | None:
         verdict = ("not converged" if moved else "check not run" if missing else
                    "converged" if run.status == "ok" else f"{run.status} in every check")
         compact.append([*_identity(run)[:2], *_identity(run)[3:], _swept(run), verdict,
-                        "; ".join(moved) or "—"])
+                        folded(f"{len(moved)} value(s)", "; ".join(moved)) if moved else "—"])
         classes.append("fails" if moved else "" if missing else "holds")
     head = ["name", "arm", "Ts [ms]", "start", "swept values"]
     return {"compact": _table(head + ["verdict", f"moved ({', '.join(labels)})"], compact,
@@ -349,7 +350,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                 animation_path: Path | None = None) -> ReportData:
     """Everything the report shows, as data (figures as PNG bytes)."""
     from ..verdicts.claims import CLAIMS, claim_columns
-    from .summary import NOTE_MEANING, pairs_table, summary_view
+    from .summary import NOTE_MEANING, pairs_table, verdict_counts
     from .verdict_tables import claims_tables
     store = ResultStore(results_dir)
     all_rows, runs, warnings, evaluations = _included(store)
@@ -373,7 +374,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     columns = claim_columns(runs + checks)
     data.mesh = _mesh_table(runs + checks)
     if columns:
-        data.summary = summary_view(columns)
+        data.summary = verdict_counts(columns)
         data.claims = claims_tables(columns)
         data.claims_criteria = [{"text": c.text, "criterion": c.criterion,
                                  "bound": f"{fmt_number(c.bound)} {c.unit}",
@@ -393,8 +394,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                  "keeps tracking up to [ms]", "first loss [ms]", "predicted [ms]",
                  "monotone?", "mesh and step", "why the first bad one is"],
                 [[r["case"], r["plant"], r["arm"], r["no_divergence"], r["first_divergence"],
-                  r["tracking"], r["first_loss"], r["predicted"], r["notes"], r["mesh"],
-                  r["reason"]] for r in rows],
+                  r["tracking"], r["first_loss"], r["predicted"], folded_text(r["notes"]),
+                  folded_text(r["mesh"]), folded_text(r["reason"])] for r in rows],
                 ["failed" if "FAILED" in r["notes"] else "" for r in rows])}
             tasks.append(("Stability map", "sampled-data stability map: tested control periods "
                           "per case, plant and arm", lambda: stability_chart(results)))
@@ -454,7 +455,9 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         items = made if isinstance(made, list) else [(caption, made)]
         data.figures += [Figure(section, c, p) for c, p in items]
     if len(drawn) > len(tasks) and drawn[-1] is not None:
-        data.animation = {"caption": drawn[-1], "file": animation_path.name}
+        caption, poster = drawn[-1]
+        data.animation = {"caption": caption, "file": animation_path.name,
+                          "poster": Figure("Animation", caption, poster)}
     return data
 
 
@@ -463,12 +466,15 @@ def _loaded(group):
 
 
 def _title(group) -> str:
+    """What a group of runs is: its name(s), arm, Ts, start and swept values, then the
+    runs of it that did not complete, after " — " (a figure's file name stops there)."""
     head = next(r for r in group if r.status == "ok")
     swept = _swept(head)
     names = " / ".join(dict.fromkeys(r.name for r in group))
-    return f"{names} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})" + "".join(
-        f"; {r.plant_label} {r.status.upper()}: {r.message}"
-        for r in group if r.status != "ok")
+    stopped = "; ".join(f"{r.plant_label} {r.status.upper()}: {r.message}"
+                        for r in group if r.status != "ok")
+    return f"{names} ({fig.describe_run(head.config)}{'; ' + swept if swept else ''})" + (
+        f" — {stopped}" if stopped else "")
 
 
 def paper_figure_tasks(group, bounds: dict | None = None) -> list:
@@ -488,29 +494,80 @@ def paper_figure_tasks(group, bounds: dict | None = None) -> list:
         if "r" not in cache:
             cache["r"] = _loaded(group)
         return cache["r"]
-    tasks = [("Paper figures", f"{title}: joint tracking (Fig. 3)",
+    what, _, stopped = title.partition(" — ")
+
+    def caption(figure: str) -> str:  # what was run, the figure, then what did not complete
+        return f"{what}: {figure}" + (f" — {stopped}" if stopped else "")
+    tasks = [("Paper figures", caption("joint tracking (Fig. 3)"),
               lambda: fig.tracking(results(), title, transient, bounds.get("tracking"))),
-             ("Paper figures", f"{title}: tip deflections and vibration (Fig. 4)",
+             ("Paper figures", caption("tip deflections and vibration (Fig. 4)"),
               lambda: fig.deflections(results(), title, transient, cutoff,
                                       bounds.get("vibration")))]
     if head.config["observer"]["kind"] != "none":
-        tasks += [("Paper figures", f"{title}: true vs estimated rates (Figs. 5–6)",
+        tasks += [("Paper figures", caption("true vs estimated rates (Figs. 5–6)"),
                    lambda: fig.rates(results(), title, transient)),
-                  ("Paper figures", f"{title}: estimation errors (Fig. 7)",
+                  ("Paper figures", caption("estimation errors (Fig. 7)"),
                    lambda: fig.estimation_errors(results(), title, transient,
                                                  bounds.get("estimation")))]
-    tasks.append(("Paper figures", f"{title}: phase portrait (Fig. 8)",
-                  lambda: fig.phase_portrait(results(), title, bounds.get("phase_portrait"))))
+    tasks.append(("Paper figures", caption("phase portrait (Fig. 8)"),
+                  lambda: fig.phase_portrait(results(), title, transient,
+                                             bounds.get("phase_portrait"))))
     return tasks
 
 
-def _animation(group, path: Path) -> str:
+def _animation(group, path: Path) -> tuple[str, bytes] | None:
+    """The GIF of a group written to ``path`` and its still for print: (caption, PNG);
+    None when no run moves (one sample)."""
     from ..run.laws import nominal_model
     head = group[0]
     params = ArmParameters.from_mapping(head.config["nominal_params"])
     model = nominal_model(params, tuple(head.config["model"]["modes_per_link"]))
-    return fig.animation(_loaded([r for r in group if r.status == "ok"]), params, model,
-                         _title(group), path)
+    loaded = _loaded([r for r in group if r.status == "ok"])
+    caption = fig.animation(loaded, params, model, _title(group), path)
+    if caption is None:
+        return None
+    return caption, fig.arm_snapshots(loaded, params, model, _title(group))
+
+
+# --- the pages ------------------------------------------------------------------------------
+#: The figure sections, in the order the report shows them.
+SECTIONS = ["Stability map", "Attribution", "Paper figures", "Sweeps",
+            "Validity of the reduced model"]
+
+
+def file_stem(caption: str, taken: set[str]) -> str:
+    """A figure's file name from what it shows (its caption up to " — ", where what did not
+    complete starts), e.g. "pbc+smo-paper-default-arm-ts-1-ms-from-rest-joint-tracking-
+    fig-3": ASCII, at most 140 characters, unique among ``taken``, which it joins."""
+    what = caption.partition(" — ")[0].lower().replace("paper/", "", 1)
+    text = re.sub(r"\.(?!\d)", " ", what)  # "fig. 3" → "fig 3", "0.2" kept
+    stem = re.sub(r"-+", "-", re.sub(r"[^a-z0-9+.]+", "-", text)).strip("-.")
+    stem = (stem[:140].rsplit("-", 1)[0] if len(stem) > 140 else stem) or "figure"
+    name, k = stem, 2
+    while name in taken:
+        name, k = f"{stem}-{k}", k + 1
+    taken.add(name)
+    return name
+
+
+def contents(data: ReportData) -> list[tuple[str, str]]:
+    """(anchor, title) of each section the report has, for its table of contents."""
+    has = {s: any(f.section == s for f in data.figures) for s in SECTIONS}
+    present = [("summary", "Summary", data.summary or data.pairs),
+               ("claims", "The paper's claims", data.claims),
+               ("mesh", "Mesh and time-step convergence", data.mesh),
+               ("stability", "Stability map", data.stability),
+               ("attribution", "Attribution", data.attribution),
+               ("robust", "Robust verdicts", data.robust),
+               ("calibration", "Calibration", data.calibration),
+               ("estimation", "Estimation against the measurement", data.estimation),
+               ("runs", "Runs and metrics", data.runs),
+               ("paper-figures", "Paper figures", has["Paper figures"]),
+               ("sweeps", "Sweeps", has["Sweeps"]),
+               ("validity", "Validity of the reduced model",
+                has["Validity of the reduced model"]),
+               ("animation", "Animation", data.animation)]
+    return [(anchor, title) for anchor, title, shown in present if shown]
 
 
 # --- the content key -------------------------------------------------------------------------
@@ -585,19 +642,19 @@ def write_report(results_dir, *, animate: bool = True, progress: bool = True,
         raise StoreError(f"{out}: cannot write the report ({exc.strerror or exc})") from None
     data = report_data(results_dir, animate=animate, progress=progress,
                        animation_path=out / "arm.gif")
-    for old in (out / "figures").glob("fig*.png"):
+    for old in (out / "figures").glob("*.png"):  # the report's own folder (own_folder)
         old.unlink()
-    for i, f in enumerate(data.figures):
-        f.file = f"figures/fig{i:02d}.png"
+    poster = [data.animation["poster"]] if data.animation else []
+    names: set[str] = set()
+    for f in data.figures + poster:
+        f.file = f"figures/{file_stem(f.caption, names)}.png"
         (out / f.file).write_bytes(f.png)
-    sections = ["Stability map", "Attribution", "Paper figures", "Sweeps",
-                "Validity of the reduced model"]
     gif = None
     if data.animation:
         gif = "data:image/gif;base64," + base64.b64encode((out / "arm.gif").read_bytes()).decode()
-    page = render("report.html.j2", d=data, sections=sections, gif=gif)
+    page = render("report.html.j2", d=data, sections=SECTIONS, toc=contents(data), gif=gif)
     write_atomic(html_path, lambda fh: fh.write(page))
-    text = render("report.md.j2", d=data, sections=sections)
+    text = render("report.md.j2", d=data, sections=SECTIONS)
     write_atomic(md_path, lambda fh: fh.write(text))
     write_atomic(key_path, lambda fh: fh.write(key + "\n"))
     return html_path, md_path

@@ -36,7 +36,8 @@ def show_run(row) -> tuple[Path, list[Path], str]:
     folder = own_folder(store.out, "show", row.run_id)
     files, figures = [], []
     for _, caption, draw in paper_figure_tasks(group, claim_bounds()):
-        name = next(v for k, v in _FILES.items() if caption.endswith(k)) + ".png"
+        name = next(v for k, v in _FILES.items()
+                    if caption.partition(" — ")[0].endswith(k)) + ".png"
         data = draw()
         write_atomic(folder / name, lambda fh, data=data: fh.write(data), binary=True)
         files.append(folder / name)

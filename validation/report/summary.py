@@ -1,6 +1,7 @@
-"""The report's summary and claims tables, from the reader's side: each claim with its
-margin to the bound and the truth plant's difference from the reduced one (the
-toolkit's central question), values in the units a reader expects (mrad, mm).
+"""The report's summary and claims cells, from the reader's side: each claim with its
+margin to the bound, the verdicts counted at a glance, and the truth plant's difference
+from the reduced one (the toolkit's central question), values in the units a reader
+expects (mrad, mm).
 
 The verdicts themselves come from `validation.verdicts.claims`; this module only says
 them.  Margin = 1 − value/bound: positive when the claim holds (the share of the bound
@@ -12,11 +13,12 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 
 from .render import display_unit, fmt_number
 
-__all__ = ["verdict_text", "value_text", "summary_view", "pairs_table", "NOTE_MEANING",
-           "margin"]
+__all__ = ["verdict_text", "verdict_parts", "value_text", "verdict_counts", "counted",
+           "pairs_table", "NOTE_MEANING", "margin", "VERDICT_ORDER"]
 
 #: What the note in brackets after a verdict says, per claim.
 NOTE_MEANING = {
@@ -65,63 +67,49 @@ def _times(ratio: float) -> str:
     return f"{ratio:.2g}×" if ratio < 10 else f"{ratio:.0f}×"
 
 
-def verdict_text(claim, v) -> str:
-    """"9.63 mrad — holds, margin +52 % (link 2)", or what happened instead.  A value
-    without a verdict (window-sensitive, mesh not checked) has no margin; a truth-plant
-    value that moved with the mesh is not given at all, only every mesh's."""
+def verdict_parts(claim, v) -> tuple[str, str]:
+    """(verdict, note): "9.63 mrad — holds, margin +52 %" and "link 2", or what happened
+    instead.  A value without a verdict (window-sensitive, mesh not checked) has no
+    margin; a truth-plant value that moved with the mesh is not given at all, only every
+    mesh's (the note)."""
     if v.verdict in ("diverged", "failed"):
-        return f"— ({v.verdict})"
-    if v.verdict in ("not run", "n/a"):
-        return v.verdict + (f" ({v.note})" if v.note else "")
-    if v.verdict == "not converged":
-        return f"not converged ({v.note})"
+        return f"— ({v.verdict})", ""
+    if v.verdict in ("not run", "n/a", "not converged"):
+        return v.verdict, v.note
     text = f"{value_text(claim, v.value, v.error)} — {v.verdict}"
     if v.verdict in ("holds", "fails") and _margin_text(claim, v.value):
         text += f", {_margin_text(claim, v.value)}"
-    return text + (f" ({v.note})" if v.note else "")
+    return text, v.note
 
 
-def summary_view(columns) -> list[dict]:
-    """Per arm, one column per (Ts, initial condition), one row per claim.  A cell says
-    the truth plant's verdict with its margin (the reduced plant's where there is no
-    truth run), then the other plant's value and Δ = (truth − reduced)/|reduced|."""
+def verdict_text(claim, v) -> str:
+    """`verdict_parts` in one line: "9.63 mrad — holds, margin +52 % (link 2)"."""
+    text, note = verdict_parts(claim, v)
+    return text + (f" ({note})" if note else "")
+
+
+#: Verdicts in the order a count lists them.
+VERDICT_ORDER = ("holds", "fails", "window-sensitive", "not converged", "mesh not checked",
+                 "diverged", "failed", "not run", "n/a")
+
+
+def counted(verdicts) -> str:
+    """"3 holds, 1 fails, 2 diverged": each verdict with how often it occurs."""
+    counts = Counter(verdicts)
+    order = [v for v in VERDICT_ORDER if v in counts] + sorted(set(counts) - set(VERDICT_ORDER))
+    return ", ".join(f"{counts[v]} {v}" for v in order)
+
+
+def verdict_counts(columns) -> dict:
+    """The claims at a glance: per claim and arm, its verdicts over the arm's columns
+    counted ("3 holds, 1 diverged"), and how many columns each arm has."""
     from ..verdicts.claims import CLAIMS
-    tables = []
-    for arm in dict.fromkeys(c.arm for c in columns):
-        pairs: dict[tuple, dict] = {}
-        for c in columns:
-            if c.arm == arm:
-                _, _, Ts, start = c.key
-                role = next(iter(c.runs.values())).role
-                pairs.setdefault((Ts, start), {})[role] = c
-        heads = [f"Ts = {1e3 * Ts:g} ms, {'from rest' if start == 'rest' else 'moving'}"
-                 for Ts, start in pairs]
-        rows = []
-        for claim in CLAIMS:
-            cells, classes = [], []
-            for plants in pairs.values():
-                lines, verdict = _summary_cell(claim, plants)
-                cells.append(lines)
-                classes.append(verdict)
-            rows.append({"claim": claim.text, "bound": value_text(claim, claim.bound),
-                         "cells": cells, "verdicts": classes})
-        tables.append({"arm": arm, "columns": heads, "rows": rows})
-    return tables
-
-
-def _summary_cell(claim, plants: dict) -> tuple[list[str], str]:
-    first = "truth" if "truth" in plants else next(iter(plants))
-    v = plants[first].verdicts[claim.key]
-    lines = [f"{first}: {_short_verdict(claim, v)}"]
-    other = next((p for p in plants if p != first), None)
-    if other is not None:
-        w = plants[other].verdicts[claim.key]
-        line = f"{other}: {_short_verdict(claim, w)}"
-        truth, reduced = (v, w) if first == "truth" else (w, v)
-        if _finite(truth.value) and _finite(reduced.value) and reduced.value != 0:
-            line += f"; {_delta(truth.value, reduced.value)}"
-        lines.append(line)
-    return lines, v.verdict
+    arms = list(dict.fromkeys(c.arm for c in columns))
+    rows = [{"claim": claim.text,
+             "cells": [counted(c.verdicts[claim.key].verdict for c in columns if c.arm == arm)
+                       for arm in arms]} for claim in CLAIMS]
+    return {"arms": [f"{arm} arm ({sum(c.arm == arm for c in columns)} columns)"
+                     for arm in arms], "rows": rows}
 
 
 def _delta(truth: float, reduced: float) -> str:
@@ -130,16 +118,6 @@ def _delta(truth: float, reduced: float) -> str:
     if abs(delta) < 10:
         return f"Δ {_percent(delta)}"
     return f"truth = {_times(truth / reduced)} reduced"
-
-
-def _finite(x) -> bool:
-    return isinstance(x, float) and math.isfinite(x)
-
-
-def _short_verdict(claim, v) -> str:
-    if v.verdict in ("diverged", "failed"):
-        return v.verdict.upper()
-    return verdict_text(claim, v)
 
 
 #: (metric keys whose largest value is shown, name, SI unit) of the reduced-vs-truth table.

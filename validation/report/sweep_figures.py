@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import textwrap
 
 from .figures import BOUND_STYLE, figure_title, plt, png
 
@@ -107,7 +108,7 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
     # A row of the strip per series with a run that diverged or failed, named.
     bad_rows = [k for k in keys if any(r.status != "ok" for r in series[k])]
     any_bad = bool(bad_rows)
-    fig = plt.figure(figsize=(3.9 * len(metrics) + 2.8, 4.0 + 0.2 * len(bad_rows)),
+    fig = plt.figure(figsize=(2.6 * len(metrics) + 2.8, 3.6 + 0.2 * len(bad_rows)),
                      layout="constrained")
     grid = fig.add_gridspec(2 if any_bad else 1, len(metrics),
                             height_ratios=[0.4 + 0.6 * len(bad_rows), 7] if any_bad else [1])
@@ -152,10 +153,8 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
                 ax.set_ylim(lo, hi)
                 ax.text(0.99, 0.97, f"bound {factor * bound:g} {unit}: above", ha="right",
                         va="top", transform=ax.transAxes, fontsize=7, color="crimson")
-        ax.set_title(f"{title} [{unit}]", fontsize=9)
-        zipped = [a for a in group if a != label_axis]
-        ax.set_xlabel(axis_label(label_axis) + (f"\n(zipped with {', '.join(zipped)})"
-                                                if zipped else ""), fontsize=8)
+        heading = textwrap.fill(f"{title} [{unit}]", 30)
+        ax.set_title(heading, fontsize=9)
         if numeric:
             lo = min(json.loads(x)[0] for x in xs) * scale
             hi = max(json.loads(x)[0] for x in xs) * scale
@@ -165,7 +164,7 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
             ax.set_xticks(range(len(xs)))
             idx = group.index(label_axis)
             ax.set_xticklabels([short_value(json.loads(x)[idx]).split("/")[-1] for x in xs],
-                               rotation=30, ha="right", fontsize=7)
+                               rotation=60, ha="right", fontsize=7)
         ax.tick_params(labelsize=7)
         if strip is not None:
             strip.set_ylim(len(bad_rows) - 0.4, -0.6)
@@ -173,8 +172,11 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
             strip.set_yticklabels([_series_label(k) for k in bad_rows] if col == 0 else [],
                                   fontsize=7, color="crimson")
             strip.tick_params(labelbottom=False, labelsize=7, left=False)
-            strip.set_title(f"{title} [{unit}]", fontsize=9)
+            strip.set_title(heading, fontsize=9)
             ax.set_title("")
+    zipped = [a for a in group if a != label_axis]
+    fig.supxlabel(axis_label(label_axis) + (f" (zipped with {', '.join(zipped)})"
+                                            if zipped else ""), fontsize=8)
     handles, labels = legend_from.get_legend_handles_labels()
     if any_bad:
         handles.append(plt.Line2D([], [], ls="none", marker="x", color="crimson", mew=2))

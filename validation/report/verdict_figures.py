@@ -17,7 +17,7 @@ def validity_map(params, modes: tuple[int, int], arm_text: str) -> bytes:
     from reduced_model import ArmModel
     theta2 = np.linspace(0.0, np.pi, 13)
     model = ArmModel(params, modes)
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.4), sharex=True, layout="constrained")
+    fig, axes = plt.subplots(2, 2, figsize=(7, 4.8), sharex=True, layout="constrained")
     for col, joints in enumerate(("locked", "free")):
         red, fe = [], []
         for t2 in theta2:
@@ -48,37 +48,43 @@ def validity_map(params, modes: tuple[int, int], arm_text: str) -> bytes:
 def stability_chart(results) -> bytes:
     """Tested Ts per case by outcome (stable, lost tracking, diverged, failed), the largest
     Ts with no divergence and the largest that keeps tracking (bars), and the predicted
-    limit (grey diamond)."""
+    limit (grey diamond); a panel per arm, side by side (legible on a printed page)."""
     style = {"stable": ("o", "seagreen", 5), "lost tracking": ("^", "darkorange", 6),
              "diverged": ("x", "crimson", 7), "failed": ("s", "k", 6)}
-    fig, ax = plt.subplots(figsize=(9, 0.32 * len(results) + 1.8), layout="constrained")
-    labels = []
-    for i, r in enumerate(results):
-        labels.append(f"{r.case.label} · {r.case.plant} · {r.case.arm}")
-        for Ts, (outcome, _) in r.tested.items():
-            marker, color, size = style[outcome]
-            ax.plot(1e3 * Ts, i, marker, color=color, ms=size, mew=2,
-                    mfc="none" if outcome == "failed" else color)
-        # The longer black bar stays visible where both limits coincide.
-        for limit, color, half in ((r.divergence, "k", 0.42), (r.tracking, "darkorange", 0.25)):
-            if not math.isnan(limit.largest):
-                ax.plot([1e3 * limit.largest] * 2, [i - half, i + half], color=color, lw=2)
-        if math.isfinite(r.predicted):
-            ax.plot(1e3 * r.predicted, i, "D", color="0.5", ms=5, mfc="none")
-    ax.set_yticks(range(len(results)))
-    ax.set_yticklabels(labels, fontsize=7)
-    ax.set_ylim(len(results) - 0.5, -0.5)
-    ax.set_xscale("log")
-    ax.set_xlabel("control period Ts [ms]")
-    ax.axvline(1.0, color="grey", lw=0.5, ls=":")
+    arms = list(dict.fromkeys(r.case.arm for r in results))
+    rows = max(sum(r.case.arm == arm for r in results) for arm in arms)
+    fig, axes = plt.subplots(1, len(arms), figsize=(5.5 * len(arms), 0.3 * rows + 1.6),
+                             sharex=True, squeeze=False, layout="constrained")
+    for ax, arm in zip(axes[0], arms):
+        cases = [r for r in results if r.case.arm == arm]
+        for i, r in enumerate(cases):
+            for Ts, (outcome, _) in r.tested.items():
+                marker, color, size = style[outcome]
+                ax.plot(1e3 * Ts, i, marker, color=color, ms=size, mew=2,
+                        mfc="none" if outcome == "failed" else color)
+            # The longer black bar stays visible where both limits coincide.
+            for limit, color, half in ((r.divergence, "k", 0.42),
+                                       (r.tracking, "darkorange", 0.25)):
+                if not math.isnan(limit.largest):
+                    ax.plot([1e3 * limit.largest] * 2, [i - half, i + half], color=color, lw=2)
+            if math.isfinite(r.predicted):
+                ax.plot(1e3 * r.predicted, i, "D", color="0.5", ms=5, mfc="none")
+        ax.set_yticks(range(len(cases)))
+        ax.set_yticklabels([f"{r.case.label} · {r.case.plant}" for r in cases], fontsize=8)
+        ax.set_ylim(rows - 0.5, -0.5)
+        ax.set_xscale("log")
+        ax.set_xlabel("control period Ts [ms]")
+        ax.set_title(f"{arm} arm", fontsize=9)
+        ax.axvline(1.0, color="grey", lw=0.5, ls=":")
     for outcome, (marker, color, size) in style.items():
-        ax.plot([], [], marker, color=color, ms=size, mew=2,
-                mfc="none" if outcome == "failed" else color, label=outcome)
-    ax.plot([], [], "|", color="k", ms=10, mew=2, label="no divergence up to")
-    ax.plot([], [], "|", color="darkorange", ms=10, mew=2, label="keeps tracking up to")
-    ax.plot([], [], "D", color="0.5", mfc="none", label="predicted (ZOH eigenvalues)")
-    fig.legend(fontsize=7, loc="outside lower center", ncol=4)
-    figure_title(fig, "sampled-data stability map (case · plant · arm; dotted: Ts = 1 ms)")
+        axes[0, 0].plot([], [], marker, color=color, ms=size, mew=2,
+                        mfc="none" if outcome == "failed" else color, label=outcome)
+    axes[0, 0].plot([], [], "|", color="k", ms=10, mew=2, label="no divergence up to")
+    axes[0, 0].plot([], [], "|", color="darkorange", ms=10, mew=2, label="keeps tracking up to")
+    axes[0, 0].plot([], [], "D", color="0.5", mfc="none", label="predicted (ZOH eigenvalues)")
+    fig.legend(fontsize=8, loc="outside lower center", ncol=4)
+    figure_title(fig, "sampled-data stability map (case · plant, a panel per arm; dotted: "
+                      "Ts = 1 ms)")
     return png(fig)
 
 

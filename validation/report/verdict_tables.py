@@ -26,8 +26,8 @@ from ..verdicts.stability import (BISECTIONS, DURATION, GRID, GROWTH_LIMIT, MAX_
                                   StabilityResult)
 from ..verdicts.validity import _GAP_VIEWS
 from .linear_figures import validity_figures
-from .render import display_unit, fmt_number, render
-from .summary import value_text, verdict_text
+from .render import display_unit, fmt_number, folded, folded_text, render
+from .summary import value_text, verdict_parts
 
 __all__ = ["write_claims", "claims_tables", "mesh_row", "mesh_status",
            "arm_notes", "run_text", "stability_rows", "write_stability", "write_attribution",
@@ -58,7 +58,8 @@ def mesh_status(run, checks: dict | None, verdicts: dict) -> str:
 
 def claims_tables(columns: list[Column]) -> list[dict]:
     """Per arm: column labels, the run row and the mesh row, one row per claim (its bound
-    and cells in the units a reader expects, with the margin: `summary.verdict_text`; the
+    and cells in the units a reader expects, with the margin: `summary.verdict_parts`,
+    a long note `folded`; the
     failure it guards against) and one per requirement — for claims.md and the report."""
     tables = []
     for arm in dict.fromkeys(c.arm for c in columns):
@@ -70,7 +71,8 @@ def claims_tables(columns: list[Column]) -> list[dict]:
                 dict(mesh_row(cols), bound="")]
         rows += [{"claim": claim.text, "key": claim.key, "bound": value_text(claim, claim.bound),
                   "guards": claim.guards,
-                  "cells": [verdict_text(claim, c.verdicts[claim.key]) for c in cols],
+                  "cells": [folded(*verdict_parts(claim, c.verdicts[claim.key]))
+                            for c in cols],
                   "verdicts": [c.verdicts[claim.key].verdict for c in cols]}
                  for claim in CLAIMS]
         rows += _requirement_rows(cols)
@@ -85,7 +87,7 @@ def mesh_row(columns: list[Column]) -> dict:
     survived the mesh refinement (cells and their verdicts)."""
     return {"claim": "truth plant under mesh and time-step refinement (closed loop)", "key": "mesh",
             "guards": "results of the FE discretisation taken for the arm's",
-            "cells": [mesh_status(c.runs[SYSTEM], c.checks.get(SYSTEM), c.verdicts)
+            "cells": [folded_text(mesh_status(c.runs[SYSTEM], c.checks.get(SYSTEM), c.verdicts))
                       if SYSTEM in c.runs else "not run" for c in columns],
             "verdicts": [_mesh_verdict(c) if SYSTEM in c.runs else "not run"
                          for c in columns]}

@@ -13,7 +13,7 @@ import textwrap
 import numpy as np
 
 __all__ = ["PLANT_STYLE", "BOUND_STYLE", "SUB", "DPI", "figure_title", "figure_legend",
-           "envelope", "trace", "plant_trace", "fit_ylim", "bound_lines", "draw_tracking",
+           "pixel_columns", "envelope", "trace", "plant_trace", "fit_ylim", "bound_lines", "draw_tracking",
            "draw_deflections", "plot_results"]
 
 #: Reduced plant wide and light underneath, truth plant thin and dark on top.
@@ -39,13 +39,14 @@ def figure_legend(fig, axes) -> None:
     for ax in np.ravel(axes):
         for h, label in zip(*ax.get_legend_handles_labels()):
             seen.setdefault(label, h)
-    if seen:
+    if seen:  # as many columns as the figure's width holds (8 pt: ~0.07 in a character)
+        fits = int(fig.get_figwidth() / (0.07 * (max(map(len, seen)) + 6)))
         fig.legend(list(seen.values()), list(seen), loc="outside lower center",
-                   ncol=min(len(seen), 4), fontsize=8)
+                   ncol=max(1, min(len(seen), 4, fits)), fontsize=8)
 
 
 # --- drawing a series -----------------------------------------------------------------------
-def _columns(ax) -> int:
+def pixel_columns(ax) -> int:
     """Pixel columns of a panel at the saved resolution (`DPI`)."""
     return max(60, int(ax.get_position().width * ax.figure.get_figwidth() * DPI))
 
@@ -64,7 +65,7 @@ def trace(ax, t, y, *, color, lw=0.8, alpha=1.0, zorder=2, label=None, ls="-"):
     """A time series: a plain line if it has at most two samples per pixel column, else
     its min/max envelope (light) and the column mean (line)."""
     y = np.asarray(y, dtype=float)
-    columns = _columns(ax)
+    columns = pixel_columns(ax)
     if t.size <= 2 * columns:
         ax.plot(t, y, color=color, lw=lw, alpha=alpha, zorder=zorder, label=label, ls=ls)
         return
@@ -94,8 +95,8 @@ def fit_ylim(ax, series, transient: float, bound: float | None = None, unit: str
         if bound <= 4 * extent:
             lo, hi = min(lo, -bound), max(hi, bound)
         else:
-            ax.text(0.99, 0.97, f"bound ±{bound:.3g} {unit}: off this scale", ha="right",
-                    va="top", transform=ax.transAxes, fontsize=7, color=BOUND_STYLE["color"])
+            ax.text(0.99, 0.97, f"bound ±{bound:.3g} {unit} off scale", ha="right",
+                    va="top", transform=ax.transAxes, fontsize=6.5, color=BOUND_STYLE["color"])
     pad = 0.08 * (hi - lo) or 1e-12
     ax.set_ylim(lo - pad, hi + pad)
 
@@ -151,11 +152,10 @@ def draw_deflections(axes, group, transient: float, cutoff_hz: float | None = No
     for j in (0, 1):
         axes[0, j].set_ylabel(f"tip deflection {j + 1} [mm]")
         if cutoff_hz:
-            axes[1, j].set_ylabel(f"vibration {j + 1} [mm]")
+            axes[1, j].set_ylabel(f"vibration {j + 1} [mm]\n(> {cutoff_hz:.2f} Hz)")
             axes[1, j].axvline(transient, color="grey", lw=0.5, ls=":")
-            limit = f"; bound {1e3 * bound:g}" if bound is not None else ""
-            axes[1, j].set_title(f"> {cutoff_hz:.2f} Hz, RMS after {transient:g} s [mm]: "
-                                 f"{', '.join(rms[j])}{limit}", fontsize="small")
+            axes[1, j].set_title(f"RMS after {transient:g} s: {', '.join(rms[j])}",
+                                 fontsize="small")
             if bound is not None:
                 bound_lines(axes[1, j], 1e3 * bound, f"vibration bound (on the RMS) "
                                                      f"±{1e3 * bound:g} mm")
