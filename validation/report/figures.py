@@ -247,9 +247,8 @@ def phase_portrait(group, title: str, transient: float,
                        label="the paper's ±1.2 rad/s" if y > 0 else None)
         pad = 0.15 * (hi - lo)
         ax.set_ylim(min(lo, -1.2) - pad, max(hi, 1.2) + pad)
-        if notes:
-            ax.text(0.01, 0.99, "\n".join(notes), transform=ax.transAxes, va="top",
-                    fontsize=7, color="0.25")
+        if notes:  # above the panel, never over the orbit
+            ax.set_title("\n".join(notes), fontsize=7, color="0.25")
     figure_legend(fig, axes)
     figure_title(fig, f"{title}: phase portrait (cf. Fig. 8), y-range after the "
                       f"{transient:g} s transient")

@@ -39,8 +39,8 @@ def figure_legend(fig, axes) -> None:
     for ax in np.ravel(axes):
         for h, label in zip(*ax.get_legend_handles_labels()):
             seen.setdefault(label, h)
-    if seen:  # as many columns as the figure's width holds (8 pt: ~0.07 in a character)
-        fits = int(fig.get_figwidth() / (0.07 * (max(map(len, seen)) + 6)))
+    if seen:  # as many columns as the figure's width holds (8 pt: ~0.06 in a character)
+        fits = int(fig.get_figwidth() / (0.06 * (max(map(len, seen)) + 6)))
         fig.legend(list(seen.values()), list(seen), loc="outside lower center",
                    ncol=max(1, min(len(seen), 4, fits)), fontsize=8)
 
