@@ -31,7 +31,7 @@ def draw_all(tasks: list, *, stores=(), progress: bool = True,
     from tqdm import tqdm
 
     from ..batch.executor import available_cores
-    from ..batch.limits import die_with_parent
+    from ..run.processes import die_with_parent
     workers = min(available_cores(), len(tasks))
     if workers < 2 or "fork" not in multiprocessing.get_all_start_methods():
         return [make() for make in tqdm(tasks, desc=label, unit="fig", disable=not progress)]
