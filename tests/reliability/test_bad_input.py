@@ -19,6 +19,7 @@ CAMPAIGN_BAD_RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 0\nrandom.seed = 
                       'random.true_params.Mp = {uniform = [0.0, 1.0]}\n'
 CAMPAIGN_OK = 'name = "x"\n[scenario]\nduration = 0.1\ntransient = 0.05\n'
 CAMPAIGN_PATH_NAME = 'name = "../x"\n'
+SLASH_NAME = 'name = "robust/robust"\nduration = 0.1\ntransient = 0.05\n'
 # Issue 23: errors that were tracebacks (OverflowError, RecursionError, TypeError) or did
 # not name their key.
 RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 2\nrandom.true_params.Mp = {{{}}}\n'
@@ -53,7 +54,7 @@ CASES = [
     (["run", "--duration", "1.5", "--set", "transient=2"], ("transient: ", "leaves nothing")),
     (["run", "--duration", "1e4"], ("duration: ", "1e+07 samples (at most 5e+06")),
     (["run", "--set", "sensors.encoder_noise=1e4"], "sensors.encoder_noise: must be <= 1000"),
-    (["run", "--name", ""], "name: must be a non-empty printable string"),
+    (["run", "--name", ""], "name: must be a plain name"),
     (["run", "--set", "model.modes_per_link=[5, 2]"], "model.modes_per_link"),
     (["run", "--set", "plant.modes_per_link=[0, 2]"], "plant.modes_per_link"),
     (["run", "--set", "model.modes_per_link=[2]"], "model.modes_per_link: expected 2 values"),
@@ -114,7 +115,13 @@ CASES = [
      "sweep[0].random.true_params.Mp: loguniform needs finite bounds"),
     (["campaign", "{tmp}/axis-name.toml"], ("sweep[0].grid.name: must be a plain name",
                                             "'../../../x'")),
-    (["run", "--name", "a/b/c"], "name: must be a plain name or campaign/label"),
+    # A name given to one run is a plain name, as a scenario file's ("<campaign>/<label>"
+    # names a campaign's run; --like keeps a stored one).
+    (["run", "--name", "a/b/c"], ("name: must be a plain name", "'a/b/c'")),
+    (["run", "--name", "a/b"], ("name: must be a plain name", "'a/b'")),
+    (["run", "--set", 'name="a/b"'], ("name: must be a plain name", "'a/b'")),
+    (["run", "--config", "{tmp}/slash-name.toml"], ("name: must be a plain name",
+                                                     "'robust/robust'")),
     (["baseline", "check", "--file", "{tmp}/baseline-no-op.toml"],
      "check[0].op: missing"),
     (["run", "--observer", "smo-bl", "--set", 'observer.options.boundary_layer="x"'],
@@ -142,7 +149,7 @@ def scratch(tmp_path):
              "uniform-both-inf.toml": RANDOM.format("uniform = [-inf, inf]"),
              "loguniform-inf.toml": RANDOM.format("loguniform = [1.0, inf]"),
              "axis-name.toml": CAMPAIGN_AXIS_NAME, "baseline-no-op.toml": BASELINE_NO_OP,
-             "a-file": "not a folder"}
+             "a-file": "not a folder", "slash-name.toml": SLASH_NAME}
     for name, text in files.items():
         (tmp_path / name).write_text(text)
     return tmp_path

@@ -1,11 +1,23 @@
 """No certificate is false and a verdict's evidence replays: the ν-gap against its
 definition, computed independently; the falsifier's counterexample run again by `flexarm
 run`; a law's output that is no torque refused; an STL `until` computed exactly and fast."""
-import numpy as np
+import json
+import math
+import subprocess
+import sys
+import textwrap
+
 import control
+import numpy as np
 import pytest
 import scipy.optimize
 
+from conftest import write_files
+from validation.batch.store import ResultStore
+from validation.cli import main
+from validation.run.loop import run_scenario
+from validation.run.requirements import _parse, requirement_metrics
+from validation.run.scenario import scenario_from_mapping
 from validation.verdicts.nugap import gap_detail
 
 tf = control.tf
@@ -122,3 +134,257 @@ def test_an_observable_mode_is_kept_and_a_hidden_one_removed():
     # 3e-13; kept, the hidden mode makes the factorisation fail).
     assert gap_detail(with_hidden, P2).value == pytest.approx(gap_detail(P1, P2).value,
                                                               abs=1e-12)
+
+
+# --- the falsifier's counterexample replays ---------------------------------------------------
+FINE_ARM = textwrap.dedent('''
+    from reduced_model import ReducedPlant
+
+
+    class FineArm(ReducedPlant):
+        """A finer assumed-modes arm playing the truth (a truth plant that costs little)."""
+        name = "fine-arm"
+        role = "truth"
+
+        def __init__(self, params, *, model, sensors, modes=3):
+            super().__init__(params, modes_per_link=(modes, modes), step=2.5e-4,
+                             modal_basis=model.mode_shapes, sensors=sensors)
+''')
+
+# The system of tests/test_verify.py on the plug-in truth plant: a 1 N m pulse breaks the
+# tracking bound with payloads near 1 kg and pulses near 4 N m.
+ROBUST = textwrap.dedent('''
+    duration = 1.0
+    transient = 0.5
+    initial_state = "reference"
+    plant = { kind = "labplants:FineArm", options = { modes = 3 } }
+    disturbances = [{ kind = "pulse", target = "tau1", amplitude = 1.0, start = 0.6, duration = 0.2 }]
+    [[requirement]]
+    name = "track"
+    claim = "tracking"
+    [uncertainty]
+    "true_params.Mp" = { uniform = [0.0, 1.0] }
+    "disturbances[0].amplitude" = { uniform = [0.0, 4.0] }
+''')
+
+
+def flexarm(cwd, *args):
+    return subprocess.run([sys.executable, "-m", "validation.cli", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_the_counterexample_replays_with_flexarm_run(tmp_path):
+    """Known-bad (issue 32): the file named its run "robust/robust" (the search's campaign
+    and the system), which `flexarm run --config` refused.  Now it names it "robust" and
+    replays to the verdict's robustness bit for bit (the same scenario, the same code)."""
+    write_files(tmp_path, {"labplants.py": FINE_ARM, "robust.toml": ROBUST})
+    done = flexarm(tmp_path, "verify", "robust.toml", "--mode", "falsify", "--budget", "2",
+                   "--workers", "1", "--out", "out", "--no-progress")
+    assert done.returncode == 0, done.stderr
+    verdict = json.loads((tmp_path / "out" / "verdict.json").read_text())
+    assert verdict["found"] and verdict["rho_truth"] < 0
+    replay = flexarm(tmp_path, "run", "--config", f"out/{verdict['counterexample']}",
+                     "--out", "replay")
+    assert replay.returncode == 0, replay.stderr
+    (row,) = ResultStore(tmp_path / "replay").rows()
+    assert row.name == "robust" and row.role == "truth"
+    assert row.metrics["rho_track"] == verdict["rho_truth"]
+
+
+def test_name_replaces_the_name_of_a_scenario_file(tmp_path, monkeypatch, capsys):
+    """Known-bad (issue 32): --name did not rescue a file whose name was refused; now a
+    name given on the command line replaces the file's (checked as a name, the file's not
+    used).  Known-good of the rule: the file alone is refused (tests/reliability/
+    test_bad_input.py)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.toml").write_text('name = "robust/robust"\nduration = 0.1\n'
+                                     'transient = 0.05\n')
+    assert main(["run", "--config", "s.toml", "--name", "replayed", "--out", "out"]) == 0
+    (row,) = ResultStore(tmp_path / "out").rows()
+    assert row.name == "replayed"
+
+
+# --- a law's output that is no torque -------------------------------------------------------
+RETURNS = textwrap.dedent('''
+    """A PD law returning its torques as ``what`` says, and an observer passing the true
+    state through as ``what`` says (the tests' bad outputs)."""
+    import numpy as np
+
+    SHAPES = {
+        "float": lambda tau: tau,
+        "list of ints": lambda tau: [int(v) for v in tau],
+        "float32": lambda tau: tau.astype(np.float32),
+        "complex": lambda tau: tau + 1e-3j,
+        "complex, zero imaginary part": lambda tau: tau.astype(complex),
+        "three torques": lambda tau: np.append(tau, 0.0),
+        "a scalar": lambda tau: float(tau[0]),
+        "strings": lambda tau: [str(v) for v in tau],
+        "booleans": lambda tau: tau > 0,
+        "ragged": lambda tau: [tau[0], [tau[1]]],
+        "None": lambda tau: None,
+    }
+
+
+    class Returns:
+        def __init__(self, model, *, what="float"):
+            self.shape = SHAPES[what]
+
+        def __call__(self, t, x, ref):
+            n = x.shape[0] // 2
+            theta_d, dtheta_d, _ = ref(t)
+            return self.shape(30.0 * (theta_d - x[:2]) + 18.0 * (dtheta_d - x[n:n + 2]))
+
+
+    class Estimates:
+        measured = ("theta1", "theta2", "theta1_dot", "theta2_dot")
+
+        def __init__(self, model, *, what="float"):
+            self.shape, self.n = SHAPES[what], model.n
+
+        def reset(self, x_hat0):
+            self.x = np.asarray(x_hat0, float)
+            return self.x
+
+        def update(self, t, y, tau, Ts):
+            self.x[[0, 1, self.n, self.n + 1]] = y
+            return self.shape(self.x)
+''')
+
+
+def run_law(what: str, role: str = "controller"):
+    data = {"duration": 0.2, "transient": 0.1, "controller": {"kind": "pd"}}
+    data[role] = {"kind": f"returnlaws:{'Returns' if role == 'controller' else 'Estimates'}",
+                  "options": {"what": what}}
+    return run_scenario(scenario_from_mapping(data))
+
+
+@pytest.mark.parametrize("what", ["float", "list of ints", "float32"])
+def test_real_torques_of_any_real_dtype_are_taken(plugin_lab, what):
+    plugin_lab({"returnlaws.py": RETURNS})
+    result = run_law(what)
+    assert result.status == "ok", result.message
+    assert np.all(np.isfinite(result.signals))
+
+
+@pytest.mark.parametrize("what, said", [
+    ("complex", ("torques array([11.3", "+0.001j", ": dtype complex128, shape (2,);")),
+    ("complex, zero imaginary part", ("+0.j", ": dtype complex128, shape (2,);")),
+    ("three torques", (", 0. ]): dtype float64, shape (3,);",)),
+    ("a scalar", ("torques 11.309", ": dtype float64, shape ();")),
+    ("strings", ("torques ['11.3", ": dtype <U",)),
+    ("booleans", ("torques array([ True, True]): dtype bool, shape (2,);",)),  # spaces folded
+    ("ragged", ("torques [np.float64(11.3", ": not an array;")),
+    ("None", ("torques None: dtype object, shape ();",)),
+])
+def test_a_law_returning_no_torques_fails_the_run_saying_what_it_returned(plugin_lab, what,
+                                                                           said):
+    """Known-bad (issue 32): complex torques were stored as an ok run, their imaginary part
+    dropped (and strings parsed, booleans taken as 0/1)."""
+    plugin_lab({"returnlaws.py": RETURNS})
+    result = run_law(what)
+    assert result.status == "failed"
+    message = result.message
+    assert message.startswith("Returns returned torques ") and all(t in message for t in said)
+    assert message.endswith("; expected real numbers of shape (2,) or (6,) at t = 0 s"), message
+
+
+def test_an_observer_returning_a_complex_estimate_fails_the_run(plugin_lab):
+    plugin_lab({"returnlaws.py": RETURNS})
+    assert run_law("float", "observer").status == "ok"  # known-good
+    result = run_law("complex", "observer")
+    assert result.status == "failed"
+    assert result.message.startswith("Estimates returned an estimate array([0.+0.001j")
+    assert result.message.endswith(": dtype complex128, shape (12,); expected real numbers "
+                                   "of shape (12,) at t = 0 s"), result.message
+
+
+# --- STL until and since, exactly and in O(n) ------------------------------------------------
+def rtamt_reference(formula: str, Ts: float):
+    """RTAMT's own discrete-time offline monitor of ``formula`` over signals a and b."""
+    import rtamt
+    spec = rtamt.StlDiscreteTimeOfflineSpecification()
+    for v in ("a", "b"):
+        spec.declare_var(v, "float")
+    spec.spec = formula
+    spec.set_sampling_period(int(round(Ts * 1e9)), "ns", 0.1)
+    spec.parse()
+    return spec
+
+
+# Windows inside the run, past its end (n = 40 samples are 0.04 s), of one sample, from 0,
+# nested, and past operators; RTAMT's cost O(n·w²) keeps the windows short.
+UNTIL_FORMULAS = [
+    "(a <= 0.5) until[0,0.05] (b >= 1)", "(a <= 0.5) until[0.01,0.02] (a >= b)",
+    "(a < 1) until[0.002,0.002] (b > 0)", "(a < 1) until[0,0] (b > 0)",
+    "(a < 1) until[0.03,0.08] (b > 0)", "always[0,0.1]((a < 1) until[0.005,0.02] (b > 0.5))",
+    "(a > -1) since[0,0.03] (b > 1)", "(a > -1) since[0.004,0.05] (b > 0.5)",
+    "((a < 1) until[0.001,0.004] (b > 0)) since[0.002,0.006] (a > 0)",
+]
+
+
+@pytest.mark.parametrize("formula", UNTIL_FORMULAS)
+def test_until_and_since_equal_rtamts_own(formula):
+    """Known-good of the O(n) until/since: RTAMT's own values on random signals of 2 to
+    200 samples — normal (distinct values) and integers (ties everywhere) — equal, not
+    close: both take only minima and maxima of the same numbers."""
+    Ts = 1e-3
+    ours, _ = _parse(formula, ("a", "b"), Ts)
+    reference = rtamt_reference(formula, Ts)
+    rng = np.random.default_rng(11)
+    for n in (2, 3, 7, 40, 200):
+        for draw in (lambda: rng.normal(size=n), lambda: rng.integers(-2, 3, n) * 0.5):
+            data = {"time": (np.arange(n) * Ts).tolist(), "a": draw().tolist(),
+                    "b": draw().tolist()}
+            assert [v for _, v in ours.evaluate(dict(data))] == \
+                [v for _, v in reference.evaluate(dict(data))], (formula, n)
+
+
+def until_by_definition(left: np.ndarray, right: np.ndarray, first: int, last: int):
+    """ρ[i] = max over τ in [first, last] of min(right[i + τ], min left[i .. i + τ − 1]),
+    right −∞ and left +∞ past the run (RTAMT's semantics): one pass over τ keeping the
+    running minimum of left, O(n·w) with numpy."""
+    n = left.size
+    L = np.concatenate([left, np.full(last + 1, np.inf)])
+    R = np.concatenate([right, np.full(last + 1, -np.inf)])
+    running, out = np.full(n, np.inf), np.full(n, -np.inf)
+    for tau in range(last + 1):
+        if tau >= first:
+            out = np.maximum(out, np.minimum(R[tau:tau + n], running))
+        running = np.minimum(running, L[tau:tau + n])
+    return out
+
+
+def test_until_on_a_4_s_run_at_1_ms_is_its_definition():
+    """Known-bad (issue 32): a requirement with until[0.2,2.5] on a 4 s run at Ts = 1 ms
+    ended the run as failed, "no result after 104 s" (RTAMT's O(n·w²) until).  Now the
+    run is ok and its ρ is the definition's value over the whole run, exactly."""
+    formula = ("(abs(theta1 - theta1_ref) <= 0.05) until[0.2,2.5] "
+               "(abs(theta2 - theta2_ref) <= 0.01)")
+    result = run_scenario(scenario_from_mapping(
+        {"duration": 4.0, "requirement": [{"name": "settle", "formula": formula}]}))
+    assert result.status == "ok" and result.time.size == 4000
+    left = 0.05 - np.abs(result["theta1"] - result["theta1_ref"])
+    right = 0.01 - np.abs(result["theta2"] - result["theta2_ref"])
+    expected = until_by_definition(left, right, 200, 2500)
+    assert requirement_metrics(result, {})["rho_settle"] == expected[0]
+    ours, _ = _parse(formula, tuple(result.names), 1e-3)
+    data = {"time": result.time.tolist()} | {v: result[v].tolist() for v in
+                                              ("theta1", "theta1_ref", "theta2", "theta2_ref")}
+    assert [v for _, v in ours.evaluate(data)] == expected.tolist()
+
+
+def test_a_requirement_on_a_run_of_one_sample():
+    """Known-bad: a run of one sample (duration = Ts) with an STL requirement failed with
+    RTAMT's UnboundLocalError (its evaluate reads the period between two samples); now ρ
+    is the formula at that sample, from rest (θ = 0): always(θ1 <= 1) is 1; an until
+    from 0 is its right operand there, θ2 − 3 < 0 gives −3; an until whose window starts
+    after the run has no sample to hold in: −∞."""
+    formulas = {"always": "always(theta1 <= 1)",
+                "until": "(theta1 <= 1) until[0,0.5] (theta2 > 3)",
+                "late": "(theta1 <= 1) until[0.1,0.5] (theta2 > 3)"}
+    result = run_scenario(scenario_from_mapping(
+        {"duration": 1e-3, "requirement": [{"name": k, "formula": f}
+                                           for k, f in formulas.items()]}))
+    assert result.status == "ok" and result.time.size == 1
+    assert requirement_metrics(result, {}) == {"rho_always": 1.0, "rho_until": -3.0,
+                                               "rho_late": -math.inf}

@@ -16,9 +16,12 @@ maximum, time bounds in seconds and whole multiples of Ts; a window that reaches
 the end of the run sees only the samples it has — ``always`` of nothing is +∞).  RTAMT
 evaluates a bounded ``always``/``eventually`` (and the past ``historically``/``once``)
 by a minimum over each window in Python, O(n·w): 3.0 s for ``always[2,20]`` on a 20 s
-run at 1 kHz.  `_SlidingWindowVisitor` computes the same minima with SciPy's
-sliding-window filter, O(n): 0.045 s, identical values (tests/test_requirements.py
-compares both on random signals).
+run at 1 kHz; and a bounded ``until``/``since`` in O(n·w²): a 4 s run's
+``until[0.2,2.5]`` exceeded its run's time limit.  `_SlidingWindowVisitor` computes the
+same values in O(n) — windows with SciPy's sliding-window filter (0.045 s), ``until``
+and ``since`` by blocks of the window's length (0.02 s) — identical, as they only take
+minima and maxima of the same numbers (tests/test_requirements.py and
+tests/reliability/test_verdicts.py compare them with RTAMT's own on random signals).
 
 Every check happens before anything runs: an unknown claim, a formula that does not
 parse, a signal the run will not record and a time bound that is not a multiple of Ts
@@ -112,6 +115,44 @@ def _spec_factory():
         centred = extreme(padded, size=width, mode="constant", cval=fill)
         return centred[np.arange(n) + front + first + width // 2].tolist()
 
+    def until(left, right, first: int, last: int) -> list:
+        """out[i] = max over j in [i + first, i + last] of min(right[j], left[i .. j − 1])
+        (RTAMT's timed until; left is +∞ and right −∞ past the run), exactly — only
+        minima and maxima of the inputs — in O(n):
+
+        - the left operand over [i, i + first − 1] is a sliding minimum A[i], and
+          ρ[i] = min(A[i], U[i + first]) with U the until over the window [0, w], w =
+          last − first (a minimum distributes over the maximum);
+        - U[k] with blocks of w + 1 samples: for j in k's own block, the untimed until
+          run backwards through the block, P[k] = max(right[k], min(left[k], P[k + 1]));
+          for j in the next block, min(left over the rest of k's block, the running
+          maximum from the next block's start to k + w of min(right[j], left from the
+          block's start to j − 1))."""
+        left, right = np.asarray(left, dtype=float), np.asarray(right, dtype=float)
+        n, w = left.size, last - first
+        size = w + 1
+        blocks = -(-(n + first) // size) + 1  # every k up to n + first, and the next block
+        m = blocks * size
+        L = np.concatenate([left, np.full(m - n, math.inf)]).reshape(blocks, size)
+        R = np.concatenate([right, np.full(m - n, -math.inf)]).reshape(blocks, size)
+        # in each block: P by the backward recursion, the suffix minimum of left, and the
+        # running maximum of min(right[j], prefix minimum of left before j)
+        P = np.empty_like(R)
+        P[:, -1] = R[:, -1]
+        for c in range(size - 2, -1, -1):
+            P[:, c] = np.maximum(R[:, c], np.minimum(L[:, c], P[:, c + 1]))
+        suffix = np.minimum.accumulate(L[:, ::-1], axis=1)[:, ::-1]
+        before = np.concatenate([np.full((blocks, 1), math.inf),
+                                 np.minimum.accumulate(L[:, :-1], axis=1)], axis=1)
+        reach = np.maximum.accumulate(np.minimum(R, before), axis=1)
+        # j in the next block up to k + w: column c + w − size = c − 1 of the next block
+        nxt = np.full_like(R, -math.inf)
+        nxt[:-1, 1:] = np.minimum(suffix[:-1, 1:], reach[1:, :-1])
+        U = np.maximum(P, nxt).ravel()
+        A = window(left, 0, first - 1, math.inf, minimum_filter1d) if first else \
+            np.full(n, math.inf)
+        return np.minimum(A, U[first:first + n]).tolist()
+
     class _SlidingWindowVisitor(StlDiscreteTimeOfflineAstVisitor):
         def _samples(self, node) -> tuple[int, int]:
             begin, end = self.time_unit_transformer(node)  # checked multiples of Ts
@@ -132,14 +173,35 @@ def _spec_factory():
             return window(self.visit(node.children[0], *args, **kwargs), -e, -b, math.inf,
                           minimum_filter1d)
 
+        def visitTimedUntil(self, node, *args, **kwargs):
+            b, e = self._samples(node)
+            return until(self.visit(node.children[0], *args, **kwargs),
+                         self.visit(node.children[1], *args, **kwargs), b, e)
+
+        def visitTimedSince(self, node, *args, **kwargs):  # the until of the reversed run
+            b, e = self._samples(node)
+            return until(self.visit(node.children[0], *args, **kwargs)[::-1],
+                         self.visit(node.children[1], *args, **kwargs)[::-1], b, e)[::-1]
+
         def visitTimedOnce(self, node, *args, **kwargs):
             b, e = self._samples(node)
             return window(self.visit(node.children[0], *args, **kwargs), -e, -b, -math.inf,
                           maximum_filter1d)
 
+    class _Interpreter(discrete_time_offline_interpreter_factory(_SlidingWindowVisitor)):
+        def evaluate(self, dataset):
+            """RTAMT's, for a run of one sample too: RTAMT's own reads the period between
+            the last two samples (for a counter we do not use: `_parse` checks the time
+            bounds) and raises UnboundLocalError without them."""
+            if len(dataset["time"]) > 1:
+                return super().evaluate(dataset)
+            self.exist_ast()
+            self.set_variable_to_ast_from_dataset(dataset)
+            self.ast.offline_results["time"] = dataset["time"]
+            return [[dataset["time"][0], self.visitAst(self.ast, 1)[-1][0]]]
+
     def make_spec():
-        interpreter = discrete_time_offline_interpreter_factory(_SlidingWindowVisitor)()
-        return AbstractOfflineSpecification(StlAst(), interpreter)
+        return AbstractOfflineSpecification(StlAst(), _Interpreter())
 
     return make_spec
 
