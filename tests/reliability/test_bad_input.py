@@ -166,6 +166,12 @@ def run_main(argv, capsys):
 @pytest.mark.parametrize("argv, text", CASES, ids=[f"{i:02d}-{c[0][0]}" for i, c in
                                                    enumerate(CASES)])
 def test_bad_input(argv, text, scratch, capsys, monkeypatch):
+    assert_refused(argv, text, scratch, capsys, monkeypatch)
+
+
+def assert_refused(argv, text, scratch, capsys, monkeypatch):
+    """``argv`` ends with one line naming ``text`` (a string, or all of a tuple), exit
+    status 2, no traceback and nothing written."""
     monkeypatch.chdir(scratch)
     out = scratch / "out"
     argv = [a.replace("{tmp}", str(scratch)) for a in argv]
@@ -185,6 +191,62 @@ def test_bad_input(argv, text, scratch, capsys, monkeypatch):
     assert "Traceback" not in captured.err + captured.out
     assert not out.exists(), "an output folder was created for bad input"
     assert sorted(p.name for p in scratch.iterdir()) == before  # nothing else either
+
+
+def _includes(n: int, prefix: str) -> str:
+    return "include = [" + ", ".join(f'"{prefix}{i}.toml"' for i in range(n)) + "]\n"
+
+
+# Issue 32: include chains that cost minutes or ended in a traceback.  A 0.6 MB table.
+BIG = "[big]\n" + "".join(f"k{i} = {i}.5\n" for i in range(40_000))
+INCLUDE_CASES = [
+    # the same 0.6 MB file 50 000 times: over 5 min of CPU, now refused as it is read
+    (["run", "--config", "{tmp}/same-50000.toml"],
+     ("include: ", "same-50000.toml: names 'big.toml' more than once")),
+    # symbolic links in a loop: a RuntimeError traceback, as the file and as an include
+    (["run", "--config", "{tmp}/loop1.toml"], "loop1.toml: cannot read (Symlink loop"),
+    (["campaign", "{tmp}/includes-loop.toml"], "loop1.toml: cannot read (Symlink loop"),
+    # 20 files each including the same 20 (a diamond: 40 files, 420 includes)
+    (["run", "--config", "{tmp}/diamond.toml"], ("include: ", "more than 256 includes")),
+    # five 0.9 MB files, each under the 1 MiB cap
+    (["run", "--config", "{tmp}/five-big.toml"], ("include: ", "exceed 4 MiB in all")),
+]
+
+
+@pytest.fixture
+def include_scratch(tmp_path):
+    files = {"big.toml": BIG, "same-50000.toml": 'include = ["big.toml"' +
+             ', "big.toml"' * 49_999 + ']\n', "includes-loop.toml": 'include = "loop1.toml"\n',
+             "diamond.toml": _includes(20, "mid"), "five-big.toml": _includes(5, "big")}
+    files |= {f"mid{i}.toml": _includes(20, "leaf") for i in range(20)}
+    files |= {f"leaf{i}.toml": f"seed = {i}\n" for i in range(20)}
+    files |= {f"big{i}.toml": "[big]\n" + "".join(f"k{j} = {j}.25\n" for j in range(50_000))
+              for i in range(5)}
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    (tmp_path / "loop1.toml").symlink_to("loop2.toml")
+    (tmp_path / "loop2.toml").symlink_to("loop1.toml")
+    return tmp_path
+
+
+@pytest.mark.parametrize("argv, text", INCLUDE_CASES, ids=[
+    "same file 50000 times", "symlink loop", "include of a symlink loop", "256 includes",
+    "4 MiB in all"])
+def test_bad_include(argv, text, include_scratch, capsys, monkeypatch):
+    assert_refused(argv, text, include_scratch, capsys, monkeypatch)
+
+
+def test_an_include_diamond_within_the_caps_is_read(tmp_path):
+    """Known-good of the include caps: a file included along two paths (parsed once)."""
+    from validation.run.tomlfiles import load_toml
+    (tmp_path / "top.toml").write_text('include = ["a.toml", "b.toml"]\nseed = 1\n')
+    (tmp_path / "a.toml").write_text('include = "base.toml"\n[controller]\nkind = "pd"\n')
+    (tmp_path / "b.toml").write_text('include = "base.toml"\n[plant]\nkind = "exudyn"\n')
+    (tmp_path / "base.toml").write_text("duration = 1.0\ntransient = 0.5\n[plant]\n"
+                                        'kind = "reduced"\n')
+    assert load_toml(tmp_path / "top.toml") == {
+        "seed": 1, "duration": 1.0, "transient": 0.5, "plant": {"kind": "exudyn"},
+        "controller": {"kind": "pd"}}
 
 
 def test_enough_cases():
