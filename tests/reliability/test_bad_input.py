@@ -20,6 +20,7 @@ CAMPAIGN_BAD_RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 0\nrandom.seed = 
 CAMPAIGN_OK = 'name = "x"\n[scenario]\nduration = 0.1\ntransient = 0.05\n'
 CAMPAIGN_PATH_NAME = 'name = "../x"\n'
 SLASH_NAME = 'name = "robust/robust"\nduration = 0.1\ntransient = 0.05\n'
+NAMELESS_REQUIREMENT = 'name = "x"\n[[requirement]]\nclaim = "tracking"\n'
 # Issue 23: errors that were tracebacks (OverflowError, RecursionError, TypeError) or did
 # not name their key.
 RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 2\nrandom.true_params.Mp = {{{}}}\n'
@@ -136,6 +137,24 @@ CASES = [
     (["run", "--memory-limit", "10"], "--memory-limit: must be >= 1024 MiB"),
     (["baseline", "check", "--only", "no-such-check"], "no check matches"),
     (["modes", "--params", "{tmp}/broken.toml"], "invalid TOML"),
+    # Issue 32: requirements that ended in a traceback or in ANTLR's noise on stderr, or
+    # were accepted reading no signal.
+    (["run", "--set", 'requirement=[{formula = "always(theta1 <= 1)"}]'],
+     "requirement[0].name: missing (required)"),
+    (["run", "--set", 'requirement=[{name = "r", formula = "always[2,1](theta1 <= 1)"}]'],
+     ("requirement[0].formula: ", "the interval [2, 1] ends before it begins")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "(theta1 < 1) since[3ms,2ms] '
+                      '(theta2 > 0)"}]'],
+     ("requirement[0].formula: ", "the interval [3ms, 2ms] ends before it begins")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "theta1 <= 1 if ok else 2"}]'],
+     ("requirement[0].formula: ", "unknown signal 'if'")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "theta1 <= 1 ? 2 : 3"}]'],
+     ("requirement[0].formula: ", "token recognition error at: '?'")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "abs(theta1) <= 1 # comment"}]'],
+     ("requirement[0].formula: ", "token recognition error at: '#'")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "theta1 <= 1 and theta2.real > 0"}]'],
+     ("requirement[0].formula: ", "unknown signal 'theta2.real'")),
+    (["campaign", "{tmp}/nameless-requirement.toml"], "requirement[0].name: missing"),
 ]
 
 
@@ -149,7 +168,8 @@ def scratch(tmp_path):
              "uniform-both-inf.toml": RANDOM.format("uniform = [-inf, inf]"),
              "loguniform-inf.toml": RANDOM.format("loguniform = [1.0, inf]"),
              "axis-name.toml": CAMPAIGN_AXIS_NAME, "baseline-no-op.toml": BASELINE_NO_OP,
-             "a-file": "not a folder", "slash-name.toml": SLASH_NAME}
+             "a-file": "not a folder", "slash-name.toml": SLASH_NAME,
+             "nameless-requirement.toml": NAMELESS_REQUIREMENT}
     for name, text in files.items():
         (tmp_path / name).write_text(text)
     return tmp_path

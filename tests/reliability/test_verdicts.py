@@ -339,6 +339,29 @@ def test_until_and_since_equal_rtamts_own(formula):
                 [v for _, v in reference.evaluate(dict(data))], (formula, n)
 
 
+@pytest.mark.parametrize("formula, within", [
+    ("always[0,1e30](a <= 0.5)", "always[0,0.05](a <= 0.5)"),
+    ("eventually[0.01,1e12](a >= b)", "eventually[0.01,0.05](a >= b)"),
+    ("historically[0,1e30](a < 1)", "historically[0,0.05](a < 1)"),
+    ("once[1e9,1e10](a > 0)", "once[0.05,0.06](a > 0)"),
+    ("(a < 1) until[0.01,1e20] (b > 0)", "(a < 1) until[0.01,0.05] (b > 0)"),
+    ("(a < 1) until[1e6,1e20] (b > 0)", "(a < 1) until[0.05,0.06] (b > 0)"),
+    ("(a > -1) since[0.002,1e15] (b > 0.5)", "(a > -1) since[0.002,0.05] (b > 0.5)"),
+])
+def test_a_time_bound_beyond_the_run_is_the_runs_end(formula, within):
+    """Known-bad (issue 32): always[0,1e30] on a run ended in "Maximum allowed dimension
+    exceeded" (always[0,1e12]: a 7 PiB allocation).  A window reaching past the run's 50
+    samples sees what it would see clipped at 0.05 s (RTAMT's own values, with the
+    clipped bound): equal."""
+    Ts, n = 1e-3, 50
+    ours, _ = _parse(formula, ("a", "b"), Ts)
+    rng = np.random.default_rng(2)
+    data = {"time": (np.arange(n) * Ts).tolist(), "a": rng.normal(size=n).tolist(),
+            "b": rng.normal(size=n).tolist()}
+    assert [v for _, v in ours.evaluate(dict(data))] == \
+        [v for _, v in rtamt_reference(within, Ts).evaluate(dict(data))]
+
+
 def until_by_definition(left: np.ndarray, right: np.ndarray, first: int, last: int):
     """ρ[i] = max over τ in [first, last] of min(right[i + τ], min left[i .. i + τ − 1]),
     right −∞ and left +∞ past the run (RTAMT's semantics): one pass over τ keeping the

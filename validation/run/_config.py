@@ -157,7 +157,8 @@ _type_hints = functools.cache(get_type_hints)  # resolving annotations costs ~0.
 
 
 def from_mapping(cls, data: dict, path: str = ""):
-    """Build dataclass ``cls`` from ``data``; missing keys take the defaults."""
+    """Build dataclass ``cls`` from ``data``; missing keys take the defaults, a missing key
+    without one is a `ConfigError` naming it."""
     hints = _type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     kwargs = {}
@@ -166,6 +167,10 @@ def from_mapping(cls, data: dict, path: str = ""):
         if key not in fields:
             raise ConfigError(sub, f"unknown key (allowed: {', '.join(sorted(fields))})")
         kwargs[key] = _convert(hints[key], value, sub)
+    for name, f in fields.items():
+        if name not in kwargs and f.default is dataclasses.MISSING and \
+                f.default_factory is dataclasses.MISSING:
+            raise ConfigError(f"{path}.{name}" if path else name, "missing (required)")
     try:
         return cls(**kwargs)
     except ConfigError as exc:

@@ -98,17 +98,25 @@ def _spec_factory():
     """A function making an empty RTAMT offline specification whose bounded temporal
     operators use SciPy's sliding-window extremes (module docstring); RTAMT is imported
     on first use."""
+    from rtamt.antlr.parser.stl.error.parser_error_listener import STLParserErrorListener
+    from rtamt.antlr.parser.stl.LtlLexer import LtlLexer
+    from rtamt.antlr.parser.stl.StlParser import StlParser
+    from rtamt.exception.exception import RTAMTException
     from rtamt.semantics.abstract_discrete_time_offline_interpreter import \
         discrete_time_offline_interpreter_factory
     from rtamt.semantics.stl.discrete_time.offline.ast_visitor import \
         StlDiscreteTimeOfflineAstVisitor
     from rtamt.spec.abstract_specification import AbstractOfflineSpecification
-    from rtamt.syntax.ast.parser.stl.specification_parser import StlAst
+    from rtamt.syntax.ast.parser.abstract_ast_parser import ast_factory
+    from rtamt.syntax.ast.parser.stl.parser_visitor import StlAstParserVisitor
     from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
     def window(sample, first: int, last: int, fill: float, extreme) -> list:
         """out[i] = extreme of sample[i + first .. i + last], ``fill`` outside the run."""
         x = np.asarray(sample, dtype=float)
+        # Bounds beyond the run's length see nothing more: clipped to ±n, exactly the same
+        # (a window held outside the run holds ``fill``, which is neutral or the answer).
+        first, last = (min(max(b, -x.size), x.size) for b in (first, last))
         n, width = x.size, last - first + 1
         front, back = max(0, -first), max(0, last)
         padded = np.concatenate([np.full(front, fill), x, np.full(back, fill)])
@@ -129,7 +137,11 @@ def _spec_factory():
           maximum from the next block's start to k + w of min(right[j], left from the
           block's start to j − 1))."""
         left, right = np.asarray(left, dtype=float), np.asarray(right, dtype=float)
-        n, w = left.size, last - first
+        n = left.size
+        if first >= n:  # no right operand within the run
+            return [-math.inf] * n
+        last = min(last, n - 1)  # j past the run contributes −∞: the same maximum
+        w = last - first
         size = w + 1
         blocks = -(-(n + first) // size) + 1  # every k up to n + first, and the next block
         m = blocks * size
@@ -156,6 +168,10 @@ def _spec_factory():
     class _SlidingWindowVisitor(StlDiscreteTimeOfflineAstVisitor):
         def _samples(self, node) -> tuple[int, int]:
             begin, end = self.time_unit_transformer(node)  # checked multiples of Ts
+            if begin > end:
+                raise RTAMTException(f"the interval [{float(node.begin):g}"
+                                     f"{node.begin_unit}, {float(node.end):g}"
+                                     f"{node.end_unit}] ends before it begins")
             return int(begin), int(end)
 
         def visitTimedAlways(self, node, *args, **kwargs):
@@ -200,8 +216,18 @@ def _spec_factory():
             self.ast.offline_results["time"] = dataset["time"]
             return [[dataset["time"][0], self.visitAst(self.ast, 1)[-1][0]]]
 
+    class _Lexer(LtlLexer):
+        """RTAMT's STL lexer raising its errors as its parser does: ANTLR's default prints
+        each character it cannot read to stderr ("line 1:22 token recognition error at:
+        '#'") and goes on without it."""
+
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self._listeners = [STLParserErrorListener()]
+
     def make_spec():
-        return AbstractOfflineSpecification(StlAst(), _Interpreter())
+        ast = ast_factory(StlAstParserVisitor)(_Lexer, StlParser, STLParserErrorListener)
+        return AbstractOfflineSpecification(ast, _Interpreter())
 
     return make_spec
 
@@ -242,12 +268,18 @@ def _parse(formula: str, variables: tuple[str, ...], Ts: float = 1e-3):
             if not variables:
                 return None, ()  # a syntax check only: names are checked per scenario
             raise
-    return spec, tuple(sorted(_variables(spec.ast.specs[0])))
+    used = tuple(sorted(_variables(spec.ast.specs[0])))
+    for name in used:
+        if name not in variables:  # a field of a signal (``theta1.real``): no signal
+            raise KeyError(name)
+    return spec, used
 
 
 def _variables(node) -> set[str]:
+    """The signals a formula reads; RTAMT reads ``x.f`` as the attribute ``f`` of each
+    sample of ``x`` (for structured inputs), named here ``"x.f"``, which is no signal."""
     if type(node).__name__ == "Variable":
-        return {node.var}
+        return {f"{node.var}.{node.field}" if node.field else node.var}
     return set().union(*(_variables(c) for c in getattr(node, "children", ())))
 
 
