@@ -155,6 +155,19 @@ CASES = [
     (["run", "--set", 'requirement=[{name = "r", formula = "theta1 <= 1 and theta2.real > 0"}]'],
      ("requirement[0].formula: ", "unknown signal 'theta2.real'")),
     (["campaign", "{tmp}/nameless-requirement.toml"], "requirement[0].name: missing"),
+    # Issue 32: a reference setting its kind ignores was accepted; an infinite omega was
+    # reported as amplitude; an infinite time as "must be > 0".
+    (["run", "--set", 'reference={kind = "quintic", amplitude = [1, 1]}'],
+     "reference.amplitude: not used by a 'quintic' reference (drop it)"),
+    (["run", "--set", "reference.goal=[1.0, 0.5]"],
+     "reference.goal: not used by a 'paper' reference (drop it)"),
+    (["run", "--set", "reference.omega=[inf, 1.0]"],
+     "reference.omega: must be finite, got (inf, 1.0)"),
+    (["run", "--set", 'reference={kind = "quintic", move_time = inf}'],
+     "reference.move_time: must be finite, got inf"),
+    (["run", "--set", "duration=inf"], "duration: must be finite, got inf"),
+    (["run", "--set", "disturbances=[{kind = 'step', start = inf}]"],
+     "disturbances[0].start: must be finite, got inf"),
 ]
 
 
