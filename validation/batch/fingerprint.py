@@ -12,7 +12,7 @@ from stored metrics) stay out, and editing them leaves stored runs valid.
 A plug-in law adds its own module and every module that one imports from outside the
 Python installation (its helpers), found the same way: files are located on
 ``sys.path`` without importing anything, so reading a results folder never runs a
-plug-in's code.  The package and Exudyn versions enter too.
+plug-in's code.  A plug-in imported from a zip archive is hashed as the whole archive.  The package and Exudyn versions enter too.
 """
 from __future__ import annotations
 
@@ -68,7 +68,9 @@ def _locate(name: str, inside: tuple[str, ...] | None) -> Path | None:
     origin = getattr(spec, "origin", None)
     if not origin or not origin.endswith(".py"):
         return None
-    path = Path(origin).resolve()
+    # A module in a zip archive on sys.path (zipimport) has no file of its own: the
+    # archive stands for it, hashed whole (what it imports is not followed).
+    path = Path(getattr(spec.loader, "archive", None) or origin).resolve()
     if inside is not None and not any(path.is_relative_to(root) for root in inside):
         return None
     return path
