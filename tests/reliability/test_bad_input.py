@@ -166,6 +166,9 @@ CASES = [
     (["run", "--set", 'reference={kind = "quintic", move_time = inf}'],
      "reference.move_time: must be finite, got inf"),
     (["run", "--set", "duration=inf"], "duration: must be finite, got inf"),
+    # Issue 32: an unreachable scheduler was refused after the results folder was made.
+    (["campaign", "{tmp}/ok.toml", "--executor", "dask", "--scheduler", "tcp://127.0.0.1:1"],
+     "--scheduler: cannot reach tcp://127.0.0.1:1"),
     (["run", "--set", "disturbances=[{kind = 'step', start = inf}]"],
      "disturbances[0].start: must be finite, got inf"),
 ]
@@ -280,6 +283,26 @@ def test_an_include_diamond_within_the_caps_is_read(tmp_path):
     assert load_toml(tmp_path / "top.toml") == {
         "seed": 1, "duration": 1.0, "transient": 0.5, "plant": {"kind": "exudyn"},
         "controller": {"kind": "pd"}}
+
+
+def test_a_refused_runner_keeps_a_results_folder_that_was_there(tmp_path, monkeypatch,
+                                                                 capsys):
+    """Known-good of removing what a refused command created: a folder that held results
+    before stays, runs and all."""
+    from validation.cli import common
+    from validation.run._config import ConfigError
+    (tmp_path / "ok.toml").write_text(CAMPAIGN_OK)
+    out = tmp_path / "out"
+    assert main(["campaign", str(tmp_path / "ok.toml"), "--out", str(out),
+                 "--no-progress"]) == 0
+    stored = sorted(p.name for p in (out / "runs").iterdir())
+
+    def unreachable(*args, **kwargs):
+        raise ConfigError("--scheduler", "cannot reach tcp://127.0.0.1:1 within 10 s")
+    monkeypatch.setattr(common, "make_runner", unreachable)
+    assert main(["campaign", str(tmp_path / "ok.toml"), "--out", str(out)]) == 2
+    assert "cannot reach" in capsys.readouterr().err
+    assert sorted(p.name for p in (out / "runs").iterdir()) == stored
 
 
 def test_enough_cases():
