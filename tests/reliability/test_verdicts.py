@@ -189,6 +189,14 @@ def test_the_counterexample_replays_with_flexarm_run(tmp_path):
     (row,) = ResultStore(tmp_path / "replay").rows()
     assert row.name == "robust" and row.role == "truth"
     assert row.metrics["rho_track"] == verdict["rho_truth"]
+    # The verdict's report (known-good of the verdict.json schema): its section with the
+    # case on both plants.  Known-bad: a plug-in truth plant has no step, and the report
+    # raised KeyError: 'step' looking for the case's reduced twin.
+    report = flexarm(tmp_path, "report", "out", "--no-animation")
+    assert report.returncode == 0, report.stderr
+    text = (tmp_path / "out" / "report" / "report.md").read_text()
+    assert "## Robust verdicts" in text and "counterexample" in text
+    assert any("(Fig. 3)" in line and "counterexample" in line for line in text.splitlines())
 
 
 def test_name_replaces_the_name_of_a_scenario_file(tmp_path, monkeypatch, capsys):
@@ -296,6 +304,56 @@ def test_an_observer_returning_a_complex_estimate_fails_the_run(plugin_lab):
     assert result.message.startswith("Estimates returned an estimate array([0.+0.001j")
     assert result.message.endswith(": dtype complex128, shape (12,); expected real numbers "
                                    "of shape (12,) at t = 0 s"), result.message
+
+
+UNREADABLE = textwrap.dedent('''
+    """Laws that end the run with something no message can print as it is."""
+    import sys
+
+
+    class Unprintable:
+        def __repr__(self):
+            raise RuntimeError("no repr")
+
+        def __str__(self):
+            raise RuntimeError("no str")
+
+
+    class Bad(Exception):
+        def __str__(self):
+            raise RuntimeError("no str")
+
+
+    class Ends:
+        def __init__(self, model, *, how="exit 3"):
+            self.how = how
+
+        def __call__(self, t, x, ref):
+            if self.how == "exit 3":
+                sys.exit(3)
+            if self.how == "exit unprintable":
+                sys.exit(Unprintable())
+            raise Bad()
+''')
+
+
+@pytest.mark.parametrize("how, said", [
+    ("exit 3", "the run called sys.exit(3)"),  # known-good
+    ("exit unprintable", "the run called sys.exit(<Unprintable whose repr raised "
+                         "RuntimeError>)"),
+    ("raise unprintable", "Ends raised Bad (whose str raised RuntimeError) at t = 0 s"),
+])
+def test_a_law_ending_with_an_unprintable_object_fails_its_run_in_one_line(tmp_path, how,
+                                                                            said):
+    """Known-bad (issue 32): sys.exit(x) with x's repr raising printed the worker's
+    traceback and stored "the worker exited with status 1"; an exception whose str
+    raises was stored as that RuntimeError."""
+    write_files(tmp_path, {"endlaws.py": UNREADABLE})
+    done = flexarm(tmp_path, "run", "--controller", "endlaws:Ends", "--set",
+                   f'controller.options.how="{how}"', "--duration", "0.1", "--out", "out")
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    (row,) = ResultStore(tmp_path / "out").rows()
+    assert row.status == "failed" and row.message.startswith(said), row.message
 
 
 # --- STL until and since, exactly and in O(n) ------------------------------------------------
@@ -411,3 +469,46 @@ def test_a_requirement_on_a_run_of_one_sample():
     assert result.status == "ok" and result.time.size == 1
     assert requirement_metrics(result, {}) == {"rho_always": 1.0, "rho_until": -3.0,
                                                "rho_late": -math.inf}
+
+
+# --- a verdict file from someone else -------------------------------------------------------
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    """A results folder of one short run."""
+    out = tmp_path_factory.mktemp("verdicts") / "res"
+    assert main(["run", "--duration", "0.1", "--out", str(out)]) == 0
+    return out
+
+
+@pytest.mark.parametrize("name, text, said", [
+    ("verdict.json", '{"mode": "falsify"}', "verdict.json: no key 'system'"),
+    ("verdict.json", '{"mode": "bayes", "system": "s"}', "mode: 'bayes' is no mode"),
+    ("verdict.json", "[1, 2]", "verdict.json: expected a table, got list"),
+    ("verdict.json", "not json", "verdict.json: not JSON (JSONDecodeError"),
+    ("verdict.json", json.dumps({"mode": "estimate", "system": "s", "plant": "reduced",
+                                 "runs": [], "requirements": {"r": {"criterion": "c",
+                                                                    "n": "3"}}}),
+     "verdict.json: requirements.r.n: expected int, got str"),
+    ("verdict.json", json.dumps({"mode": "conform", "system": "s", "distance": 0.1,
+                                 "simulations": {"reduced": 1, "truth": 1},
+                                 "trace": [{"reduced": 1}]}),
+     "verdict.json: trace[0]: no key 'truth'"),
+    ("verdict.json", " " * (17 << 20), "verdict.json: larger than 16 MiB"),
+    ("validity/validity.json", '{"arms": 1, "cases": []}',
+     "validity.json: arms: expected a list, got int"),
+])
+def test_a_crafted_verdict_file_is_one_line_and_no_report(results, capsys, name, text, said):
+    """Known-bad (issue 32): verdict.json {"mode": "falsify"} made report raise KeyError
+    ('system'); any file of the wrong shape did the same, or failed in a figure worker.
+    Now: one line naming the file and the key, exit 2, no report folder."""
+    path = results / name
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(text)
+    try:
+        code = main(["report", str(results), "--no-animation"])
+        err = capsys.readouterr().err
+    finally:
+        path.unlink()
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("flexarm: error: ") and said in err, err
+    assert "Traceback" not in err and not (results / "report").exists()

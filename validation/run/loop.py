@@ -24,6 +24,7 @@ from controllers._compiled import absent
 from reduced_model import ArmModel, PlantFailure, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
+from ._config import short_repr, short_str
 from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
                       check_bounds, context, law_fields, noise_stream, post_sample, pre_sample,
                       run_reduced, sample_laws, signal_layout, status_message)
@@ -370,8 +371,8 @@ class _PythonLaws:
             raise _LawRaised("failed", f"{label} returned {exc} at t = {t:.4g} s") from None
         except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
             label = getattr(calling, "name", type(calling).__name__)
-            raise _LawRaised("failed", f"{label} raised {type(exc).__name__}: "
-                                       f"{_one_line(exc)} at t = {t:.4g} s") from None
+            raise _LawRaised("failed", f"{label} raised {short_str(exc)} at t = {t:.4g} s") \
+                from None
         r.tau[:out.shape[0]] = out
         return post_sample(r.context, t, out.shape[0], row)
 
@@ -390,16 +391,11 @@ def _real_array(value, shapes: tuple, what: str) -> np.ndarray:
     try:
         array = np.asarray(value)
     except (ValueError, TypeError):  # a ragged sequence, an object numpy refuses
-        raise _NotReal(f"{what} {_short_repr(value)}: not an array; {expected}") from None
+        raise _NotReal(f"{what} {short_repr(value, 80)}: not an array; {expected}") from None
     if array.dtype.kind not in "iuf" or array.shape not in shapes:
-        raise _NotReal(f"{what} {_short_repr(value)}: dtype {array.dtype}, shape "
+        raise _NotReal(f"{what} {short_repr(value, 80)}: dtype {array.dtype}, shape "
                        f"{array.shape}; {expected}")
     return array.astype(float, copy=False)
-
-
-def _short_repr(value, limit: int = 80) -> str:
-    text = " ".join(repr(value).split())
-    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _disturbance_spec(specs, Ts: float) -> np.ndarray:
@@ -420,11 +416,6 @@ def _noise_draws(dspec: np.ndarray, n_samples: int, Ts: float) -> int:
     t = np.arange(n_samples) * Ts
     return int(sum(np.count_nonzero(t >= row[3] - 1e-9) for row in dspec
                    if row[0] == DisturbanceKind.NOISE))
-
-
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else "(no message)"
 
 
 def initial_state(scenario: Scenario, model: ArmModel) -> np.ndarray:
