@@ -155,6 +155,13 @@ CASES = [
     (["run", "--set", 'requirement=[{name = "r", formula = "theta1 <= 1 and theta2.real > 0"}]'],
      ("requirement[0].formula: ", "unknown signal 'theta2.real'")),
     (["campaign", "{tmp}/nameless-requirement.toml"], "requirement[0].name: missing"),
+    # A formula deeper than the parser's recursion: "input nested too deeply", no key.
+    (["run", "--set", 'requirement=[{name = "r", formula = "' + "always(" * 3000 +
+      "theta1 <= 1" + ")" * 3000 + '"}]'],
+     ("requirement[0].formula: 'always(always(", "nested too deeply to parse")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "' +
+      " and ".join(["theta1 <= 1"] * 300) + '"}]'],
+     ("requirement[0].formula: 'theta1 <= 1 and", "nested too deeply to evaluate")),
     # Issue 32: a reference setting its kind ignores was accepted; an infinite omega was
     # reported as amplitude; an infinite time as "must be > 0".
     (["run", "--set", 'reference={kind = "quintic", amplitude = [1, 1]}'],

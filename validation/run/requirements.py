@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._config import ConfigError, check, check_label
+from ._config import ConfigError, check, check_label, short_repr
 from .claim_measures import CLAIMS, claim_by_key
 
 __all__ = ["Requirement", "check_requirements", "requirement_metrics", "robustness",
@@ -268,6 +268,9 @@ def _parse(formula: str, variables: tuple[str, ...], Ts: float = 1e-3):
             if not variables:
                 return None, ()  # a syntax check only: names are checked per scenario
             raise
+        except RecursionError:  # ANTLR and RTAMT's visitors recurse once per operator
+            raise ConfigError("formula", f"{short_repr(formula)}: nested too deeply to "
+                                         "parse") from None
     used = tuple(sorted(_variables(spec.ast.specs[0])))
     for name in used:
         if name not in variables:  # a field of a signal (``theta1.real``): no signal
@@ -333,6 +336,9 @@ def _evaluate(formula: str, signals: tuple[str, ...], Ts: float, time: np.ndarra
         text = " ".join(str(exc).replace("RTAMT Exception:", "").split())
         raise ConfigError(f"{where}.formula" if where != "formula" else where,
                           f"{formula!r}: {text} (Ts = {Ts:g} s)") from None
+    except RecursionError:
+        raise ConfigError(f"{where}.formula" if where != "formula" else where,
+                          f"{short_repr(formula)}: nested too deeply to evaluate") from None
     return float(out[0][1])
 
 
