@@ -35,8 +35,8 @@ def gap_by_definition(P1, P2) -> tuple[float, float, float | None]:
 
     - κ(ω) = |n1 d2 − n2 d1| / √((|n1|² + |d1|²)(|n2|² + |d2|²)) (the closed form, finite
       at the poles) on a dense grid — 10 points a 1e-4 decade, and 8000 points within
-      ±10 % of each pole's magnitude down to 1e-9 of it — then every near-maximum refined
-      by a bounded search;
+      ±10 % of each pole's magnitude down to 1e-9 of it — then every local maximum within
+      0.1 % of the largest refined by a bounded search;
     - the normalised factors are N = n/m, M = d/m with m Hurwitz, |m|² = |n|² + |d|² on the
       axis, so G2*G1 = q/(m2(−s) m1(s)) with q = n2(−s) n1(s) + d2(−s) d1(s), and the
       phase of a polynomial gains π for each root left of the axis and loses π for each one
@@ -59,7 +59,7 @@ def gap_by_definition(P1, P2) -> tuple[float, float, float | None]:
                                   np.outer(poles, 1 + offsets).ravel()]))
     k = kappa(w)
     peak = float(k.max())
-    local = (k >= np.roll(k, 1)) & (k >= np.roll(k, -1)) & (k >= peak - 1e-3)
+    local = (k >= np.roll(k, 1)) & (k >= np.roll(k, -1)) & (k >= (1 - 1e-3) * peak)
     for i in np.flatnonzero(local):
         a, b = w[max(i - 1, 0)], w[min(i + 1, len(w) - 1)]
         res = scipy.optimize.minimize_scalar(lambda x: -kappa([x])[0], bounds=(a, b),

@@ -207,8 +207,8 @@ def _spec_factory():
     class _Interpreter(discrete_time_offline_interpreter_factory(_SlidingWindowVisitor)):
         def evaluate(self, dataset):
             """RTAMT's, for a run of one sample too: RTAMT's own reads the period between
-            the last two samples (for a counter we do not use: `_parse` checks the time
-            bounds) and raises UnboundLocalError without them."""
+            the last two samples (for a counter of irregular sampling, which a run's
+            regular samples never raise) and raises UnboundLocalError without them."""
             if len(dataset["time"]) > 1:
                 return super().evaluate(dataset)
             self.exist_ast()
