@@ -104,7 +104,9 @@ def _locate(name: str) -> Path | None:
     origin = getattr(spec, "origin", None)
     if not origin or not spec.has_location:
         return None
-    return Path(origin).resolve()
+    # A module in a zip archive on sys.path (zipimport) has no file of its own: the
+    # archive stands for it (hashed whole; what it imports is not followed).
+    return Path(getattr(spec.loader, "archive", None) or origin).resolve()
 
 
 @dataclass

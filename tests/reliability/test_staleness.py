@@ -12,6 +12,7 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+import zipfile
 
 import numpy as np
 import pytest
@@ -257,3 +258,42 @@ def test_a_compiled_plugin_never_runs_its_helpers_old_code(tmp_path, cache_dir):
     assert probe("resolve") == 3.0  # the guard deleted it: the edited helper runs
     cached = (tmp_path / "numba-cache") if cache_dir else (lab / "__pycache__")
     assert list(cached.rglob("labkernlaw.*.nbi"))  # the caches are where we looked
+ZIP_LAW = textwrap.dedent('''
+    class ZipPD:
+        """A PD law shipped in a zip archive."""
+        def __init__(self, model):
+            pass
+
+        def __call__(self, t, x, ref):
+            n = x.shape[0] // 2
+            theta_d, dtheta_d, _ = ref(t)
+            return 30.0 * (theta_d - x[:2]) + 18.0 * (dtheta_d - x[n:n + 2])
+''')
+
+
+def _zip(path, text: str) -> None:
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("ziplaws.py", text)
+
+
+def test_a_plugin_from_a_zip_archive_runs_and_its_archive_is_its_fingerprint(tmp_path):
+    """Known-bad (issue 32): with the archive on PYTHONPATH (ordinary Python), the run
+    ran, then storing it failed: "laws.zip/ziplaws.py: Not a directory" (the fingerprint
+    read the module as a file), exit 1.  Now the archive is hashed whole: the run is
+    stored, and editing the archive makes it stale."""
+    _zip(tmp_path / "laws.zip", ZIP_LAW)
+    env = {**os.environ, "PYTHONPATH": str(tmp_path / "laws.zip")}
+    done = subprocess.run([sys.executable, "-m", "validation.cli", "run", "--controller",
+                           "ziplaws:ZipPD", "--duration", "0.2", "--out", "out"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    (row,) = ResultStore(tmp_path / "out").rows()
+    assert row.status == "ok"
+    fingerprint = [sys.executable, "-c", "import sys, json; from validation.batch."
+                   "fingerprint import run_fingerprint; print(run_fingerprint("
+                   "json.loads(sys.argv[1])))", json.dumps(row.config)]
+    same = subprocess.run(fingerprint, env=env, capture_output=True, text=True, check=True)
+    assert same.stdout.strip() == row.fingerprint
+    _zip(tmp_path / "laws.zip", ZIP_LAW.replace("30.0", "60.0"))
+    edited = subprocess.run(fingerprint, env=env, capture_output=True, text=True, check=True)
+    assert edited.stdout.strip() != row.fingerprint

@@ -14,8 +14,8 @@ enters with its version and its installed files' record (``RECORD``: a hash per 
 
 A plug-in law adds its own module and every module that one imports that is not part of
 the Python installation (its helpers, wherever they live: a folder on ``PYTHONPATH``,
-inside one of the project's packages, a sourceless ``.pyc``, an extension module), found
-the same way, and every installed package it imports, the same way as the project's: a
+inside one of the project's packages, a sourceless ``.pyc``, an extension module, a zip
+archive on ``sys.path`` — hashed whole, what it imports not followed), found the same way, and every installed package it imports, the same way as the project's: a
 plug-in installed with ``pip`` and upgraded is new code.  Files are located without
 importing anything, so reading a results folder never runs a plug-in's code.  Numba's
 compiled artefacts are kept consistent with these sources by `reduced_model._cache_guard`.

@@ -55,12 +55,12 @@ def failed_result(scenario, exc: BaseException | str) -> tuple[RunResult, dict]:
 
 def describe(exc: BaseException) -> str:
     """One line saying what ``exc`` means for a run."""
+    from ..run._config import short_repr, short_str
     if isinstance(exc, SystemExit):
-        return f"the run called sys.exit({exc.code!r})"
+        return f"the run called sys.exit({short_repr(exc.code)})"
     if isinstance(exc, KeyboardInterrupt):  # workers ignore SIGINT: raised by the code
         return "KeyboardInterrupt raised during the run (not a Ctrl-C)"
-    text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+    return short_str(exc)
 
 
 def _over_memory(message: str) -> str:

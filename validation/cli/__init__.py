@@ -53,6 +53,7 @@ try:
     from ..batch.interrupts import Interrupted, exit_status, signals_interrupt  # noqa: E402
     from ..batch.store import StoreError  # noqa: E402
     from ..run.processes import CHECK_TIMEOUT, contain_checks  # noqa: E402
+    from ..run._config import short_repr  # noqa: E402
     from .common import EXIT_FAILED, EXIT_USAGE  # noqa: E402
     from .parser import build_parser  # noqa: E402
 except ImportError as _exc:  # a system library missing: one line naming the fix
@@ -103,7 +104,7 @@ def _command(args: argparse.Namespace) -> int:
     except RecursionError:  # a structure the checks did not bound
         return _error("input nested too deeply", EXIT_USAGE)
     except SystemExit as exc:  # flexarm's own code never exits from inside a command
-        return _error(f"sys.exit({exc.code!r}) was called by code this command ran "
+        return _error(f"sys.exit({short_repr(exc.code)}) was called by code this command ran "
                       "(a plug-in's?); stopped", EXIT_FAILED)
     except Interrupted:  # a Ctrl-C (a KeyboardInterrupt too): `main` says so
         raise
