@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import operator
+import os
 import platform
 from datetime import datetime, timezone
 from pathlib import Path
@@ -35,7 +36,7 @@ def report(name: str, rows: list[dict], *, columns: list[str], title: str) -> Pa
     path = RESULTS / f"{name}.json"
     meta = {"when": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "machine": platform.processor() or platform.machine(),
-            "python": platform.python_version()}
+            "python": platform.python_version(), "cores": os.cpu_count()}
     path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=2))
     print(f"(written to {path})")
     return path

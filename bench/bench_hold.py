@@ -96,16 +96,18 @@ def cost_rows(repeats: int) -> list[dict]:
     return rows
 
 
-def main(repeats: int = REPEATS) -> None:
-    report("hold_accuracy", accuracy_rows(),
-           title="Replay error against Ts/64 (max |theta - theta_ref|, rad), default arm, "
-                 "ANCF 4 el/link, Ts = 1 ms",
-           columns=["loop", "hold", "err_Ts", "err_Ts/2", "err_Ts/4", "order", "target",
-                    "met", "note"])
+def main(repeats: int = REPEATS, accuracy: bool = True) -> None:
+    if accuracy:
+        report("hold_accuracy", accuracy_rows(),
+               title="Replay error against Ts/64 (max |theta - theta_ref|, rad), default "
+                     "arm, ANCF 4 el/link, Ts = 1 ms",
+               columns=["loop", "hold", "err_Ts", "err_Ts/2", "err_Ts/4", "order",
+                        "target", "met", "note"])
     report("hold_cost", cost_rows(repeats),
            title=f"Cost of the exact hold, medians of {repeats} interleaved repeats",
            columns=["what", "us", "ratio", "target", "met", "s", "realtime"])
 
 
-if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else REPEATS)
+if __name__ == "__main__":  # bench_hold.py [REPEATS] [--cost-only]
+    numbers = [a for a in sys.argv[1:] if a.isdigit()]
+    main(int(numbers[0]) if numbers else REPEATS, accuracy="--cost-only" not in sys.argv)

@@ -11,6 +11,8 @@ import inspect
 import os
 import types
 
+from reduced_model._cache_guard import invalidate_stale_plugin_caches
+
 from ._baselines import JointPD, RigidComputedTorque
 from ._ekf import ExtendedKalmanFilter, PositionEKF
 from ._lqr import GainScheduledLQR
@@ -44,6 +46,7 @@ def resolve(kind: str, builtins: dict[str, type], role: str) -> type:
     module_name, _, attr = kind.partition(":")
     if not module_name or not attr:
         raise PluginError(f"{kind!r} is not an import path \"package.module:Class\"")
+    invalidate_stale_plugin_caches(module_name)  # before numba can load its old code
     try:
         module = importlib.import_module(module_name)
     except Exception as exc:  # noqa: BLE001 - any import failure is the user's to see

@@ -68,16 +68,15 @@ def campaign_toml(spec: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def wait_gone(group: int, timeout: float = 10.0) -> bool:
-    """Whether every process of process group ``group`` (a command started in its own
-    session, and every worker it forked) has ended within ``timeout`` seconds."""
-    import os
+def wait_gone(session: int, timeout: float = 10.0) -> bool:
+    """Whether every process of session ``session`` (a command started in its own
+    session, every worker it forked — each leads its own process group — and whatever
+    they started) has ended within ``timeout`` seconds."""
+    import subprocess
     import time
     deadline = time.time() + timeout
     while time.time() < deadline:
-        try:
-            os.killpg(group, 0)
-        except ProcessLookupError:
+        if not subprocess.run(["pgrep", "-s", str(session)], capture_output=True).stdout:
             return True
         time.sleep(0.05)
     return False

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from validation.batch.fingerprint import plugin_sources
+from validation.batch.fingerprint import forget_plugins
 
 
 def write_files(folder: Path, files: dict[str, str]) -> Path:
@@ -29,7 +29,7 @@ def plugin_lab(tmp_path, monkeypatch):
         for name in [m for m in sys.modules
                      if any(m == mod or m.startswith(mod + ".") for mod in modules)]:
             monkeypatch.delitem(sys.modules, name)
-        plugin_sources.cache_clear()
+        forget_plugins()
         return tmp_path
     yield make
-    plugin_sources.cache_clear()
+    forget_plugins()

@@ -147,10 +147,10 @@ def test_the_realisable_pbc_refuses_its_dead_settings_with_the_reason():
 
 def test_plugin_code_is_part_of_the_fingerprint(plugin_dir):
     """Editing a plug-in's module makes its stored runs stale (not reused)."""
-    from validation.batch.fingerprint import plugin_sources, run_fingerprint
+    from validation.batch.fingerprint import forget_plugins, run_fingerprint
     config = json.loads(json.dumps(scenario_to_mapping(scenario_from_mapping(
         {"controller": {"kind": "mylab_plugins:MyPD"}}))))
     before = run_fingerprint(config)
     (plugin_dir / "mylab_plugins.py").write_text(PLUGIN + "\n# edited\n")
-    plugin_sources.cache_clear()
+    forget_plugins()
     assert run_fingerprint(config) != before

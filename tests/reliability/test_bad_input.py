@@ -19,6 +19,8 @@ CAMPAIGN_BAD_RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 0\nrandom.seed = 
                       'random.true_params.Mp = {uniform = [0.0, 1.0]}\n'
 CAMPAIGN_OK = 'name = "x"\n[scenario]\nduration = 0.1\ntransient = 0.05\n'
 CAMPAIGN_PATH_NAME = 'name = "../x"\n'
+SLASH_NAME = 'name = "robust/robust"\nduration = 0.1\ntransient = 0.05\n'
+NAMELESS_REQUIREMENT = 'name = "x"\n[[requirement]]\nclaim = "tracking"\n'
 # Issue 23: errors that were tracebacks (OverflowError, RecursionError, TypeError) or did
 # not name their key.
 RANDOM = 'name = "x"\n[[sweep]]\nrandom.samples = 2\nrandom.true_params.Mp = {{{}}}\n'
@@ -53,7 +55,7 @@ CASES = [
     (["run", "--duration", "1.5", "--set", "transient=2"], ("transient: ", "leaves nothing")),
     (["run", "--duration", "1e4"], ("duration: ", "1e+07 samples (at most 5e+06")),
     (["run", "--set", "sensors.encoder_noise=1e4"], "sensors.encoder_noise: must be <= 1000"),
-    (["run", "--name", ""], "name: must be a non-empty printable string"),
+    (["run", "--name", ""], "name: must be a plain name"),
     (["run", "--set", "model.modes_per_link=[5, 2]"], "model.modes_per_link"),
     (["run", "--set", "plant.modes_per_link=[0, 2]"], "plant.modes_per_link"),
     (["run", "--set", "model.modes_per_link=[2]"], "model.modes_per_link: expected 2 values"),
@@ -114,7 +116,13 @@ CASES = [
      "sweep[0].random.true_params.Mp: loguniform needs finite bounds"),
     (["campaign", "{tmp}/axis-name.toml"], ("sweep[0].grid.name: must be a plain name",
                                             "'../../../x'")),
-    (["run", "--name", "a/b/c"], "name: must be a plain name or campaign/label"),
+    # A name given to one run is a plain name, as a scenario file's ("<campaign>/<label>"
+    # names a campaign's run; --like keeps a stored one).
+    (["run", "--name", "a/b/c"], ("name: must be a plain name", "'a/b/c'")),
+    (["run", "--name", "a/b"], ("name: must be a plain name", "'a/b'")),
+    (["run", "--set", 'name="a/b"'], ("name: must be a plain name", "'a/b'")),
+    (["run", "--config", "{tmp}/slash-name.toml"], ("name: must be a plain name",
+                                                     "'robust/robust'")),
     (["baseline", "check", "--file", "{tmp}/baseline-no-op.toml"],
      "check[0].op: missing"),
     (["run", "--observer", "smo-bl", "--set", 'observer.options.boundary_layer="x"'],
@@ -129,6 +137,47 @@ CASES = [
     (["run", "--memory-limit", "10"], "--memory-limit: must be >= 1024 MiB"),
     (["baseline", "check", "--only", "no-such-check"], "no check matches"),
     (["modes", "--params", "{tmp}/broken.toml"], "invalid TOML"),
+    # Issue 32: requirements that ended in a traceback or in ANTLR's noise on stderr, or
+    # were accepted reading no signal.
+    (["run", "--set", 'requirement=[{formula = "always(theta1 <= 1)"}]'],
+     "requirement[0].name: missing (required)"),
+    (["run", "--set", 'requirement=[{name = "r", formula = "always[2,1](theta1 <= 1)"}]'],
+     ("requirement[0].formula: ", "the interval [2, 1] ends before it begins")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "(theta1 < 1) since[3ms,2ms] '
+                      '(theta2 > 0)"}]'],
+     ("requirement[0].formula: ", "the interval [3ms, 2ms] ends before it begins")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "theta1 <= 1 if ok else 2"}]'],
+     ("requirement[0].formula: ", "unknown signal 'if'")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "theta1 <= 1 ? 2 : 3"}]'],
+     ("requirement[0].formula: ", "token recognition error at: '?'")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "abs(theta1) <= 1 # comment"}]'],
+     ("requirement[0].formula: ", "token recognition error at: '#'")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "theta1 <= 1 and theta2.real > 0"}]'],
+     ("requirement[0].formula: ", "unknown signal 'theta2.real'")),
+    (["campaign", "{tmp}/nameless-requirement.toml"], "requirement[0].name: missing"),
+    # A formula deeper than the parser's recursion: "input nested too deeply", no key.
+    (["run", "--set", 'requirement=[{name = "r", formula = "' + "always(" * 3000 +
+      "theta1 <= 1" + ")" * 3000 + '"}]'],
+     ("requirement[0].formula: 'always(always(", "nested too deeply to parse")),
+    (["run", "--set", 'requirement=[{name = "r", formula = "' +
+      " and ".join(["theta1 <= 1"] * 300) + '"}]'],
+     ("requirement[0].formula: 'theta1 <= 1 and", "nested too deeply to evaluate")),
+    # Issue 32: a reference setting its kind ignores was accepted; an infinite omega was
+    # reported as amplitude; an infinite time as "must be > 0".
+    (["run", "--set", 'reference={kind = "quintic", amplitude = [1, 1]}'],
+     "reference.amplitude: not used by a 'quintic' reference (drop it)"),
+    (["run", "--set", "reference.goal=[1.0, 0.5]"],
+     "reference.goal: not used by a 'paper' reference (drop it)"),
+    (["run", "--set", "reference.omega=[inf, 1.0]"],
+     "reference.omega: must be finite, got (inf, 1.0)"),
+    (["run", "--set", 'reference={kind = "quintic", move_time = inf}'],
+     "reference.move_time: must be finite, got inf"),
+    (["run", "--set", "duration=inf"], "duration: must be finite, got inf"),
+    # Issue 32: an unreachable scheduler was refused after the results folder was made.
+    (["campaign", "{tmp}/ok.toml", "--executor", "dask", "--scheduler", "tcp://127.0.0.1:1"],
+     "--scheduler: cannot reach tcp://127.0.0.1:1"),
+    (["run", "--set", "disturbances=[{kind = 'step', start = inf}]"],
+     "disturbances[0].start: must be finite, got inf"),
 ]
 
 
@@ -142,7 +191,8 @@ def scratch(tmp_path):
              "uniform-both-inf.toml": RANDOM.format("uniform = [-inf, inf]"),
              "loguniform-inf.toml": RANDOM.format("loguniform = [1.0, inf]"),
              "axis-name.toml": CAMPAIGN_AXIS_NAME, "baseline-no-op.toml": BASELINE_NO_OP,
-             "a-file": "not a folder"}
+             "a-file": "not a folder", "slash-name.toml": SLASH_NAME,
+             "nameless-requirement.toml": NAMELESS_REQUIREMENT}
     for name, text in files.items():
         (tmp_path / name).write_text(text)
     return tmp_path
@@ -159,6 +209,12 @@ def run_main(argv, capsys):
 @pytest.mark.parametrize("argv, text", CASES, ids=[f"{i:02d}-{c[0][0]}" for i, c in
                                                    enumerate(CASES)])
 def test_bad_input(argv, text, scratch, capsys, monkeypatch):
+    assert_refused(argv, text, scratch, capsys, monkeypatch)
+
+
+def assert_refused(argv, text, scratch, capsys, monkeypatch):
+    """``argv`` ends with one line naming ``text`` (a string, or all of a tuple), exit
+    status 2, no traceback and nothing written."""
     monkeypatch.chdir(scratch)
     out = scratch / "out"
     argv = [a.replace("{tmp}", str(scratch)) for a in argv]
@@ -178,6 +234,82 @@ def test_bad_input(argv, text, scratch, capsys, monkeypatch):
     assert "Traceback" not in captured.err + captured.out
     assert not out.exists(), "an output folder was created for bad input"
     assert sorted(p.name for p in scratch.iterdir()) == before  # nothing else either
+
+
+def _includes(n: int, prefix: str) -> str:
+    return "include = [" + ", ".join(f'"{prefix}{i}.toml"' for i in range(n)) + "]\n"
+
+
+# Issue 32: include chains that cost minutes or ended in a traceback.  A 0.6 MB table.
+BIG = "[big]\n" + "".join(f"k{i} = {i}.5\n" for i in range(40_000))
+INCLUDE_CASES = [
+    # the same 0.6 MB file 50 000 times: over 5 min of CPU, now refused as it is read
+    (["run", "--config", "{tmp}/same-50000.toml"],
+     ("include: ", "same-50000.toml: names 'big.toml' more than once")),
+    # symbolic links in a loop: a RuntimeError traceback, as the file and as an include
+    (["run", "--config", "{tmp}/loop1.toml"], "loop1.toml: cannot read (Symlink loop"),
+    (["campaign", "{tmp}/includes-loop.toml"], "loop1.toml: cannot read (Symlink loop"),
+    # 20 files each including the same 20 (a diamond: 40 files, 420 includes)
+    (["run", "--config", "{tmp}/diamond.toml"], ("include: ", "more than 256 includes")),
+    # five 0.9 MB files, each under the 1 MiB cap
+    (["run", "--config", "{tmp}/five-big.toml"], ("include: ", "exceed 4 MiB in all")),
+]
+
+
+@pytest.fixture
+def include_scratch(tmp_path):
+    files = {"big.toml": BIG, "same-50000.toml": 'include = ["big.toml"' +
+             ', "big.toml"' * 49_999 + ']\n', "includes-loop.toml": 'include = "loop1.toml"\n',
+             "diamond.toml": _includes(20, "mid"), "five-big.toml": _includes(5, "big")}
+    files |= {f"mid{i}.toml": _includes(20, "leaf") for i in range(20)}
+    files |= {f"leaf{i}.toml": f"seed = {i}\n" for i in range(20)}
+    files |= {f"big{i}.toml": "[big]\n" + "".join(f"k{j} = {j}.25\n" for j in range(50_000))
+              for i in range(5)}
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    (tmp_path / "loop1.toml").symlink_to("loop2.toml")
+    (tmp_path / "loop2.toml").symlink_to("loop1.toml")
+    return tmp_path
+
+
+@pytest.mark.parametrize("argv, text", INCLUDE_CASES, ids=[
+    "same file 50000 times", "symlink loop", "include of a symlink loop", "256 includes",
+    "4 MiB in all"])
+def test_bad_include(argv, text, include_scratch, capsys, monkeypatch):
+    assert_refused(argv, text, include_scratch, capsys, monkeypatch)
+
+
+def test_an_include_diamond_within_the_caps_is_read(tmp_path):
+    """Known-good of the include caps: a file included along two paths (parsed once)."""
+    from validation.run.tomlfiles import load_toml
+    (tmp_path / "top.toml").write_text('include = ["a.toml", "b.toml"]\nseed = 1\n')
+    (tmp_path / "a.toml").write_text('include = "base.toml"\n[controller]\nkind = "pd"\n')
+    (tmp_path / "b.toml").write_text('include = "base.toml"\n[plant]\nkind = "exudyn"\n')
+    (tmp_path / "base.toml").write_text("duration = 1.0\ntransient = 0.5\n[plant]\n"
+                                        'kind = "reduced"\n')
+    assert load_toml(tmp_path / "top.toml") == {
+        "seed": 1, "duration": 1.0, "transient": 0.5, "plant": {"kind": "exudyn"},
+        "controller": {"kind": "pd"}}
+
+
+def test_a_refused_runner_keeps_a_results_folder_that_was_there(tmp_path, monkeypatch,
+                                                                 capsys):
+    """Known-good of removing what a refused command created: a folder that held results
+    before stays, runs and all."""
+    from validation.cli import common
+    from validation.run._config import ConfigError
+    (tmp_path / "ok.toml").write_text(CAMPAIGN_OK)
+    out = tmp_path / "out"
+    assert main(["campaign", str(tmp_path / "ok.toml"), "--out", str(out),
+                 "--no-progress"]) == 0
+    stored = sorted(p.name for p in (out / "runs").iterdir())
+
+    def unreachable(*args, **kwargs):
+        raise ConfigError("--scheduler", "cannot reach tcp://127.0.0.1:1 within 10 s")
+    monkeypatch.setattr(common, "make_runner", unreachable)
+    assert main(["campaign", str(tmp_path / "ok.toml"), "--out", str(out)]) == 2
+    assert "cannot reach" in capsys.readouterr().err
+    assert sorted(p.name for p in (out / "runs").iterdir()) == stored
 
 
 def test_enough_cases():

@@ -7,6 +7,7 @@ workers.
 One campaign holds every fault and is run once per worker count (module fixtures); each
 fault is then its own test on the stored results."""
 import math
+import os
 import subprocess
 import sys
 import textwrap
@@ -17,6 +18,7 @@ import pytest
 from campaign_testing import wait_gone
 from conftest import write_files
 from validation.batch.store import ResultStore
+from validation.run._config import ConfigError
 
 FAULTS = textwrap.dedent('''
     """Laws that misbehave from t = 0.1 s on, written for the tests."""
@@ -174,7 +176,7 @@ def test_workers_die_with_a_killed_campaign(lab, workers, tmp_path):
         time.sleep(0.05)
     time.sleep(1.0)  # every worker is now inside a run that never ends
     assert proc.poll() is None, proc.communicate()
-    workers_pids = subprocess.run(["pgrep", "-g", str(proc.pid)], capture_output=True,
+    workers_pids = subprocess.run(["pgrep", "-s", str(proc.pid)], capture_output=True,
                                   text=True).stdout.split()
     assert len(workers_pids) == 1 + int(workers)  # the campaign and its workers
     proc.kill()
@@ -194,32 +196,138 @@ def test_sys_exit_in_the_plugin_run_by_flexarm_run_is_not_success(lab, tmp_path)
     assert wait_gone(proc.pid)
 
 
-@pytest.mark.parametrize("where", ["__init__", "module"])
-def test_sys_exit_or_keyboard_interrupt_while_checking_a_plugin(lab, tmp_path, where):
-    """Checking a scenario constructs its laws here (and imports their modules): code
-    that exits or raises KeyboardInterrupt there ends the command with status 1 and one
-    line, never 0, and writes nothing."""
-    (tmp_path / "checklaws.py").write_text(textwrap.dedent(f'''
-        import sys
-        if {where == "module"!r}:
+CHECKED = textwrap.dedent('''
+    """A law whose import or constructor misbehaves as FAULT_AT and FAULT say."""
+    import ctypes
+    import os
+    import sys
+    import time
+
+
+    def misbehave():
+        fault = os.environ.get("FAULT")
+        if fault == "sys.exit":
             sys.exit(0)
-        class Exits:
+        if fault == "sys.exit-repr":
+            class Unprintable:
+                def __repr__(self):
+                    raise RuntimeError("no repr")
+            sys.exit(Unprintable())
+        if fault == "os._exit":
+            os._exit(0)
+        if fault == "segfault":
+            ctypes.string_at(0)
+        if fault == "KeyboardInterrupt":
+            raise KeyboardInterrupt
+        if fault == "hang":
+            while True:
+                time.sleep(1.0)
+
+
+    if os.environ.get("FAULT_AT") == "module":
+        misbehave()
+
+
+    class Law:
+        def __init__(self, model):
+            if os.environ.get("FAULT_AT") == "__init__":
+                misbehave()
+
+        def __call__(self, t, x, ref):
+            return x[:2] * 0.0
+''')
+#: fault -> what the one line says happened while the plug-in was imported or built.
+CHECK_FAULTS = {
+    "sys.exit": "it called sys.exit(0)",
+    "sys.exit-repr": "it called sys.exit(<Unprintable object>)",
+    "os._exit": "the process checking it exited with status 0",
+    "segfault": "the process checking it was killed by signal 11 (SIGSEGV)",
+    "KeyboardInterrupt": "it raised KeyboardInterrupt",
+    "hang": "no answer after 3 s",
+}
+
+
+@pytest.mark.parametrize("where", ["module", "__init__"])
+@pytest.mark.parametrize("fault", list(CHECK_FAULTS))
+def test_a_plugin_misbehaving_while_checked_is_one_named_failure(plugin_lab, monkeypatch,
+                                                                 where, fault):
+    """Import and construction run apart from the command (as the command line checks
+    plug-ins): exit, crash, hang — the check is a ConfigError saying what happened, and
+    this process lives on."""
+    from validation.run import laws, processes
+    from validation.run.scenario import scenario_from_mapping
+    plugin_lab({"checkedlaw.py": CHECKED})
+    monkeypatch.setenv("FAULT", fault)
+    monkeypatch.setenv("FAULT_AT", where)
+    laws._checked.cache_clear()
+    processes.contain_checks(3.0)  # the hang's limit [s]: long enough for a fork and an import
+    try:
+        with pytest.raises(ConfigError) as caught:
+            scenario_from_mapping({"controller": {"kind": "checkedlaw:Law"}})
+    finally:
+        processes.contain_checks(None)
+        laws._checked.cache_clear()
+    assert caught.value.path == "controller.kind"
+    assert CHECK_FAULTS[fault] in caught.value.message, caught.value.message
+    assert "during its import and construction" in caught.value.message
+    assert "checkedlaw" not in sys.modules  # never imported here
+
+
+def test_the_command_ends_with_one_line_when_a_plugin_exits_at_import(tmp_path):
+    """Known bad: os._exit(0) at import ended `campaign` with status 0, no message and
+    none of its runs stored."""
+    write_files(tmp_path, {"checkedlaw.py": CHECKED, "c.toml": textwrap.dedent('''
+        name = "c"
+        [scenario]
+        duration = 0.5
+        transient = 0.1
+        controller.kind = "checkedlaw:Law"
+        [[sweep]]
+        grid.seed = [0, 1, 2]
+    ''')})
+    proc = flexarm(tmp_path, "campaign", "c.toml", "--out", str(tmp_path / "out"),
+                   env={**os.environ, "FAULT": "os._exit", "FAULT_AT": "module"})
+    _, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 2, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("flexarm: error: scenario.controller.kind: "
+                                                   "checkedlaw:Law: "), stderr
+    assert "exited with status 0 during its import and construction" in lines[0]
+    assert not (tmp_path / "out").exists()
+    assert wait_gone(proc.pid)
+
+
+def test_a_helper_process_of_a_stopped_run_is_stopped_with_it(tmp_path):
+    """Known bad: a run past its time limit was killed but the helper process its law
+    started ran on."""
+    write_files(tmp_path, {"helperlaw.py": textwrap.dedent('''
+        import subprocess
+        import time
+        from pathlib import Path
+
+
+        class Law:
             def __init__(self, model):
-                sys.exit(0)
-        class Interrupts:
-            def __init__(self, model):
-                raise KeyboardInterrupt
-    '''))
-    kinds = ["checklaws:Exits"] + (["checklaws:Interrupts"] if where == "__init__" else [])
-    for kind in kinds:
-        proc = flexarm(tmp_path, "run", "--controller", kind, "--duration", "0.5",
-                       "--set", "transient=0.1", "--out", str(tmp_path / "out"))
-        _, stderr = proc.communicate(timeout=300)
-        assert proc.returncode == 1, stderr
-        lines = stderr.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith("flexarm: error:"), stderr
-        assert ("sys.exit(0)" if "Exits" in kind else "KeyboardInterrupt") in lines[0]
-        assert not (tmp_path / "out").exists()
+                pass
+
+            def __call__(self, t, x, ref):
+                helper = subprocess.Popen(["sleep", "600"])
+                Path("helper.pid").write_text(str(helper.pid))
+                while True:
+                    time.sleep(1.0)
+    ''')})
+    proc = flexarm(tmp_path, "run", "--controller", "helperlaw:Law", "--duration", "0.5",
+                   "--set", "transient=0.1", "--out", str(tmp_path / "out"),
+                   "--run-timeout", str(run_timeout()))
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 1, stderr
+    assert "no result after" in stdout
+    helper = int((tmp_path / "helper.pid").read_text())
+    deadline = time.time() + 10
+    while time.time() < deadline and os.path.exists(f"/proc/{helper}"):
+        time.sleep(0.05)  # the kill is immediate; the kernel reaps it in a moment
+    assert not os.path.exists(f"/proc/{helper}"), "the law's helper outlived its run"
+    assert wait_gone(proc.pid)
 
 
 def test_a_run_past_its_time_limit_is_stopped_on_dask(lab, monkeypatch, tmp_path):

@@ -118,13 +118,16 @@ def load_campaign(path: str | Path) -> Campaign:
     return campaign_from_mapping(load_toml(path), source=str(path))
 
 
-def load_study(path: str | Path) -> Campaign:
+def load_study(path: str | Path, *, name: str | None = None) -> Campaign:
     """A scenario file or a campaign file, read the one way every command reads them: a
     campaign (`is_campaign`) as it is; a scenario as a campaign of that one run, named
-    after the file (the run keeps the scenario's own ``name``, if it has one)."""
+    after the file (the run keeps the scenario's own ``name``, if it has one, or
+    ``name`` if given: a name from the command line replaces the file's)."""
     data = load_toml(path)
     if is_campaign(data):
         return campaign_from_mapping(data, source=str(path))
+    if name is not None:
+        data = dict(data, name=name)
     label = re.sub(r"[^A-Za-z0-9._+-]", "-", Path(path).stem).lstrip(".") or "scenario"
     sweep = {"name": data["name"]} if "name" in data else {}
     if sweep:

@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import signal
 import time
 from contextlib import contextmanager
 from multiprocessing import connection
 from typing import TextIO
 
 from ..run._config import ConfigError, check
+from ..run.processes import describe_exit, kill_group
 from .interrupts import Interrupted, signals_interrupt
 from .limits import (MIN_MEMORY_MIB, RUN_TIMEOUT_BASE, default_memory_limit,
                      default_run_timeout)
@@ -91,21 +91,6 @@ def _run_timeout(data, run_timeout: float | None) -> float:
     return default_run_timeout(scenario)
 
 
-def _death(exitcode: int | None) -> str:
-    """What a worker's exit code says happened to it."""
-    if exitcode is None:
-        return "the worker stopped answering during the run"
-    if exitcode < 0:
-        try:
-            name = f" ({signal.Signals(-exitcode).name})"
-        except ValueError:
-            name = ""
-        oom = "; the system kills with it when memory runs out" \
-            if -exitcode == signal.SIGKILL else ""
-        return f"the worker was killed by signal {-exitcode}{name} during the run{oom}"
-    return f"the worker exited with status {exitcode} during the run"
-
-
 class _Worker:
     """One worker process (`worker.serve`), the parent's end of its pipe, and the run it
     holds: ``task`` (key, scenario), when it started and its deadline."""
@@ -133,9 +118,7 @@ class _Worker:
         return True
 
     def kill(self) -> None:
-        if self.process.is_alive():
-            self.process.kill()
-        self.process.join()
+        kill_group(self.process)  # and whatever a plug-in started in it
         self.conn.close()
 
     def stop(self) -> None:
@@ -248,7 +231,8 @@ class LocalPoolRunner(Runner):
                 pass  # died while sending
             elapsed = time.monotonic() - w.started
             w.kill()
-            message = f"{_death(w.process.exitcode)}, {elapsed:.3g} s after the run started"
+            message = (f"{describe_exit(w.process.exitcode, 'the run')}, {elapsed:.3g} s after "
+                       "the run started")
         elif time.monotonic() >= w.deadline:
             w.kill()
             message = f"no result after {w.timeout:g} s (the run was stopped; " \

@@ -1,126 +1,96 @@
 """The code fingerprint stored with every run: a hash of the code that produced it.
 
-A stored result may be reused only if it was made by the same code.  The files hashed
-are found, not listed: every project module that executing one run
+A stored result may be reused only if it was made by the same code: every module (source
+or bytecode), every package version and every compiled artefact that produced it.  The
+files hashed are found, not listed: every project module that executing one run
 (`validation.batch.worker`) can import — at module level or inside a function, directly
-or through other modules — found by a static walk of the import statements (`ast`),
-plus the ``__init__`` of every package on the way.  A module that can change a stored
-signal or metric is imported by the run path, so none can be left out; modules the run
-path never imports (the command line, the store, the reports, the verdicts computed
-from stored metrics) stay out, and so does what it imports only to show a result
-(`PRESENTATION`): editing them leaves stored runs valid.
+or through other modules — found by a static walk of the import statements
+(`reduced_model._imports`), plus the ``__init__`` of every package on the way.  A module
+that can change a stored signal or metric is imported by the run path, so none can be
+left out; modules the run path never imports (the command line, the store, the reports,
+the verdicts computed from stored metrics) stay out, and so does what it imports only to
+show a result (`PRESENTATION`, with the packages only it imports): editing them leaves
+stored runs valid.  Every installed package the run path imports (numpy, scipy, numba, Exudyn …)
+enters with its version and its installed files' record (``RECORD``: a hash per file).
 
-A plug-in law adds its own module and every module that one imports from outside the
-Python installation (its helpers), found the same way: files are located on
-``sys.path`` without importing anything, so reading a results folder never runs a
-plug-in's code.  The package and Exudyn versions enter too.
+A plug-in law adds its own module and every module that one imports that is not part of
+the Python installation (its helpers, wherever they live: a folder on ``PYTHONPATH``,
+inside one of the project's packages, a sourceless ``.pyc``, an extension module, a zip
+archive on ``sys.path`` — hashed whole, what it imports not followed), found the same way, and every installed package it imports, the same way as the project's: a
+plug-in installed with ``pip`` and upgraded is new code.  Files are located without
+importing anything, so reading a results folder never runs a plug-in's code.  Numba's
+compiled artefacts are kept consistent with these sources by `reduced_model._cache_guard`.
 """
 from __future__ import annotations
 
 import functools
 import hashlib
-import importlib.machinery
-import sys
-import sysconfig
-from importlib.metadata import PackageNotFoundError, version
+import re
+from importlib.metadata import PackageNotFoundError, distribution, packages_distributions
 from pathlib import Path
 
-from reduced_model._imports import imports
+from reduced_model._imports import walk
 
-__all__ = ["code_fingerprint", "run_fingerprint", "result_sources", "plugin_sources"]
+__all__ = ["code_fingerprint", "run_fingerprint", "result_sources", "plugin_sources",
+           "forget_plugins"]
 
 _ROOT = Path(__file__).resolve().parents[2]
 #: Where executing a run starts: everything it can import decides results.
 RUN_ENTRY = "validation.batch.worker"
 #: What the run path imports only to show a result, never to make one (`RunResult.plot`
-#: draws with it): not hashed, so that editing a figure leaves stored runs valid.
+#: draws with it): not walked, so that editing a figure (or upgrading matplotlib) leaves
+#: stored runs valid.
 PRESENTATION = ("validation.run.plotting",)
 _PROJECT_PACKAGES = ("reduced_model", "plant_exudyn", "controllers", "validation")
+#: The distribution name a requirement string starts with (PEP 508).
+_REQUIREMENT = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 
 
-def _version(name: str) -> str:
-    try:
-        return version(name)
-    except PackageNotFoundError:
-        return "?"
-
-
-def _imports(path: Path, module: str) -> set[str]:
-    """Absolute names of every module ``path`` (the module ``module``) imports, including
-    the names ``from X import name`` may mean as submodules."""
-    out = set()
-    for source, names in imports(path, module):
-        out.add(source)
-        out.update(f"{source}.{name}" for name in names)
-    return out
-
-
-def _locate(name: str, inside: tuple[str, ...] | None) -> Path | None:
-    """The source file of module ``name`` found on ``sys.path`` without importing it
-    (None if there is none, or it is not under one of the roots ``inside``)."""
-    parts = name.split(".")
-    search = None
-    spec = None
-    for i in range(len(parts)):
-        try:
-            spec = importlib.machinery.PathFinder.find_spec(".".join(parts[:i + 1]), search)
-        except (ImportError, ValueError):
-            return None
-        if spec is None:
-            return None
-        search = spec.submodule_search_locations
-    origin = getattr(spec, "origin", None)
-    if not origin or not origin.endswith(".py"):
-        return None
-    path = Path(origin).resolve()
-    if inside is not None and not any(path.is_relative_to(root) for root in inside):
-        return None
-    return path
-
-
-def _walk(start: list[str], inside, skip: tuple[str, ...] = ()) -> dict[str, Path]:
-    """Module name → file of ``start`` and everything it imports (transitively) whose file
-    lies under ``inside`` (None: anywhere but the Python installation).  Each name is
-    looked up once; with ``inside``, only names of packages that live there are (the
-    rest of the world cannot), without it the standard library is skipped by name; the
-    modules ``skip`` are not followed."""
-    found: dict[str, Path] = {}
-    seen: set[str] = set()
-    local = None if inside is None else {root.name for root in inside}
-    todo = list(start)
-    while todo:
-        name = todo.pop()
-        if not name or name in seen or name in skip:
-            continue
-        seen.add(name)
-        top = name.partition(".")[0]
-        if (local is not None and top not in local) or top in sys.stdlib_module_names:
-            continue
-        path = _locate(name, inside)
-        if path is None or (inside is None and _installed(path)):
-            continue
-        found[name] = path
-        parent = name.rpartition(".")[0]
-        todo.append(parent)  # a package's __init__ runs before its modules
-        try:
-            todo.extend(_imports(path, name))
-        except (SyntaxError, ValueError, OSError):
-            pass  # a file Python cannot parse imports nothing (and runs nothing); hashed
-    return found
-
-
-def _installed(path: Path) -> bool:
-    """Whether ``path`` belongs to the Python installation (standard library or an
-    installed package), not to the user's own code."""
-    roots = {sysconfig.get_paths()[k] for k in ("stdlib", "platstdlib", "purelib", "platlib")}
-    return any(path.is_relative_to(Path(r).resolve()) for r in roots if r)
+@functools.lru_cache(maxsize=1)
+def _project_walk():
+    return walk([RUN_ENTRY], tuple(_ROOT / p for p in _PROJECT_PACKAGES), skip=PRESENTATION)
 
 
 @functools.lru_cache(maxsize=1)
 def result_sources() -> tuple[Path, ...]:
     """The project files the run path can import (module docstring), sorted."""
-    inside = tuple(_ROOT / p for p in _PROJECT_PACKAGES)
-    return tuple(sorted(set(_walk([RUN_ENTRY], inside, PRESENTATION).values())))
+    return tuple(sorted(set(_project_walk().files.values())))
+
+
+@functools.cache
+def _top_levels() -> dict:
+    return packages_distributions()  # ~0.3 s: asked only for a module not named as its package
+
+
+@functools.cache
+def _distributions(top: str) -> tuple[str, ...]:
+    """The distributions that install the top-level module ``top`` and, transitively,
+    the ones they require (numba's llvmlite, say), sorted."""
+    try:
+        names = [distribution(top).name]
+    except PackageNotFoundError:
+        names = list(_top_levels().get(top, ()))
+    found: set[str] = set()
+    while names:
+        name = _REQUIREMENT.match(names.pop()).group(0).lower().replace("_", "-")
+        if name in found:
+            continue
+        try:
+            requires = distribution(name).requires or []
+        except PackageNotFoundError:
+            continue
+        found.add(name)
+        names += [r for r in requires if "extra ==" not in r and _REQUIREMENT.match(r)]
+    return tuple(sorted(found))
+
+
+@functools.cache
+def _distribution_record(name: str) -> str:
+    """A distribution's name, version and the hash of its ``RECORD`` (a hash of every
+    file it installed)."""
+    dist = distribution(name)
+    record = dist.read_text("RECORD") or ""
+    return f"{name}=={dist.version}:{hashlib.sha256(record.encode()).hexdigest()[:16]}"
 
 
 def _hash_files(h, files) -> None:
@@ -132,31 +102,50 @@ def _hash_files(h, files) -> None:
         h.update(b"\0")
 
 
+def _hash_packages(h, tops) -> None:
+    for name in sorted({d for top in tops for d in _distributions(top)}):
+        h.update(f"{_distribution_record(name)}\0".encode())
+    if not all(_distributions(top) for top in tops):  # a module no distribution declares
+        h.update(f"undeclared: {sorted(t for t in tops if not _distributions(t))}".encode())
+
+
 @functools.lru_cache(maxsize=1)
 def code_fingerprint() -> str:
     """16 hex digits identifying the result-deciding code of this installation."""
-    h = hashlib.sha256()
-    h.update(f"flexarm-validation {_version('flexarm-validation')} exudyn "
-             f"{_version('exudyn')}\0".encode())
+    h = hashlib.sha256(b"flexarm-validation\0")
     _hash_files(h, result_sources())
+    _hash_packages(h, _project_walk().packages)
     return h.hexdigest()[:16]
 
 
 @functools.lru_cache(maxsize=64)
+def _plugin_walk(module: str):
+    return walk([module], None)
+
+
+def forget_plugins() -> None:
+    """Forget which files each plug-in imports and which distributions are installed
+    (found once per process): for a caller that edits or installs plug-ins while it
+    runs, such as a test."""
+    for cached in (_plugin_walk, _top_levels, _distributions, _distribution_record):
+        cached.cache_clear()
+
+
 def plugin_sources(kind: str) -> tuple[Path, ...]:
     """The files of a plug-in's module and of the modules it imports from outside the
-    Python installation and outside this project (whose files `code_fingerprint`
-    covers), sorted; () if its module cannot be found."""
-    module = kind.partition(":")[0]
-    project = tuple(_ROOT / p for p in _PROJECT_PACKAGES)
-    files = _walk([module], None).values()
-    return tuple(sorted(p for p in files if not any(p.is_relative_to(r) for r in project)))
+    Python installation, less the project files `code_fingerprint` covers, sorted;
+    () if its module cannot be found."""
+    covered = set(result_sources())
+    files = _plugin_walk(kind.partition(":")[0]).files.values()
+    return tuple(sorted(p for p in files if p not in covered))
 
 
 def run_fingerprint(scenario: dict) -> str:
-    """The fingerprint of one run's code: `code_fingerprint` plus its plug-ins' sources."""
+    """The fingerprint of one run's code: `code_fingerprint` plus its plug-ins' sources
+    and installed packages."""
     kinds = sorted(k for k in (scenario.get("controller", {}).get("kind", ""),
-                               scenario.get("observer", {}).get("kind", "")) if ":" in k)
+                               scenario.get("observer", {}).get("kind", ""),
+                               scenario.get("plant", {}).get("kind", "")) if ":" in k)
     if not kinds:
         return code_fingerprint()
     h = hashlib.sha256(code_fingerprint().encode())
@@ -167,4 +156,5 @@ def run_fingerprint(scenario: dict) -> str:
             _hash_files(h, files)
         else:
             h.update(b"unknown")
+        _hash_packages(h, _plugin_walk(kind.partition(":")[0]).packages)
     return h.hexdigest()[:16]

@@ -1,6 +1,6 @@
-"""The limits every run executes under: a time limit derived from what the run simulates,
-a memory limit per worker process, and workers that die with the process that started
-them.
+"""The limits every run executes under: a time limit derived from what the run simulates
+and a memory limit per worker process (workers die with the process that started them:
+`validation.run.processes`).
 
 The default time limit is ``60 s + 10 × (1 ms per control sample + the plant's cost per
 internal step × steps)``, the plant's cost being 0.1 ms per step for the reduced plant and
@@ -20,15 +20,12 @@ limits the worker's address space (``RLIMIT_AS``); an allocation beyond it fails
 """
 from __future__ import annotations
 
-import ctypes
 import math
 import os
-import signal
-import sys
 from pathlib import Path
 
 __all__ = ["default_run_timeout", "default_memory_limit", "machine_memory",
-           "limit_memory", "die_with_parent", "MIN_MEMORY_MIB"]
+           "limit_memory", "MIN_MEMORY_MIB"]
 
 #: Wall time every run may take before its first sample (building the laws, Exudyn
 #: assembling its mesh, a worker compiling a kernel on its first use in a checkout) [s].
@@ -82,23 +79,3 @@ def limit_memory(mib: int) -> None:
     if hard != resource.RLIM_INFINITY:
         limit = min(limit, hard)
     resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
-
-
-def die_with_parent(parent: int) -> None:
-    """End this process with SIGKILL when ``parent`` (the process that forked it) dies:
-    no worker outlives a killed campaign.  Linux: the kernel's parent-death signal;
-    elsewhere a thread that watches the parent."""
-    if sys.platform.startswith("linux"):
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL))
-        if os.getppid() != parent:  # the parent died before the signal was armed
-            os._exit(1)
-        return
-    import threading
-    import time
-
-    def watch():
-        while os.getppid() == parent:
-            time.sleep(1.0)
-        os.kill(os.getpid(), signal.SIGKILL)
-    threading.Thread(target=watch, daemon=True, name="watch-parent").start()

@@ -55,12 +55,12 @@ def failed_result(scenario, exc: BaseException | str) -> tuple[RunResult, dict]:
 
 def describe(exc: BaseException) -> str:
     """One line saying what ``exc`` means for a run."""
+    from ..run._config import short_repr, short_str
     if isinstance(exc, SystemExit):
-        return f"the run called sys.exit({exc.code!r})"
+        return f"the run called sys.exit({short_repr(exc.code)})"
     if isinstance(exc, KeyboardInterrupt):  # workers ignore SIGINT: raised by the code
         return "KeyboardInterrupt raised during the run (not a Ctrl-C)"
-    text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0] if text else ''}".rstrip(": ")
+    return short_str(exc)
 
 
 def _over_memory(message: str) -> str:
@@ -109,7 +109,10 @@ def worker_init(parent: int, memory_mib: int | None) -> None:
     decides what a Ctrl-C means: stop, keep what finished, end the workers), dies with
     its parent, and runs under a memory limit of ``memory_mib`` MiB (None: none)."""
     global _memory_limit
-    from .limits import die_with_parent, limit_memory
+    from ..run.processes import contain_checks, die_with_parent, lead_process_group
+    from .limits import limit_memory
+    lead_process_group()  # killed with what a plug-in starts (`executor`)
+    contain_checks(None)  # a run's faults are contained by this process already
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     die_with_parent(parent)
@@ -142,7 +145,7 @@ def kernel_groups(scenarios) -> list[tuple[str, object]]:
     Each piece is compiled once per checkout (numba's cache) and loaded in well under a
     second afterwards.  Compiling executes two samples of a run, so runs of plug-in laws
     (whose code may exit, crash or hang) are left out: their workers compile what they
-    need within the run (its time limit allows for it)."""
+    need within the run (its time limit allows for it); so are runs of plug-in plants."""
     from controllers import compiled_form
     from reduced_model import ReducedPlant
 
@@ -154,7 +157,8 @@ def kernel_groups(scenarios) -> list[tuple[str, object]]:
         plant.step([0.0, 0.0], plant.h)
         plant.truth_vector()
 
-    scenarios = [s for s in scenarios if ":" not in s.controller.kind + s.observer.kind]
+    scenarios = [s for s in scenarios
+                 if ":" not in s.controller.kind + s.observer.kind + s.plant.kind]
     if not scenarios:
         return []
     groups, seen = [("arm model (M, C, RK4, kinematics)", model_kernels)], set()

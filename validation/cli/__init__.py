@@ -53,6 +53,8 @@ from .system import missing_library  # noqa: E402
 try:
     from ..batch.interrupts import Interrupted, exit_status, signals_interrupt  # noqa: E402
     from ..batch.store import StoreError  # noqa: E402
+    from ..run.processes import CHECK_TIMEOUT, contain_checks  # noqa: E402
+    from ..run._config import short_repr  # noqa: E402
     from .common import EXIT_FAILED, EXIT_USAGE  # noqa: E402
     from .parser import build_parser  # noqa: E402
 except ImportError as _exc:  # a system library missing: one line naming the fix
@@ -81,6 +83,9 @@ def main(argv: list[str] | None = None) -> int:
                     sys.path.append(os.getcwd())
                 else:
                     sys.path.insert(0, os.getcwd())
+            # A plug-in's import and constructor run apart from the command when a
+            # scenario is checked: whatever they do, the command ends with a message.
+            contain_checks(getattr(args, "run_timeout", None) or CHECK_TIMEOUT)
             return _command(args)
     except Interrupted as exc:
         print("flexarm: interrupted", file=sys.stderr)
@@ -100,7 +105,7 @@ def _command(args: argparse.Namespace) -> int:
     except RecursionError:  # a structure the checks did not bound
         return _error("input nested too deeply", EXIT_USAGE)
     except SystemExit as exc:  # flexarm's own code never exits from inside a command
-        return _error(f"sys.exit({exc.code!r}) was called by code this command ran "
+        return _error(f"sys.exit({short_repr(exc.code)}) was called by code this command ran "
                       "(a plug-in's?); stopped", EXIT_FAILED)
     except Interrupted:  # a Ctrl-C (a KeyboardInterrupt too): `main` says so
         raise

@@ -2,6 +2,7 @@
 runs, and how a command ends."""
 from __future__ import annotations
 
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -34,15 +35,25 @@ def runner_for(args, scenarios, *folders: Path):
     """The runner of a command's runs: its options checked, then the results ``folders``
     created or opened (bad input writes nothing), then, for local workers, the kernels the
     runs of ``scenarios`` use compiled here with progress on stderr (workers fork with
-    them)."""
+    them), or the Dask scheduler reached; if that fails, the folders created are
+    removed."""
     executor = getattr(args, "executor", "local")
     options = dict(force=args.force_workers, run_timeout=args.run_timeout,
                    memory_limit=args.memory_limit)
     check_runner(executor, args.workers, getattr(args, "scheduler", None), **options)
-    for folder in folders:
-        open_output(folder)
-    return make_runner(executor, args.workers, getattr(args, "scheduler", None), **options,
-                       scenarios=list(scenarios) or None, progress=sys.stderr)
+    created = [Path(f) for f in folders if not Path(f).exists()]
+    try:
+        for folder in folders:
+            open_output(folder)
+        return make_runner(executor, args.workers, getattr(args, "scheduler", None),
+                           **options, scenarios=list(scenarios) or None, progress=sys.stderr)
+    except BaseException:
+        # Refused (an unreachable scheduler) or stopped before any run: the folders this
+        # command created go again, as long as they hold no run.
+        for folder in reversed(created):
+            if not any(ResultStore(folder).runs_dir.glob("*.npz")):
+                shutil.rmtree(folder, ignore_errors=True)
+        raise
 
 
 def finish(summary, name: str, out) -> int:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..batch.executor import available_cores, check_runner, make_runner
 from ..batch.store import ResultStore, run_id
-from ..run._config import ConfigError
+from ..run._config import ConfigError, check_label
 from ..run.plants import is_truth, plant_spec
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
@@ -90,11 +90,22 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     notes, like = [], getattr(args, "like", None)
     if like and args.config:
         raise ConfigError("--like", "--like and --config exclude each other")
+    settings = []
+    for item in args.set or []:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError("--set", f"expected KEY=VALUE, got {item!r}")
+        settings.append((key.strip(), parse_value(text.strip(), key.strip())))
+    # A name given here names this one run: a plain name, as a scenario file's own (which
+    # it replaces); "<campaign>/<label>" is a campaign's run, kept only by --like.
+    given = next((v for k, v in reversed(settings) if k == "name"), args.name)
+    if given is not None:
+        check_label(given, "name")
     if like:
         row = stored_run(like, "--like")
         data = copy.deepcopy(row.config)
     elif args.config:
-        study = load_study(args.config)
+        study = load_study(args.config, name=given)
         data = deep_merge({}, study.base)
         if len(study.sweeps) == 1 and set(study.sweeps[0]) == {"name"}:
             data["name"] = study.sweeps[0]["name"]  # a scenario file's own name
@@ -104,21 +115,17 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
                          f"{args.config})")
     else:
         data = {}
-    named = "name" in data or args.name is not None
-    sets = {item.partition("=")[0].strip() for item in args.set or []}
-    if args.duration is not None and "transient" not in sets and "transient" in data and \
+    named = "name" in data or given is not None
+    if args.duration is not None and "transient" not in dict(settings) and \
+            "transient" in data and \
             data["transient"] == default_transient(data.get("duration", Scenario.duration)):
         del data["transient"]  # it was the default for the old duration: follow the new one
     for attr, key in _RUN_FLAGS.items():
         value = getattr(args, attr)
         if value is not None:
             set_dotted(data, key, value)
-    for item in args.set or []:
-        key, sep, text = item.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError("--set", f"expected KEY=VALUE, got {item!r}")
-        set_dotted(data, key.strip(), parse_value(text.strip(), key.strip()))
-        named = named or key.strip() == "name"
+    for key, value in settings:
+        set_dotted(data, key, value)
     scenario = scenario_from_mapping(data)
     if not named:
         scenario = dataclasses.replace(scenario, name=auto_name(scenario))

@@ -171,8 +171,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help=f"control period [s] (default: {d.Ts:g})")
     run.add_argument("--seed", type=_int_in(0, 2**63 - 1),
                      help=f"noise seed (default: {d.seed})")
-    run.add_argument("--name", help="a label for the run (default: controller+observer@plant, "
-                                    "e.g. pbc+smo-paper@reduced)")
+    run.add_argument("--name", help="a label for the run, replacing its file's (default: "
+                                    "controller+observer@plant, e.g. pbc+smo-paper@reduced)")
     run.add_argument("--set", action="append", metavar="KEY=VALUE",
                      help="any scenario field by dotted key, value in TOML syntax, e.g. "
                           "--set true_params.Mp=0.5 --set sensors.encoder_noise=1e-4")

@@ -55,7 +55,7 @@ def _collect(done, n: int, label: str, progress: bool) -> list:
 
 def _in_workers(tasks: list, workers: int, label: str, progress: bool) -> list:
     global _TASKS
-    from ..batch.limits import die_with_parent
+    from ..run.processes import die_with_parent
     _TASKS = tasks
     try:
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),

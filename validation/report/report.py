@@ -27,6 +27,7 @@ import hashlib
 import json
 import math
 import re
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -635,13 +636,22 @@ def write_report(results_dir, *, animate: bool = True, progress: bool = True,
         return html_path, md_path
     out = html_path.parent
     key = content_key(results_dir, animate=animate)
+    created = not out.exists()
     try:
         own_folder(store.out, "report", "figures")
+    except OSError as exc:
+        raise StoreError(f"{out}: cannot write the report ({exc.strerror or exc})") from None
+    try:
+        data = report_data(results_dir, animate=animate, progress=progress,
+                           animation_path=out / "arm.gif")
+    except BaseException:
+        if created:  # refused (no runs, a damaged verdict) or stopped: no report folder
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    try:
         key_path.unlink(missing_ok=True)  # written last: a report cut short is redone
     except OSError as exc:
         raise StoreError(f"{out}: cannot write the report ({exc.strerror or exc})") from None
-    data = report_data(results_dir, animate=animate, progress=progress,
-                       animation_path=out / "arm.gif")
     for old in (out / "figures").glob("*.png"):  # the report's own folder (own_folder)
         old.unlink()
     poster = [data.animation["poster"]] if data.animation else []

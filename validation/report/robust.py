@@ -9,18 +9,43 @@ deflections on both plants — the analogues of the paper's Figs. 3 and 4.
 """
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from ..run.results import conforms, read_json
 from . import figures as fig
 from .render import fmt_number
 
 __all__ = ["robust_section", "SECTION"]
 
 SECTION = "Robust verdicts"
+
+_NUMBER, _MAYBE = (int, float), (int, float, type(None))
+_FILE = (str, type(None))
+_SIMULATIONS = {"reduced": int, "truth": int}
+_RUNS = {"truth?": str, "reduced?": str}
+#: What this section reads of each kind of verdict.json (`validation.run.results.read_json`).
+_VERDICTS = {
+    "estimate": {"system": str, "plant": str, "distribution?": [str], "runs": [str],
+                 "requirements": {str: {
+                     "criterion": str, "n": int, "failures": int, "p_low": _NUMBER,
+                     "p_high": _NUMBER, "level": _NUMBER, "rho_min": _MAYBE,
+                     "sequential": {"decision": str, "draws": int, "p0": _NUMBER,
+                                    "indifference": _NUMBER, "alpha": _NUMBER,
+                                    "beta": _NUMBER}}}},
+    "falsify": {"system": str, "distribution?": [str], "requirement": str, "criterion": str,
+                "found": bool, "rho_truth": _MAYBE, "rho_reduced": _MAYBE,
+                "truth_status?": str, "simulations": _SIMULATIONS, "spurious": [dict],
+                "trace": [{"reduced": int, "truth": int, "best_rho_reduced": _MAYBE,
+                           "best_rho_truth": _MAYBE}],
+                "runs?": _RUNS, "counterexample?": _FILE, "worst_case?": _FILE},
+    "conform": {"system": str, "distribution?": [str], "distance": _MAYBE,
+                "simulations": _SIMULATIONS, "rho_difference?": {str: _MAYBE},
+                "trace": [{"reduced": int, "truth": int, "distance": _MAYBE}],
+                "runs?": _RUNS, "scenario?": _FILE},
+}
 
 
 def robust_section(store, runs) -> tuple[dict | None, list]:
@@ -29,9 +54,13 @@ def robust_section(store, runs) -> tuple[dict | None, list]:
     path = Path(store.out) / "verdict.json"
     if not path.is_file():
         return None, []
-    verdict = json.loads(path.read_text())
-    by_id = {r.run_id: r for r in runs}
+    verdict = read_json(path, {"mode": str})
     mode = verdict["mode"]
+    if mode not in _VERDICTS:
+        raise ValueError(f"{path}: mode: {mode!r} is no mode of flexarm verify (not a file "
+                         "this program wrote)")
+    conforms(verdict, _VERDICTS[mode], path)
+    by_id = {r.run_id: r for r in runs}
     data = {"mode": mode, "system": verdict["system"], "rows": _rows(verdict),
             "distribution": verdict.get("distribution", []), "files": _files(verdict)}
     tasks = []

@@ -18,7 +18,8 @@ from typing import Any, Union, get_args, get_origin, get_type_hints
 
 from reduced_model import FieldError
 
-__all__ = ["ConfigError", "from_mapping", "to_mapping", "check", "check_label"]
+__all__ = ["ConfigError", "from_mapping", "to_mapping", "check", "check_label", "short_repr",
+           "short_str"]
 
 
 class ConfigError(ValueError):
@@ -56,9 +57,24 @@ def check_label(name: Any, path: str) -> None:
                     f"path), got {name!r}")
 
 
-def _describe(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` on one line, at most ``limit`` characters, for a message; a value
+    whose ``repr`` raises (a plug-in's object may) is named by its type."""
+    try:
+        text = " ".join(repr(value).split())
+    except Exception as exc:  # noqa: BLE001 - any error of a foreign repr
+        text = f"<{type(value).__name__} whose repr raised {type(exc).__name__}>"
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def short_str(exc: BaseException) -> str:
+    """The first line of ``str(exc)`` for a message (its type's name if it has none, or
+    if its ``str`` raises)."""
+    try:
+        lines = str(exc).strip().splitlines()
+    except Exception as error:  # noqa: BLE001 - any error of a foreign __str__
+        return f"{type(exc).__name__} (whose str raised {type(error).__name__})"
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
 
 
 def _convert(tp: Any, value: Any, path: str) -> Any:
@@ -74,11 +90,11 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
         if dataclasses.is_dataclass(value) and isinstance(value, tp):
             return value
         if not isinstance(value, dict):
-            raise ConfigError(path, f"expected a table, got {_describe(value)}")
+            raise ConfigError(path, f"expected a table, got {short_repr(value)}")
         return from_mapping(tp, value, path)
     if origin is tuple:
         if not isinstance(value, (list, tuple)):
-            raise ConfigError(path, f"expected a list, got {_describe(value)}")
+            raise ConfigError(path, f"expected a list, got {short_repr(value)}")
         if len(args) == 2 and args[1] is Ellipsis:
             return tuple(_convert(args[0], v, f"{path}[{i}]") for i, v in enumerate(value))
         if len(value) != len(args):
@@ -86,25 +102,25 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
         return tuple(_convert(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(path, f"expected true or false, got {_describe(value)}")
+            raise ConfigError(path, f"expected true or false, got {short_repr(value)}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(path, f"expected an integer, got {_describe(value)}")
+            raise ConfigError(path, f"expected an integer, got {short_repr(value)}")
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(path, f"expected a number, got {_describe(value)}")
+            raise ConfigError(path, f"expected a number, got {short_repr(value)}")
         if math.isnan(value):
             raise ConfigError(path, "must be a number, got nan")
         return float(value)
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(path, f"expected a string, got {_describe(value)}")
+            raise ConfigError(path, f"expected a string, got {short_repr(value)}")
         return value
     if tp is dict or origin is dict:
         if not isinstance(value, dict):
-            raise ConfigError(path, f"expected a table, got {_describe(value)}")
+            raise ConfigError(path, f"expected a table, got {short_repr(value)}")
         return {k: _plain(v, f"{path}.{k}") for k, v in value.items()}
     raise TypeError(f"unsupported configuration type {tp!r} at {path}")
 
@@ -117,7 +133,7 @@ def _tagged(members: list, value: Any, path: str) -> Any:
     if isinstance(value, tuple(members)):
         return value
     if not isinstance(value, dict):
-        raise ConfigError(path, f"expected a table, got {_describe(value)}")
+        raise ConfigError(path, f"expected a table, got {short_repr(value)}")
     kind = value.get("kind", next(iter(kinds)))
     # A member whose kind defaults to "" takes every "package.module:Class" (a plug-in).
     chosen = kinds.get(kind) or (kinds.get("") if isinstance(kind, str) and ":" in kind
@@ -126,7 +142,7 @@ def _tagged(members: list, value: Any, path: str) -> Any:
         named = [k for k in kinds if k]
         plugin = ' or a plug-in "package.module:Class"' if "" in kinds else ""
         raise ConfigError(f"{path}.kind", f"must be one of {', '.join(map(repr, named))}"
-                                          f"{plugin}, got {_describe(kind)}")
+                                          f"{plugin}, got {short_repr(kind)}")
     kinds = {**kinds, kind: chosen}
     takes = {f.name for f in dataclasses.fields(chosen)}
     for key in value:
@@ -150,14 +166,15 @@ def _plain(value: Any, path: str) -> Any:
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
     raise ConfigError(path, f"expected a number, string, boolean, list or table, got "
-                            f"{_describe(value)}")
+                            f"{short_repr(value)}")
 
 
 _type_hints = functools.cache(get_type_hints)  # resolving annotations costs ~0.5 ms a class
 
 
 def from_mapping(cls, data: dict, path: str = ""):
-    """Build dataclass ``cls`` from ``data``; missing keys take the defaults."""
+    """Build dataclass ``cls`` from ``data``; missing keys take the defaults, a missing key
+    without one is a `ConfigError` naming it."""
     hints = _type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     kwargs = {}
@@ -166,6 +183,10 @@ def from_mapping(cls, data: dict, path: str = ""):
         if key not in fields:
             raise ConfigError(sub, f"unknown key (allowed: {', '.join(sorted(fields))})")
         kwargs[key] = _convert(hints[key], value, sub)
+    for name, f in fields.items():
+        if name not in kwargs and f.default is dataclasses.MISSING and \
+                f.default_factory is dataclasses.MISSING:
+            raise ConfigError(f"{path}.{name}" if path else name, "missing (required)")
     try:
         return cls(**kwargs)
     except ConfigError as exc:

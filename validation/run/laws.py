@@ -8,7 +8,9 @@ scenario's control period there unless the scenario's options set it.
 options and construct on the nominal model, have the methods of the interface
 (`controllers._interface`), and an observer must find the measurements it needs among
 the scenario's sensors.  Every failure is a `ConfigError` naming the key.  Each distinct
-law is constructed once per process (a campaign of a thousand runs checks each law once).
+law is constructed once per process (a campaign of a thousand runs checks each law once);
+the command line constructs a plug-in apart from itself (`processes.checked_apart`): its
+import or constructor may exit, crash or hang, and the command says so.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from controllers import CONTROLLERS, OBSERVERS, PluginError, accepted_options, r
 from reduced_model import ArmModel, ArmParameters, cached_model
 
 from ._config import ConfigError, check
+from .processes import checked_apart
 
 __all__ = ["check_laws", "build_controller", "build_observer", "nominal_model",
            "measurement_names"]
@@ -48,28 +51,24 @@ def measurement_names(scenario, model: ArmModel) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _options(scenario, role: str) -> dict:
-    """The law's options; a law with an option named ``Ts`` (a discrete-time design)
-    receives the scenario's control period there unless the options set it."""
-    spec = getattr(scenario, role)
-    options = dict(spec.options)
-    if "Ts" not in options:
-        try:
-            accepted = accepted_options(resolve(spec.kind, CONTROLLERS if role == "controller"
-                                                else OBSERVERS, role))
-        except PluginError:
-            return options  # reported by _construct
-        if accepted is not None and "Ts" in accepted:
-            options["Ts"] = scenario.Ts
-    return options
-
-
-def _construct(role: str, kind: str, options: dict, model: ArmModel):
+def _class(role: str, kind: str) -> type:
     registry = CONTROLLERS if role == "controller" else OBSERVERS
     try:
-        cls = resolve(kind, registry, role)
+        return resolve(kind, registry, role)
     except PluginError as exc:
         raise ConfigError(f"{role}.kind", str(exc)) from None
+
+
+def _options(options: dict, cls: type, Ts: float) -> dict:
+    """The law's options; a law with an option named ``Ts`` (a discrete-time design)
+    receives the scenario's control period there unless the options set it."""
+    accepted = accepted_options(cls)
+    if "Ts" not in options and accepted is not None and "Ts" in accepted:
+        return {**options, "Ts": Ts}
+    return dict(options)
+
+
+def _construct(role: str, kind: str, cls: type, options: dict, model: ArmModel):
     accepted = accepted_options(cls)
     if accepted is not None:
         for key in options:
@@ -95,6 +94,12 @@ def _construct(role: str, kind: str, options: dict, model: ArmModel):
     return law
 
 
+def _build(scenario, role: str, model: ArmModel):
+    spec = getattr(scenario, role)
+    cls = _class(role, spec.kind)
+    return _construct(role, spec.kind, cls, _options(spec.options, cls, scenario.Ts), model)
+
+
 def _check_interface(role: str, kind: str, law) -> None:
     if role == "controller":
         check(callable(law), "controller.kind", f"{kind} is not callable as "
@@ -109,29 +114,41 @@ def _check_interface(role: str, kind: str, law) -> None:
                            f"got {measured!r}")
 
 
-@functools.lru_cache(maxsize=256)
-def _checked(role: str, kind: str, options_json: str, params: ArmParameters,
-             modes: tuple[int, int]) -> tuple[str, ...]:
-    """Construct once and check; returns the observer's measured names (() for a
+def _check_here(role: str, kind: str, options_json: str, Ts: float, params: ArmParameters,
+                modes: tuple[int, int]) -> tuple[str, ...]:
+    """Construct and check; returns the observer's measured names (() for a
     controller)."""
-    law = _construct(role, kind, json.loads(options_json), nominal_model(params, modes))
+    cls = _class(role, kind)
+    law = _construct(role, kind, cls, _options(json.loads(options_json), cls, Ts),
+                     nominal_model(params, modes))
     _check_interface(role, kind, law)
     return tuple(law.measured) if role == "observer" else ()
+
+
+@functools.lru_cache(maxsize=256)
+def _checked(role: str, kind: str, options_json: str, Ts: float, params: ArmParameters,
+             modes: tuple[int, int]) -> tuple[str, ...]:
+    """`_check_here` once per law; a plug-in's apart from the command
+    (`processes.checked_apart`)."""
+    if ":" not in kind:
+        return _check_here(role, kind, options_json, Ts, params, modes)
+    return checked_apart(_check_here, role, kind, options_json, Ts, params, modes,
+                         key=f"{role}.kind", what=kind)
 
 
 def check_laws(scenario) -> None:
     """Raise `ConfigError` unless the scenario's controller and observer can be built."""
     s = scenario
-    key = (s.nominal_params, s.model.modes_per_link)
-    _checked("controller", s.controller.kind,
-             json.dumps(_options(s, "controller"), sort_keys=True), *key)
+    key = (s.Ts, s.nominal_params, s.model.modes_per_link)
+    _checked("controller", s.controller.kind, json.dumps(s.controller.options, sort_keys=True),
+             *key)
     if s.observer.kind == "none":
         check(not s.observer.options, "observer.options", "there is no observer "
                                                           "(observer.kind = 'none')")
         return
     measured = _checked("observer", s.observer.kind,
-                        json.dumps(_options(s, "observer"), sort_keys=True), *key)
-    available = measurement_names(s, nominal_model(*key))
+                        json.dumps(s.observer.options, sort_keys=True), *key)
+    available = measurement_names(s, nominal_model(s.nominal_params, s.model.modes_per_link))
     missing = [m for m in measured if m not in available]
     check(not missing, "observer.kind",
           f"{s.observer.kind} needs the measurements {', '.join(missing)}, which the sensors "
@@ -141,12 +158,11 @@ def check_laws(scenario) -> None:
 
 def build_controller(scenario, model: ArmModel):
     """A fresh controller for one run (laws keep state; never share one between runs)."""
-    return _construct("controller", scenario.controller.kind, _options(scenario, "controller"),
-                      model)
+    return _build(scenario, "controller", model)
 
 
 def build_observer(scenario, model: ArmModel):
     """A fresh observer for one run, or None."""
     if scenario.observer.kind == "none":
         return None
-    return _construct("observer", scenario.observer.kind, _options(scenario, "observer"), model)
+    return _build(scenario, "observer", model)

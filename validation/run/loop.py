@@ -24,6 +24,7 @@ from controllers._compiled import absent
 from reduced_model import ArmModel, PlantFailure, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
+from ._config import short_repr, short_str
 from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
                       check_bounds, context, law_fields, noise_stream, post_sample, pre_sample,
                       run_reduced, sample_laws, signal_layout, status_message)
@@ -347,30 +348,55 @@ class _PythonLaws:
             return code
         self.ref.t = t
         calling = self.observer
-        try:  # a plug-in may raise: the run fails, the campaign goes on
+        try:  # a plug-in may raise, or return what is no estimate or torque: the run fails
             x_hat = r.x_hat
             if self.observer is not None:
-                x_hat = np.asarray(self.observer.update(t, r.y_used[r.obs_idx],
-                                                        r.last_tau[:r.counts[1]], self.Ts),
-                                   dtype=float)
+                x_hat = _real_array(self.observer.update(t, r.y_used[r.obs_idx],
+                                                         r.last_tau[:r.counts[1]], self.Ts),
+                                    ((2 * self.n,),), "an estimate")
                 row[self.s_xhat] = x_hat
             calling = self.controller
-            out = np.asarray(self.controller(t, x_hat if self.use_estimate else
-                                             r.truth[:2 * self.n], self.ref), dtype=float)
-            if out.shape not in ((2,), (self.n,)):
-                raise ValueError(f"returned torques of shape {out.shape}, expected (2,)")
+            out = _real_array(self.controller(t, x_hat if self.use_estimate else
+                                              r.truth[:2 * self.n], self.ref),
+                              ((2,), (self.n,)), "torques")
+            if self.s_res is not None:  # read each sample: it may be rebound
+                row[self.s_res] = _real_array(self.controller.residual,
+                                              ((self.s_res.stop - self.s_res.start,),),
+                                              "a residual")
         except ObserverFailure as exc:
             label = getattr(calling, "name", type(calling).__name__)
             raise _LawRaised("diverged", status_message(
                 SampleStatus.OBSERVER_FAILED, 0.0, self.divergence, t, f"{label}: {exc}")) from None
+        except _NotReal as exc:
+            label = getattr(calling, "name", type(calling).__name__)
+            raise _LawRaised("failed", f"{label} returned {exc} at t = {t:.4g} s") from None
         except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
             label = getattr(calling, "name", type(calling).__name__)
-            raise _LawRaised("failed", f"{label} raised {type(exc).__name__}: "
-                                       f"{_one_line(exc)} at t = {t:.4g} s") from None
+            raise _LawRaised("failed", f"{label} raised {short_str(exc)} at t = {t:.4g} s") \
+                from None
         r.tau[:out.shape[0]] = out
-        if self.s_res is not None:
-            row[self.s_res] = self.controller.residual  # read each sample: it may be rebound
         return post_sample(r.context, t, out.shape[0], row)
+
+
+class _NotReal(ValueError):
+    """A law returned something other than the real array its contract names
+    (`controllers._interface`); the message says what it returned."""
+
+
+def _real_array(value, shapes: tuple, what: str) -> np.ndarray:
+    """``value`` as a float array if it holds real numbers (integer or floating dtype)
+    in one of ``shapes``, else `_NotReal` describing it: ``np.asarray(value, float)``
+    would drop an imaginary part, parse strings and take booleans.  Non-finite values
+    pass: they end the run as the sample kernel says (`SampleStatus`)."""
+    expected = f"expected real numbers of shape {' or '.join(map(str, shapes))}"
+    try:
+        array = np.asarray(value)
+    except (ValueError, TypeError):  # a ragged sequence, an object numpy refuses
+        raise _NotReal(f"{what} {short_repr(value, 80)}: not an array; {expected}") from None
+    if array.dtype.kind not in "iuf" or array.shape not in shapes:
+        raise _NotReal(f"{what} {short_repr(value, 80)}: dtype {array.dtype}, shape "
+                       f"{array.shape}; {expected}")
+    return array.astype(float, copy=False)
 
 
 def _disturbance_spec(specs, Ts: float) -> np.ndarray:
@@ -391,11 +417,6 @@ def _noise_draws(dspec: np.ndarray, n_samples: int, Ts: float) -> int:
     t = np.arange(n_samples) * Ts
     return int(sum(np.count_nonzero(t >= row[3] - 1e-9) for row in dspec
                    if row[0] == DisturbanceKind.NOISE))
-
-
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else "(no message)"
 
 
 def measurement_noise(sensors, measured) -> np.ndarray:

@@ -40,6 +40,7 @@ from plant_exudyn import Mesh
 from reduced_model import ArmModel, ArmParameters, Plant, SensorConfig, validate_modes_per_link
 
 from ._config import ConfigError, check
+from .processes import checked_apart
 
 __all__ = ["PlantSpec", "ReducedPlantSpec", "ExudynPlantSpec", "PluginPlantSpec", "PLANTS",
            "ROLES", "LEVELS", "DEFAULT_TRUTH", "Refinement", "plant_spec", "role_of",
@@ -269,9 +270,12 @@ class PluginPlantSpec(PlantSpec):
                                           f"got {self.role!r}")
         _positive(self.step_cost_s, "step_cost_s")
 
-    def check(self) -> type:
-        """The plug-in class, imported and checked (its options and role); ConfigError
-        naming the key otherwise.  Only running a scenario imports it."""
+    def check(self) -> None:
+        """ConfigError naming the key unless the plug-in class imports and takes the
+        options and role (apart from the command: `processes.checked_apart`)."""
+        checked_apart(_plugin_checks, self, key="plant.kind", what=self.kind)
+
+    def _checked_class(self) -> type:
         cls = _plugin_class(self.kind)
         check(cls.role == self.role, "plant.role", f"{self.kind} is a {cls.role!r} plant, "
                                                    f"the scenario says {self.role!r}")
@@ -284,7 +288,7 @@ class PluginPlantSpec(PlantSpec):
         return cls
 
     def build(self, params, model, sensors):
-        cls = self.check()
+        cls = self._checked_class()
         try:
             plant = cls(params, model=model, sensors=sensors, **self.options)
         except Exception as exc:  # noqa: BLE001 - a plug-in may raise anything; say what
@@ -296,6 +300,10 @@ class PluginPlantSpec(PlantSpec):
 
     def step_cost(self) -> float:
         return self.step_cost_s
+
+
+def _plugin_checks(spec: PluginPlantSpec) -> None:
+    spec._checked_class()  # the class itself stays in the process that imported it
 
 
 def _plugin_class(kind: str) -> type:

@@ -16,9 +16,12 @@ maximum, time bounds in seconds and whole multiples of Ts; a window that reaches
 the end of the run sees only the samples it has — ``always`` of nothing is +∞).  RTAMT
 evaluates a bounded ``always``/``eventually`` (and the past ``historically``/``once``)
 by a minimum over each window in Python, O(n·w): 3.0 s for ``always[2,20]`` on a 20 s
-run at 1 kHz.  `_SlidingWindowVisitor` computes the same minima with SciPy's
-sliding-window filter, O(n): 0.045 s, identical values (tests/test_requirements.py
-compares both on random signals).
+run at 1 kHz; and a bounded ``until``/``since`` in O(n·w²): a 4 s run's
+``until[0.2,2.5]`` exceeded its run's time limit.  `_SlidingWindowVisitor` computes the
+same values in O(n) — windows with SciPy's sliding-window filter (0.045 s), ``until``
+and ``since`` by blocks of the window's length (0.02 s) — identical, as they only take
+minima and maxima of the same numbers (tests/test_requirements.py and
+tests/reliability/test_verdicts.py compare them with RTAMT's own on random signals).
 
 Every check happens before anything runs: an unknown claim, a formula that does not
 parse, a signal the run will not record and a time bound that is not a multiple of Ts
@@ -34,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._config import ConfigError, check, check_label
+from ._config import ConfigError, check, check_label, short_repr
 from .claim_measures import CLAIMS, claim_by_key
 
 __all__ = ["Requirement", "check_requirements", "requirement_metrics", "robustness",
@@ -105,26 +108,80 @@ def _spec_factory():
     """A function making an empty RTAMT offline specification whose bounded temporal
     operators use SciPy's sliding-window extremes (module docstring); RTAMT is imported
     on first use."""
+    from rtamt.antlr.parser.stl.error.parser_error_listener import STLParserErrorListener
+    from rtamt.antlr.parser.stl.LtlLexer import LtlLexer
+    from rtamt.antlr.parser.stl.StlParser import StlParser
+    from rtamt.exception.exception import RTAMTException
     from rtamt.semantics.abstract_discrete_time_offline_interpreter import \
         discrete_time_offline_interpreter_factory
     from rtamt.semantics.stl.discrete_time.offline.ast_visitor import \
         StlDiscreteTimeOfflineAstVisitor
     from rtamt.spec.abstract_specification import AbstractOfflineSpecification
-    from rtamt.syntax.ast.parser.stl.specification_parser import StlAst
+    from rtamt.syntax.ast.parser.abstract_ast_parser import ast_factory
+    from rtamt.syntax.ast.parser.stl.parser_visitor import StlAstParserVisitor
     from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
     def window(sample, first: int, last: int, fill: float, extreme) -> list:
         """out[i] = extreme of sample[i + first .. i + last], ``fill`` outside the run."""
         x = np.asarray(sample, dtype=float)
+        # Bounds beyond the run's length see nothing more: clipped to ±n, exactly the same
+        # (a window held outside the run holds ``fill``, which is neutral or the answer).
+        first, last = (min(max(b, -x.size), x.size) for b in (first, last))
         n, width = x.size, last - first + 1
         front, back = max(0, -first), max(0, last)
         padded = np.concatenate([np.full(front, fill), x, np.full(back, fill)])
         centred = extreme(padded, size=width, mode="constant", cval=fill)
         return centred[np.arange(n) + front + first + width // 2].tolist()
 
+    def until(left, right, first: int, last: int) -> list:
+        """out[i] = max over j in [i + first, i + last] of min(right[j], left[i .. j − 1])
+        (RTAMT's timed until; left is +∞ and right −∞ past the run), exactly — only
+        minima and maxima of the inputs — in O(n):
+
+        - the left operand over [i, i + first − 1] is a sliding minimum A[i], and
+          ρ[i] = min(A[i], U[i + first]) with U the until over the window [0, w], w =
+          last − first (a minimum distributes over the maximum);
+        - U[k] with blocks of w + 1 samples: for j in k's own block, the untimed until
+          run backwards through the block, P[k] = max(right[k], min(left[k], P[k + 1]));
+          for j in the next block, min(left over the rest of k's block, the running
+          maximum from the next block's start to k + w of min(right[j], left from the
+          block's start to j − 1))."""
+        left, right = np.asarray(left, dtype=float), np.asarray(right, dtype=float)
+        n = left.size
+        if first >= n:  # no right operand within the run
+            return [-math.inf] * n
+        last = min(last, n - 1)  # j past the run contributes −∞: the same maximum
+        w = last - first
+        size = w + 1
+        blocks = -(-(n + first) // size) + 1  # every k up to n + first, and the next block
+        m = blocks * size
+        L = np.concatenate([left, np.full(m - n, math.inf)]).reshape(blocks, size)
+        R = np.concatenate([right, np.full(m - n, -math.inf)]).reshape(blocks, size)
+        # in each block: P by the backward recursion, the suffix minimum of left, and the
+        # running maximum of min(right[j], prefix minimum of left before j)
+        P = np.empty_like(R)
+        P[:, -1] = R[:, -1]
+        for c in range(size - 2, -1, -1):
+            P[:, c] = np.maximum(R[:, c], np.minimum(L[:, c], P[:, c + 1]))
+        suffix = np.minimum.accumulate(L[:, ::-1], axis=1)[:, ::-1]
+        before = np.concatenate([np.full((blocks, 1), math.inf),
+                                 np.minimum.accumulate(L[:, :-1], axis=1)], axis=1)
+        reach = np.maximum.accumulate(np.minimum(R, before), axis=1)
+        # j in the next block up to k + w: column c + w − size = c − 1 of the next block
+        nxt = np.full_like(R, -math.inf)
+        nxt[:-1, 1:] = np.minimum(suffix[:-1, 1:], reach[1:, :-1])
+        U = np.maximum(P, nxt).ravel()
+        A = window(left, 0, first - 1, math.inf, minimum_filter1d) if first else \
+            np.full(n, math.inf)
+        return np.minimum(A, U[first:first + n]).tolist()
+
     class _SlidingWindowVisitor(StlDiscreteTimeOfflineAstVisitor):
         def _samples(self, node) -> tuple[int, int]:
             begin, end = self.time_unit_transformer(node)  # checked multiples of Ts
+            if begin > end:
+                raise RTAMTException(f"the interval [{float(node.begin):g}"
+                                     f"{node.begin_unit}, {float(node.end):g}"
+                                     f"{node.end_unit}] ends before it begins")
             return int(begin), int(end)
 
         def visitTimedAlways(self, node, *args, **kwargs):
@@ -142,14 +199,45 @@ def _spec_factory():
             return window(self.visit(node.children[0], *args, **kwargs), -e, -b, math.inf,
                           minimum_filter1d)
 
+        def visitTimedUntil(self, node, *args, **kwargs):
+            b, e = self._samples(node)
+            return until(self.visit(node.children[0], *args, **kwargs),
+                         self.visit(node.children[1], *args, **kwargs), b, e)
+
+        def visitTimedSince(self, node, *args, **kwargs):  # the until of the reversed run
+            b, e = self._samples(node)
+            return until(self.visit(node.children[0], *args, **kwargs)[::-1],
+                         self.visit(node.children[1], *args, **kwargs)[::-1], b, e)[::-1]
+
         def visitTimedOnce(self, node, *args, **kwargs):
             b, e = self._samples(node)
             return window(self.visit(node.children[0], *args, **kwargs), -e, -b, -math.inf,
                           maximum_filter1d)
 
+    class _Interpreter(discrete_time_offline_interpreter_factory(_SlidingWindowVisitor)):
+        def evaluate(self, dataset):
+            """RTAMT's, for a run of one sample too: RTAMT's own reads the period between
+            the last two samples (for a counter of irregular sampling, which a run's
+            regular samples never raise) and raises UnboundLocalError without them."""
+            if len(dataset["time"]) > 1:
+                return super().evaluate(dataset)
+            self.exist_ast()
+            self.set_variable_to_ast_from_dataset(dataset)
+            self.ast.offline_results["time"] = dataset["time"]
+            return [[dataset["time"][0], self.visitAst(self.ast, 1)[-1][0]]]
+
+    class _Lexer(LtlLexer):
+        """RTAMT's STL lexer raising its errors as its parser does: ANTLR's default prints
+        each character it cannot read to stderr ("line 1:22 token recognition error at:
+        '#'") and goes on without it."""
+
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self._listeners = [STLParserErrorListener()]
+
     def make_spec():
-        interpreter = discrete_time_offline_interpreter_factory(_SlidingWindowVisitor)()
-        return AbstractOfflineSpecification(StlAst(), interpreter)
+        ast = ast_factory(StlAstParserVisitor)(_Lexer, StlParser, STLParserErrorListener)
+        return AbstractOfflineSpecification(ast, _Interpreter())
 
     return make_spec
 
@@ -190,12 +278,21 @@ def _parse(formula: str, variables: tuple[str, ...], Ts: float = 1e-3):
             if not variables:
                 return None, ()  # a syntax check only: names are checked per scenario
             raise
-    return spec, tuple(sorted(_variables(spec.ast.specs[0])))
+        except RecursionError:  # ANTLR and RTAMT's visitors recurse once per operator
+            raise ConfigError("formula", f"{short_repr(formula)}: nested too deeply to "
+                                         "parse") from None
+    used = tuple(sorted(_variables(spec.ast.specs[0])))
+    for name in used:
+        if name not in variables:  # a field of a signal (``theta1.real``): no signal
+            raise KeyError(name)
+    return spec, used
 
 
 def _variables(node) -> set[str]:
+    """The signals a formula reads; RTAMT reads ``x.f`` as the attribute ``f`` of each
+    sample of ``x`` (for structured inputs), named here ``"x.f"``, which is no signal."""
     if type(node).__name__ == "Variable":
-        return {node.var}
+        return {f"{node.var}.{node.field}" if node.field else node.var}
     return set().union(*(_variables(c) for c in getattr(node, "children", ())))
 
 
@@ -249,6 +346,9 @@ def _evaluate(formula: str, signals: tuple[str, ...], Ts: float, time: np.ndarra
         text = " ".join(str(exc).replace("RTAMT Exception:", "").split())
         raise ConfigError(f"{where}.formula" if where != "formula" else where,
                           f"{formula!r}: {text} (Ts = {Ts:g} s)") from None
+    except RecursionError:
+        raise ConfigError(f"{where}.formula" if where != "formula" else where,
+                          f"{short_repr(formula)}: nested too deeply to evaluate") from None
     return float(out[0][1])
 
 

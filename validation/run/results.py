@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["RunResult", "STATUSES", "write_atomic", "own_folder", "LinkedFolder"]
+__all__ = ["RunResult", "STATUSES", "write_atomic", "own_folder", "LinkedFolder",
+           "read_json", "conforms"]
 
 STATUSES = ("ok", "diverged", "failed")
 
@@ -225,3 +226,63 @@ def write_atomic(path: Path, write, *, binary: bool = False, sync: bool = True) 
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+#: The largest JSON file a command reads back from a results folder (verdict.json,
+#: validity.json): what it writes is far smaller.
+MAX_JSON_BYTES = 16 << 20
+
+
+def read_json(path: Path, schema) -> dict:
+    """The JSON table of a file a command wrote into a results folder, checked against
+    ``schema`` before anyone reads it (a folder may come from someone else): ValueError,
+    one line naming the file and the key, if it is too large, not JSON or not what the
+    schema says.
+
+    ``schema`` is a type or a tuple of types (``isinstance``; an ``int`` is no ``bool``),
+    ``[item]`` for a list of items, or a dict of keys to schemas — a key ending in "?"
+    may be absent, the key ``str`` stands for any key."""
+    path = Path(path)
+    with path.open("rb") as fh:
+        raw = fh.read(MAX_JSON_BYTES + 1)
+    if len(raw) > MAX_JSON_BYTES:
+        raise ValueError(f"{path}: larger than {MAX_JSON_BYTES >> 20} MiB")
+    try:
+        data = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise ValueError(f"{path}: not JSON ({exc.__class__.__name__}: "
+                         f"{str(exc).splitlines()[0] if str(exc) else ''})") from None
+    conforms(data, schema, path)
+    return data
+
+
+def conforms(value, schema, path: Path, where: str = "") -> None:
+    """ValueError naming ``path`` and the key ``where`` (dotted) if ``value`` is not what
+    ``schema`` says (`read_json`)."""
+    def refuse(what: str):
+        raise ValueError(f"{path}: {where + ': ' if where else ''}{what} (not a file this "
+                         "program wrote)")
+
+    def inner(key) -> str:
+        return f"{where}.{key}" if where else str(key)
+    if isinstance(schema, dict):
+        if not isinstance(value, dict):
+            refuse(f"expected a table, got {type(value).__name__}")
+        for key, sub in schema.items():
+            if key is str:
+                for name, item in value.items():
+                    conforms(item, sub, path, inner(name))
+            elif key.rstrip("?") in value:
+                conforms(value[key.rstrip("?")], sub, path, inner(key.rstrip("?")))
+            elif not key.endswith("?"):
+                refuse(f"no key {key!r}")
+    elif isinstance(schema, list):
+        if not isinstance(value, list):
+            refuse(f"expected a list, got {type(value).__name__}")
+        for i, item in enumerate(value):
+            conforms(item, schema[0], path, f"{where}[{i}]")
+    else:
+        types = schema if isinstance(schema, tuple) else (schema,)
+        if not isinstance(value, types) or (isinstance(value, bool) and bool not in types):
+            refuse(f"expected {' or '.join(t.__name__ for t in types)}, got "
+                   f"{type(value).__name__}")

@@ -67,8 +67,9 @@ def _one_of(value, allowed, name) -> None:
 
 
 def _positive(value, name, *, allow_zero=False) -> None:
-    ok = math.isfinite(value) and (value >= 0 if allow_zero else value > 0)
-    check(ok, name, f"must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
+    check(math.isfinite(value), name, f"must be finite, got {value!r}")
+    check(value >= 0 if allow_zero else value > 0, name,
+          f"must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
 
 
 def _modes(value) -> None:
@@ -171,9 +172,16 @@ class ObserverSpec:
               "must be finite numbers")
 
 
+#: The settings each reference kind uses, and their defaults.
+_REFERENCE_FIELDS = {"paper": ("amplitude", "omega"), "quintic": ("start", "goal", "move_time")}
+_REFERENCE_DEFAULTS = {"amplitude": (2.0, 2.0), "omega": (0.1 * np.pi, 0.2 * np.pi),
+                       "start": (0.0, 0.0), "goal": (1.0, -1.0), "move_time": 4.0}
+
+
 @dataclass(frozen=True)
 class ReferenceSpec:
-    """The reference trajectory of the joint angles.
+    """The reference trajectory of the joint angles.  Each kind takes only its own
+    settings.
 
     Parameters
     ----------
@@ -181,29 +189,35 @@ class ReferenceSpec:
         "paper": eq. (37), θ_d = amplitude·sin(omega·t); "quintic": rest-to-rest from
         ``start`` to ``goal`` in ``move_time``, then hold.
     amplitude : (float, float)
-        Amplitudes of eq. (37) per joint [rad] ("paper").
+        Amplitudes of eq. (37) per joint [rad] (only "paper"; default (2, 2)).
     omega : (float, float)
-        Angular frequencies of eq. (37) per joint [rad/s] ("paper").
+        Angular frequencies of eq. (37) per joint [rad/s] (only "paper"; default
+        (0.1π, 0.2π)).
     start : (float, float)
-        Joint angles at the start of the move [rad] ("quintic").
+        Joint angles at the start of the move [rad] (only "quintic"; default (0, 0)).
     goal : (float, float)
-        Joint angles at its end [rad] ("quintic").
+        Joint angles at its end [rad] (only "quintic"; default (1, −1)).
     move_time : float
-        Duration of the move [s] ("quintic").
+        Duration of the move [s] (only "quintic"; default 4).
     """
 
     kind: str = "paper"
-    amplitude: tuple[float, float] = (2.0, 2.0)
-    omega: tuple[float, float] = (0.1 * np.pi, 0.2 * np.pi)
-    start: tuple[float, float] = (0.0, 0.0)
-    goal: tuple[float, float] = (1.0, -1.0)
-    move_time: float = 4.0
+    amplitude: tuple[float, float] | None = None
+    omega: tuple[float, float] | None = None
+    start: tuple[float, float] | None = None
+    goal: tuple[float, float] | None = None
+    move_time: float | None = None
 
     def __post_init__(self):
         _one_of(self.kind, REFERENCE_KINDS, "kind")
-        check(all(math.isfinite(v) for v in (*self.amplitude, *self.omega, *self.start,
-                                              *self.goal)), "amplitude", "must be finite")
-        _positive(self.move_time, "move_time")
+        used = _REFERENCE_FIELDS[self.kind]
+        _only_where_used(self, used, _REFERENCE_DEFAULTS, f"by a {self.kind!r} reference")
+        for name in used:
+            if name == "move_time":
+                _positive(self.move_time, name)
+            else:
+                check(all(math.isfinite(v) for v in getattr(self, name)), name,
+                      f"must be finite, got {getattr(self, name)!r}")
 
 
 def _only_where_used(spec, used: tuple[str, ...], defaults: dict, where: str) -> None:

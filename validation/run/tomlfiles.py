@@ -8,6 +8,7 @@ nothing downstream recurses into them.
 """
 from __future__ import annotations
 
+import collections
 import copy
 import json
 import re
@@ -35,16 +36,22 @@ def deep_merge(base: dict, override: dict) -> dict:
     return out
 
 
-#: Caps on what an include chain may load: depth, number of files, bytes per file.
+#: Caps on what an include chain may load: depth, number of files, number of includes
+#: (a file counted each time it is included), bytes per file and in all (4 MiB of TOML
+#: parse in about a second).
 MAX_INCLUDE_DEPTH = 16
 MAX_INCLUDED_FILES = 64
+MAX_INCLUDES = 256
 MAX_FILE_BYTES = 1 << 20
+MAX_TOTAL_BYTES = 4 << 20
 
 
 def load_toml(path: str | Path) -> dict:
     """Read ``path`` and its includes; errors name the file.  Each file is parsed once
-    however often it is included; chains deeper than `MAX_INCLUDE_DEPTH`, more than
-    `MAX_INCLUDED_FILES` files or files over 1 MiB are refused.
+    however often it is included, and merged without copying (the result is copied
+    once); chains deeper than `MAX_INCLUDE_DEPTH`, more than `MAX_INCLUDED_FILES` files
+    or `MAX_INCLUDES` includes, a file named twice in one ``include``, files over 1 MiB
+    and more than 4 MiB in all are refused.
 
     Parameters
     ----------
@@ -56,8 +63,7 @@ def load_toml(path: str | Path) -> dict:
     dict
         Its tables, the included files' keys merged under its own.
     """
-    cache: dict[Path, dict] = {}
-    return _load(Path(path), (), cache)
+    return copy.deepcopy(_load(Path(path), (), {}, {"includes": 0, "bytes": 0}))
 
 
 def check_nesting(value, where: str = "") -> None:
@@ -76,7 +82,9 @@ def check_nesting(value, where: str = "") -> None:
             todo.extend((v, path, depth + 1) for v in item)
 
 
-def _read(path: Path) -> dict:
+def _read(path: Path, budget: dict) -> dict:
+    """The tables of one file; ``budget["bytes"]`` (`_load`) counts what an include
+    chain has read."""
     if path.exists() and not path.is_file():
         raise ConfigError("", f"{path}: not a regular file")
     try:
@@ -86,6 +94,10 @@ def _read(path: Path) -> dict:
         raise ConfigError("", f"{path}: cannot read ({exc.strerror or exc})") from None
     if len(raw) > MAX_FILE_BYTES:
         raise ConfigError("", f"{path}: larger than {MAX_FILE_BYTES >> 20} MiB")
+    budget["bytes"] += len(raw)
+    if budget["bytes"] > MAX_TOTAL_BYTES:
+        raise ConfigError("include", f"{path}: the included files exceed "
+                                     f"{MAX_TOTAL_BYTES >> 20} MiB in all")
     try:
         data = tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:
@@ -102,8 +114,14 @@ def _read(path: Path) -> dict:
     return data
 
 
-def _load(path: Path, seen: tuple[Path, ...], cache: dict) -> dict:
-    resolved = path.resolve()
+def _load(path: Path, seen: tuple[Path, ...], cache: dict, budget: dict) -> dict:
+    """``path`` merged over its includes; the result shares values with ``cache`` (whose
+    entries are never changed) — `load_toml` copies it.  ``budget`` counts the includes
+    and bytes read so far."""
+    try:
+        resolved = path.resolve()
+    except (OSError, RuntimeError) as exc:  # RuntimeError: a symbolic link loop (< 3.13)
+        raise ConfigError("", f"{path}: cannot read ({exc})") from None
     if resolved in seen:
         raise ConfigError("include", f"{path} includes itself (cycle: "
                                      f"{' -> '.join(p.name for p in (*seen, resolved))})")
@@ -112,17 +130,37 @@ def _load(path: Path, seen: tuple[Path, ...], cache: dict) -> dict:
     if resolved not in cache:
         if len(cache) >= MAX_INCLUDED_FILES:
             raise ConfigError("include", f"{path}: more than {MAX_INCLUDED_FILES} files included")
-        data = _read(path)
+        data = _read(path, budget)
         includes = data.pop("include", [])
         if isinstance(includes, str):
             includes = [includes]
         if not isinstance(includes, list) or not all(isinstance(i, str) for i in includes):
             raise ConfigError("include", f"{path}: must be a file name or a list of them")
+        twice = sorted(i for i, count in collections.Counter(includes).items() if count > 1)
+        if twice:
+            raise ConfigError("include", f"{path}: names {', '.join(map(repr, twice[:3]))}"
+                                         f"{', ...' if len(twice) > 3 else ''} more than once")
+        budget["includes"] += len(includes)
+        if budget["includes"] > MAX_INCLUDES:
+            raise ConfigError("include", f"{path}: more than {MAX_INCLUDES} includes (a file "
+                                         "counts each time it is included)")
         merged: dict = {}
         for inc in includes:
-            merged = deep_merge(merged, _load(path.parent / inc, (*seen, resolved), cache))
-        cache[resolved] = deep_merge(merged, data)
-    return copy.deepcopy(cache[resolved])
+            merged = _merged(merged, _load(path.parent / inc, (*seen, resolved), cache,
+                                           budget))
+        cache[resolved] = _merged(merged, data)
+    return cache[resolved]
+
+
+def _merged(base: dict, override: dict) -> dict:
+    """`deep_merge` without copies: a new table sharing the values of both."""
+    out = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merged(out[key], value)
+        else:
+            out[key] = value
+    return out
 
 
 _SEGMENT = re.compile(r"^([^\[\]]+)((?:\[\d+\])*)$")

@@ -26,7 +26,6 @@ part of the joint mobility, so that its measured limit can be a property of the 
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import time
 from pathlib import Path
@@ -38,6 +37,7 @@ from reduced_model import ArmModel
 
 from ..run.laws import build_controller
 from ..run.plants import is_truth, truth_spec
+from ..run.results import read_json
 from ..run.scenario import scenario_from_mapping
 from .linear import law_gain, reduced_linear_model
 from .nugap import as_statespace, gap_detail
@@ -221,10 +221,28 @@ def validity_analysis(cases, *, stability_dir=None, progress=None) -> dict:
             "certify_periods": list(CERTIFY_PERIODS), "points": POINTS}
 
 
+_NUMBER = (int, float)
+_CURVES = {f"{i}->{o}": [_NUMBER] for i, o in CHANNELS}
+#: What the report reads of validity.json (`validation.run.results.read_json`).
+_SCHEMA = {
+    "arms": [{"arm": str, "Ts": _NUMBER, "modes": [int], "truth": str,
+              "frequencies_hz": [_NUMBER],
+              "responses": [{"theta2": _NUMBER, "reduced": _CURVES, "fe": _CURVES}],
+              "gaps": [{"theta2": _NUMBER, **{k: _NUMBER for v in _GAP_VIEWS
+                                              for k in (v, f"{v}_peak_hz")}}]}],
+    "cases": [{"case": str, "plant": str, "arm": str, "predicted_s": _NUMBER, "mesh": str,
+               "predicted_fine_s": _NUMBER, "mesh_fine": str, "certified_s": _NUMBER,
+               "certificate": [dict], "largest_stable_s": _NUMBER,
+               "first_unstable_s": _NUMBER, "in_bracket": str, "sound": str,
+               "conservatism": _NUMBER, "note": str, "evidence": str}],
+}
+
+
 def load_validity(folder) -> dict | None:
-    """The stored analysis of a validity folder (validity.json), or None."""
+    """The stored analysis of a validity folder (validity.json), or None; ValueError
+    naming the file and key if it is not what `flexarm validity` writes."""
     path = Path(folder) / "validity.json"
     if not path.is_file():
         return None
-    return json.loads(path.read_text(encoding="utf-8"))
+    return read_json(path, _SCHEMA)
 

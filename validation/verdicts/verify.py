@@ -146,6 +146,10 @@ def write_verdict(out: Path, verdict: dict) -> Path:
 
 
 def _write_scenario(out: Path, name: str, mapping: dict, comment: str) -> str:
+    """Write a stored run's scenario ``mapping`` as the scenario file ``out/name`` that
+    ``flexarm run --config`` replays: its run named by its label, as a scenario file
+    names its one run (a plain name; "<campaign>/<label>" is a campaign's run)."""
+    mapping = dict(mapping, name=mapping["name"].split("/")[-1])
     text = "".join(f"# {line}\n" for line in comment.splitlines()) + toml_text(mapping)
     write_atomic(Path(out) / name, lambda fh: fh.write(text))
     return name

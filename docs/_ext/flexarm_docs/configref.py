@@ -98,6 +98,8 @@ def _allowed(cls, name: str, annotation, required: dict, special: dict) -> str:
         cls(**{**required, name: probe})
     except (ConfigError, FieldError) as exc:
         message = exc.message if isinstance(exc, ConfigError) else exc.reason
+        if message.startswith("not used "):  # a key of other kinds than the default's
+            return "(per kind: see meaning)"
         message = re.split(r", got ", message)[0]
         return message.removeprefix("must be ")
     return "any"
