@@ -17,6 +17,7 @@ from ..report.summary import counted
 __all__ = ["claims_summary", "stability_summary", "validity_summary",
            "attribution_summary"]
 
+
 def claims_summary(columns, path: Path) -> tuple[list[str], int]:
     """One line per claim: its verdicts over the columns of each arm; the claims a failed
     run left without a verdict are missing."""
