@@ -40,20 +40,24 @@ from .executor import Runner, SerialRunner
 from .interrupts import Interrupted
 from .fingerprint import run_fingerprint
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
-from .store import ResultStore, StoreError, environment, run_id
+from .committing import Committer
+from .runfiles import KEEP_ALL, Keep, keep_from_mapping
+from .store import ResultStore, environment, run_id
+from .storing import Destination, StoreTask, landed, leave_token
 from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
            "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
            "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "run_name",
-           "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes"]
+           "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes",
+           "campaign_keep"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
 MAX_RUNS = 100_000
 
 _TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution",
-             "requirement", "uncertainty", "verify", "calibrate"}
+             "requirement", "uncertainty", "verify", "calibrate", "keep"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
 _SPEC_KEYS = {"scale", "uniform", "loguniform", "choices", "also"}
 #: Sections a scenario file may have too (``flexarm verify`` reads a scenario file's
@@ -87,6 +91,7 @@ class Campaign:
     uncertainty: dict = field(default_factory=dict)
     verify: dict = field(default_factory=dict)
     calibrate: dict = field(default_factory=dict)
+    keep: dict = field(default_factory=dict)
 
 
 # --- loading ------------------------------------------------------------------------------
@@ -190,7 +195,7 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
                     description=str(data.get("description", "")), attribution=attribution,
                     uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}),
-                    calibrate=data.get("calibrate", {}))
+                    calibrate=data.get("calibrate", {}), keep=data.get("keep", {}))
 
 
 # --- expansion --------------------------------------------------------------------------------
@@ -387,7 +392,21 @@ def expand(campaign: Campaign) -> list[PlannedRun]:
     return runs
 
 
+def campaign_keep(campaign: Campaign) -> Keep:
+    """What the runs of ``campaign`` keep (its ``[keep]`` table, `runfiles.Keep`; default:
+    every signal); ConfigError naming the key."""
+    if not campaign.keep:
+        return KEEP_ALL
+    from ..run.requirements import signal_names
+    try:
+        base_scenario = scenario_from_mapping(campaign.base)
+    except ConfigError as exc:
+        raise exc.under("scenario") from None
+    return keep_from_mapping(campaign.keep, signal_names(base_scenario))
+
+
 def _expand(campaign: Campaign) -> list[PlannedRun]:
+    campaign_keep(campaign)  # checked with the rest, before anything runs
     try:
         base_scenario = scenario_from_mapping(campaign.base)
     except ConfigError as exc:
@@ -572,33 +591,63 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
     if todo:
         own = runner is None
         runner = runner or SerialRunner()
-        env = environment()
-        by_id = {r.run_id: r for r in todo}
+        destination = Destination(str(store.out), campaign.name, environment(),
+                                  campaign_keep(campaign), leave_token(store.out))
         bar = _progress(len(todo), label or campaign.name, enabled=progress)
+        committer = Committer(store)
+        returned: set[str] = set()
         try:
-            tasks = ((r.run_id, r.scenario) for r in todo)  # checked: not parsed again
-            for rid, result, metrics in runner.results(tasks):
-                run = by_id[rid]
-                try:
-                    store.add(rid, result, metrics, campaign=campaign.name, sweep=run.sweep,
-                              axes={k: _jsonable(v) for k, v in run.axes.items()}, env=env)
-                except StoreError as exc:  # this run's place only (a folder in the way)
-                    summary.unstored.append(str(exc))
-                    bar.update(1)
-                    continue
-                setattr(summary, result.status, getattr(summary, result.status) + 1)
+            tasks = ((r.run_id, StoreTask(r.run_id, r.scenario, r.sweep,  # checked: not
+                                          {k: _jsonable(v) for k, v in r.axes.items()},
+                                          destination)) for r in todo)  # parsed again
+            for rid, stored in runner.results(tasks, committer.idle):
+                returned.add(rid)
+                stored = landed(store.out, stored)
+                if stored.values is None:
+                    summary.unstored.append(stored.error)  # this run's place only
+                else:
+                    committer.add(stored.values)
+                    _count(summary, stored.status)
                 bar.update(1)
-                bar.set_postfix(ok=summary.ok, diverged=summary.diverged, failed=summary.failed)
+                bar.set_postfix(ok=summary.ok, diverged=summary.diverged, failed=summary.failed,
+                                refresh=False)
         except Interrupted as exc:
             summary.interrupted = exc.signum
+            committer.flush()
+            for row in _landed_unreturned(store, [r for r in todo if r.run_id not in returned]):
+                _count(summary, row.status)
         finally:
-            bar.close()
-            if own:
-                runner.close()
+            try:
+                committer.flush()  # what finished is stored, whatever stopped the loop
+            finally:
+                bar.close()
+                (store.runs_dir / destination.reach).unlink(missing_ok=True)
+                if own:
+                    runner.close()
     if export:
         store.export()
     store.close()
     return summary
+
+
+def _count(summary: CampaignSummary, status: str) -> None:
+    setattr(summary, status, getattr(summary, status) + 1)
+
+
+def _landed_unreturned(store: ResultStore, runs: list[PlannedRun]) -> list:
+    """Adopt the files of ``runs`` (interrupted before their results came back) that
+    their workers put in place before they were stopped, where the index holds no row
+    of them: finished runs, kept."""
+    landed_ids = [r.run_id for r in runs if (store.runs_dir / f"{r.run_id}.npz").is_file()]
+    known = {row.run_id for row in store.rows_of(landed_ids)}
+    adopted = []
+    for rid in landed_ids:
+        if rid not in known:
+            try:
+                adopted.append(store.adopt(store.runs_dir / f"{rid}.npz"))
+            except ValueError:
+                pass  # not an intact run file: the run is redone on resume
+    return adopted
 
 
 def _jsonable(value):

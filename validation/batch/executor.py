@@ -1,9 +1,12 @@
 """Where runs execute: on local worker processes or on a Dask cluster (or, for library
 callers, in this process) — one interface, results handed back as they finish.
 
-`Runner.results(tasks)` yields ``(key, result, metrics)`` as each run completes, so the
-caller stores every finished run at once.  Nothing a run does can take the command
-down: every run of a local runner executes in a worker process (one for
+`Runner.results(tasks)` takes `storing.StoreTask` s and yields ``(key, Stored)`` as each
+run completes: the worker that ran it has stored its file (`validation.batch.storing`)
+and sends back only its index row, which the caller commits.  Before it waits for the
+next result, a runner calls the caller's ``idle()``, which may commit what has arrived
+and says how long the runner may wait before asking again.  Nothing a run does can take
+the command down: every run of a local runner executes in a worker process (one for
 ``--workers 1``).  A run whose worker exits, is killed or crashes (a law calling
 ``os._exit``, a segfault) is handed back as a "failed" result saying what happened and
 how long after the run started, and the worker is replaced; a run past its time limit
@@ -37,7 +40,8 @@ from .interrupts import Interrupted, signals_interrupt
 from .limits import (MIN_MEMORY_MIB, RUN_TIMEOUT_BASE, default_memory_limit,
                      default_run_timeout)
 from .threads import ONE_THREAD
-from .worker import execute_run, failed_result, keep_freed_memory, serve
+from .storing import Stored, run_and_store, serve, store_failure
+from .worker import describe, keep_freed_memory
 
 __all__ = ["Runner", "SerialRunner", "LocalPoolRunner", "DaskRunner", "make_runner",
            "available_cores"]
@@ -51,11 +55,14 @@ def available_cores() -> int:
 
 
 class Runner:
-    """Executes tasks ``(key, scenario)`` (see `execute_run`); subclasses say where."""
+    """Executes tasks ``(key, StoreTask)`` (`storing.run_and_store`); subclasses say
+    where.  ``results(tasks, idle)`` yields ``(key, Stored)`` as runs finish; ``idle()``
+    (optional) is called before each wait for a result and returns the longest wait
+    [s] before it wants to be called again (None: no limit)."""
 
     workers = 1
 
-    def results(self, tasks):
+    def results(self, tasks, idle=None):
         raise NotImplementedError
 
     def close(self) -> None:
@@ -73,17 +80,21 @@ class SerialRunner(Runner):
     exits the process or crashes takes this process with it; the command line never
     uses it)."""
 
-    def results(self, tasks):
+    def results(self, tasks, idle=None):
         with signals_interrupt():
-            for key, data in tasks:
-                yield (key, *execute_run(data))
+            for key, task in tasks:
+                if idle is not None:
+                    idle()
+                yield key, run_and_store(task)
 
 
-def _run_timeout(data, run_timeout: float | None) -> float:
-    """The wall-time limit of the run of ``data`` (a `Scenario` or its mapping)."""
+def _run_timeout(task, run_timeout: float | None) -> float:
+    """The wall-time limit of the run of ``task`` (its scenario: a `Scenario` or its
+    mapping)."""
     if run_timeout is not None:
         return run_timeout
     from ..run.scenario import Scenario, scenario_from_mapping
+    data = task.scenario
     try:
         scenario = data if isinstance(data, Scenario) else scenario_from_mapping(data)
     except ValueError:  # a mapping that is no scenario: its worker says so at once
@@ -183,24 +194,26 @@ class LocalPoolRunner(Runner):
                 w = self._pool[i] = _Worker(self._ctx, self.memory_limit, self._warm)
         return w
 
-    def results(self, tasks):
+    def results(self, tasks, idle=None):
         with signals_interrupt():
             try:
-                yield from self._results(iter(tasks))
+                yield from self._results(iter(tasks), idle or (lambda: None))
             finally:  # left early (an error or a signal): end the runs still in flight
                 self._kill_busy()
 
-    def _results(self, tasks):
+    def _results(self, tasks, idle):
         pending, unstarted = self._dispatch(tasks, True)
         yield from unstarted
         while True:
             busy = [w for w in self._pool if w is not None and w.task is not None]
             if not busy:
                 return
+            limit = min(w.deadline for w in busy) - time.monotonic()
+            wanted = idle()
             try:
                 ready = connection.wait(
                     [w.conn for w in busy] + [w.process.sentinel for w in busy],
-                    timeout=max(0.0, min(w.deadline for w in busy) - time.monotonic()))
+                    timeout=max(0.0, limit if wanted is None else min(limit, wanted)))
             except Interrupted:
                 yield from self._finished(busy)  # keep what finished before the signal
                 raise
@@ -230,7 +243,7 @@ class LocalPoolRunner(Runner):
                 self._pool[i].kill()  # died while idle: a new one takes the run
                 self._pool[i] = None
             else:
-                unstarted.append((task[0], *failed_result(
+                unstarted.append((task[0], store_failure(
                     task[1], "no worker process could be started for the run")))
         return pending, unstarted
 
@@ -241,9 +254,9 @@ class LocalPoolRunner(Runner):
         if w.conn in ready or w.process.sentinel in ready:
             try:
                 if w.conn.poll():
-                    result = w.conn.recv()
+                    stored = w.conn.recv()
                     w.task = None
-                    return (key, *result)
+                    return key, stored
             except (EOFError, OSError):
                 pass  # died while sending
             elapsed = time.monotonic() - w.started
@@ -256,7 +269,7 @@ class LocalPoolRunner(Runner):
         else:
             return None
         self._pool[self._pool.index(w)] = None  # replaced when next needed
-        return (key, *failed_result(data, message))
+        return key, store_failure(data, message)
 
     @staticmethod
     def _finished(busy: list[_Worker]):
@@ -266,9 +279,9 @@ class LocalPoolRunner(Runner):
             try:
                 if w.conn.poll():
                     key = w.task[0]
-                    result = w.conn.recv()
+                    stored = w.conn.recv()
                     w.task = None
-                    yield (key, *result)
+                    yield key, stored
             except (EOFError, OSError):
                 pass
 
@@ -319,38 +332,39 @@ class DaskRunner(Runner):
         from .worker import warm_up
         client.run(warm_up)  # load the kernels now: not within the first runs' limits
 
-    def results(self, tasks):
+    def results(self, tasks, idle=None):
         from distributed import wait
         tasks = iter(tasks)
-        in_flight: dict = {}  # future -> (key, data, timeout, deadline)
+        in_flight: dict = {}  # future -> (key, task, timeout, deadline)
         with signals_interrupt():
             try:
                 while True:
                     while len(in_flight) < self.workers:
-                        task = next(tasks, None)
-                        if task is None:
+                        item = next(tasks, None)
+                        if item is None:
                             break
-                        key, data = task
-                        timeout = _run_timeout(data, self.run_timeout)
-                        future = self.client.submit(execute_run, data, pure=False)
-                        in_flight[future] = (key, data, timeout, time.monotonic() + timeout)
+                        key, task = item
+                        timeout = _run_timeout(task, self.run_timeout)
+                        future = self.client.submit(run_and_store, task, pure=False)
+                        in_flight[future] = (key, task, timeout, time.monotonic() + timeout)
                     if not in_flight:
                         return
-                    nearest = min(d for *_, d in in_flight.values())
+                    limit = min(d for *_, d in in_flight.values()) - time.monotonic()
+                    wanted = idle() if idle is not None else None
                     try:
-                        wait(list(in_flight), timeout=max(0.01, nearest - time.monotonic()),
-                             return_when="FIRST_COMPLETED")
+                        wait(list(in_flight), return_when="FIRST_COMPLETED",
+                             timeout=max(0.01, limit if wanted is None else min(limit, wanted)))
                     except TimeoutError:
                         pass
                     for future in [f for f in in_flight if f.done()]:
                         yield self._collect(future, in_flight.pop(future))
                     now = time.monotonic()
                     for future in [f for f, (*_, d) in in_flight.items() if d <= now]:
-                        key, data, timeout, _ = in_flight.pop(future)
+                        key, task, timeout, _ = in_flight.pop(future)
                         self._stop(future)
-                        yield (key, *failed_result(data, f"no result after {timeout:g} s (the "
-                                                         "run was stopped; --run-timeout sets "
-                                                         "the limit)"))
+                        yield key, store_failure(task, f"no result after {timeout:g} s (the "
+                                                       "run was stopped; --run-timeout sets "
+                                                       "the limit)")
             except Interrupted:
                 finished = [f for f in in_flight if f.done()]
                 self.client.cancel(list(in_flight), force=True)
@@ -359,12 +373,12 @@ class DaskRunner(Runner):
                 raise
 
     @staticmethod
-    def _collect(future, task) -> tuple:
-        key, data, *_ = task
+    def _collect(future, item) -> tuple[str, Stored]:
+        key, task, *_ = item
         try:
-            return (key, *future.result())
+            return key, future.result()
         except Exception as exc:  # noqa: BLE001 - the Dask worker itself died: a failed run
-            return (key, *failed_result(data, exc))
+            return key, store_failure(task, describe(exc))
 
     def _stop(self, future) -> None:
         """Cancel a run past its limit and restart the Dask worker running it (a thread

@@ -10,7 +10,8 @@ import sys
 from pathlib import Path
 
 from ..batch.executor import check_runner, make_runner
-from ..batch.store import ResultStore, run_id
+from ..batch.store import ResultStore, StoreError, run_id
+from ..batch.storing import landed, one_task
 from ..run._config import ConfigError
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
@@ -192,9 +193,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     store = open_output(args.out or Path("results") / f"run-{rid}")  # bad --out: nothing ran
     with make_runner("local", 1, run_timeout=args.run_timeout, memory_limit=args.memory_limit,
                      scenarios=[scenario], progress=sys.stderr) as runner:  # a worker process
-        (_, result, metrics), = runner.results([(rid, scenario)])
-    path = store.add(rid, result, metrics)
-    store.export()
+        (_, stored), = runner.results([(rid, one_task(rid, scenario, store.out))])
+    stored = landed(store.out, stored)
+    if stored.values is None:
+        raise StoreError(stored.error)
+    store.insert([stored.values])
+    result = store.row(rid)
+    path = store.out / result.file
+    metrics = result.metrics
     s = scenario
     obs = "" if s.observer.kind == "none" else f" + {s.observer.kind}"
     print(f"{s.name}: {s.controller.kind}{obs} on the {s.plant.kind} plant, {s.arm} arm, "

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..batch.resimulate import full_result
 from . import figures as fig
 from .render import fmt_number
 
@@ -160,7 +161,7 @@ def _case_figures(v: dict, store) -> list:
     cutoff = vibration_cutoff(ArmParameters.from_mapping(truth.config["true_params"]))
 
     def loaded():
-        return [(r, r.load()) for r in group]
+        return [(r, full_result(r)) for r in group]
     return [(SECTION, f"{title}: joint tracking (Fig. 3)",
              lambda: fig.tracking(loaded(), title, transient)),
             (SECTION, f"{title}: tip deflections and vibration (Fig. 4)",
