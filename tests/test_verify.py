@@ -303,6 +303,39 @@ indifference = 0.1
         assert len(saved["runs"]) == 8 and len(saved["noise_seeds"]) == 8
 
 
+def test_every_completed_draw_counts(tmp_path, capsys):
+    """Issue 37: 6 draws completed and the sequential test decided after 3 (three failures
+    at p0 = 0.95: 3 ln 3 crosses ln 19); the interval must be over the 6 (it was over 3,
+    the other three thrown away), and verdict.json says which n each method used.  Two
+    systems, judged together on one runner."""
+    from validation.cli import main
+    head, _, _ = SYSTEM.partition("[[requirement]]")
+    path = tmp_path / "systems.toml"
+    path.write_text("[scenario]\n" + head.replace("duration = 1.0", "duration = 0.6").replace(
+        "start = 0.6", "start = 0.55").replace("transient = 0.5", "transient = 0.3") + '''
+[[requirement]]
+name = "impossible"
+formula = "always(abs(theta1 - theta1_ref) <= -1)"
+[uncertainty]
+"true_params.Mp" = { uniform = [0.0, 1.0] }
+[[sweep]]
+zip.name = ["pd", "pbc"]
+zip.controller.kind = ["pd", "pbc"]
+''')
+    out = tmp_path / "out"
+    assert main(["verify", str(path), "--mode", "estimate", "--samples", "6", "--workers", "1",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    for name in ("pd", "pbc"):
+        saved = json.loads((out / name / "verdict.json").read_text())
+        assert saved["draws"] == 6 and saved["n"] == 6 and saved["failures"] == 6
+        assert saved["sequential"]["decision"] == "fails" and saved["sequential"]["draws"] == 3
+        assert (saved["p_low"], saved["p_high"]) == clopper_pearson(0, 6, 0.95)
+        assert len(saved["runs"]) == 6
+        assert f"{name}: 6/6 draws" in printed
+    assert printed.count("0/6 hold") == 2 and "after 3 draws" in printed
+
+
 @pytest.mark.slow  # three searches, a Dask cluster: ~1 min
 def test_a_search_gives_the_same_verdict_on_every_runner(tmp_path):
     """Serial, two local workers, a Dask cluster: the same seeded search, the same

@@ -37,13 +37,10 @@ import numpy as np
 
 from ..run._config import ConfigError, check, check_label
 from .executor import Runner, SerialRunner
-from .interrupts import Interrupted
 from .fingerprint import run_fingerprint
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
-from .committing import Committer
 from .runfiles import KEEP_ALL, Keep, keep_from_mapping
-from .store import ResultStore, environment, run_id
-from .storing import Destination, StoreTask, landed, leave_token
+from .store import ResultStore, run_id
 from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
@@ -575,86 +572,22 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
                  progress: bool = True, only: list[PlannedRun] | None = None,
                  label: str | None = None, export: bool = True) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
-    stored as soon as it finishes; the progress bar is labelled ``label`` (default: the
-    campaign's name).  On SIGINT/SIGTERM, what finished is kept and
-    ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json are
-    exported at the end (unless ``export`` is false: a search calling this for every
+    stored as soon as it finishes (`validation.batch.queue`); the progress bar is labelled
+    ``label`` (default: the campaign's name).  On SIGINT/SIGTERM, what finished is kept
+    and ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json
+    are exported at the end (unless ``export`` is false: a search calling this for every
     batch exports once, when it is done)."""
+    from .queue import open_job, run_jobs  # the queue builds on this module
     planned = only if only is not None else expand(campaign)
-    store = ResultStore(out)
-    store.prepare()
-    store.set_campaign(campaign.name, {"description": campaign.description,
-                                       "report": campaign.report})
-    store.remove_stale_temporaries()
-    todo, summary = classify(planned, store, retry_failed=retry_failed,
-                             reuse_stale=reuse_stale)
-    if todo:
-        own = runner is None
-        runner = runner or SerialRunner()
-        destination = Destination(str(store.out), campaign.name, environment(),
-                                  campaign_keep(campaign), leave_token(store.out))
-        bar = _progress(len(todo), label or campaign.name, enabled=progress)
-        committer = Committer(store)
-        returned: set[str] = set()
-        try:
-            tasks = ((r.run_id, StoreTask(r.run_id, r.scenario, r.sweep,  # checked: not
-                                          {k: _jsonable(v) for k, v in r.axes.items()},
-                                          destination)) for r in todo)  # parsed again
-            for rid, stored in runner.results(tasks, committer.idle):
-                returned.add(rid)
-                stored = landed(store.out, stored)
-                if stored.values is None:
-                    summary.unstored.append(stored.error)  # this run's place only
-                else:
-                    committer.add(stored.values)
-                    _count(summary, stored.status)
-                bar.update(1)
-                bar.set_postfix(ok=summary.ok, diverged=summary.diverged, failed=summary.failed,
-                                refresh=False)
-        except Interrupted as exc:
-            summary.interrupted = exc.signum
-            committer.flush()
-            for row in _landed_unreturned(store, [r for r in todo if r.run_id not in returned]):
-                _count(summary, row.status)
-        finally:
-            try:
-                committer.flush()  # what finished is stored, whatever stopped the loop
-            finally:
-                bar.close()
-                (store.runs_dir / destination.reach).unlink(missing_ok=True)
-                if own:
-                    runner.close()
+    job = open_job(campaign, out, planned, retry_failed=retry_failed, reuse_stale=reuse_stale)
+    own = runner is None and bool(job.todo)
+    runner = runner or SerialRunner()
+    try:
+        run_jobs([job], runner, progress=progress, label=label or campaign.name)
+    finally:
+        if own:
+            runner.close()
     if export:
-        store.export()
-    store.close()
-    return summary
-
-
-def _count(summary: CampaignSummary, status: str) -> None:
-    setattr(summary, status, getattr(summary, status) + 1)
-
-
-def _landed_unreturned(store: ResultStore, runs: list[PlannedRun]) -> list:
-    """Adopt the files of ``runs`` (interrupted before their results came back) that
-    their workers put in place before they were stopped, where the index holds no row
-    of them: finished runs, kept."""
-    landed_ids = [r.run_id for r in runs if (store.runs_dir / f"{r.run_id}.npz").is_file()]
-    known = {row.run_id for row in store.rows_of(landed_ids)}
-    adopted = []
-    for rid in landed_ids:
-        if rid not in known:
-            try:
-                adopted.append(store.adopt(store.runs_dir / f"{rid}.npz"))
-            except ValueError:
-                pass  # not an intact run file: the run is redone on resume
-    return adopted
-
-
-def _jsonable(value):
-    return value.item() if isinstance(value, np.generic) else value
-
-
-def _progress(total: int, name: str, *, enabled: bool):
-    from tqdm import tqdm
-    tqdm.monitor_interval = 0  # no monitor thread: worker processes may still be forked
-    return tqdm(total=total, desc=name, unit="run", disable=not enabled, dynamic_ncols=True)
+        job.store.export()
+    job.store.close()
+    return job.summary

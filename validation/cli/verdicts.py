@@ -144,7 +144,8 @@ def cmd_attribute(args: argparse.Namespace) -> int:
 # --- flexarm verify --------------------------------------------------------------------------
 def cmd_verify(args: argparse.Namespace) -> int:
     from ..verdicts.uncertainty import load_systems
-    from ..verdicts.verify import conform, estimate, falsify
+    from ..batch.queue import answer_all
+    from ..verdicts.verify import conform, estimate_question, falsify
     systems = load_systems(args.file)
     if args.system is not None:
         names = [s.name for s in systems]
@@ -165,18 +166,28 @@ def cmd_verify(args: argparse.Namespace) -> int:
     failed = False
     # A signal between two batches of a search (not only during one) stops it: exit 143.
     with runner, signals_interrupt():
-        for system, requirement in zip(systems, requirements):
-            where = folders[system.name]
-            print(f"{system.name}: {args.mode} over {', '.join(system.uncertainty.describe())}")
-            if args.mode == "estimate":
-                v = estimate(system, requirement, where, runner=runner, samples=args.samples,
-                             seed=args.seed)
+        if args.mode == "estimate":  # every system's draws on the one runner at once
+            for system in systems:
+                print(f"{system.name}: estimate over "
+                      f"{', '.join(system.uncertainty.describe())}")
+            verdicts = answer_all([estimate_question(
+                s, r, folders[s.name], workers=runner.workers, samples=args.samples,
+                seed=args.seed) for s, r in zip(systems, requirements)], runner)
+            for system, v in zip(systems, verdicts):
+                print(f"{system.name}: {v['draws']}/{v['samples']} draws")
                 for r in v["requirements"].values():
                     print(f"  {r['requirement']}: {r['n'] - r['failures']}/{r['n']} hold, "
                           f"P(holds) in [{r['p_low']:.3f}, {r['p_high']:.3f}] at "
-                          f"{r['level']:g} (Clopper-Pearson); sequential test: "
-                          f"{r['sequential']['decision']}")
-            elif args.mode == "falsify":
+                          f"{r['level']:g} (Clopper-Pearson, n = {r['n']}); sequential "
+                          f"test: {r['sequential']['decision']} after "
+                          f"{r['sequential']['draws']} draws")
+                failed |= bool(v["failed_runs"])
+                print(f"  verdict: {folders[system.name] / 'verdict.json'}")
+            return EXIT_FAILED if failed else 0
+        for system, requirement in zip(systems, requirements):
+            where = folders[system.name]
+            print(f"{system.name}: {args.mode} over {', '.join(system.uncertainty.describe())}")
+            if args.mode == "falsify":
                 v = falsify(system, requirement, where, runner=runner, budget=args.budget,
                             seed=args.seed)
                 what = "counterexample" if v["found"] else "no counterexample; worst case"

@@ -5,8 +5,10 @@ Three questions about one system (`validation.verdicts.uncertainty.System`) over
 uncertainty set, each answered in ``OUT/verdict.json``:
 
 - **estimate** — N seeded draws on the system's own plant; P(holds) with an exact
-  two-sided Clopper-Pearson interval at the stated level, and Wald's sequential test,
-  which stops drawing as soon as it decides (`validation.verdicts.statistics`).  A run
+  two-sided Clopper-Pearson interval at the stated level over every completed draw
+  (``n``), and Wald's sequential test, with the draws at which it decided
+  (``sequential.draws``; with ``[verify] sequential`` no further chunk of draws is
+  run once it has: `validation.verdicts.statistics`).  A run
   that diverged fails every requirement; a run that failed (solver, law) is not data.
 - **falsify** — minimise the requirement's robustness ρ over the set with CMA-ES
   (`validation.verdicts.search`) on the reduced plant (the designer's own model), and
@@ -44,7 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..batch.campaign import PlannedRun, run_planned
+from ..batch.campaign import PlannedRun
+from ..batch.queue import Batch, answer_all
 from ..batch.interrupts import Interrupted
 from ..batch.store import ResultStore, run_id
 from ..run._config import ConfigError
@@ -57,8 +60,8 @@ from .search import CMASearch
 from .statistics import clopper_pearson, sprt
 from .uncertainty import System
 
-__all__ = ["estimate", "falsify", "conform", "ROBUST_SWEEPS", "REDUCED_PER_TRUTH",
-           "effective_rho", "write_verdict", "Evaluations"]
+__all__ = ["estimate", "estimate_question", "falsify", "conform", "ROBUST_SWEEPS",
+           "REDUCED_PER_TRUTH", "effective_rho", "write_verdict", "Evaluations"]
 
 #: The sweep names the evaluations are stored under (reports keep them apart).
 ROBUST_SWEEPS = ("estimate", "falsify", "conform")
@@ -86,7 +89,9 @@ def effective_rho(row, requirement: Requirement) -> float | None:
 @dataclass
 class Evaluations:
     """Scenarios run on the campaign runner into ``out`` and read back from the store;
-    simulations counted per plant role (distinct scenarios asked for)."""
+    simulations counted per plant role (distinct scenarios asked for).  A search asks
+    with `run`; a question answered beside others (`validation.batch.queue`) yields
+    `batch` and hands the rows it is sent to `record`."""
 
     out: Path
     runner: object
@@ -98,26 +103,27 @@ class Evaluations:
     def __post_init__(self):
         self.store = ResultStore(self.out)
 
-    def run(self, items: list[tuple]) -> list:
-        """Rows of ``items`` = [(scenario, sweep, axes)], in order (run if not stored)."""
-        planned = []
-        for scenario, sweep, axes in items:
-            data = scenario_to_mapping(scenario)
-            planned.append(PlannedRun(run_id(data), scenario, sweep, axes))
-        unique = list({p.run_id: p for p in planned}.values())
-        summary = run_planned(unique, self.out, name=self.name,
-                              description="verdicts over uncertainty (flexarm verify)",
-                              runner=self.runner, progress=False, export=False)
-        if summary.interrupted:
-            raise Interrupted(summary.interrupted)
-        rows = {r.run_id: r for r in self.store.rows_of(p.run_id for p in unique)}
-        for p in unique:
+    def batch(self, items: list[tuple]) -> Batch:
+        """The batch of ``items`` = [(scenario, sweep, axes)]."""
+        planned = [PlannedRun(run_id(scenario_to_mapping(scenario)), scenario, sweep, axes)
+                   for scenario, sweep, axes in items]
+        return Batch(self.out, self.name, planned,
+                     description="verdicts over uncertainty (flexarm verify)")
+
+    def record(self, batch: Batch, rows: list) -> list:
+        """``rows`` (a batch's, in order), counted: simulations per plant, failed runs."""
+        for p, row in zip(batch.runs, rows):
             if p.run_id not in self.seen:
                 self.seen.add(p.run_id)
                 self.count[p.scenario.plant.role] += 1
-                if rows[p.run_id].status == "failed":
+                if row.status == "failed":
                     self.failed.append(p.run_id)
-        return [rows[p.run_id] for p in planned]
+        return rows
+
+    def run(self, items: list[tuple]) -> list:
+        """Rows of ``items`` = [(scenario, sweep, axes)], in order (run if not stored)."""
+        batch = self.batch(items)
+        return self.record(batch, answer_all([_ask(batch)], self.runner)[0])
 
     def finish(self) -> None:
         """Export metrics.csv and manifest.json once (not after every batch)."""
@@ -127,6 +133,11 @@ class Evaluations:
     @property
     def simulations(self) -> dict:
         return dict(self.count)
+
+
+def _ask(batch: Batch):
+    """A question of one batch: its answer is the batch's rows."""
+    return (yield batch)
 
 
 def _point_axes(point: dict, **extra) -> dict:
@@ -155,33 +166,43 @@ def _write_scenario(out: Path, name: str, mapping: dict, comment: str) -> str:
 def estimate(system: System, requirement: Requirement, out, *, runner, samples: int,
              seed: int, log=print) -> dict:
     """P(requirement holds) over ``samples`` seeded draws (module docstring)."""
+    return answer_all([estimate_question(system, requirement, out, workers=runner.workers,
+                                         samples=samples, seed=seed, log=log)], runner)[0]
+
+
+def estimate_question(system: System, requirement: Requirement, out, *, workers: int,
+                      samples: int, seed: int, log=print):
+    """`estimate` as a question of the queue (`validation.batch.queue.answer_all`: the
+    systems of ``flexarm verify`` are answered together on one runner of ``workers``).
+    Every completed draw counts: the interval is over all of them (``n``); the
+    sequential test reports the draws at which it decided (``sequential.draws``), and,
+    with ``[verify] sequential``, no further chunk of draws is asked for after it has."""
     points, noise = system.uncertainty.draws(samples, seed)
     scenarios = [system.scenario(p, seed=s) for p, s in zip(points, noise)]  # all checked
-    ev = Evaluations(Path(out), runner, f"verify-estimate/{system.name}")
+    ev = Evaluations(Path(out), None, f"verify-estimate/{system.name}")
     settings = system.settings
     # Draws are run in order, in chunks when the sequential test may stop them early;
     # its decision uses the draws in order, so it does not depend on the chunk size.
-    chunk = max(8, 4 * getattr(runner, "workers", 1)) if settings.sequential else samples
+    chunk = max(8, 4 * workers) if settings.sequential else samples
     rows: list = []
-    decision, used = "inconclusive", 0
     while len(rows) < samples:
-        batch = range(len(rows), min(samples, len(rows) + chunk))
-        rows += ev.run([(scenarios[i], "estimate", _point_axes(points[i], draw=i,
-                                                                seed=noise[i])) for i in batch])
+        draws = range(len(rows), min(samples, len(rows) + chunk))
+        batch = ev.batch([(scenarios[i], "estimate", _point_axes(points[i], draw=i,
+                                                                  seed=noise[i])) for i in draws])
+        rows += ev.record(batch, (yield batch))
         outcomes = _outcomes(rows, requirement)
         decision, used = sprt(outcomes, settings.test)
         log(f"  {system.name}: {len(rows)}/{samples} draws, "
             f"{sum(not o for o in outcomes)} failures of {requirement.name}")
         if settings.sequential and decision != "inconclusive":
             break
-    n_used = used if settings.sequential and decision != "inconclusive" else len(rows)
     verdict = {"mode": "estimate", "system": system.name, "plant": system.nominal["plant"]["kind"],
-               **_estimate_numbers(rows[:n_used], requirement, system),
-               "samples": samples, "seed": seed, "noise_seeds": noise[:n_used],
-               "distribution": system.uncertainty.describe(),
-               "requirements": {r.name: _estimate_numbers(rows[:n_used], r, system)
+               **_estimate_numbers(rows, requirement, system),
+               "samples": samples, "draws": len(rows), "seed": seed,
+               "noise_seeds": noise[:len(rows)], "distribution": system.uncertainty.describe(),
+               "requirements": {r.name: _estimate_numbers(rows, r, system)
                                 for r in system.requirements},
-               "runs": [r.run_id for r in rows[:n_used]],
+               "runs": [r.run_id for r in rows],
                "simulations": ev.simulations, "failed_runs": ev.failed}
     ev.finish()
     write_verdict(out, verdict)
