@@ -102,11 +102,12 @@ def test_a_worker_that_cannot_reach_the_folder_sends_the_file(reference, tmp_pat
 
 
 @pytest.mark.parametrize("keep", [{"signals": ["theta1", "tau2"]}, {"every": 7},
-                                  {"signals": ["theta2"], "every": 10}, {"signals": "none"}])
+                                  {"signals": ["theta2"], "every": 10}, {"signals": "none"},
+                                  {"compress": True}, {"signals": ["tau1"], "compress": True}])
 def test_what_a_run_keeps_and_its_signals_on_demand(reference, tmp_path, keep):
     """A campaign that keeps a subset, decimated signals or metrics only stores the same
-    metrics and, of the signals it keeps, the same values bit for bit; every signal of
-    any of its runs is re-simulated bit for bit; its files are smaller."""
+    metrics and, of the signals it keeps, the same values bit for bit (compressed too);
+    every signal of any of its runs is re-simulated bit for bit; its files are smaller."""
     out = tmp_path / "kept"
     run_campaign(campaign_from_mapping(dict(SMALL, keep=keep)), out, runner=SerialRunner(),
                  progress=False)
@@ -145,10 +146,30 @@ def test_re_simulation_refuses_a_run_it_does_not_reproduce(tmp_path):
         full_result(store.row(row.run_id))
 
 
+def test_packed_signals_unpack_exactly_or_not_at_all():
+    """Known-good: any float32 values (NaN, ±inf, subnormals, sign changes) come back bit
+    for bit.  Known-bad: a stream that holds fewer or more values than its shape, or a
+    shape no run has, is refused before anything is inflated beyond it."""
+    from validation.run.packing import MAX_UNPACKED, pack, unpack
+    rng = np.random.default_rng(3)
+    values = rng.standard_normal((5, 1001)).astype(np.float32)
+    values[0, :4] = [np.nan, np.inf, -np.inf, np.float32(1e-45)]
+    packed = pack(values)
+    assert unpack(packed, values.shape).tobytes() == values.tobytes()
+    for shape in ((5, 1000), (5, 1002), (4, 1001)):
+        with pytest.raises(ValueError):
+            unpack(packed, shape)
+    with pytest.raises(ValueError):
+        unpack(packed[:-10], values.shape)
+    with pytest.raises(ValueError):
+        unpack(packed, (MAX_UNPACKED, 1))
+
+
 @pytest.mark.parametrize("keep, key", [({"signals": ["theta1", "nope"]}, "keep.signals"),
                                        ({"signals": "some"}, "keep.signals"),
                                        ({"every": 0}, "keep.every"),
                                        ({"every": 1.5}, "keep.every"),
+                                       ({"compress": "yes"}, "keep.compress"),
                                        ({"decimate": 2}, "keep.decimate")])
 def test_a_bad_keep_table_names_its_key(keep, key):
     with pytest.raises(ConfigError) as err:
