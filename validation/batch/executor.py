@@ -31,6 +31,7 @@ import multiprocessing
 import os
 import signal
 import time
+from collections import deque
 from contextlib import contextmanager
 from multiprocessing import connection
 from typing import TextIO
@@ -301,12 +302,17 @@ class LocalPoolRunner(Runner):
 
 class DaskRunner(Runner):
     """Runs on a Dask cluster; workers must be able to import this package (and any
-    plug-in module).  At most one run per worker thread is in flight, so a run starts
-    when it is submitted: a run without a result ``run_timeout`` after its submission
-    (default `limits.default_run_timeout`) is recorded as failed and cancelled, and the
-    Dask worker running it restarted (if it has a nanny).  The workers' memory limit is
-    the cluster's own (``dask worker --memory-limit``).  Every worker loads the
-    simulation code and its kernels when the runner starts."""
+    plug-in module).  Two runs per worker thread are in flight: one running, one queued
+    on the scheduler, which starts it the moment a thread frees (without waiting for
+    this process to hear of the finished run and submit the next: that round trip,
+    once per run, made Dask 16 % slower than the local pool on 5 s reduced runs).
+    Queued runs start in submission order, so a run's clock starts when it is
+    submitted to an idle thread, or when a run before it ends: a run without a result
+    ``run_timeout`` after its start (default `limits.default_run_timeout`) is recorded
+    as failed and cancelled, and the Dask worker running it restarted (if it has a
+    nanny).  The workers' memory limit is the cluster's own (``dask worker
+    --memory-limit``).  Every worker loads the simulation code and its kernels when the
+    runner starts."""
 
     def __init__(self, address: str, timeout: float = 10.0, *,
                  run_timeout: float | None = None) -> None:
@@ -335,33 +341,51 @@ class DaskRunner(Runner):
     def results(self, tasks, idle=None):
         from distributed import wait
         tasks = iter(tasks)
-        in_flight: dict = {}  # future -> (key, task, timeout, deadline)
+        in_flight: dict = {}  # future -> [key, task, timeout, deadline (None: queued)]
+        queued: deque = deque()  # futures waiting for a thread, in submission order
+
+        def started(now: float) -> None:  # a thread freed: the oldest queued run starts
+            while queued:
+                future = queued.popleft()
+                if future in in_flight:
+                    in_flight[future][3] = now + in_flight[future][2]
+                    return
+
         with signals_interrupt():
             try:
                 while True:
-                    while len(in_flight) < self.workers:
+                    while len(in_flight) < 2 * self.workers:
                         item = next(tasks, None)
                         if item is None:
                             break
                         key, task = item
                         timeout = _run_timeout(task, self.run_timeout)
                         future = self.client.submit(run_and_store, task, pure=False)
-                        in_flight[future] = (key, task, timeout, time.monotonic() + timeout)
+                        running = len(in_flight) - len(queued) < self.workers
+                        in_flight[future] = [key, task, timeout,
+                                             time.monotonic() + timeout if running else None]
+                        if not running:
+                            queued.append(future)
                     if not in_flight:
                         return
-                    limit = min(d for *_, d in in_flight.values()) - time.monotonic()
+                    limit = min(d for *_, d in in_flight.values() if d is not None) \
+                        - time.monotonic()
                     wanted = idle() if idle is not None else None
                     try:
                         wait(list(in_flight), return_when="FIRST_COMPLETED",
                              timeout=max(0.01, limit if wanted is None else min(limit, wanted)))
                     except TimeoutError:
                         pass
-                    for future in [f for f in in_flight if f.done()]:
-                        yield self._collect(future, in_flight.pop(future))
                     now = time.monotonic()
-                    for future in [f for f, (*_, d) in in_flight.items() if d <= now]:
+                    for future in [f for f in in_flight if f.done()]:
+                        item = in_flight.pop(future)
+                        started(now)  # its thread is free
+                        yield self._collect(future, item)
+                    for future in [f for f, (*_, d) in in_flight.items()
+                                   if d is not None and d <= now]:
                         key, task, timeout, _ = in_flight.pop(future)
                         self._stop(future)
+                        started(now)
                         yield key, store_failure(task, f"no result after {timeout:g} s (the "
                                                        "run was stopped; --run-timeout sets "
                                                        "the limit)")

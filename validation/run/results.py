@@ -102,8 +102,10 @@ class RunResult:
             meta["packed"] = {"codec": CODEC, "shape": list(signals.shape)}
             signals = np.frombuffer(pack(signals), np.uint8)
         buf = io.BytesIO()
+        # The metadata as UTF-8 bytes: a numpy string array holds 4 bytes per character
+        # (30 KB of a metrics-only run's 37 KB; files written so still read).
         np.savez(buf, time=self.time, signals=signals, names=np.array(self.names, dtype=str),
-                 meta=np.array(json.dumps(meta)))
+                 meta=np.frombuffer(json.dumps(meta).encode(), np.uint8))
         return buf.getvalue()
 
     @classmethod
@@ -114,7 +116,9 @@ class RunResult:
         try:
             _check_declared_sizes(data)
             with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-                meta = json.loads(str(npz["meta"]))
+                text = npz["meta"]
+                meta = json.loads(text.tobytes().decode() if text.dtype == np.uint8
+                                  else str(text))
                 signals = npz["signals"]
                 if "packed" in meta:
                     from .packing import CODEC, unpack
