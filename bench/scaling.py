@@ -9,7 +9,8 @@ go: ``python3 bench/scaling.py OUT`` (from a checkout: it reads campaigns/robust
 - ``flexarm verify campaigns/robust.toml --mode estimate`` with 16 workers: its busy
   fraction, the workers' CPU seconds over 16 × the wall time.
 
-For each: wall seconds, speed-up over one worker, the command's own CPU seconds and its
+``python3 bench/scaling.py OUT FRACTION`` runs FRACTION of every workload (0.1: a
+smoke test of the script on a small machine).  For each: wall seconds, speed-up over one worker, the command's own CPU seconds and its
 workers'.  The kernels are compiled first (not counted).  The whole script keeps within
 `BUDGET` seconds: a measurement that would not fit is left out (or verify's draws
 trimmed), and the output says so.  Writes OUT/scaling.json and OUT/scaling.txt.
@@ -137,7 +138,14 @@ class Cluster:
                     pass
 
 
-def main(out: Path) -> None:
+def _fraction(text: str, fraction: float) -> str:
+    """``text`` with its seeds axis cut to ``fraction`` of its length (at least 1)."""
+    head, _, seeds = text.rpartition("grid.seed = ")
+    values = json.loads(seeds)
+    return head + f"grid.seed = {values[:max(1, round(len(values) * fraction))]}\n"
+
+
+def main(out: Path, fraction: float = 1.0) -> None:
     out.mkdir(parents=True, exist_ok=True)
     rows, notes = [], []
     top = min(16, CORES)
@@ -145,15 +153,21 @@ def main(out: Path) -> None:
         notes.append(f"only {CORES} cores: 16 workers measured as {top}")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        for name, text in (("truth.toml", TRUTH), ("reduced.toml", REDUCED), ("warm.toml", WARM)):
+        for name, text in (("truth.toml", _fraction(TRUTH, fraction)),
+                           ("reduced.toml", _fraction(REDUCED, fraction)), ("warm.toml", WARM)):
             (tmp / name).write_text(text)
+        truth_runs, reduced_runs = (len(json.loads((tmp / f"{w}.toml").read_text().rpartition(
+            "grid.seed = ")[2])) * 12 for w in ("truth", "reduced"))
+        if fraction != 1.0:
+            notes.append(f"{fraction:g} of every workload (a smoke test)")
         warm = campaign(tmp / "warm.toml", tmp, local(1), timeout=left())
         notes.append(f"compiling the kernels first: {warm['wall_s']:.1f} s (not counted)")
         one = {}
         # the essential rows first: one worker (the base), then the many-core ones
-        plan = [("truth", 96, n) for n in (1, top, 8, 4, 2)] + \
-               [("reduced", 960, n) for n in (1, top, 4)]
-        expected = {"truth": 80.0, "reduced": 60.0}  # one worker, the issue's machine [s]
+        plan = [("truth", truth_runs, n) for n in dict.fromkeys((1, top, 8, 4, 2))] + \
+               [("reduced", reduced_runs, n) for n in dict.fromkeys((1, top, 4))]
+        # one worker on the issue's machine [s]
+        expected = {"truth": 80.0 * fraction, "reduced": 60.0 * fraction}
         for workload, runs, n in plan:
             guess = one[workload] / n * 2 + 5 if workload in one else 1.5 * expected[workload]
             if guess > left() - 150:  # keep ~150 s for Dask and verify
@@ -174,16 +188,17 @@ def main(out: Path) -> None:
                 cluster.close()
             local_top = next((x["wall_s"] for x in rows if x["workload"].endswith("truth")
                               and x["executor"] == "local" and x["workers"] == top), None)
-            rows.append({"workload": "campaign 96 x 5 s truth", "executor": "dask",
+            rows.append({"workload": f"campaign {truth_runs} x 5 s truth", "executor": "dask",
                          "workers": top, **r, "speedup": one["truth"] / r["wall_s"],
                          "dask_over_local": r["wall_s"] / local_top if local_top else None})
         else:
             notes.append("Dask left out (budget)")
         robust = ROOT / "campaigns" / "robust.toml"
         # 3 systems × 59 draws of 20 s on the truth plant: ~283 CPU-s, ~25 s on 16 cores
-        samples = 59 if left() > 90 else max(8, int(59 * max(left() - 20, 0) / 90))
+        full = max(2, round(59 * fraction))
+        samples = full if left() > 90 else max(2, min(full, int(59 * max(left() - 20, 0) / 90)))
         if robust.exists() and left() > 40:
-            if samples < 59:
+            if samples < full:
                 notes.append(f"verify trimmed to {samples} draws per system (budget)")
             r = flexarm("verify", str(robust), "--mode", "estimate", "--samples", str(samples),
                         "--workers", str(top), "--out", str(tmp / "verify"), timeout=left())
@@ -192,8 +207,8 @@ def main(out: Path) -> None:
                          "executor": "local", "workers": top, **r, "busy": busy})
         else:
             notes.append("verify left out (budget, or no campaigns/robust.toml here)")
-    targets = {"campaign 96 x 5 s truth": ("speedup", 13.0), "campaign 960 x 5 s reduced":
-               ("speedup", 11.0)}
+    targets = {f"campaign {truth_runs} x 5 s truth": ("speedup", 13.0),
+               f"campaign {reduced_runs} x 5 s reduced": ("speedup", 11.0)}
     for r in rows:
         key = targets.get(r["workload"])
         if key and r["executor"] == "local" and r["workers"] == 16:
@@ -224,4 +239,5 @@ def main(out: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1] if len(sys.argv) > 1 else os.environ.get("OUT", "scaling-out")))
+    main(Path(sys.argv[1] if len(sys.argv) > 1 else os.environ.get("OUT", "scaling-out")),
+         float(sys.argv[2]) if len(sys.argv) > 2 else 1.0)
