@@ -8,7 +8,8 @@ since: the run's fingerprint tells).
 
 Reading a folder runs no code it names: a run of a plug-in law or plant is not
 re-simulated here (`resimulable`); ``flexarm run --like RESULTS/RUN`` re-runs it on
-purpose.  Re-simulating loads the simulation code (Exudyn for a truth-plant run)."""
+purpose.  `StoredRun.load` is `full_result`: every reader of a run's signals (reports,
+``show``, the claims, ``export --signals``, calibration) gets them all.  Re-simulating loads the simulation code (Exudyn for a truth-plant run)."""
 from __future__ import annotations
 
 import math

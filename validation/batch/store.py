@@ -51,6 +51,7 @@ from . import export, repair
 from .index import (BUSY_TIMEOUT, COLUMNS, INDEX_NAME, JSON_COLUMNS, SCHEMA, SCHEMA_VERSION,
                     StoreError, insert_row, insert_rows, is_run_id, json_table, metric_values,
                     run_id, set_wal, transaction)
+from .resimulate import full_result
 from .runfiles import write_run
 
 __all__ = ["ResultStore", "StoredRun", "StoreError", "run_id", "is_run_id", "environment",
@@ -81,7 +82,8 @@ def environment() -> dict:
 
 @dataclass
 class StoredRun:
-    """One row of the index.  ``load()`` reads and verifies the run's file."""
+    """One row of the index.  ``load()`` reads and verifies the run's file (every signal,
+    re-simulated where the file keeps less)."""
 
     run_id: str
     name: str
@@ -103,7 +105,9 @@ class StoredRun:
     store: "ResultStore | None" = field(default=None, repr=False, compare=False)
 
     def load(self) -> RunResult:
-        return self.store.load(self.run_id)
+        """Every signal of the run at every sample: from its file, or re-simulated where
+        the file keeps less (`validation.batch.resimulate.full_result`)."""
+        return full_result(self)
 
     @property
     def plant(self) -> str:
@@ -396,7 +400,7 @@ class ResultStore:
         return out
 
     def load(self, rid: str) -> RunResult:
-        """The run's result as its file keeps it, verified against its row (StoreError
+        """The run's result as its file keeps it (every signal: `StoredRun.load`), verified against its row (StoreError
         naming the run if the file is missing or damaged)."""
         return self.read(rid)[0]
 

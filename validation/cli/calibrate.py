@@ -6,7 +6,6 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..batch.resimulate import full_result
 from ..run.experiments import from_run, read_experiment, read_frequency_response, write_experiment
 
 from .common import EXIT_FAILED, runner_for
@@ -19,7 +18,7 @@ def _experiment(spec: str):
     if path.suffix.lower() == ".csv" or path.is_file():
         return read_experiment(path), None
     row = stored_run(spec, "DATA")
-    return from_run(full_result(row), row.run_id, spec), row.config
+    return from_run(row.load(), row.run_id, spec), row.config
 
 
 def _fit_names(text: str | None) -> list[str] | None:
@@ -74,7 +73,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 def export_signals(args: argparse.Namespace) -> int:
     """``flexarm export --signals RESULTS/RUN [--to FILE]``: the run as an experiment CSV."""
     row = stored_run(args.signals, "--signals")
-    exp = from_run(full_result(row), row.run_id, args.signals)
+    exp = from_run(row.load(), row.run_id, args.signals)
     comment = (f"run {row.run_id} ({row.name}) of {row.store.out}, as flexarm calibrate reads "
                f"an experiment: t [s], the joint torques applied [N m], the measurements")
     if args.to is None:

@@ -37,7 +37,6 @@ from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
 from .drawing import draw_all
 from ..batch.fingerprint import run_fingerprint
-from ..batch.resimulate import full_result
 from .render import fmt_number, render
 from .calibration import calibration_section
 from .robust import robust_section
@@ -448,8 +447,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
 
 def _loaded(group):
     """(row, every signal) of each run of a figure group (re-simulated where a run's file
-    keeps less: `validation.batch.resimulate`)."""
-    return [(r, full_result(r)) for r in group]
+    keeps less: `StoredRun.load`)."""
+    return [(r, r.load()) for r in group]
 
 
 def _title(group) -> str:

@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..batch.resimulate import full_result
 from . import figures as fig
 from .render import fmt_number
 
@@ -161,7 +160,7 @@ def _case_figures(v: dict, store) -> list:
     cutoff = vibration_cutoff(ArmParameters.from_mapping(truth.config["true_params"]))
 
     def loaded():
-        return [(r, full_result(r)) for r in group]
+        return [(r, r.load()) for r in group]
     return [(SECTION, f"{title}: joint tracking (Fig. 3)",
              lambda: fig.tracking(loaded(), title, transient)),
             (SECTION, f"{title}: tip deflections and vibration (Fig. 4)",

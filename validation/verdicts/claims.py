@@ -33,7 +33,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from ..batch.resimulate import full_result
 from ..run.claim_measures import CLAIMS, DISTURBED, SYSTEM, Claim
 from ..run.plants import is_truth, label_of, plant_spec
 from ..run.metrics import all_metrics
@@ -101,7 +100,7 @@ class _Measured:
     @property
     def result(self):
         if self._result is None:
-            self._result = full_result(self.stored)
+            self._result = self.stored.load()
         return self._result
 
     def metrics(self, transient: float | None = None) -> dict:
