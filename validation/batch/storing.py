@@ -16,9 +16,11 @@ result, and editing it leaves stored runs valid.
 """
 from __future__ import annotations
 
+import dataclasses
 import errno
 import functools
 import secrets
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -93,10 +95,13 @@ def _reaches(out: str, token: str) -> bool:
 
 def _store(task: StoreTask, result, metrics) -> Stored:
     d = task.destination
+    reaches = d.reach is not None and _reaches(d.out, d.reach)
+    # A file to send is sent compressed (`validation.run.packing`: half the bytes).
+    keep = d.keep if reaches else dataclasses.replace(d.keep, compress=True)
     data, row = run_file(task.rid, result, metrics, campaign=d.campaign, sweep=task.sweep,
-                         axes=task.axes, env=d.env, keep=d.keep)
+                         axes=task.axes, env=d.env, keep=keep)
     values = row_values(row)
-    if d.reach is None or not _reaches(d.out, d.reach):
+    if not reaches:
         return Stored(task.rid, values, data)
     return _written(Path(d.out), task.rid, data, values)
 
@@ -125,11 +130,17 @@ def landed(out: Path, stored: Stored) -> Stored:
     return stored
 
 
-def one_task(rid: str, scenario, out: Path) -> StoreTask:
-    """The task of a single run (``flexarm run``) into the results folder ``out``: its
-    worker sends the file back (one file: no token needed to prove the folder)."""
+@contextmanager
+def one_task(rid: str, scenario, out: Path):
+    """The task of a single run (``flexarm run``) into the results folder ``out``, whose
+    worker writes the file there (its token left in ``runs/`` meanwhile)."""
     from .store import environment
-    return StoreTask(rid, scenario, "", {}, Destination(str(out), "", environment()))
+    token = leave_token(out)
+    try:
+        yield StoreTask(rid, scenario, "", {}, Destination(str(out), "", environment(),
+                                                           reach=token))
+    finally:
+        (Path(out) / "runs" / token).unlink(missing_ok=True)
 
 
 def _written(out: Path, rid: str, data: bytes, values: tuple) -> Stored:

@@ -192,8 +192,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     check_runner(run_timeout=args.run_timeout, memory_limit=args.memory_limit)
     store = open_output(args.out or Path("results") / f"run-{rid}")  # bad --out: nothing ran
     with make_runner("local", 1, run_timeout=args.run_timeout, memory_limit=args.memory_limit,
-                     scenarios=[scenario], progress=sys.stderr) as runner:  # a worker process
-        (_, stored), = runner.results([(rid, one_task(rid, scenario, store.out))])
+                     scenarios=[scenario], progress=sys.stderr) as runner, \
+            one_task(rid, scenario, store.out) as task:  # a worker process
+        (_, stored), = runner.results([(rid, task)])
     stored = landed(store.out, stored)
     if stored.values is None:
         raise StoreError(stored.error)
