@@ -224,11 +224,14 @@ def test_a_falsification_answer_stands_only_if_every_check_keeps_its_sign(rho, c
     rows = {f"check{i}": SimpleNamespace(status=status, metrics={req.metric: value},
                                          run_id=f"check{i}")
             for i, (status, value) in enumerate(checks)}
-    monkeypatch.setattr(verify, "run_checks",
-                        lambda *a, **k: SimpleNamespace(interrupted=0))
+    monkeypatch.setattr(verify, "check_runs", lambda rows: [])
     monkeypatch.setattr(verify, "checks_of", lambda row, by_id: dict(rows))
     ev = SimpleNamespace(out=None, runner=None, store=SimpleNamespace(rows=lambda: []))
-    result = verify._convergence(ev, SimpleNamespace(), req, rho)
+    step = verify._convergence(ev, SimpleNamespace(), req, rho)  # a question's step:
+    next(step)  # it asks for the check runs
+    with pytest.raises(StopIteration) as answered:
+        step.send([])
+    result = answered.value.value
     assert result["verdict"] == expected
     assert [c["status"] for c in result["checks"].values()] == [c[0] for c in checks]
 

@@ -48,19 +48,19 @@ import numpy as np
 
 from ..batch.campaign import PlannedRun
 from ..batch.queue import Batch, answer_all
-from ..batch.interrupts import Interrupted
 from ..batch.store import ResultStore, run_id
 from ..run._config import ConfigError
 from ..run.requirements import Requirement
 from ..run.results import write_atomic
 from ..run.scenario import scenario_to_mapping
 from ..run.tomlfiles import toml_text
-from .mesh import checks_of, run_checks
+from .mesh import MESH_SWEEP, check_runs, checks_of
 from .search import CMASearch
 from .statistics import clopper_pearson, sprt
 from .uncertainty import System
 
-__all__ = ["estimate", "estimate_question", "falsify", "conform", "ROBUST_SWEEPS",
+__all__ = ["estimate", "estimate_question", "falsify", "falsify_question", "conform",
+           "conform_question", "ROBUST_SWEEPS",
            "REDUCED_PER_TRUTH", "effective_rho", "write_verdict", "Evaluations"]
 
 #: The sweep names the evaluations are stored under (reports keep them apart).
@@ -265,9 +265,23 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
             seed: int, log=print) -> dict:
     """A truth-confirmed counterexample — or with ``[verify] worst_case``, the lowest ρ
     the truth plant confirms within the budget — over the set (module docstring)."""
+    return answer_all([falsify_question(system, requirement, out, budget=budget, seed=seed,
+                                        log=log)], runner)[0]
+
+
+def _asked(ev: Evaluations, items: list[tuple]):
+    """Ask for ``items``' rows (a question's step: ``rows = yield from _asked(...)``)."""
+    batch = ev.batch(items)
+    return ev.record(batch, (yield batch))
+
+
+def falsify_question(system: System, requirement: Requirement, out, *, budget: int,
+                     seed: int, log=print):
+    """`falsify` as a question of the queue (`validation.batch.queue.answer_all`: the
+    systems of ``flexarm verify`` searched together on one runner)."""
     out = Path(out)
     u_dim = system.uncertainty.dim
-    ev = Evaluations(out, runner, f"verify-falsify/{system.name}")
+    ev = Evaluations(out, None, f"verify-falsify/{system.name}")
     search = CMASearch(u_dim, seed)
     correction = _Correction()
     truth: dict[tuple, dict] = {}  # point key -> {u, rho_reduced, rho_truth, row}
@@ -285,8 +299,8 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
         True when the search is over."""
         nonlocal found, threshold
         point = system.uncertainty.at(u)
-        (row,) = ev.run([(system.scenario(point, plant="truth"), "falsify",
-                          _point_axes(point, role="confirm"))])
+        (row,) = yield from _asked(ev, [(system.scenario(point, plant="truth"), "falsify",
+                                         _point_axes(point, role="confirm"))])
         rho_truth = effective_rho(row, requirement)
         entry = {"u": u, "point": point, "rho_reduced": rho_reduced, "rho_truth": rho_truth,
                  "row": row}
@@ -311,14 +325,14 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
         if search.restarts != restarts and best_run is not None:
             # The previous CMA-ES run stopped: its best point is the worst case it found;
             # confirm it on the truth plant.
-            if tuple(best_run[1]) not in truth and confirm(best_run[1], best_run[2],
-                                                           best_run[0]):
+            if tuple(best_run[1]) not in truth and (yield from confirm(
+                    best_run[1], best_run[2], best_run[0])):
                 break
             best_run = None
         U = U[:reduced_budget - ev.count["reduced"]]  # the last generation may be cut
         points = [system.uncertainty.at(u) for u in U]
-        rows = ev.run([(system.scenario(p, plant="reduced"), "falsify",
-                        _point_axes(p, role="search")) for p in points])
+        rows = yield from _asked(ev, [(system.scenario(p, plant="reduced"), "falsify",
+                                       _point_axes(p, role="search")) for p in points])
         rho_r = np.array([_search_value(effective_rho(r, requirement)) for r in rows])
         corrected = rho_r + correction(U)
         if len(U) == search.popsize:
@@ -332,7 +346,7 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
                       if corrected[i] < threshold and tuple(U[i]) not in truth]
         if candidates and ev.count["truth"] < budget:
             i = candidates[0]
-            done = confirm(U[i], float(rho_r[i]), float(corrected[i]))
+            done = yield from confirm(U[i], float(rho_r[i]), float(corrected[i]))
         trace.append({"reduced": ev.count["reduced"], "truth": ev.count["truth"],
                       "best_rho_reduced": _number(best_reduced[0]) if best_reduced else None,
                       "best_rho_truth": _number(min((e["rho_truth"] for e in truth.values()
@@ -340,9 +354,9 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
                                                     default=math.inf))})
     if not done and best_run is not None and tuple(best_run[1]) not in truth \
             and ev.count["truth"] < budget:
-        confirm(best_run[1], best_run[2], best_run[0])  # the last run's best case
-    return _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace,
-                            budget, seed, search)
+        yield from confirm(best_run[1], best_run[2], best_run[0])  # the last run's best
+    return (yield from _falsify_verdict(system, requirement, out, ev, found, truth,
+                                        spurious, trace, budget, seed, search))
 
 
 def _search_value(rho: float | None) -> float:
@@ -356,7 +370,8 @@ def _label(point: dict) -> str:
 
 
 def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace, budget,
-                     seed, search) -> dict:
+                     seed, search):
+    """The verdict of a search (a question's last steps: the checks of its answer)."""
     confirmed = [e for e in truth.values() if e["rho_truth"] is not None]
     worst = found or (min(confirmed, key=lambda e: e["rho_truth"]) if confirmed else None)
     verdict = {"mode": "falsify", "system": system.name, "requirement": requirement.name,
@@ -376,7 +391,8 @@ def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace
         verdict["point"] = _point_axes(worst["point"])
         verdict["truth_status"] = row.status + (f": {row.message}" if row.message else "")
         verdict["runs"] = {"truth": row.run_id}
-        verdict["convergence"] = _convergence(ev, row, requirement, worst["rho_truth"])
+        verdict["convergence"] = yield from _convergence(ev, row, requirement,
+                                                         worst["rho_truth"])
     verdict |= {"spurious": [{"point": _point_axes(e["point"]),
                               "rho_reduced": _number(e["rho_reduced"]),
                               "rho_truth": _number(e["rho_truth"])} for e in spurious],
@@ -391,14 +407,14 @@ def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace
     return verdict
 
 
-def _convergence(ev: Evaluations, row, requirement: Requirement, rho: float) -> dict:
-    """The truth-plant run ``row`` (robustness ``rho``) repeated on the check meshes and
+def _convergence(ev: Evaluations, row, requirement: Requirement, rho: float):
+    """(A question's step.)  The truth-plant run ``row`` (robustness ``rho``) repeated on the check meshes and
     with a finer step: "converged" if ρ has the same sign in every check, "not
     converged" if it changes sign in one, "check failed" if a check run failed; with
     every check's ρ."""
-    summary = run_checks([row], ev.out, runner=ev.runner, progress=False)
-    if summary.interrupted:
-        raise Interrupted(summary.interrupted)
+    planned = check_runs([row])
+    yield Batch(ev.out, MESH_SWEEP, planned,
+                description="closed-loop convergence of the truth-plant runs")
     by_id = {r.run_id: r for r in ev.store.rows()}
     checks = checks_of(row, by_id)
     rhos = {label: None if check is None else effective_rho(check, requirement)
@@ -416,8 +432,14 @@ def _convergence(ev: Evaluations, row, requirement: Requirement, rho: float) -> 
 # --- conform --------------------------------------------------------------------------------------
 def conform(system: System, out, *, runner, budget: int, seed: int, log=print) -> dict:
     """The largest disagreement between the two plants over the set (module docstring)."""
+    return answer_all([conform_question(system, out, budget=budget, seed=seed, log=log)],
+                      runner)[0]
+
+
+def conform_question(system: System, out, *, budget: int, seed: int, log=print):
+    """`conform` as a question of the queue (`validation.batch.queue.answer_all`)."""
     out = Path(out)
-    ev = Evaluations(out, runner, f"verify-conform/{system.name}")
+    ev = Evaluations(out, None, f"verify-conform/{system.name}")
     search = CMASearch(system.uncertainty.dim, seed)
     best, trace = None, []
     while ev.count["truth"] < budget:
@@ -428,7 +450,7 @@ def conform(system: System, out, *, runner, budget: int, seed: int, log=print) -
             for role in ("reduced", "truth"):
                 items.append((system.scenario(p, plant=role), "conform",
                               _point_axes(p, plant=role)))
-        rows = ev.run(items)
+        rows = yield from _asked(ev, items)
         distances = []
         for k, p in enumerate(points):
             reduced, truth = rows[2 * k], rows[2 * k + 1]

@@ -1,7 +1,9 @@
 """A 10⁵-run campaign (issue 35): short reduced runs keeping metrics only, killed with
 SIGKILL part-way and resumed; then how fast its index answers.
 
-    python bench/bench_large.py [RUNS] [WORKERS]
+    python bench/campaign_1e5.py [RUNS] [WORKERS]
+
+(not one of `make bench`'s bench_*.py: 10⁵ runs take about an hour on 2 busy cores)
 
 1. ``flexarm campaign`` of RUNS (default 100 000, the most a campaign may expand to)
    0.1 s reduced runs (PBC + sign SMO, noisy encoders, one noise seed each; ``[keep]
