@@ -24,3 +24,22 @@ observer.kind = "smo-paper"
 grid."true_params.Mp" = [0.0, 0.1, 0.5, 1.0]
 grid.seed = [1, 2]
 """
+
+#: 48 × 5 s reduced runs of one law pair (PBC + sign SMO: six payloads, eight seeds), so
+#: that a one-run campaign of the same laws is their fair start (the kernels it loads are
+#: all the campaign needs).
+REDUCED_ONE_LAW = """name = "bench-coordinator"
+[scenario]
+duration = 5.0
+observer.kind = "smo-paper"
+[[sweep]]
+grid."true_params.Mp" = [0.0, 0.1, 0.2, 0.3, 0.5, 0.8]
+grid.seed = [1, 2, 3, 4, 5, 6, 7, 8]
+"""
+
+#: One run of `REDUCED_ONE_LAW`'s laws: its campaign is the command's fixed start.
+ONE_RUN = """name = "bench-one"
+[scenario]
+duration = 5.0
+observer.kind = "smo-paper"
+"""

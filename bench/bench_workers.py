@@ -19,7 +19,14 @@ reduced runs, `flexarm verify` on the truth plant, and each worker's peak memory
   memory (VmHWM) of each worker and of the command's own process, read from /proc while
   it runs.
 
-Targets (issue 24): 2 workers ≥ 1.7× one, for the campaign and for verify.
+- The command's own CPU per stored run (issue 35): ``getrusage`` of ``flexarm campaign``
+  with 2 workers, N runs of one law pair (480 of 5 s, 192 of 50 s: ten times the
+  signals), minus the same command's one-run start, over N − 1.  Beside it the marginal
+  cost, (N runs − N/2 runs) / (N/2), which no fixed start enters.  ``python bench/bench_workers.py
+  coordinator`` measures only this.
+
+Targets (issue 24): 2 workers ≥ 1.7× one, for the campaign and for verify.  Issue 35: the
+command's own CPU ≤ 1 ms per stored run, for 5 s and for 50 s runs.
 """
 from __future__ import annotations
 
@@ -33,18 +40,13 @@ import time
 from pathlib import Path
 
 from _report import report, target
-from _workloads import REDUCED_48, TRUTH_8
+from _workloads import ONE_RUN, REDUCED_48, REDUCED_ONE_LAW, TRUTH_8
 
 ROOT = Path(__file__).resolve().parent.parent
 REPEATS = 5
 LIBRARIES = "import numpy, numba, scipy.linalg, scipy.optimize, scipy.signal"
 LONG_RUNS = REDUCED_48.replace("duration = 5.0", "duration = 50.0")
 assert LONG_RUNS != REDUCED_48
-ONE_RUN = """name = "bench-one"
-[scenario]
-duration = 5.0
-observer.kind = "smo-paper"
-"""
 
 
 def flexarm(*args: str, poll=None) -> float:
@@ -101,6 +103,43 @@ def cpu_row(what: str, spec: Path, one_worker: float, start: tuple[float, float]
                     f"{one_worker / floor:.2f}x"}
 
 
+def _grown(text: str, seeds: int) -> str:
+    """`REDUCED_ONE_LAW` with ``seeds`` seeds (6 × seeds runs)."""
+    return text.replace("grid.seed = [1, 2, 3, 4, 5, 6, 7, 8]",
+                        f"grid.seed = {list(range(1, seeds + 1))}")
+
+
+#: Runs per coordinator measurement (6 payloads × seeds): (half, full) per run length;
+#: enough that their own CPU (≤ 1 ms each) stands above the start's jitter (~0.1-0.2 s).
+COORDINATOR_RUNS = {5.0: (240, 480), 50.0: (96, 192)}
+
+
+def coordinator_rows(spec: Path, repeats: int) -> list[dict]:
+    """The command's own CPU per stored run (module docstring), medians of ``repeats``."""
+    rows = []
+    for duration, (half, full) in COORDINATOR_RUNS.items():
+        files = {}
+        for n, text in ((1, ONE_RUN), (half, _grown(REDUCED_ONE_LAW, half // 6)),
+                        (full, _grown(REDUCED_ONE_LAW, full // 6))):
+            files[n] = spec / f"coordinator-{n}-{duration:g}.toml"
+            files[n].write_text(text.replace("duration = 5.0", f"duration = {duration}"))
+        own = {n: [] for n in files}
+        for _ in range(repeats):
+            for n, path in files.items():
+                with tempfile.TemporaryDirectory() as tmp:
+                    own[n].append(cpu_split("campaign", str(path), "--out", tmp,
+                                            "--workers", "2")[0])
+        med = {n: statistics.median(v) for n, v in own.items()}
+        per_run = 1e3 * (med[full] - med[1]) / (full - 1)
+        rows.append({"what": f"command's own CPU per stored run, {duration:g} s runs [ms]",
+                     "two_workers_s": med[full], "ms_per_run": per_run,
+                     **target(per_run, "<=", 1.0),
+                     "note": f"{full} runs {med[full]:.3f} s, one-run start {med[1]:.3f} s; "
+                             f"{half} runs {med[half]:.3f} s: marginal "
+                             f"{1e3 * (med[full] - med[half]) / (full - half):.2f} ms/run"})
+    return rows
+
+
 def bare_start(repeats: int) -> float:
     """Median wall seconds of a fresh interpreter importing `LIBRARIES`."""
     times = []
@@ -144,6 +183,22 @@ def _children(pid: int) -> list[int]:
         return []
 
 
+COLUMNS = ["what", "one_worker_s", "two_workers_s", "speedup", "speedup_min", "ms_per_run",
+           "target", "met", "note"]
+
+
+def coordinator(repeats: int = REPEATS) -> None:
+    """Only the command's own CPU per stored run."""
+    with tempfile.TemporaryDirectory() as spec_dir:
+        spec = Path(spec_dir)
+        (spec / "c1.toml").write_text(ONE_RUN)
+        flexarm("campaign", str(spec / "c1.toml"), "--out", str(spec / "warm"))  # kernels
+        rows = coordinator_rows(spec, repeats)
+    report("workers_coordinator", rows, title=f"The command's own CPU per stored run, 2 "
+                                              f"workers (load {os.getloadavg()[0]:.1f})",
+           columns=COLUMNS)
+
+
 def main(repeats: int = REPEATS) -> None:
     rows = []
     with tempfile.TemporaryDirectory() as spec_dir:
@@ -185,6 +240,7 @@ def main(repeats: int = REPEATS) -> None:
                      "note": "the same fixed start"})
         rows.append(cpu_row("48 x 50 s", spec / "long.toml", statistics.median(long[1]),
                             (fixed, start_cpu)))
+        rows += coordinator_rows(spec, repeats)
         verify = paired(lambda tmp: ("verify", "campaigns/robust.toml", "--mode", "estimate",
                                      "--system", "pbc+ekf", "--samples", "16",
                                      "--out", str(tmp)), max(1, repeats // 2))
@@ -211,9 +267,11 @@ def main(repeats: int = REPEATS) -> None:
                              f"the command {max(peaks['command'].values()) / 1024:.0f}"})
     report("workers", rows, title=f"Whole command line, 1 vs 2 workers, medians of paired "
                                   f"repeats (load {os.getloadavg()[0]:.1f})",
-           columns=["what", "one_worker_s", "two_workers_s", "speedup", "speedup_min",
-                    "target", "met", "note"])
+           columns=COLUMNS)
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else REPEATS)
+    if sys.argv[1:2] == ["coordinator"]:
+        coordinator(int(sys.argv[2]) if len(sys.argv) > 2 else REPEATS)
+    else:
+        main(int(sys.argv[1]) if len(sys.argv) > 1 else REPEATS)

@@ -1,6 +1,12 @@
 """Helpers shared by the campaign tests (tests/test_campaign.py, tests/reliability/)."""
 import json
 import math
+import os
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
 
 from validation.batch.store import ResultStore, StoreError
 
@@ -80,3 +86,43 @@ def wait_gone(session: int, timeout: float = 10.0) -> bool:
             return True
         time.sleep(0.05)
     return False
+
+
+@contextmanager
+def dask_cluster(folder: Path, workers: int, *, timeout: float = 120.0):
+    """A real Dask cluster on localhost, as a user starts one: ``dask scheduler`` and
+    ``dask worker --nworkers N --nthreads 1`` processes (this interpreter's), their
+    connection file in ``folder``; yields the scheduler's address, ends both after."""
+    dask = [str(Path(sys.executable).with_name("dask"))]
+    info = folder / "scheduler.json"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")])}
+    common = ["--no-dashboard", "--host", "127.0.0.1"]
+    scheduler = subprocess.Popen([*dask, "scheduler", "--port", "0", "--scheduler-file",
+                                  str(info), *common], env=env, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL, start_new_session=True)
+    procs = [scheduler]
+    try:
+        deadline = time.time() + timeout
+        while not info.exists() and time.time() < deadline:
+            time.sleep(0.1)
+        address = json.loads(info.read_text())["address"]
+        procs.append(subprocess.Popen(
+            [*dask, "worker", "--scheduler-file", str(info), "--nworkers", str(workers),
+             "--nthreads", "1", *common], env=env, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL, start_new_session=True))
+        from distributed import Client
+        with Client(address, timeout=f"{timeout}s") as client:  # the workers are up
+            client.wait_for_workers(workers, timeout=timeout)
+        yield address
+    finally:
+        for proc in reversed(procs):
+            try:
+                os.killpg(proc.pid, 15)
+            except ProcessLookupError:
+                pass
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, 9)
+                proc.wait()

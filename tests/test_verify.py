@@ -224,11 +224,14 @@ def test_a_falsification_answer_stands_only_if_every_check_keeps_its_sign(rho, c
     rows = {f"check{i}": SimpleNamespace(status=status, metrics={req.metric: value},
                                          run_id=f"check{i}")
             for i, (status, value) in enumerate(checks)}
-    monkeypatch.setattr(verify, "run_checks",
-                        lambda *a, **k: SimpleNamespace(interrupted=0))
+    monkeypatch.setattr(verify, "check_runs", lambda rows: [])
     monkeypatch.setattr(verify, "checks_of", lambda row, by_id: dict(rows))
     ev = SimpleNamespace(out=None, runner=None, store=SimpleNamespace(rows=lambda: []))
-    result = verify._convergence(ev, SimpleNamespace(), req, rho)
+    step = verify._convergence(ev, SimpleNamespace(), req, rho)  # a question's step:
+    next(step)  # it asks for the check runs
+    with pytest.raises(StopIteration) as answered:
+        step.send([])
+    result = answered.value.value
     assert result["verdict"] == expected
     assert [c["status"] for c in result["checks"].values()] == [c[0] for c in checks]
 
@@ -301,6 +304,39 @@ indifference = 0.1
         low, high = clopper_pearson(8 - saved["failures"], 8, 0.95)
         assert (saved["p_low"], saved["p_high"]) == (low, high)
         assert len(saved["runs"]) == 8 and len(saved["noise_seeds"]) == 8
+
+
+def test_every_completed_draw_counts(tmp_path, capsys):
+    """Issue 37: 6 draws completed and the sequential test decided after 3 (three failures
+    at p0 = 0.95: 3 ln 3 crosses ln 19); the interval must be over the 6 (it was over 3,
+    the other three thrown away), and verdict.json says which n each method used.  Two
+    systems, judged together on one runner."""
+    from validation.cli import main
+    head, _, _ = SYSTEM.partition("[[requirement]]")
+    path = tmp_path / "systems.toml"
+    path.write_text("[scenario]\n" + head.replace("duration = 1.0", "duration = 0.6").replace(
+        "start = 0.6", "start = 0.55").replace("transient = 0.5", "transient = 0.3") + '''
+[[requirement]]
+name = "impossible"
+formula = "always(abs(theta1 - theta1_ref) <= -1)"
+[uncertainty]
+"true_params.Mp" = { uniform = [0.0, 1.0] }
+[[sweep]]
+zip.name = ["pd", "pbc"]
+zip.controller.kind = ["pd", "pbc"]
+''')
+    out = tmp_path / "out"
+    assert main(["verify", str(path), "--mode", "estimate", "--samples", "6", "--workers", "1",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    for name in ("pd", "pbc"):
+        saved = json.loads((out / name / "verdict.json").read_text())
+        assert saved["draws"] == 6 and saved["n"] == 6 and saved["failures"] == 6
+        assert saved["sequential"]["decision"] == "fails" and saved["sequential"]["draws"] == 3
+        assert (saved["p_low"], saved["p_high"]) == clopper_pearson(0, 6, 0.95)
+        assert len(saved["runs"]) == 6
+        assert f"{name}: 6/6 draws" in printed
+    assert printed.count("0/6 hold") == 2 and "after 3 draws" in printed
 
 
 @pytest.mark.slow  # three searches, a Dask cluster: ~1 min

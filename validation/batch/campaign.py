@@ -37,24 +37,24 @@ import numpy as np
 
 from ..run._config import ConfigError, check, check_label
 from .executor import Runner, SerialRunner
-from .interrupts import Interrupted
 from .fingerprint import run_fingerprint
-from .progress import progress as progress_bar
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
-from .store import ResultStore, StoreError, environment, run_id
+from .runfiles import KEEP_ALL, Keep, keep_from_mapping
+from .store import ResultStore, run_id
 from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
            "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
            "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "run_name",
-           "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes"]
+           "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes",
+           "campaign_keep"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
 MAX_RUNS = 100_000
 
 _TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution",
-             "requirement", "uncertainty", "verify", "calibrate"}
+             "requirement", "uncertainty", "verify", "calibrate", "keep"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
 _SPEC_KEYS = {"scale", "uniform", "loguniform", "choices", "also"}
 #: Sections a scenario file may have too (``flexarm verify`` reads a scenario file's
@@ -88,6 +88,7 @@ class Campaign:
     uncertainty: dict = field(default_factory=dict)
     verify: dict = field(default_factory=dict)
     calibrate: dict = field(default_factory=dict)
+    keep: dict = field(default_factory=dict)
 
 
 # --- loading ------------------------------------------------------------------------------
@@ -194,7 +195,7 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
                     description=str(data.get("description", "")), attribution=attribution,
                     uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}),
-                    calibrate=data.get("calibrate", {}))
+                    calibrate=data.get("calibrate", {}), keep=data.get("keep", {}))
 
 
 # --- expansion --------------------------------------------------------------------------------
@@ -391,7 +392,21 @@ def expand(campaign: Campaign) -> list[PlannedRun]:
     return runs
 
 
+def campaign_keep(campaign: Campaign) -> Keep:
+    """What the runs of ``campaign`` keep (its ``[keep]`` table, `runfiles.Keep`; default:
+    every signal); ConfigError naming the key."""
+    if not campaign.keep:
+        return KEEP_ALL
+    from ..run.requirements import signal_names
+    try:
+        base_scenario = scenario_from_mapping(campaign.base)
+    except ConfigError as exc:
+        raise exc.under("scenario") from None
+    return keep_from_mapping(campaign.keep, signal_names(base_scenario))
+
+
 def _expand(campaign: Campaign) -> list[PlannedRun]:
+    campaign_keep(campaign)  # checked with the rest, before anything runs
     try:
         base_scenario = scenario_from_mapping(campaign.base)
     except ConfigError as exc:
@@ -560,50 +575,22 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
                  progress: bool = True, only: list[PlannedRun] | None = None,
                  label: str | None = None, export: bool = True) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
-    stored as soon as it finishes; the progress bar is labelled ``label`` (default: the
-    campaign's name).  On SIGINT/SIGTERM, what finished is kept and
-    ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json are
-    exported at the end (unless ``export`` is false: a search calling this for every
+    stored as soon as it finishes (`validation.batch.queue`); the progress bar is labelled
+    ``label`` (default: the campaign's name).  On SIGINT/SIGTERM, what finished is kept
+    and ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json
+    are exported at the end (unless ``export`` is false: a search calling this for every
     batch exports once, when it is done)."""
+    from .queue import open_job, run_jobs  # the queue builds on this module
     planned = only if only is not None else expand(campaign)
-    store = ResultStore(out)
-    store.prepare()
-    store.set_campaign(campaign.name, {"description": campaign.description,
-                                       "report": campaign.report})
-    store.remove_stale_temporaries()
-    todo, summary = classify(planned, store, retry_failed=retry_failed,
-                             reuse_stale=reuse_stale)
-    if todo:
-        own = runner is None
-        runner = runner or SerialRunner()
-        env = environment()
-        by_id = {r.run_id: r for r in todo}
-        bar = progress_bar(len(todo), label or campaign.name, enabled=progress)
-        try:
-            tasks = ((r.run_id, r.scenario) for r in todo)  # checked: not parsed again
-            for rid, result, metrics in runner.results(tasks):
-                run = by_id[rid]
-                try:
-                    store.add(rid, result, metrics, campaign=campaign.name, sweep=run.sweep,
-                              axes={k: _jsonable(v) for k, v in run.axes.items()}, env=env)
-                except StoreError as exc:  # this run's place only (a folder in the way)
-                    summary.unstored.append(str(exc))
-                    bar.update(1)
-                    continue
-                setattr(summary, result.status, getattr(summary, result.status) + 1)
-                bar.set_postfix(ok=summary.ok, diverged=summary.diverged, failed=summary.failed)
-                bar.update(1)
-        except Interrupted as exc:
-            summary.interrupted = exc.signum
-        finally:
-            bar.close()
-            if own:
-                runner.close()
+    job = open_job(campaign, out, planned, retry_failed=retry_failed, reuse_stale=reuse_stale)
+    own = runner is None and bool(job.todo)
+    runner = runner or SerialRunner()
+    try:
+        run_jobs([job], runner, progress=progress, label=label or campaign.name)
+    finally:
+        if own:
+            runner.close()
     if export:
-        store.export()
-    store.close()
-    return summary
-
-
-def _jsonable(value):
-    return value.item() if isinstance(value, np.generic) else value
+        job.store.export()
+    job.store.close()
+    return job.summary

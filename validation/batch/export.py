@@ -56,14 +56,17 @@ def _export(store, allow_fewer: bool) -> tuple[Path, Path]:
     for r in table:
         writer.writerow({k: _format(v) for k, v in r.items()})
     write_atomic(csv_path, lambda fh: fh.write(buf.getvalue()))
-    manifest = {"campaigns": store.campaigns(), "runs": {
-        r.run_id: {"name": r.name, "campaign": r.campaign, "sweep": r.sweep,
-                   "axes": r.axes, "status": r.status, "message": r.message,
-                   "end_time": r.end_time, "fingerprint": r.fingerprint,
-                   "timings": r.timings, "environment": r.environment, "file": r.file,
-                   "sha256": r.sha256, "size": r.size, "finished": r.finished}
-        for r in rows}}
-    write_atomic(json_path, lambda fh: json.dump(manifest, fh, indent=1))
+    # One run a line, each encoded by json's C encoder (an indented dump goes through
+    # its pure-Python one: ~30x slower, 3 s for 10^4 runs).
+    runs = ",\n".join(f"  {json.dumps(r.run_id)}: " + json.dumps(
+        {"name": r.name, "campaign": r.campaign, "sweep": r.sweep, "axes": r.axes,
+         "status": r.status, "message": r.message, "end_time": r.end_time,
+         "fingerprint": r.fingerprint, "timings": r.timings, "environment": r.environment,
+         "file": r.file, "sha256": r.sha256, "size": r.size, "finished": r.finished})
+        for r in rows)
+    text = (f'{{"campaigns": {json.dumps(store.campaigns())},\n"runs": {{\n'
+            f'{runs}\n}}}}\n')
+    write_atomic(json_path, lambda fh: fh.write(text))
     return csv_path, json_path
 
 

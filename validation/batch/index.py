@@ -13,7 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 __all__ = ["StoreError", "INDEX_NAME", "SCHEMA", "SCHEMA_VERSION", "COLUMNS", "JSON_COLUMNS", "BUSY_TIMEOUT", "run_id", "is_run_id",
-           "set_wal", "transaction", "insert_row", "json_table", "finite_or_none",
+           "set_wal", "transaction", "insert_row", "insert_rows", "row_values", "json_table", "finite_or_none",
            "metric_values", "RUN_ID", "set_aside"]
 
 class StoreError(ValueError):
@@ -98,12 +98,25 @@ def transaction(db: sqlite3.Connection, *, commit: bool = True):
     db.execute("COMMIT" if commit else "ROLLBACK")
 
 
+def row_values(row: dict) -> tuple:
+    """A run's row as the index stores it: its `COLUMNS` in order, JSON columns encoded
+    (done where the run was made: the process inserting rows only inserts them)."""
+    return tuple(json.dumps(row[c], allow_nan=False) if c in JSON_COLUMNS else row[c]
+                 for c in COLUMNS)
+
+
+_INSERT = (f"INSERT OR REPLACE INTO runs ({', '.join(COLUMNS)}) VALUES "
+           f"({', '.join('?' * len(COLUMNS))})")
+
+
+def insert_rows(db: sqlite3.Connection, rows: list[tuple]) -> None:
+    """Write runs' rows (`row_values`), replacing older rows of the same ids."""
+    db.executemany(_INSERT, rows)
+
+
 def insert_row(db: sqlite3.Connection, row: dict) -> None:
     """Write one run's row (replacing an older row of the same id)."""
-    values = [json.dumps(row[c], allow_nan=False) if c in JSON_COLUMNS else row[c]
-              for c in COLUMNS]
-    db.execute(f"INSERT OR REPLACE INTO runs ({', '.join(COLUMNS)}) VALUES "
-               f"({', '.join('?' * len(COLUMNS))})", values)
+    insert_rows(db, [row_values(row)])
 
 
 def json_table(text):

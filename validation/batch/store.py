@@ -3,15 +3,17 @@
     OUT/index.sqlite        one row per run: id, name, campaign, sweep and swept values,
                             status, message, timings, versions, code fingerprint, the
                             resolved scenario, every metric, and the run file's SHA-256 and
-                            size (WAL journal; one transaction per stored run)
+                            size (WAL journal; rows committed in batches:
+                            `validation.batch.committing`)
     OUT/runs/<run_id>.npz   signals (float32) and the same metadata (`RunResult.to_bytes`):
                             a file alone is enough to rebuild its row (`repair`)
     OUT/metrics.csv         exports, written from the index (`export`)
     OUT/manifest.json       (read back only to refuse an export that would lose runs)
 
 Writers: any number of processes may store runs into one folder at once — SQLite
-serialises their transactions, so every row arrives (the run file is written first,
-under a temporary name, then renamed; its row is committed after).
+serialises their transactions, so every row arrives (the run file is written first, by
+the worker that made the run, under a temporary name, then renamed; its row is committed
+after, by the command: `validation.batch.storing`, `validation.batch.committing`).
 
 The store trusts nothing it reads.  A row's run id must be 12 hex digits and its file
 ``runs/<id>.npz`` before either touches a path (else the index is refused, and `repair`
@@ -47,8 +49,9 @@ from pathlib import Path
 from ..run.results import STATUSES, LinkedFolder, RunResult, own_folder
 from . import export, repair
 from .index import (BUSY_TIMEOUT, COLUMNS, INDEX_NAME, JSON_COLUMNS, SCHEMA, SCHEMA_VERSION,
-                    StoreError, insert_row, is_run_id, json_table, metric_values, run_id,
-                    set_wal, transaction)
+                    StoreError, insert_row, insert_rows, is_run_id, json_table, metric_values,
+                    run_id, set_wal, transaction)
+from .resimulate import full_result
 from .runfiles import write_run
 
 __all__ = ["ResultStore", "StoredRun", "StoreError", "run_id", "is_run_id", "environment",
@@ -79,7 +82,8 @@ def environment() -> dict:
 
 @dataclass
 class StoredRun:
-    """One row of the index.  ``load()`` reads and verifies the run's file."""
+    """One row of the index.  ``load()`` reads and verifies the run's file (every signal,
+    re-simulated where the file keeps less)."""
 
     run_id: str
     name: str
@@ -101,7 +105,9 @@ class StoredRun:
     store: "ResultStore | None" = field(default=None, repr=False, compare=False)
 
     def load(self) -> RunResult:
-        return self.store.load(self.run_id)
+        """Every signal of the run at every sample: from its file, or re-simulated where
+        the file keeps less (`validation.batch.resimulate.full_result`)."""
+        return full_result(self)
 
     @property
     def plant(self) -> str:
@@ -309,6 +315,13 @@ class ResultStore:
         return self.out / row["file"]
 
     @_sqlite_errors
+    def insert(self, rows: list[tuple]) -> None:
+        """Commit the rows (`index.row_values`) of runs whose files are in place, in one
+        transaction (`validation.batch.committing`)."""
+        with transaction(self._connect(create=True)) as db:
+            insert_rows(db, rows)
+
+    @_sqlite_errors
     def set_campaign(self, name: str, info: dict) -> None:
         """Record a campaign that stores runs here (description, report settings, …);
         keys already recorded for it and not in ``info`` are kept."""
@@ -387,13 +400,17 @@ class ResultStore:
         return out
 
     def load(self, rid: str) -> RunResult:
-        """The run's result, verified against its row (StoreError naming the run if the
-        file is missing or damaged)."""
+        """The run's result as its file keeps it (every signal: `StoredRun.load`), verified against its row (StoreError
+        naming the run if the file is missing or damaged)."""
+        return self.read(rid)[0]
+
+    def read(self, rid: str) -> tuple[RunResult, dict]:
+        """(result, the file's metadata) of run ``rid`` (`load`); the metadata's ``kept``
+        says what the file keeps of the run's signals when it is not all of them."""
         row = self.row(rid)
         if row is None:
             raise StoreError(f"{self.out}: no run {rid}")
-        data = self._verified_bytes(row)
-        return RunResult.from_bytes(data)[0]
+        return RunResult.from_bytes(self._verified_bytes(row))
 
     def _verified_bytes(self, row: StoredRun) -> bytes:
         path = self.out / row.file

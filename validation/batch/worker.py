@@ -1,5 +1,6 @@
 """What runs inside a worker: one scenario in, its result and metrics out, never an
-exception (`execute_run`); the loop of a worker process (`serve`); and what a worker
+exception (`execute_run`); how a worker process starts (`worker_init`; its loop, which
+also stores the run, is `validation.batch.storing.serve`); and what a worker
 needs before it runs anything: the simulation code (models, plants, laws, the closed
 loop, metrics) loaded and its kernels compiled — not the command line and not
 matplotlib.  `warm_up` compiles or loads the kernels the runs need in the parent before
@@ -19,8 +20,8 @@ from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, befor
 from ..run.results import RunResult
 from .interrupts import Interrupted
 
-__all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "serve",
-           "warm_up", "kernel_groups"]
+__all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
+           "kernel_groups", "describe"]
 
 #: The memory limit this process runs under [MiB] (set by `worker_init`; None: none).
 _memory_limit: int | None = None
@@ -119,23 +120,6 @@ def worker_init(parent: int, memory_mib: int | None) -> None:
     if memory_mib is not None:
         limit_memory(memory_mib)
         _memory_limit = memory_mib
-
-
-def serve(conn, parent: int, memory_mib: int | None, warm: bool) -> None:
-    """A worker process's life: receive a scenario on ``conn``, send back
-    ``execute_run``'s (result, metrics); until it receives None or the parent's end
-    closes.  ``warm``: the kernels are loaded already (forked from a warmed parent)."""
-    worker_init(parent, memory_mib)
-    if not warm:
-        warm_up()
-    while True:
-        try:
-            task = conn.recv()
-        except (EOFError, OSError):
-            return
-        if task is None:
-            return
-        conn.send(execute_run(task))
 
 
 def kernel_groups(scenarios) -> list[tuple[str, object]]:

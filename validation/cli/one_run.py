@@ -10,7 +10,8 @@ import sys
 from pathlib import Path
 
 from ..batch.executor import available_cores, check_runner, make_runner
-from ..batch.store import ResultStore, run_id
+from ..batch.store import ResultStore, StoreError, run_id
+from ..batch.storing import landed, one_task
 from ..run._config import ConfigError, check_label
 from ..run.plants import is_truth, plant_spec
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
@@ -236,8 +237,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     with make_runner("local", workers, run_timeout=args.run_timeout,
                      memory_limit=args.memory_limit, scenarios=[scenario],
                      progress=sys.stderr) as runner:  # worker processes
-        (_, result, metrics), = runner.results([(rid, scenario)])
-        path = store.add(rid, result, metrics)
+        with one_task(rid, scenario, store.out) as task:  # its worker writes the file
+            (_, stored), = runner.results([(rid, task)])
+        stored = landed(store.out, stored)
+        if stored.values is None:
+            raise StoreError(stored.error)
+        store.insert([stored.values])
+        result = store.row(rid)
+        path = store.out / result.file
+        metrics = result.metrics
         if args.mesh_check:
             checked = mesh_checks(runner, store.out, {rid}, progress=True)
     store.export()

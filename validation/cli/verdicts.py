@@ -145,7 +145,8 @@ def cmd_attribute(args: argparse.Namespace) -> int:
 # --- flexarm verify --------------------------------------------------------------------------
 def cmd_verify(args: argparse.Namespace) -> int:
     from ..verdicts.uncertainty import load_systems
-    from ..verdicts.verify import conform, estimate, falsify
+    from ..batch.queue import answer_all
+    from ..verdicts.verify import conform_question, estimate_question, falsify_question
     systems = load_systems(args.file)
     if args.system is not None:
         names = [s.name for s in systems]
@@ -165,38 +166,48 @@ def cmd_verify(args: argparse.Namespace) -> int:
                             for role in ROLES], *folders.values())
     failed = False
     # A signal between two batches of a search (not only during one) stops it: exit 143.
-    with runner, signals_interrupt():
-        for system, requirement in zip(systems, requirements):
-            where = folders[system.name]
-            print(f"{system.name}: {args.mode} over {', '.join(system.uncertainty.describe())}")
-            if args.mode == "estimate":
-                v = estimate(system, requirement, where, runner=runner, samples=args.samples,
-                             seed=args.seed)
-                for r in v["requirements"].values():
-                    print(f"  {r['requirement']}: {r['n'] - r['failures']}/{r['n']} hold, "
-                          f"P(holds) in [{r['p_low']:.3f}, {r['p_high']:.3f}] at "
-                          f"{r['level']:g} (Clopper-Pearson); sequential test: "
-                          f"{r['sequential']['decision']}")
-            elif args.mode == "falsify":
-                v = falsify(system, requirement, where, runner=runner, budget=args.budget,
-                            seed=args.seed)
-                what = "counterexample" if v["found"] else "no counterexample; worst case"
-                truth = (requirement.rho_text(v["rho_truth"]) if v["rho_truth"] is not None
-                         else f"−inf ({v.get('truth_status', 'no run')})")
-                reduced = requirement.rho_text(v["rho_reduced"] if v["rho_reduced"] is not None
-                                               else -math.inf)
-                print(f"  {requirement.name}: {what}: ρ truth {truth}, reduced {reduced} "
-                      f"({v['counterexample'] or v['worst_case']}); simulations "
-                      f"{v['simulations']}")
-                if "convergence" in v:
-                    print(f"  truth plant under refinement: "
-                          f"{_checks_line(v['convergence'], requirement)}")
-            else:
-                v = conform(system, where, runner=runner, budget=args.budget, seed=args.seed)
-                print(f"  largest |theta_truth - theta_reduced| = {v['distance']} rad "
-                      f"({v['scenario']}); simulations {v['simulations']}")
-            failed |= bool(v["failed_runs"])
-            print(f"  verdict: {where / 'verdict.json'}")
+    with runner, signals_interrupt():  # every system's runs on the one runner at once
+        for system in systems:
+            print(f"{system.name}: {args.mode} over "
+                  f"{', '.join(system.uncertainty.describe())}")
+        if args.mode == "estimate":
+            questions = [estimate_question(s, r, folders[s.name], workers=runner.workers,
+                                           samples=args.samples, seed=args.seed)
+                         for s, r in zip(systems, requirements)]
+        elif args.mode == "falsify":
+            questions = [falsify_question(s, r, folders[s.name], budget=args.budget,
+                                          seed=args.seed) for s, r in zip(systems, requirements)]
+        else:
+            questions = [conform_question(s, folders[s.name], budget=args.budget,
+                                          seed=args.seed) for s in systems]
+        verdicts = answer_all(questions, runner)
+    for system, requirement, v in zip(systems, requirements, verdicts):
+        if args.mode == "estimate":
+            print(f"{system.name}: {v['draws']}/{v['samples']} draws")
+            for r in v["requirements"].values():
+                print(f"  {r['requirement']}: {r['n'] - r['failures']}/{r['n']} hold, "
+                      f"P(holds) in [{r['p_low']:.3f}, {r['p_high']:.3f}] at "
+                      f"{r['level']:g} (Clopper-Pearson, n = {r['n']}); sequential "
+                      f"test: {r['sequential']['decision']} after "
+                      f"{r['sequential']['draws']} draws")
+        elif args.mode == "falsify":
+            print(f"{system.name}:")
+            what = "counterexample" if v["found"] else "no counterexample; worst case"
+            truth = (requirement.rho_text(v["rho_truth"]) if v["rho_truth"] is not None
+                     else f"−inf ({v.get('truth_status', 'no run')})")
+            reduced = requirement.rho_text(v["rho_reduced"] if v["rho_reduced"] is not None
+                                           else -math.inf)
+            print(f"  {requirement.name}: {what}: ρ truth {truth}, reduced {reduced} "
+                  f"({v['counterexample'] or v['worst_case']}); simulations "
+                  f"{v['simulations']}")
+            if "convergence" in v:
+                print(f"  truth plant under refinement: {_checks_line(v['convergence'], requirement)}")
+        else:
+            print(f"{system.name}:")
+            print(f"  largest |theta_truth - theta_reduced| = {v['distance']} rad "
+                  f"({v['scenario']}); simulations {v['simulations']}")
+        failed |= bool(v["failed_runs"])
+        print(f"  verdict: {folders[system.name] / 'verdict.json'}")
     return EXIT_FAILED if failed else 0
 
 

@@ -463,6 +463,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
 
 
 def _loaded(group):
+    """(row, every signal) of each run of a figure group (re-simulated where a run's file
+    keeps less: `StoredRun.load`)."""
     return [(r, r.load()) for r in group]
 
 

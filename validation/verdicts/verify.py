@@ -5,8 +5,10 @@ Three questions about one system (`validation.verdicts.uncertainty.System`) over
 uncertainty set, each answered in ``OUT/verdict.json``:
 
 - **estimate** — N seeded draws on the system's own plant; P(holds) with an exact
-  two-sided Clopper-Pearson interval at the stated level, and Wald's sequential test,
-  which stops drawing as soon as it decides (`validation.verdicts.statistics`).  A run
+  two-sided Clopper-Pearson interval at the stated level over every completed draw
+  (``n``), and Wald's sequential test, with the draws at which it decided
+  (``sequential.draws``; with ``[verify] sequential`` no further chunk of draws is
+  run once it has: `validation.verdicts.statistics`).  A run
   that diverged fails every requirement; a run that failed (solver, law) is not data.
 - **falsify** — minimise the requirement's robustness ρ over the set with CMA-ES
   (`validation.verdicts.search`) on the reduced plant (the designer's own model), and
@@ -44,21 +46,22 @@ from pathlib import Path
 
 import numpy as np
 
-from ..batch.campaign import PlannedRun, run_planned
-from ..batch.interrupts import Interrupted
+from ..batch.campaign import PlannedRun
+from ..batch.queue import Batch, answer_all
 from ..batch.store import ResultStore, run_id
 from ..run._config import ConfigError
 from ..run.requirements import Requirement
 from ..run.results import write_atomic
 from ..run.scenario import scenario_to_mapping
 from ..run.tomlfiles import toml_text
-from .mesh import checks_of, run_checks
+from .mesh import MESH_SWEEP, check_runs, checks_of
 from .search import CMASearch
 from .statistics import clopper_pearson, sprt
 from .uncertainty import System
 
-__all__ = ["estimate", "falsify", "conform", "ROBUST_SWEEPS", "REDUCED_PER_TRUTH",
-           "effective_rho", "write_verdict", "Evaluations"]
+__all__ = ["estimate", "estimate_question", "falsify", "falsify_question", "conform",
+           "conform_question", "ROBUST_SWEEPS",
+           "REDUCED_PER_TRUTH", "effective_rho", "write_verdict", "Evaluations"]
 
 #: The sweep names the evaluations are stored under (reports keep them apart).
 ROBUST_SWEEPS = ("estimate", "falsify", "conform")
@@ -86,7 +89,9 @@ def effective_rho(row, requirement: Requirement) -> float | None:
 @dataclass
 class Evaluations:
     """Scenarios run on the campaign runner into ``out`` and read back from the store;
-    simulations counted per plant role (distinct scenarios asked for)."""
+    simulations counted per plant role (distinct scenarios asked for).  A search asks
+    with `run`; a question answered beside others (`validation.batch.queue`) yields
+    `batch` and hands the rows it is sent to `record`."""
 
     out: Path
     runner: object
@@ -98,26 +103,27 @@ class Evaluations:
     def __post_init__(self):
         self.store = ResultStore(self.out)
 
-    def run(self, items: list[tuple]) -> list:
-        """Rows of ``items`` = [(scenario, sweep, axes)], in order (run if not stored)."""
-        planned = []
-        for scenario, sweep, axes in items:
-            data = scenario_to_mapping(scenario)
-            planned.append(PlannedRun(run_id(data), scenario, sweep, axes))
-        unique = list({p.run_id: p for p in planned}.values())
-        summary = run_planned(unique, self.out, name=self.name,
-                              description="verdicts over uncertainty (flexarm verify)",
-                              runner=self.runner, progress=False, export=False)
-        if summary.interrupted:
-            raise Interrupted(summary.interrupted)
-        rows = {r.run_id: r for r in self.store.rows_of(p.run_id for p in unique)}
-        for p in unique:
+    def batch(self, items: list[tuple]) -> Batch:
+        """The batch of ``items`` = [(scenario, sweep, axes)]."""
+        planned = [PlannedRun(run_id(scenario_to_mapping(scenario)), scenario, sweep, axes)
+                   for scenario, sweep, axes in items]
+        return Batch(self.out, self.name, planned,
+                     description="verdicts over uncertainty (flexarm verify)")
+
+    def record(self, batch: Batch, rows: list) -> list:
+        """``rows`` (a batch's, in order), counted: simulations per plant, failed runs."""
+        for p, row in zip(batch.runs, rows):
             if p.run_id not in self.seen:
                 self.seen.add(p.run_id)
                 self.count[p.scenario.plant.role] += 1
-                if rows[p.run_id].status == "failed":
+                if row.status == "failed":
                     self.failed.append(p.run_id)
-        return [rows[p.run_id] for p in planned]
+        return rows
+
+    def run(self, items: list[tuple]) -> list:
+        """Rows of ``items`` = [(scenario, sweep, axes)], in order (run if not stored)."""
+        batch = self.batch(items)
+        return self.record(batch, answer_all([_ask(batch)], self.runner)[0])
 
     def finish(self) -> None:
         """Export metrics.csv and manifest.json once (not after every batch)."""
@@ -127,6 +133,11 @@ class Evaluations:
     @property
     def simulations(self) -> dict:
         return dict(self.count)
+
+
+def _ask(batch: Batch):
+    """A question of one batch: its answer is the batch's rows."""
+    return (yield batch)
 
 
 def _point_axes(point: dict, **extra) -> dict:
@@ -159,33 +170,43 @@ def _write_scenario(out: Path, name: str, mapping: dict, comment: str) -> str:
 def estimate(system: System, requirement: Requirement, out, *, runner, samples: int,
              seed: int, log=print) -> dict:
     """P(requirement holds) over ``samples`` seeded draws (module docstring)."""
+    return answer_all([estimate_question(system, requirement, out, workers=runner.workers,
+                                         samples=samples, seed=seed, log=log)], runner)[0]
+
+
+def estimate_question(system: System, requirement: Requirement, out, *, workers: int,
+                      samples: int, seed: int, log=print):
+    """`estimate` as a question of the queue (`validation.batch.queue.answer_all`: the
+    systems of ``flexarm verify`` are answered together on one runner of ``workers``).
+    Every completed draw counts: the interval is over all of them (``n``); the
+    sequential test reports the draws at which it decided (``sequential.draws``), and,
+    with ``[verify] sequential``, no further chunk of draws is asked for after it has."""
     points, noise = system.uncertainty.draws(samples, seed)
     scenarios = [system.scenario(p, seed=s) for p, s in zip(points, noise)]  # all checked
-    ev = Evaluations(Path(out), runner, f"verify-estimate/{system.name}")
+    ev = Evaluations(Path(out), None, f"verify-estimate/{system.name}")
     settings = system.settings
     # Draws are run in order, in chunks when the sequential test may stop them early;
     # its decision uses the draws in order, so it does not depend on the chunk size.
-    chunk = max(8, 4 * getattr(runner, "workers", 1)) if settings.sequential else samples
+    chunk = max(8, 4 * workers) if settings.sequential else samples
     rows: list = []
-    decision, used = "inconclusive", 0
     while len(rows) < samples:
-        batch = range(len(rows), min(samples, len(rows) + chunk))
-        rows += ev.run([(scenarios[i], "estimate", _point_axes(points[i], draw=i,
-                                                                seed=noise[i])) for i in batch])
+        draws = range(len(rows), min(samples, len(rows) + chunk))
+        batch = ev.batch([(scenarios[i], "estimate", _point_axes(points[i], draw=i,
+                                                                  seed=noise[i])) for i in draws])
+        rows += ev.record(batch, (yield batch))
         outcomes = _outcomes(rows, requirement)
         decision, used = sprt(outcomes, settings.test)
         log(f"  {system.name}: {len(rows)}/{samples} draws, "
             f"{sum(not o for o in outcomes)} failures of {requirement.name}")
         if settings.sequential and decision != "inconclusive":
             break
-    n_used = used if settings.sequential and decision != "inconclusive" else len(rows)
     verdict = {"mode": "estimate", "system": system.name, "plant": system.nominal["plant"]["kind"],
-               **_estimate_numbers(rows[:n_used], requirement, system),
-               "samples": samples, "seed": seed, "noise_seeds": noise[:n_used],
-               "distribution": system.uncertainty.describe(),
-               "requirements": {r.name: _estimate_numbers(rows[:n_used], r, system)
+               **_estimate_numbers(rows, requirement, system),
+               "samples": samples, "draws": len(rows), "seed": seed,
+               "noise_seeds": noise[:len(rows)], "distribution": system.uncertainty.describe(),
+               "requirements": {r.name: _estimate_numbers(rows, r, system)
                                 for r in system.requirements},
-               "runs": [r.run_id for r in rows[:n_used]],
+               "runs": [r.run_id for r in rows],
                "simulations": ev.simulations, "failed_runs": ev.failed}
     ev.finish()
     write_verdict(out, verdict)
@@ -248,9 +269,23 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
             seed: int, log=print) -> dict:
     """A truth-confirmed counterexample — or with ``[verify] worst_case``, the lowest ρ
     the truth plant confirms within the budget — over the set (module docstring)."""
+    return answer_all([falsify_question(system, requirement, out, budget=budget, seed=seed,
+                                        log=log)], runner)[0]
+
+
+def _asked(ev: Evaluations, items: list[tuple]):
+    """Ask for ``items``' rows (a question's step: ``rows = yield from _asked(...)``)."""
+    batch = ev.batch(items)
+    return ev.record(batch, (yield batch))
+
+
+def falsify_question(system: System, requirement: Requirement, out, *, budget: int,
+                     seed: int, log=print):
+    """`falsify` as a question of the queue (`validation.batch.queue.answer_all`: the
+    systems of ``flexarm verify`` searched together on one runner)."""
     out = Path(out)
     u_dim = system.uncertainty.dim
-    ev = Evaluations(out, runner, f"verify-falsify/{system.name}")
+    ev = Evaluations(out, None, f"verify-falsify/{system.name}")
     search = CMASearch(u_dim, seed)
     correction = _Correction()
     truth: dict[tuple, dict] = {}  # point key -> {u, rho_reduced, rho_truth, row}
@@ -268,8 +303,8 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
         True when the search is over."""
         nonlocal found, threshold
         point = system.uncertainty.at(u)
-        (row,) = ev.run([(system.scenario(point, plant="truth"), "falsify",
-                          _point_axes(point, role="confirm"))])
+        (row,) = yield from _asked(ev, [(system.scenario(point, plant="truth"), "falsify",
+                                         _point_axes(point, role="confirm"))])
         rho_truth = effective_rho(row, requirement)
         entry = {"u": u, "point": point, "rho_reduced": rho_reduced, "rho_truth": rho_truth,
                  "row": row}
@@ -295,14 +330,14 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
         if search.restarts != restarts and best_run is not None:
             # The previous CMA-ES run stopped: its best point is the worst case it found;
             # confirm it on the truth plant.
-            if tuple(best_run[1]) not in truth and confirm(best_run[1], best_run[2],
-                                                           best_run[0]):
+            if tuple(best_run[1]) not in truth and (yield from confirm(
+                    best_run[1], best_run[2], best_run[0])):
                 break
             best_run = None
         U = U[:reduced_budget - ev.count["reduced"]]  # the last generation may be cut
         points = [system.uncertainty.at(u) for u in U]
-        rows = ev.run([(system.scenario(p, plant="reduced"), "falsify",
-                        _point_axes(p, role="search")) for p in points])
+        rows = yield from _asked(ev, [(system.scenario(p, plant="reduced"), "falsify",
+                                       _point_axes(p, role="search")) for p in points])
         rho_r = np.array([_search_value(effective_rho(r, requirement)) for r in rows])
         corrected = rho_r + correction(U)
         if len(U) == search.popsize:
@@ -316,7 +351,7 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
                       if corrected[i] < threshold and tuple(U[i]) not in truth]
         if candidates and ev.count["truth"] < budget:
             i = candidates[0]
-            done = confirm(U[i], float(rho_r[i]), float(corrected[i]))
+            done = yield from confirm(U[i], float(rho_r[i]), float(corrected[i]))
         trace.append({"reduced": ev.count["reduced"], "truth": ev.count["truth"],
                       "best_rho_reduced": _number(best_reduced[0]) if best_reduced else None,
                       "best_rho_truth": _number(min((e["rho_truth"] for e in truth.values()
@@ -324,9 +359,9 @@ def falsify(system: System, requirement: Requirement, out, *, runner, budget: in
                                                     default=math.inf))})
     if not done and best_run is not None and tuple(best_run[1]) not in truth \
             and ev.count["truth"] < budget:
-        confirm(best_run[1], best_run[2], best_run[0])  # the last run's best case
-    return _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace,
-                            budget, seed, search)
+        yield from confirm(best_run[1], best_run[2], best_run[0])  # the last run's best
+    return (yield from _falsify_verdict(system, requirement, out, ev, found, truth,
+                                        spurious, trace, budget, seed, search))
 
 
 def _search_value(rho: float | None) -> float:
@@ -340,7 +375,8 @@ def _label(point: dict) -> str:
 
 
 def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace, budget,
-                     seed, search) -> dict:
+                     seed, search):
+    """The verdict of a search (a question's last steps: the checks of its answer)."""
     confirmed = [e for e in truth.values() if e["rho_truth"] is not None]
     worst = found or (min(confirmed, key=lambda e: e["rho_truth"]) if confirmed else None)
     verdict = {"mode": "falsify", "system": system.name, "requirement": requirement.name,
@@ -360,7 +396,8 @@ def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace
         verdict["point"] = _point_axes(worst["point"])
         verdict["truth_status"] = row.status + (f": {row.message}" if row.message else "")
         verdict["runs"] = {"truth": row.run_id}
-        verdict["convergence"] = _convergence(ev, row, requirement, worst["rho_truth"])
+        verdict["convergence"] = yield from _convergence(ev, row, requirement,
+                                                         worst["rho_truth"])
     verdict |= {"spurious": [{"point": _point_axes(e["point"]),
                               "rho_reduced": _number(e["rho_reduced"]),
                               "rho_truth": _number(e["rho_truth"])} for e in spurious],
@@ -375,14 +412,14 @@ def _falsify_verdict(system, requirement, out, ev, found, truth, spurious, trace
     return verdict
 
 
-def _convergence(ev: Evaluations, row, requirement: Requirement, rho: float) -> dict:
-    """The truth-plant run ``row`` (robustness ``rho``) repeated on the check meshes and
+def _convergence(ev: Evaluations, row, requirement: Requirement, rho: float):
+    """(A question's step.)  The truth-plant run ``row`` (robustness ``rho``) repeated on the check meshes and
     with a finer step: "converged" if ρ has the same sign in every check, "not
     converged" if it changes sign in one, "check failed" if a check run failed; with
     every check's ρ."""
-    summary = run_checks([row], ev.out, runner=ev.runner, progress=False)
-    if summary.interrupted:
-        raise Interrupted(summary.interrupted)
+    planned = check_runs([row])
+    yield Batch(ev.out, MESH_SWEEP, planned,
+                description="closed-loop convergence of the truth-plant runs")
     by_id = {r.run_id: r for r in ev.store.rows()}
     checks = checks_of(row, by_id)
     rhos = {label: None if check is None else effective_rho(check, requirement)
@@ -400,8 +437,14 @@ def _convergence(ev: Evaluations, row, requirement: Requirement, rho: float) -> 
 # --- conform --------------------------------------------------------------------------------------
 def conform(system: System, out, *, runner, budget: int, seed: int, log=print) -> dict:
     """The largest disagreement between the two plants over the set (module docstring)."""
+    return answer_all([conform_question(system, out, budget=budget, seed=seed, log=log)],
+                      runner)[0]
+
+
+def conform_question(system: System, out, *, budget: int, seed: int, log=print):
+    """`conform` as a question of the queue (`validation.batch.queue.answer_all`)."""
     out = Path(out)
-    ev = Evaluations(out, runner, f"verify-conform/{system.name}")
+    ev = Evaluations(out, None, f"verify-conform/{system.name}")
     search = CMASearch(system.uncertainty.dim, seed)
     best, trace = None, []
     while ev.count["truth"] < budget:
@@ -412,7 +455,7 @@ def conform(system: System, out, *, runner, budget: int, seed: int, log=print) -
             for role in ("reduced", "truth"):
                 items.append((system.scenario(p, plant=role), "conform",
                               _point_axes(p, plant=role)))
-        rows = ev.run(items)
+        rows = yield from _asked(ev, items)
         distances = []
         for k, p in enumerate(points):
             reduced, truth = rows[2 * k], rows[2 * k + 1]

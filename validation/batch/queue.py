@@ -1,0 +1,180 @@
+"""One queue for every question: the runs of any number of campaigns and verdicts, each
+stored into its own results folder, executed together on one runner.
+
+A *job* is one campaign's runs into one folder (`open_job`: the folder prepared, what it
+holds already classified, `campaign.classify`).  `run_jobs` gives the runs of every job
+to the runner at once — a worker never idles while any job has a run left — and stores
+each as it finishes: its worker has put the file in place (`validation.batch.storing`),
+the row is committed with the others that arrived meanwhile (`committing.Committer`).
+
+A *question* is a generator that yields `Batch` es — the runs it needs next, into its
+folder — and is sent back their stored rows, in order; what it returns is its answer.
+`answer_all` asks every question's next batch, runs all of them as one set of jobs,
+hands each question its rows, and repeats until every question has answered: ``flexarm
+verify`` judges all its systems at once this way, so that N workers stay busy until the
+last wave instead of the end of each system's.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .campaign import Campaign, CampaignSummary, PlannedRun, campaign_keep, classify
+from .committing import Committer
+from .interrupts import Interrupted
+from .progress import progress as progress_counter
+from .store import ResultStore, environment
+from .storing import Destination, StoreTask, landed, leave_token
+
+__all__ = ["Job", "open_job", "run_jobs", "Batch", "answer_all"]
+
+
+@dataclass
+class Job:
+    """One campaign's runs into one results folder: the store, where its workers store
+    (``destination``), the runs to execute and the summary of what happened."""
+
+    store: ResultStore
+    destination: Destination
+    todo: list[PlannedRun]
+    summary: CampaignSummary
+
+
+def open_job(campaign: Campaign, out, planned: list[PlannedRun], *, retry_failed: bool = False,
+             reuse_stale: bool = False) -> Job:
+    """Prepare ``out`` for ``campaign``'s runs ``planned`` and find those it does not hold
+    yet (`classify`)."""
+    store = ResultStore(out)
+    store.prepare()
+    store.set_campaign(campaign.name, {"description": campaign.description,
+                                       "report": campaign.report})
+    store.remove_stale_temporaries()
+    todo, summary = classify(planned, store, retry_failed=retry_failed,
+                             reuse_stale=reuse_stale)
+    destination = Destination(str(store.out), campaign.name, environment(),
+                              campaign_keep(campaign), leave_token(store.out) if todo else None)
+    return Job(store, destination, todo, summary)
+
+
+def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "") -> None:
+    """Execute the runs of every job on ``runner`` at once and store them (module
+    docstring); each job's summary counts its runs.  On SIGINT/SIGTERM what finished is
+    kept — with the runs whose workers had put their files in place when they were
+    stopped — and every summary's ``interrupted`` holds the signal number."""
+    jobs = [j for j in jobs if j.todo]
+    if not jobs:
+        return
+    committers = [Committer(j.store) for j in jobs]
+    bar = progress_counter(sum(len(j.todo) for j in jobs), label, enabled=progress)
+    returned: set[tuple[int, str]] = set()
+
+    def idle():
+        waits = [w for w in (c.idle() for c in committers) if w is not None]
+        return min(waits, default=None)
+
+    tasks = (((k, r.run_id), StoreTask(r.run_id, r.scenario, r.sweep,  # checked: not parsed
+                                        {a: _jsonable(v) for a, v in r.axes.items()},  # again
+                                        j.destination))
+             for k, j in enumerate(jobs) for r in j.todo)
+    try:
+        for key, stored in runner.results(tasks, idle):
+            returned.add(key)
+            job = jobs[key[0]]
+            stored = landed(job.store.out, stored)
+            if stored.values is None:
+                job.summary.unstored.append(stored.error)  # this run's place only
+            else:
+                committers[key[0]].add(stored.values)
+                _count(job.summary, stored.status)
+                bar.set_postfix(**{status: sum(getattr(j.summary, status) for j in jobs)
+                                   for status in ("ok", "diverged", "failed")})
+            bar.update(1)
+    except Interrupted as exc:
+        for k, (job, committer) in enumerate(zip(jobs, committers)):
+            job.summary.interrupted = exc.signum
+            committer.flush()
+            for row in _landed_unreturned(job.store, [r for r in job.todo
+                                                      if (k, r.run_id) not in returned]):
+                _count(job.summary, row.status)
+    finally:
+        try:
+            for committer in committers:  # what finished is stored, whatever stopped us
+                committer.flush()
+        finally:
+            bar.close()
+            for job in jobs:
+                (job.store.runs_dir / job.destination.reach).unlink(missing_ok=True)
+
+
+@dataclass
+class Batch:
+    """The runs a question needs next, stored into ``out`` under the campaign ``name``."""
+
+    out: Path
+    name: str
+    runs: list[PlannedRun]
+    description: str = ""
+    summary: CampaignSummary = field(default_factory=CampaignSummary)
+
+
+def answer_all(questions: list, runner, *, progress: bool = False, label: str = "") -> list:
+    """The answers of ``questions`` (generators of `Batch` es, sent the rows of each
+    batch's runs in order), their batches run together (module docstring).  Raises
+    `Interrupted` on SIGINT/SIGTERM, after storing what finished."""
+    answers: list = [None] * len(questions)
+    waiting: dict[int, Batch] = {}
+
+    def ask(i: int, rows) -> None:
+        try:
+            waiting[i] = questions[i].send(rows)
+        except StopIteration as done:
+            answers[i] = done.value
+
+    for i in range(len(questions)):
+        ask(i, None)
+    while waiting:
+        batches = dict(waiting)
+        jobs = {}
+        for i, b in batches.items():
+            unique = list({r.run_id: r for r in b.runs}.values())
+            jobs[i] = open_job(Campaign(name=b.name, base={}, sweeps=(),
+                                        description=b.description), b.out, unique)
+        run_jobs(list(jobs.values()), runner, progress=progress, label=label)
+        for i, b in batches.items():
+            b.summary = jobs[i].summary
+            if b.summary.interrupted:
+                raise Interrupted(b.summary.interrupted)
+        for i, b in batches.items():
+            store = jobs[i].store
+            rows = {r.run_id: r for r in store.rows_of(r.run_id for r in b.runs)}
+            del waiting[i]
+            ask(i, [rows[r.run_id] for r in b.runs])
+    return answers
+
+
+def _count(summary: CampaignSummary, status: str) -> None:
+    setattr(summary, status, getattr(summary, status) + 1)
+
+
+def _landed_unreturned(store: ResultStore, runs: list[PlannedRun]) -> list:
+    """Adopt the files of ``runs`` (interrupted before their results came back) that
+    their workers put in place before they were stopped, where the index holds no row
+    of them: finished runs, kept."""
+    landed_ids = [r.run_id for r in runs if (store.runs_dir / f"{r.run_id}.npz").is_file()]
+    known = {row.run_id for row in store.rows_of(landed_ids)}
+    adopted = []
+    for rid in landed_ids:
+        if rid not in known:
+            try:
+                adopted.append(store.adopt(store.runs_dir / f"{rid}.npz"))
+            except ValueError:
+                pass  # not an intact run file: the run is redone on resume
+    return adopted
+
+
+def _jsonable(value):
+    return value.item() if isinstance(value, np.generic) else value
+
+

@@ -1,0 +1,174 @@
+"""A run of a campaign, from its scenario to its stored file, where the run executes: the
+worker runs it, writes its file into the results folder (under a temporary name, renamed
+into ``runs/``; its checksum computed here, where the bytes are) and hands back only
+its index row, already encoded — so that the coordinating process's work per run is one
+row to insert, whatever the run's length.
+
+A worker that cannot reach the results folder (a Dask worker on another machine, whose
+file system does not hold it) hands back the file's bytes with the row; the coordinator
+writes them (`write_bytes`).  Whether a worker sees the folder is proved, not guessed:
+the coordinator leaves a token file in ``runs/`` (`Destination.reach`) and a worker
+writes there only if it reads that token.
+
+`serve` is a local worker process's life.  This module is not on a run's import path
+(`validation.batch.fingerprint` hashes `validation.batch.worker`): storing changes no
+result, and editing it leaves stored runs valid.
+"""
+from __future__ import annotations
+
+import dataclasses
+import errno
+import functools
+import secrets
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from .index import COLUMNS, StoreError, row_values
+from .runfiles import KEEP_ALL, Keep, run_file, write_file
+from .worker import execute_run, failed_result, warm_up, worker_init
+
+__all__ = ["Destination", "StoreTask", "Stored", "run_and_store", "store_failure",
+           "landed", "one_task", "serve", "leave_token"]
+
+
+@dataclass(frozen=True)
+class Destination:
+    """Where a campaign's runs are stored and what is recorded with each: the results
+    folder ``out``, the campaign's name, the environment (versions) recorded with every
+    run, what a run keeps (`Keep`), and the name of the token file in ``out/runs`` that
+    proves a worker sees this folder (None: workers send the file's bytes)."""
+
+    out: str
+    campaign: str
+    env: dict
+    keep: Keep = KEEP_ALL
+    reach: str | None = None
+
+
+@dataclass(frozen=True)
+class StoreTask:
+    """One run to execute and store: its scenario (a checked `Scenario` or its mapping),
+    sweep, swept values and destination."""
+
+    rid: str
+    scenario: object
+    sweep: str
+    axes: dict
+    destination: Destination
+
+
+@dataclass(frozen=True)
+class Stored:
+    """What comes back for a run: its index row as `index.row_values` encodes it; the
+    file's bytes if the worker could not write them (else None); or, if the file could
+    not be written at all, why (``error``, with ``errno`` when the system said one)."""
+
+    rid: str
+    values: tuple | None
+    data: bytes | None = None
+    error: str = ""
+    errno: int | None = None
+
+    @property
+    def status(self) -> str:
+        return self.values[COLUMNS.index("status")] if self.values else "failed"
+
+
+def leave_token(out: Path) -> str:
+    """Write a token file into ``out/runs`` for workers to find (`Destination.reach`);
+    returns its name.  It is a hidden temporary (``.reach-*.tmp``): removed by
+    `ResultStore.remove_stale_temporaries` an hour later, never taken for a run."""
+    name = f".reach-{secrets.token_hex(8)}.tmp"
+    (Path(out) / "runs" / name).write_text(name)
+    return name
+
+
+@functools.lru_cache(maxsize=64)
+def _reaches(out: str, token: str) -> bool:
+    """Whether this process sees the results folder ``out`` (reads its token)."""
+    try:
+        return (Path(out) / "runs" / token).read_text() == token
+    except OSError:
+        return False
+
+
+def _store(task: StoreTask, result, metrics) -> Stored:
+    d = task.destination
+    reaches = d.reach is not None and _reaches(d.out, d.reach)
+    # A file to send is sent compressed (`validation.run.packing`: half the bytes).
+    keep = d.keep if reaches else dataclasses.replace(d.keep, compress=True)
+    data, row = run_file(task.rid, result, metrics, campaign=d.campaign, sweep=task.sweep,
+                         axes=task.axes, env=d.env, keep=keep)
+    values = row_values(row)
+    if not reaches:
+        return Stored(task.rid, values, data)
+    return _written(Path(d.out), task.rid, data, values)
+
+
+def run_and_store(task: StoreTask) -> Stored:
+    """Execute ``task``'s run (`worker.execute_run`: never raises for the run's sake) and
+    store it (module docstring)."""
+    return _store(task, *execute_run(task.scenario))
+
+
+def store_failure(task: StoreTask, message: str) -> Stored:
+    """Store ``task``'s run as failed with ``message`` (its worker died or ran out of
+    time): in the coordinating process, which alone knows it."""
+    return _store(task, *failed_result(task.scenario, message))
+
+
+def landed(out: Path, stored: Stored) -> Stored:
+    """``stored`` with its file in the results folder ``out``: written here if its worker
+    sent the bytes (it could not reach ``out``).  A full disk is raised as `OSError`
+    (ENOSPC, naming ``out``: no further run can be stored); any other failure to write
+    is ``stored.error`` (this run's place only: a read-only file, a folder in the way)."""
+    if stored.data is not None:
+        stored = _written(Path(out), stored.rid, stored.data, stored.values)
+    if stored.errno == errno.ENOSPC:
+        raise OSError(errno.ENOSPC, "No space left on device", str(out))
+    return stored
+
+
+@contextmanager
+def one_task(rid: str, scenario, out: Path):
+    """The task of a single run (``flexarm run``) into the results folder ``out``, whose
+    worker writes the file there (its token left in ``runs/`` meanwhile)."""
+    from .store import environment
+    token = leave_token(out)
+    try:
+        yield StoreTask(rid, scenario, "", {}, Destination(str(out), "", environment(),
+                                                           reach=token))
+    finally:
+        (Path(out) / "runs" / token).unlink(missing_ok=True)
+
+
+def _written(out: Path, rid: str, data: bytes, values: tuple) -> Stored:
+    """Write run ``rid``'s file ``data`` into ``out``: its `Stored` (with why not, if it
+    could not be written: a full disk, a read-only folder, a place that cannot be
+    cleared)."""
+    try:
+        write_file(out, rid, data)
+    except StoreError as exc:
+        return Stored(rid, None, error=str(exc))
+    except OSError as exc:
+        return Stored(rid, None, error=f"runs/{rid}.npz: {exc.strerror or exc}",
+                      errno=exc.errno)
+    return Stored(rid, values)
+
+
+def serve(conn, parent: int, memory_mib: int | None, warm: bool) -> None:
+    """A local worker process's life: receive a `StoreTask` on ``conn``, send back
+    `run_and_store`'s `Stored`; until it receives None or the parent's end closes.
+    ``warm``: the kernels are loaded already (forked from a warmed parent)."""
+    worker_init(parent, memory_mib)
+    if not warm:
+        warm_up()
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):
+            return
+        if task is None:
+            return
+        conn.send(run_and_store(task))
