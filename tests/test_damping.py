@@ -42,12 +42,20 @@ def without_axial_damping(mbs) -> None:
 def test_every_fe_mode_has_the_stated_damping_ratio(mesh):
     system = build_arm(PARAMS, mesh, lock_joints=True)
     f, zeta = damped_modes(system.mbs)
-    assert f[0] == pytest.approx(0.63, abs=0.01) and f[-1] > 500  # bending ... first axial
+    # The first bending mode, 0.63 Hz: ANCF to round-off (0.629194 with two BLAS kernel
+    # sets); the geometrically exact beam's linearisation (numerically differentiated,
+    # axial stiffness 1e7 against 0.63 Hz) moves it 0.6304 -> 0.6403 Hz between OpenBLAS's
+    # default and Sandybridge kernels, hence 0.02 Hz for it (2x that spread).
+    assert f[0] == pytest.approx(0.63, abs=0.01 if mesh.element == "ancf" else 0.02)
+    assert f[-1] > 500  # ... up to the first axial mode (522 Hz)
     # ANCF: D = β K exactly (the same strain measures in both), ζ = π f β to round-off;
     # the geometrically exact beam's damping is stiffness-proportional to within 0.4 %
     # (measured: its strain rates are not exactly the linearised strains' rates).
-    np.testing.assert_allclose(zeta, np.pi * f * BETA,
-                               rtol=1e-6 if mesh.element == "ancf" else 1e-2)
+    # Its first mode carries the linearisation's round-off (above): ζ 3.5 % off with the
+    # Sandybridge kernels, hence 7 % for that mode alone.
+    ratio = zeta / (np.pi * f * BETA)
+    assert ratio[0] == pytest.approx(1.0, abs=1e-6 if mesh.element == "ancf" else 7e-2)
+    np.testing.assert_allclose(ratio[1:], 1.0, atol=1e-6 if mesh.element == "ancf" else 1e-2)
 
 
 def test_bending_damping_alone_leaves_an_axial_mode_undamped():
