@@ -16,7 +16,6 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
 
 __all__ = ["LinkModes", "clamped_mass_roots", "weighted_projector", "gauss_legendre"]
 
@@ -46,6 +45,7 @@ def clamped_mass_roots(n: int, mu: float, eta: float) -> np.ndarray:
     """
     if not 1 <= n <= 12:
         raise ValueError(f"number of modes must be in 1..12, got {n}")
+    from scipy.optimize import brentq, minimize_scalar  # 0.2 s to import: when needed
     f = lambda x: float(_frequency_function(x, mu, eta))  # noqa: E731
     roots: list[float] = []
     lo = 1e-6
