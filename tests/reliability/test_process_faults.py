@@ -331,6 +331,7 @@ def test_a_helper_process_of_a_stopped_run_is_stopped_with_it(tmp_path):
     assert wait_gone(proc.pid)
 
 
+@pytest.mark.slow  # 19 s (a real Dask cluster); the local runners' limit is tested above
 def test_a_run_past_its_time_limit_is_stopped_on_dask(lab, monkeypatch, tmp_path):
     distributed = pytest.importorskip("distributed")
     from validation.batch.campaign import campaign_from_mapping, run_campaign
