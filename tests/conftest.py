@@ -1,12 +1,30 @@
 """What the plug-in tests share: a folder of plug-in modules importable by this process
 (and by the `flexarm` commands the tests start there)."""
 import sys
+import textwrap
 from pathlib import Path
 
 import pytest
 
 from validation.batch.fingerprint import forget_plugins
 
+
+
+#: A plug-in plant module (write it as ``labplants.py``): a finer assumed-modes arm playing
+#: the truth, ``plant.kind = "labplants:FineArm"`` — a truth plant that costs little.
+FINE_ARM_PLANT = textwrap.dedent('''
+    """A finer assumed-modes arm playing the truth: the reduced plant with its own modes."""
+    from reduced_model import ReducedPlant
+
+
+    class FineArm(ReducedPlant):
+        name = "fine-arm"
+        role = "truth"
+
+        def __init__(self, params, *, model, sensors, modes=3):
+            super().__init__(params, modes_per_link=(modes, modes), step=2.5e-4,
+                             modal_basis=model.mode_shapes, sensors=sensors)
+''')
 
 def write_files(folder: Path, files: dict[str, str]) -> Path:
     """Write ``files`` ({path relative to ``folder``: text}) into ``folder``; returns it."""

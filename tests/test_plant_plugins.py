@@ -9,22 +9,8 @@ import textwrap
 
 import pytest
 
-from conftest import write_files
+from conftest import FINE_ARM_PLANT, write_files
 from validation.batch.store import ResultStore
-
-PLANT = textwrap.dedent('''
-    """A finer assumed-modes arm playing the truth: the reduced plant with its own modes."""
-    from reduced_model import ReducedPlant
-
-
-    class FineArm(ReducedPlant):
-        name = "fine-arm"
-        role = "truth"
-
-        def __init__(self, params, *, model, sensors, modes=3):
-            super().__init__(params, modes_per_link=(modes, modes), step=2.5e-4,
-                             modal_basis=model.mode_shapes, sensors=sensors)
-''')
 
 SCENARIO = textwrap.dedent('''
     duration = 1.0
@@ -58,7 +44,8 @@ def flexarm(cwd, *args):
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory):
     return write_files(tmp_path_factory.mktemp("plantlab"),
-                       {"labplants.py": PLANT, "fine.toml": SCENARIO, "study.toml": STUDY})
+                       {"labplants.py": FINE_ARM_PLANT, "fine.toml": SCENARIO,
+                        "study.toml": STUDY})
 
 
 def test_a_plugin_plant_runs_and_is_reported_as_the_truth(lab):

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from conftest import write_files
+from conftest import FINE_ARM_PLANT, write_files
 from validation.batch.store import ResultStore
 from validation.cli import main
 from validation.run.loop import run_scenario
@@ -138,20 +138,6 @@ def test_an_observable_mode_is_kept_and_a_hidden_one_removed():
 
 
 # --- the falsifier's counterexample replays ---------------------------------------------------
-FINE_ARM = textwrap.dedent('''
-    from reduced_model import ReducedPlant
-
-
-    class FineArm(ReducedPlant):
-        """A finer assumed-modes arm playing the truth (a truth plant that costs little)."""
-        name = "fine-arm"
-        role = "truth"
-
-        def __init__(self, params, *, model, sensors, modes=3):
-            super().__init__(params, modes_per_link=(modes, modes), step=2.5e-4,
-                             modal_basis=model.mode_shapes, sensors=sensors)
-''')
-
 # The system of tests/test_verify.py on the plug-in truth plant: a 1 N m pulse breaks the
 # tracking bound with payloads near 1 kg and pulses near 4 N m.
 ROBUST = textwrap.dedent('''
@@ -178,7 +164,7 @@ def test_the_counterexample_replays_with_flexarm_run(tmp_path):
     """Known-bad (issue 32): the file named its run "robust/robust" (the search's campaign
     and the system), which `flexarm run --config` refused.  Now it names it "robust" and
     replays to the verdict's robustness bit for bit (the same scenario, the same code)."""
-    write_files(tmp_path, {"labplants.py": FINE_ARM, "robust.toml": ROBUST})
+    write_files(tmp_path, {"labplants.py": FINE_ARM_PLANT, "robust.toml": ROBUST})
     done = flexarm(tmp_path, "verify", "robust.toml", "--mode", "falsify", "--budget", "2",
                    "--workers", "1", "--out", "out", "--no-progress")
     assert done.returncode == 0, done.stderr
