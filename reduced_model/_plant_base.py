@@ -116,7 +116,7 @@ class Plant:
         return 2 * (2 + sum(m.n for m in self.modal_basis)) + len(TRUTH_EXTRAS)
 
     def truth_vector(self) -> np.ndarray:
-        """[θ, q, θ̇, q̇, *TRUTH_EXTRAS] now (a new array)."""
+        """``[θ, q, θ̇, q̇, *TRUTH_EXTRAS]`` now (a new array)."""
         out = np.empty(self.truth_size)
         self.truth_into(out)
         return out

@@ -119,7 +119,9 @@ def lab(tmp_path_factory):
                        {"faultlaws.py": FAULTS, "faults.toml": campaign_text()})
 
 
-@pytest.fixture(scope="module", params=["1", "2"], ids=["serial", "2-workers"])
+# One worker process: the same code as two, in make test-all (11 s).
+@pytest.fixture(scope="module", params=[pytest.param("1", marks=pytest.mark.slow), "2"],
+                ids=["serial", "2-workers"])
 def campaign(request, lab):
     """The fault campaign run by the CLI: (workers, exit status, stdout, stderr, rows by
     name, whether its process group was gone after it, its time limit)."""
