@@ -240,6 +240,9 @@ class LocalPoolRunner(Runner):
                 if w.conn.poll():
                     stored = w.conn.recv()
                     w.task = None
+                    if stored.exhausted:  # at its memory limit: a fresh worker goes on
+                        w.kill()
+                        self._pool[self._pool.index(w)] = None
                     return key, stored
             except (EOFError, OSError):
                 pass  # died while sending

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from .index import COLUMNS, StoreError, row_values
 from .runfiles import KEEP_ALL, Keep, run_file, write_file
-from .worker import execute_run, failed_result, warm_up, worker_init
+from .worker import OVER_MEMORY, execute_run, failed_result, warm_up, worker_init
 
 __all__ = ["Destination", "StoreTask", "Stored", "run_and_store", "store_failure",
            "landed", "one_task", "serve", "leave_token"]
@@ -62,13 +62,16 @@ class StoreTask:
 class Stored:
     """What comes back for a run: its index row as `index.row_values` encodes it; the
     file's bytes if the worker could not write them (else None); or, if the file could
-    not be written at all, why (``error``, with ``errno`` when the system said one)."""
+    not be written at all, why (``error``, with ``errno`` when the system said one).
+    ``exhausted``: the run reached its worker's memory limit; what that process still
+    holds (a plug-in's module-level data) is unknown, so the runner replaces it."""
 
     rid: str
     values: tuple | None
     data: bytes | None = None
     error: str = ""
     errno: int | None = None
+    exhausted: bool = False
 
     @property
     def status(self) -> str:
@@ -109,7 +112,11 @@ def _store(task: StoreTask, result, metrics) -> Stored:
 def run_and_store(task: StoreTask) -> Stored:
     """Execute ``task``'s run (`worker.execute_run`: never raises for the run's sake) and
     store it (module docstring)."""
-    return _store(task, *execute_run(task.scenario))
+    result, metrics = execute_run(task.scenario)
+    stored = _store(task, result, metrics)
+    if result.status == "failed" and result.message.startswith(OVER_MEMORY):
+        return dataclasses.replace(stored, exhausted=True)
+    return stored
 
 
 def store_failure(task: StoreTask, message: str) -> Stored:

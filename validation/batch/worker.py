@@ -20,7 +20,7 @@ from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, befor
 from ..run.results import RunResult
 from .interrupts import Interrupted
 
-__all__ = ["execute_run", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
+__all__ = ["OVER_MEMORY", "execute_run", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
            "kernel_groups", "describe"]
 
 #: The memory limit this process runs under [MiB] (set by `worker_init`; None: none).
@@ -64,11 +64,15 @@ def describe(exc: BaseException) -> str:
     return short_str(exc)
 
 
+#: How the message of a run that reached its worker's memory limit begins.
+OVER_MEMORY = "exceeded the memory limit of"
+
+
 def _over_memory(message: str) -> str:
     """``message`` of a run that ran out of memory, saying which limit it exceeded."""
     if _memory_limit is None or "MemoryError" not in message:
         return message
-    return f"exceeded the memory limit of {_memory_limit} MiB ({message})"
+    return f"{OVER_MEMORY} {_memory_limit} MiB ({message})"
 
 
 def execute_run(scenario) -> tuple[RunResult, dict]:
