@@ -158,7 +158,8 @@ class LocalPoolRunner(Runner):
         self._warm = "fork" in multiprocessing.get_all_start_methods()
         if self._warm:  # loaded once here, inherited by every forked worker
             from .compiling import compile_for
-            from .worker import warm_up
+            from .worker import load_run_libraries, warm_up
+            load_run_libraries()
             if scenarios is None:
                 warm_up()
             else:

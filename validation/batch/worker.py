@@ -20,7 +20,7 @@ from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, befor
 from ..run.results import RunResult
 from .interrupts import Interrupted
 
-__all__ = ["OVER_MEMORY", "execute_run", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
+__all__ = ["OVER_MEMORY", "execute_run", "load_run_libraries", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
            "kernel_groups", "describe"]
 
 #: The memory limit this process runs under [MiB] (set by `worker_init`; None: none).
@@ -175,10 +175,22 @@ def _short_run(scenario) -> None:
     run_scenario(scenario_from_mapping(data))
 
 
+def load_run_libraries() -> None:
+    """Import the libraries every run needs that a command's start leaves out
+    (scipy.signal: the vibration metrics' high-pass; scipy.optimize: the mode shapes),
+    before any worker runs under its memory limit: imported lazily by a run that has
+    used most of the limit, an extension module fails to map ("ImportError: ... failed
+    to map segment") — the run would fail for the wrong reason and the import stay half
+    done for the runs after it."""
+    import scipy.optimize  # noqa: F401
+    import scipy.signal  # noqa: F401
+
+
 def warm_up(scenarios=None) -> None:
     """Compile or load, silently, every kernel the runs of ``scenarios`` use (default: the
-    PBC with the paper's SMO on both plants), e.g. in a process before it forks workers
-    (`validation.batch.compiling` does it with progress)."""
+    PBC with the paper's SMO on both plants), and `load_run_libraries`, e.g. in a process
+    before it forks workers (`validation.batch.compiling` does it with progress)."""
+    load_run_libraries()
     if scenarios is None:
         _warm_up_default()
         return
