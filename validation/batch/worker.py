@@ -20,8 +20,8 @@ from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, befor
 from ..run.results import RunResult
 from .interrupts import Interrupted
 
-__all__ = ["OVER_MEMORY", "execute_run", "load_run_libraries", "failed_result", "keep_freed_memory", "worker_init", "warm_up",
-           "kernel_groups", "describe"]
+__all__ = ["OVER_MEMORY", "execute_run", "load_run_libraries", "failed_result",
+           "keep_freed_memory", "worker_init", "warm_up", "kernel_groups", "describe"]
 
 #: The memory limit this process runs under [MiB] (set by `worker_init`; None: none).
 _memory_limit: int | None = None
