@@ -32,7 +32,7 @@ from pathlib import Path
 from reduced_model._imports import walk
 
 __all__ = ["code_fingerprint", "run_fingerprint", "result_sources", "plugin_sources",
-           "forget_plugins"]
+           "plugin_kinds", "forget_plugins"]
 
 _ROOT = Path(__file__).resolve().parents[2]
 #: Where executing a run starts: everything it can import decides results.
@@ -140,12 +140,17 @@ def plugin_sources(kind: str) -> tuple[Path, ...]:
     return tuple(sorted(p for p in files if p not in covered))
 
 
+def plugin_kinds(scenario: dict) -> list[str]:
+    """The plug-ins ("package.module:Class") a scenario mapping names as its controller,
+    observer or plant, sorted."""
+    return sorted(k for k in (str(scenario.get(part, {}).get("kind", ""))
+                              for part in ("controller", "observer", "plant")) if ":" in k)
+
+
 def run_fingerprint(scenario: dict) -> str:
     """The fingerprint of one run's code: `code_fingerprint` plus its plug-ins' sources
     and installed packages."""
-    kinds = sorted(k for k in (scenario.get("controller", {}).get("kind", ""),
-                               scenario.get("observer", {}).get("kind", ""),
-                               scenario.get("plant", {}).get("kind", "")) if ":" in k)
+    kinds = plugin_kinds(scenario)
     if not kinds:
         return code_fingerprint()
     h = hashlib.sha256(code_fingerprint().encode())

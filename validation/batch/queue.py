@@ -149,6 +149,7 @@ def answer_all(questions: list, runner, *, progress: bool = False, label: str = 
         for i, b in batches.items():
             store = jobs[i].store
             rows = {r.run_id: r for r in store.rows_of(r.run_id for r in b.runs)}
+            store.close()
             del waiting[i]
             ask(i, [rows[r.run_id] for r in b.runs])
     return answers

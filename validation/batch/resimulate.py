@@ -17,6 +17,7 @@ import math
 import numpy as np
 
 from ..run.results import RunResult
+from .fingerprint import plugin_kinds
 from .index import StoreError, finite_or_none, metric_values
 from .runfiles import Keep
 
@@ -31,9 +32,7 @@ def keeps_all(row) -> bool:
 def resimulable(row) -> bool:
     """Whether ``row``'s run may be re-simulated while a folder is read: its laws and
     plant are built in (a plug-in's module is never imported by reading a folder)."""
-    config = row.config
-    kinds = [config.get(part, {}).get("kind", "") for part in ("plant", "controller", "observer")]
-    return not any(":" in str(k) for k in kinds)
+    return not plugin_kinds(row.config)
 
 
 def full_result(row) -> RunResult:
