@@ -159,10 +159,10 @@ class LocalPoolRunner(Runner):
         if self._warm:  # loaded once here, inherited by every forked worker
             from .compiling import compile_for
             from .worker import load_run_libraries, warm_up
-            load_run_libraries()
             if scenarios is None:
-                warm_up()
+                warm_up()  # loads the run libraries too
             else:
+                load_run_libraries()
                 compile_for(scenarios, stream=progress)
         self._ctx = multiprocessing.get_context("fork" if self._warm else "spawn")
         self._pool: list[_Worker | None] = [None] * workers
