@@ -36,7 +36,7 @@ from multiprocessing import connection
 from typing import TextIO
 
 from ..run._config import ConfigError, check
-from ..run.processes import describe_exit, kill_group
+from ..run.processes import describe_exit, kill_group, signals_held
 from .interrupts import Interrupted, signals_interrupt
 from .limits import (MIN_MEMORY_MIB, RUN_TIMEOUT_BASE, default_memory_limit,
                      default_run_timeout)
@@ -175,7 +175,7 @@ class LocalPoolRunner(Runner):
         if w is None or (w.task is None and not w.process.is_alive()):
             if w is not None:
                 w.kill()
-            with _environment(ONE_THREAD):
+            with _environment(ONE_THREAD), signals_held():  # a Ctrl-C: once it is in the pool
                 w = self._pool[i] = _Worker(self._ctx, self.memory_limit, self._warm)
         return w
 

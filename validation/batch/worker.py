@@ -114,12 +114,14 @@ def worker_init(parent: int, memory_mib: int | None) -> None:
     decides what a Ctrl-C means: stop, keep what finished, end the workers), dies with
     its parent, and runs under a memory limit of ``memory_mib`` MiB (None: none)."""
     global _memory_limit
-    from ..run.processes import contain_checks, die_with_parent, lead_process_group
+    from ..run.processes import (contain_checks, die_with_parent, lead_process_group,
+                                 release_signals)
     from .limits import limit_memory
     lead_process_group()  # killed with what a plug-in starts (`executor`)
     contain_checks(None)  # a run's faults are contained by this process already
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    release_signals()  # held while it was started (`executor`)
     die_with_parent(parent)
     if memory_mib is not None:
         limit_memory(memory_mib)

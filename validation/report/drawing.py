@@ -53,15 +53,25 @@ def _collect(done, n: int, label: str, progress: bool) -> list:
     return results
 
 
+def _start_drawer(parent: int) -> None:
+    """A drawing worker dies with the report's process and, once forked, receives
+    signals again (`validation.run.processes.signals_held`)."""
+    from ..run.processes import die_with_parent, release_signals
+    die_with_parent(parent)
+    release_signals()  # held while it was forked
+
+
 def _in_workers(tasks: list, workers: int, label: str, progress: bool) -> list:
     global _TASKS
-    from ..run.processes import die_with_parent
+    from ..run.processes import signals_held
     _TASKS = tasks
     try:
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
-                                 initializer=die_with_parent,
+                                 initializer=_start_drawer,
                                  initargs=(os.getpid(),)) as pool:  # a killed report ends them
-            pool.submit(int).result()  # every worker forked now, before any thread starts
+            with signals_held():
+                started = pool.submit(int)  # every worker forked now, before any thread starts
+            started.result()
             futures = {pool.submit(_draw, i): i for i in range(len(tasks))}
             return _collect(((futures[f], f.result()) for f in as_completed(futures)),
                             len(tasks), label, progress)

@@ -12,6 +12,11 @@ down.
 
 Each such child leads its own process group and is killed with it: a helper process the
 user's code starts dies with the child.
+
+Every process is started under `signals_held`: ``os.fork`` runs the fork callbacks of the
+libraries loaded (logging releases its lock in one), and an exception a signal handler
+raises inside such a callback is printed as "Exception ignored" and lost — a Ctrl-C that
+landed while a worker was forked was forgotten and the command ran on (seen in CI).
 """
 from __future__ import annotations
 
@@ -20,6 +25,7 @@ import multiprocessing
 import os
 import signal
 import sys
+from contextlib import contextmanager
 
 from ._config import ConfigError
 
@@ -57,6 +63,26 @@ def die_with_parent(parent: int) -> None:
     threading.Thread(target=watch, daemon=True, name="watch-parent").start()
 
 
+_HELD = {signal.SIGINT, signal.SIGTERM}
+
+
+@contextmanager
+def signals_held():
+    """SIGINT/SIGTERM held back (blocked) inside, for starting a process (module
+    docstring): one that arrives meanwhile is raised on leaving, in the caller's code.  The
+    child inherits the held signals and calls `release_signals` once its handlers are set."""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def release_signals() -> None:
+    """In a child started under `signals_held`: receive SIGINT/SIGTERM again."""
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _HELD)
+
+
 def lead_process_group() -> None:
     """Make this (forked) process the leader of a new process group, so that it and
     every process it starts can be killed together (`kill_group`)."""
@@ -68,12 +94,13 @@ def lead_process_group() -> None:
 
 def kill_group(process) -> None:
     """Kill a `multiprocessing` process that leads its own group, and the group with it
-    (what the user's code started in it); wait for it."""
-    if process.pid is not None:
-        try:
-            os.killpg(process.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass  # the group is gone (or the process never led one: killed below)
+    (what the user's code started in it); wait for it.  One never started: nothing."""
+    if process.pid is None:
+        return
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass  # the group is gone (or the process never led one: killed below)
     if process.is_alive():
         process.kill()
     process.join()
@@ -106,6 +133,7 @@ def _child(conn, parent: int, fn, args) -> None:
     lead_process_group()
     die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides what a Ctrl-C means
+    release_signals()
     try:
         try:
             outcome = ("ok", fn(*args))
@@ -129,9 +157,10 @@ def contained(fn, *args, timeout: float, during: str):
     receive, send = ctx.Pipe(duplex=False)
     child = ctx.Process(target=_child, args=(send, os.getpid(), fn, args), daemon=True,
                         name="flexarm-check")
-    child.start()
-    send.close()  # the child's death is then end-of-file here
     try:
+        with signals_held():
+            child.start()
+        send.close()  # the child's death is then end-of-file here
         if not receive.poll(timeout):
             raise ContainedFault(f"no answer after {timeout:g} s during {during} (stopped; "
                                  "--run-timeout sets the limit)")
