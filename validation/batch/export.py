@@ -5,7 +5,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 import sqlite3
 from pathlib import Path
 
@@ -51,10 +50,11 @@ def _export(store, allow_fewer: bool) -> tuple[Path, Path]:
     for r in table:
         columns.update(dict.fromkeys(r))
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=columns, restval="", lineterminator="\n")
+    # csv writes None as "" and a float as its repr ("nan" too); every key is a column.
+    writer = csv.DictWriter(buf, fieldnames=columns, restval="", lineterminator="\n",
+                            extrasaction="ignore")
     writer.writeheader()
-    for r in table:
-        writer.writerow({k: _format(v) for k, v in r.items()})
+    writer.writerows(table)
     write_atomic(csv_path, lambda fh: fh.write(buf.getvalue()))
     # One run a line, each encoded by json's C encoder (an indented dump goes through
     # its pure-Python one: ~30x slower, 3 s for 10^4 runs).
@@ -101,10 +101,3 @@ def export_row(r) -> dict:
     out |= {k: v for k, v in r.metrics.items() if k != "status"}
     return out
 
-
-def _format(value) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, float):
-        return "nan" if math.isnan(value) else repr(value)
-    return str(value)
