@@ -237,3 +237,24 @@ def test_result_roundtrip(tmp_path):
     np.testing.assert_array_equal(back.signals, r.signals)
     t, y = back  # unpacks like a python-control response
     assert y.shape == (len(r.names), len(t))
+
+
+def test_a_run_holds_blas_to_one_thread_however_the_process_set_it(monkeypatch):
+    """A process whose BLAS uses two threads (a notebook's, or a worker forked from one)
+    builds and simulates a run with one, as the command line does: a multithreaded product
+    sums in another order (a robustness 2e-12 apart on local and Dask workers)."""
+    from threadpoolctl import ThreadpoolController, threadpool_limits
+    seen = []
+
+    def record(*args, **kwargs):
+        seen.append({lib["num_threads"] for lib in ThreadpoolController().info()})
+        return real(*args, **kwargs)
+
+    real = loop.Setup
+    monkeypatch.setattr(loop, "Setup", record)  # what build constructs last, inside it
+    with threadpool_limits(limits=2):
+        outside = {lib["num_threads"] for lib in ThreadpoolController().info()}
+        build(scenario(duration=0.01))
+        after = {lib["num_threads"] for lib in ThreadpoolController().info()}
+    assert outside == after == {2}  # known bad: the process's own count, restored after
+    assert seen == [{1}]

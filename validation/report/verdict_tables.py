@@ -118,7 +118,7 @@ def arm_notes(columns: list[Column]) -> list[str]:
                 "so its truth-plant columns describe the mesh, not the arm.  Give the arm "
                 "a stator inertia (true_params.stator_inertia): campaigns/stator.toml "
                 "measures the smallest at which the truth plant converges in closed loop "
-                "(README.md, 'Mesh convergence of the truth plant').")
+                "(documentation: 'The truth plant and its convergence').")
             break
     return notes
 

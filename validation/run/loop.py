@@ -31,6 +31,7 @@ from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
 from .laws import build_controller, build_observer, nominal_model
 from .results import RunResult
 from .scenario import Scenario, check_scenario, scenario_to_mapping
+from .threads import one_thread
 
 __all__ = ["Setup", "build", "simulate", "run_scenario", "make_reference",
            "measurement_noise"]
@@ -70,6 +71,7 @@ def make_reference(spec):
     return QuinticMove(start=spec.start, goal=spec.goal, duration=spec.move_time)
 
 
+@one_thread
 def build(scenario: Scenario) -> Setup:
     """The objects of a run: the plant from ``true_params``, the controller and observer
     from ``nominal_params``.
@@ -164,6 +166,7 @@ class _Run:
             **law_fields("o", "observer", observer_law))
 
 
+@one_thread
 def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
              model: ArmModel | None = None) -> RunResult:
     """Run the closed loop of ``scenario`` on ``plant``; never raises for divergence, a
