@@ -357,7 +357,7 @@ def test_a_search_gives_the_same_verdict_on_every_runner(tmp_path):
                                      log=lambda *a: None)
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, host="127.0.0.1") as cluster:
+                                  dashboard_address=":0", host="127.0.0.1") as cluster:
         with make_runner("dask", scheduler=cluster.scheduler_address) as r:
             verdicts["dask"] = falsify(system, req, tmp_path / "dask", runner=r, budget=2,
                                        seed=5, log=lambda *a: None)

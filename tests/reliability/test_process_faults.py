@@ -348,7 +348,7 @@ def test_a_run_past_its_time_limit_is_stopped_on_dask(lab, monkeypatch, tmp_path
                                "controller.kind": ["faultlaws:Fault", "pd"],
                                "controller.options": [{"fault": "sleep"}, {}]}}]}
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None, host="127.0.0.1") as cluster:
+                                  dashboard_address=":0", host="127.0.0.1") as cluster:
         timeout = run_timeout()
         with make_runner("dask", scheduler=cluster.scheduler_address,
                          run_timeout=timeout) as dask:
