@@ -68,7 +68,6 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
         return
     committers = [Committer(j.store) for j in jobs]
     bar = progress_counter(sum(len(j.todo) for j in jobs), label, enabled=progress)
-    returned: set[tuple[int, str]] = set()
 
     def idle():
         waits = [w for w in (c.idle() for c in committers) if w is not None]
@@ -78,9 +77,9 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
                                         {a: _jsonable(v) for a, v in r.axes.items()},  # again
                                         j.destination))
              for k, j in enumerate(jobs) for r in j.todo)
+    results = runner.results(tasks, idle)
     try:
-        for key, stored in runner.results(tasks, idle):
-            returned.add(key)
+        for key, stored in results:
             job = jobs[key[0]]
             stored = landed(job.store.out, stored)
             if stored.values is None:
@@ -92,11 +91,13 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
                                    for status in ("ok", "diverged", "failed")})
             bar.update(1)
     except Interrupted as exc:
-        for k, (job, committer) in enumerate(zip(jobs, committers)):
+        # The runs in flight end first (a signal that landed here, between two results,
+        # left them running): no worker puts a file in place after the look below.
+        results.close()
+        for job, committer in zip(jobs, committers):
             job.summary.interrupted = exc.signum
             committer.flush()
-            for row in _landed_unreturned(job.store, [r for r in job.todo
-                                                      if (k, r.run_id) not in returned]):
+            for row in _landed_uncommitted(job.store, job.todo):
                 _count(job.summary, row.status)
     finally:
         try:
@@ -159,10 +160,10 @@ def _count(summary: CampaignSummary, status: str) -> None:
     setattr(summary, status, getattr(summary, status) + 1)
 
 
-def _landed_unreturned(store: ResultStore, runs: list[PlannedRun]) -> list:
-    """Adopt the files of ``runs`` (interrupted before their results came back) that
-    their workers put in place before they were stopped, where the index holds no row
-    of them: finished runs, kept."""
+def _landed_uncommitted(store: ResultStore, runs: list[PlannedRun]) -> list:
+    """Adopt the files of ``runs`` that their workers put in place before they were
+    stopped, where the index holds no row of them (a result that never came back, or
+    whose row the signal stopped from being committed): finished runs, kept."""
     landed_ids = [r.run_id for r in runs if (store.runs_dir / f"{r.run_id}.npz").is_file()]
     known = {row.run_id for row in store.rows_of(landed_ids)}
     adopted = []
