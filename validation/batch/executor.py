@@ -57,9 +57,11 @@ def available_cores() -> int:
 
 class Runner:
     """Executes tasks ``(key, StoreTask)`` (`storing.run_and_store`); subclasses say
-    where.  ``results(tasks, idle)`` yields ``(key, Stored)`` as runs finish; ``idle()``
-    (optional) is called before each wait for a result and returns the longest wait
-    [s] before it wants to be called again (None: no limit)."""
+    where.  ``results(tasks, idle)`` is a generator of ``(key, Stored)`` as runs finish;
+    closed early (a Ctrl-C between two results: `queue.run_jobs`), it ends the runs still
+    in flight where it can.  ``idle()`` (optional) is called before each wait for a result
+    and returns the longest wait [s] before it wants to be called again (None: no
+    limit)."""
 
     workers = 1
 

@@ -1,7 +1,8 @@
 """One thread per numerical library: the matrices here are small, and idle BLAS or numba
 threads busy-wait on the cores the simulations run on (two workers on two cores would
 otherwise slow each other down).  Imports nothing, so that the command line can apply it
-before numpy is loaded."""
+before numpy is loaded; `validation.run.threads` holds the libraries already loaded to
+one thread while a run is built and simulated."""
 from __future__ import annotations
 
 import os

@@ -172,6 +172,7 @@ def contained(fn, *args, timeout: float, during: str):
                 from None
     finally:
         kill_group(child)
+        send.close()  # closed above unless the start was interrupted
         receive.close()
     if outcome[0] == "config":
         raise ConfigError(outcome[1], outcome[2])
