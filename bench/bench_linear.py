@@ -51,7 +51,7 @@ def main():
     gain = control.ss(np.zeros((0, 0)), np.zeros((0, 12)), np.zeros((2, 0)), K)
     red = control.sample_system(reduced_linear_model(model, theta=(0, 0.5))[names, :], 1e-3)
     fe = control.sample_system(linear_model(params, theta=(0, 0.5),
-                                            modal_basis=model.mode_shapes)[names, :], 1e-3)
+                                            model=model)[names, :], 1e-3)
     tf = control.tf
 
     def case(controller, plant):

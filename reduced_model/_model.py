@@ -15,6 +15,7 @@ import scipy.linalg
 from . import _kernels as kern
 from ._modes import LinkModes, gauss_legendre
 from ._parameters import ArmParameters
+from ._plant_interface import coordinate_names
 
 __all__ = ["ArmModel", "validate_modes_per_link", "cached_model"]
 
@@ -139,9 +140,7 @@ class ArmModel:
     # --- names -------------------------------------------------------------------
     @property
     def coordinate_names(self) -> tuple[str, ...]:
-        n1, n2 = self.modes_per_link
-        return ("theta1", "theta2", *(f"q1{j + 1}" for j in range(n1)),
-                *(f"q2{j + 1}" for j in range(n2)))
+        return coordinate_names(self.modes_per_link)
 
     @property
     def state_names(self) -> tuple[str, ...]:

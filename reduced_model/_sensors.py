@@ -15,7 +15,7 @@ import numpy as np
 
 from ._modes import LinkModes
 from ._parameters import FieldError
-from ._plant_interface import Measurement
+from ._plant_interface import Measurement, coordinate_names
 
 __all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES"]
 
@@ -85,14 +85,13 @@ class SensorModel:
     def __init__(self, config: SensorConfig, modes: tuple[LinkModes, LinkModes], plant) -> None:
         self.config = config
         self._plant = plant
-        q_names = tuple(f"q{i + 1}{j + 1}" for i, m in enumerate(modes) for j in range(m.n))
-        names = ("theta1", "theta2") + (q_names if config.modal else ())
+        states = coordinate_names(tuple(m.n for m in modes))
+        names = states if config.modal else states[:2]
         if config.rates:
             names += tuple(f"{n}_dot" for n in names)
         if config.tip_position:
             names += ("tip_x", "tip_y")
         self.names = names
-        states = ("theta1", "theta2") + q_names
         states += tuple(f"{n}_dot" for n in states)
         direct = (config.strain_gauges is None or not config.modal) and \
             config.encoder_resolution == 0 and not config.tip_position

@@ -144,7 +144,7 @@ ROBUST = textwrap.dedent('''
     duration = 1.0
     transient = 0.5
     initial_state = "reference"
-    plant = { kind = "labplants:FineArm", options = { modes = 3 } }
+    plant = { kind = "labplants:FineArm", role = "truth", options = { modes = 3 } }
     disturbances = [{ kind = "pulse", target = "tau1", amplitude = 1.0, start = 0.6, duration = 0.2 }]
     [[requirement]]
     name = "track"

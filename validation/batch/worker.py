@@ -202,6 +202,6 @@ def warm_up(scenarios=None) -> None:
 
 @functools.cache  # once per process: every runner it starts forks from the same state
 def _warm_up_default() -> None:
-    from ..run.scenario import PLANTS, scenario_from_mapping
+    from ..run.scenario import PLANT_KINDS, scenario_from_mapping
     warm_up([scenario_from_mapping({"plant": {"kind": kind}, "observer": {"kind": "smo-paper"}})
-             for kind in PLANTS])
+             for kind in PLANT_KINDS])

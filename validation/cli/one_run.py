@@ -13,7 +13,7 @@ from ..batch.executor import available_cores, check_runner, make_runner
 from ..batch.store import ResultStore, StoreError, run_id
 from ..batch.storing import landed, one_task
 from ..run._config import ConfigError, check_label
-from ..run.plants import is_truth, plant_spec
+from ..run.plants import is_truth, plant_settings
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
 from ..verdicts.mesh import is_check
@@ -263,7 +263,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if truth:
         print("  " + (convergence_line(store, rid) if args.mesh_check else
                       f"convergence not checked: these are the FE model's numbers on "
-                      f"{plant_spec(data['plant']).discretisation()}; --mesh-check runs the "
+                      f"{plant_settings(data['plant']).discretisation()}; --mesh-check runs the "
                       "same loop on refined meshes and steps"))
     print(f"results: {path} (index and metrics.csv in {store.out})" + (
         f"; figures: flexarm show {store.out}/{rid}" if result.status == "ok" else ""))

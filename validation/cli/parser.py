@@ -8,7 +8,7 @@ from importlib.metadata import version
 from controllers import CONTROLLERS, OBSERVERS
 
 from ..batch.executor import available_cores
-from ..run.scenario import ARMS, DEFAULT_TRANSIENT, PLANTS, Scenario
+from ..run.scenario import ARMS, DEFAULT_TRANSIENT, PLANT_KINDS, Scenario
 
 from .calibrate import cmd_calibrate
 from .campaigns import cmd_campaign, cmd_reproduce_paper
@@ -90,7 +90,7 @@ def _add_limits(p) -> None:
 
 def _add_cases(p) -> None:
     """--plant and --arm of the commands that take a scenario or a campaign's cases."""
-    p.add_argument("--plant", action="append", choices=PLANTS,
+    p.add_argument("--plant", action="append", choices=PLANT_KINDS,
                    help="plant(s) (default: both for a scenario, the campaign's own)")
     p.add_argument("--arm", action="append", choices=tuple(ARMS),
                    help="arm(s) (default: both for a scenario, the campaign's own)")
@@ -151,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "--set as changes")
     run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm or the paper's table1 "
                                                         f"(default: {d.arm})")
-    run.add_argument("--plant", choices=PLANTS, help=f"reduced model or Exudyn truth plant "
+    run.add_argument("--plant", choices=PLANT_KINDS, help=f"reduced model or Exudyn truth plant "
                                                      f"(default: {d.plant.kind})")
     run.add_argument("--controller", metavar="KIND",
                      help=f"{', '.join(CONTROLLERS)} or package.module:Class "

@@ -92,7 +92,7 @@ import numpy as np
 import scipy.optimize
 import scipy.stats
 
-from reduced_model import ArmParameters, cached_model
+from reduced_model import ArmParameters, output_names
 
 from ..batch.store import run_id
 from ..run._config import ConfigError, check
@@ -380,8 +380,7 @@ def plan_calibration(base: Scenario, settings: CalibrationSettings,
 
 # --- the plant's frequency response ---------------------------------------------------------
 def _linear_outputs(s: Scenario) -> tuple[str, ...]:
-    from plant_exudyn._linear import output_names  # one list of names for both plants
-    return output_names(nominal_model(s.nominal_params, s.model.modes_per_link).mode_shapes)
+    return output_names(tuple(s.model.modes_per_link))
 
 
 def linear_response(s: Scenario, theta, frequency: np.ndarray, pairs) -> np.ndarray:
@@ -389,15 +388,9 @@ def linear_response(s: Scenario, theta, frequency: np.ndarray, pairs) -> np.ndar
     linearised about rest at ``theta``, at ``frequency`` [Hz]: (len(pairs), F) complex.
     The q outputs are in the basis the sensors report them in (the controller's model).
     The reduced plant is the model of its own order; any other plant is the FE arm of
-    its mesh (`plant_exudyn.linear_model`)."""
-    from .linear import reduced_linear_model
-    basis = nominal_model(s.nominal_params, s.model.modes_per_link).mode_shapes
-    if s.plant.kind == "reduced":
-        own = cached_model(s.true_params, tuple(s.plant.modes_per_link))
-        system = reduced_linear_model(own, theta=theta, modal_basis=basis)
-    else:
-        from plant_exudyn import linear_model
-        system = linear_model(s.true_params, s.plant.mesh, theta=theta, modal_basis=basis)
+    its mesh (`plant_exudyn.linear_model`): the linear model its kind declares."""
+    system = s.plant.linear_model(s.true_params, theta=theta,
+                                  model=nominal_model(s.nominal_params, s.model.modes_per_link))
     A, B, C = (np.asarray(m) for m in (system.A, system.B, system.C))
     outs, ins = list(system.output_labels), list(system.input_labels)
     rows = [outs.index(o) for o, _ in pairs]

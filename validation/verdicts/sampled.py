@@ -42,7 +42,7 @@ from reduced_model import cached_model
 from ..run._config import ConfigError
 from ..run.laws import build_controller, nominal_model
 from ..run.loop import make_reference
-from ..run.plants import truth_spec
+from ..run.plants import truth_settings
 from ..run.scenario import scenario_from_mapping
 from .linear import (NotLinearisable, closed_loop_matrix, growth_rate, largest_stable_period,
                      law_gain, reduced_linear_model)
@@ -136,11 +136,11 @@ class _Case:
                                     modal_basis=None if own else self.model.mode_shapes,
                                     generalised_forces=forces)
 
-    def fe_plant(self, point: int, spec) -> control.StateSpace:
-        """The truth plant of kind ``spec`` linearised at a point (`PlantSpec.linear_model`;
-        NotImplementedError for a kind without one)."""
-        return spec.linear_model(self.scenario.true_params, theta=self.theta(point),
-                                 modal_basis=self.model.mode_shapes)
+    def fe_plant(self, point: int, settings) -> control.StateSpace:
+        """The truth plant of ``settings`` linearised at a point (its kind's
+        ``linear_model``; NotImplementedError for a kind without one)."""
+        return settings.linear_model(self.scenario.true_params, theta=self.theta(point),
+                                     model=self.model)
 
 
 @functools.lru_cache(maxsize=128)
@@ -211,7 +211,7 @@ def predicted_period(config: dict) -> float:
 
 
 def certificate(config: dict, periods) -> list[CertificateRow]:
-    """The ν-gap certificate of a case's law against its truth plant (`truth_spec`: the
+    """The ν-gap certificate of a case's law against its truth plant (`truth_settings`: the
     case's own, or the default truth kind for a reduced-plant case) at ``periods`` [s]
     in increasing order, up to the first that is not certified (module docstring).
     Empty for a law that cannot be certified (forces on the modal coordinates, an
@@ -219,7 +219,7 @@ def certificate(config: dict, periods) -> list[CertificateRow]:
     case = _case(_key(config))
     if case.scenario.observer.kind != "none":
         return []
-    spec = truth_spec(config)
+    spec = truth_settings(config)
     reduced = [case.reduced_plant(i, nominal=True)[case.names, :]
                for i in range(len(case.points))]
     try:
