@@ -158,7 +158,7 @@ def pd_tracking(plant, kd2, seconds=3.0):
     plant.reset()
     # The gains this test was measured with: K_p = (40, 20), no feedforward.
     # (The model only feeds the feedforward, which is off.)
-    pd = JointPD(ArmModel(), kp=(40.0, 20.0), kd=(8.0, kd2), feedforward=False)
+    pd = JointPD(ArmModel(), Ts=1e-3, kp=(40.0, 20.0), kd=(8.0, kd2), feedforward=False)
     ref = PaperReference()
     try:
         for k in range(int(round(seconds / 1e-3))):

@@ -23,7 +23,7 @@ PLUGIN = textwrap.dedent('''
 
 
     class PD:
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             pass
 
         def __call__(self, t, x, ref):

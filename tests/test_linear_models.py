@@ -104,7 +104,7 @@ def test_reduced_and_fe_models_share_their_outputs():
 # --- the laws linearised from their objects ------------------------------------------------------
 def test_pd_gain_is_its_own_gains():
     model = ArmModel(ArmParameters())
-    pd = JointPD(model, kp=(30.0, 15.0), kd=(18.1, 8.2))
+    pd = JointPD(model, Ts=1e-3, kp=(30.0, 15.0), kd=(18.1, 8.2))
     x = np.zeros(2 * model.n)
     x[:2] = (0.4, -0.3)
     K = law_gain(pd, x, 1.0, PaperReference())
@@ -119,7 +119,7 @@ def test_pbc_gain_holds_the_flexible_rate_feedback_of_eq_20():
     −M_θq Λ_f (the term M v̇ with v̇ = −Λ ė): K's q̇ columns are M_θq Λ_f — the gain the
     old 2/λmax(W G) prediction left out."""
     model = ArmModel(ArmParameters())
-    pbc = PassivityBasedController(model, lambda_flex=(1.0, 2.0, 0.5, 3.0))
+    pbc = PassivityBasedController(model, Ts=1e-3, lambda_flex=(1.0, 2.0, 0.5, 3.0))
     x = np.zeros(2 * model.n)
     x[:2] = (0.1, 0.8)
     K = law_gain(pbc, x, 0.0, hold(x[:2]))

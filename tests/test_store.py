@@ -291,7 +291,7 @@ pathlib.Path(__file__).with_name("IMPORTED").write_text("this module was importe
 
 class X:
     """A plug-in whose import leaves a mark."""
-    def __init__(self, model):
+    def __init__(self, model, *, Ts):
         pass
 
     def __call__(self, t, x, ref):

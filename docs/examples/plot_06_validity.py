@@ -28,7 +28,7 @@ for t2 in theta2:
     # The PBC (eq. 20) linearised about a resting point: δτ = −K δx.
     x = np.zeros(2 * model.n)
     x[1] = t2
-    K = law_gain(PassivityBasedController(model), x, 0.0,
+    K = law_gain(PassivityBasedController(model, Ts=1e-3), x, 0.0,
                  lambda t: (x[:2].copy(), np.zeros(2), np.zeros(2)))
     gaps.append(nu_gap(K * P[states, :], K * F[states, :]))
     margins.append(stability_margin(K * P[states, :], np.eye(2)))

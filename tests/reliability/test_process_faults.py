@@ -37,7 +37,7 @@ FAULTS = textwrap.dedent('''
 
 
     class Fault:
-        def __init__(self, model, *, fault="none"):
+        def __init__(self, model, *, Ts, fault="none"):
             self.fault = fault
 
         def __call__(self, t, x, ref):
@@ -236,7 +236,7 @@ CHECKED = textwrap.dedent('''
 
 
     class Law:
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             if os.environ.get("FAULT_AT") == "__init__":
                 misbehave()
 
@@ -314,7 +314,7 @@ def test_a_helper_process_of_a_stopped_run_is_stopped_with_it(tmp_path):
 
 
         class Law:
-            def __init__(self, model):
+            def __init__(self, model, *, Ts):
                 pass
 
             def __call__(self, t, x, ref):

@@ -19,7 +19,7 @@ HANGS = textwrap.dedent('''
 
     class Hangs:
         """A law that never returns: a command running it only ends when stopped."""
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             pass
 
         def __call__(self, t, x, ref):

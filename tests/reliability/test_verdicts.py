@@ -221,7 +221,7 @@ RETURNS = textwrap.dedent('''
 
 
     class Returns:
-        def __init__(self, model, *, what="float"):
+        def __init__(self, model, *, Ts, what="float"):
             self.shape = SHAPES[what]
 
         def __call__(self, t, x, ref):
@@ -233,14 +233,14 @@ RETURNS = textwrap.dedent('''
     class Estimates:
         measured = ("theta1", "theta2", "theta1_dot", "theta2_dot")
 
-        def __init__(self, model, *, what="float"):
+        def __init__(self, model, *, Ts, what="float"):
             self.shape, self.n = SHAPES[what], model.n
 
         def reset(self, x_hat0):
             self.x = np.asarray(x_hat0, float)
             return self.x
 
-        def update(self, t, y, tau, Ts):
+        def update(self, t, y, tau):
             self.x[[0, 1, self.n, self.n + 1]] = y
             return self.shape(self.x)
 ''')
@@ -312,7 +312,7 @@ UNREADABLE = textwrap.dedent('''
 
 
     class Ends:
-        def __init__(self, model, *, how="exit 3"):
+        def __init__(self, model, *, Ts, how="exit 3"):
             self.how = how
 
         def __call__(self, t, x, ref):

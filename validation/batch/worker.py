@@ -161,7 +161,7 @@ def kernel_groups(scenarios) -> list[tuple[str, object]]:
                 continue
             seen.add(key)
             groups.append((f"{role} {spec.kind}", lambda b=build, s=s, m=model, r=role:
-                           compiled_form(b(s, m), r, s.Ts)))
+                           compiled_form(b(s, m), r)))
     for plant in sorted({s.plant.kind for s in scenarios}):
         example = next(s for s in scenarios if s.plant.kind == plant)
         groups.append((f"closed loop on the {plant} plant", lambda e=example: _short_run(e)))

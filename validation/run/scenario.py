@@ -501,9 +501,6 @@ def check_scenario(s: Scenario) -> None:
     check(s.transient < s.duration, "transient", f"{s.transient!r} s leaves nothing of the "
                                                  f"{s.duration!r} s run to measure")
     s.plant.check()
-    check(not (s.controller.kind == "pbc-idealised" and s.plant.actuated == 2),
-          "controller.kind", f"the {s.plant.label} has two actuators; the idealised PBC "
-          "(all n rows of eq. 20 applied) runs only on the reduced plant")
     check(not (s.feedback == "estimate" and s.observer.kind == "none"), "feedback",
           "'estimate' needs an observer (observer.kind is 'none')")
     for link, name in ((1, "L1"), (2, "L2")):

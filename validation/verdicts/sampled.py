@@ -7,7 +7,8 @@ linearised about the reference state x_d(t) = [θ_d, 0, θ̇_d, 0] (`linear.law_
 gain it applies, from the law object itself, built exactly as a run builds it), and the
 plant about rest at its configuration [θ_d(t), 0] (frozen time: the plant's
 velocity-dependent Coriolis terms, second order in the reference rates of at most 1.3
-rad/s, are left out).  A law with an option ``Ts`` (the LQR) is rebuilt at every period.
+rad/s, are left out).  The law is built at every period it is evaluated at, as a run at
+that period builds it (a discrete design such as the LQR differs from period to period).
 
 - **Predicted**: the largest Ts below which the sampled loop is stable at every point
   (`linear.largest_stable_period`), on the linearisation of the case's own plant — the
@@ -36,7 +37,6 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from controllers import CONTROLLERS, PluginError, accepted_options, resolve
 from reduced_model import cached_model
 
 from ..run._config import ConfigError
@@ -97,29 +97,20 @@ class _Case:
             x = np.zeros(2 * n)
             x[:2], x[n:n + 2] = theta, rate
             self.points.append((float(t), x))
-        try:
-            accepted = accepted_options(resolve(s.controller.kind, CONTROLLERS, "controller"))
-        except PluginError:
-            accepted = None
-        self.per_period = (accepted is not None and "Ts" in accepted
-                           and "Ts" not in s.controller.options)
         self._gains: dict = {}
 
     def gains(self, Ts: float) -> list[np.ndarray] | None:
         """The law's gain at every point when run at period Ts (None if the law cannot be
         built at that period)."""
-        key = Ts if self.per_period else None
-        if key not in self._gains:
-            scenario = dataclasses.replace(self.scenario, Ts=Ts) if self.per_period \
-                else self.scenario
-            try:
-                law = build_controller(scenario, self.model)
+        if Ts not in self._gains:
+            try:  # built at the period it runs at, as a run builds it
+                law = build_controller(dataclasses.replace(self.scenario, Ts=Ts), self.model)
             except (ConfigError, ValueError):
-                self._gains[key] = None
+                self._gains[Ts] = None
             else:
-                self._gains[key] = [law_gain(law, x, t, self.reference, shared=(self.model,))
-                                    for t, x in self.points]
-        return self._gains[key]
+                self._gains[Ts] = [law_gain(law, x, t, self.reference, shared=(self.model,))
+                                   for t, x in self.points]
+        return self._gains[Ts]
 
     def theta(self, point: int) -> np.ndarray:
         return self.points[point][1][:2]

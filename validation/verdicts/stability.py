@@ -41,6 +41,7 @@ import numpy as np
 
 from ..batch.campaign import PlannedRun, run_planned
 from ..batch.executor import Runner
+from ..run.laws import applies_generalised_forces
 from ..run.plants import is_truth, plant_settings, with_plant
 from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import ResultStore, run_id
@@ -160,9 +161,9 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
                 params = scenario_to_mapping(arm_parameters(arm))
                 if arm != data["arm"]:  # start the parameter tables from the other arm
                     base["true_params"] = base["nominal_params"] = params
-                if (plant_settings(base["plant"]).actuated == 2
-                        and data["controller"]["kind"] == "pbc-idealised"):
-                    continue  # two actuators: the idealised law cannot run there
+                if plant_settings(base["plant"]).actuated == 2 and \
+                        applies_generalised_forces(s):
+                    continue  # two actuators: a law of forces on every coordinate cannot run
                 label = _label(base)
                 key = (label, _options_key(base), plant, arm)
                 base["name"] = f"stability/{label}"
