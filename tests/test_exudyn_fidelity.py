@@ -150,7 +150,7 @@ def test_reduced_and_fe_frequencies_side_by_side(theta2):
 def test_locked_arm_at_an_angle_stays_at_rest():
     """The locking clamps keep the reference relative angles (no spurious prestress)."""
     from plant_exudyn import build_arm
-    from plant_exudyn._plant import simulation_settings
+    from plant_exudyn import simulation_settings
     system = build_arm(ArmParameters(), Mesh(), theta=(0.3, 1.2), lock_joints=True)
     ss = simulation_settings(step=1e-3)
     ss.timeIntegration.endTime, ss.timeIntegration.numberOfSteps = 0.1, 100
