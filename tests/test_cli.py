@@ -78,7 +78,8 @@ NOISY = {"duration": 0.6, "transient": 0.2, "sensors": {"encoder_noise": 1e-4,
 @pytest.fixture(scope="module")
 def stored(tmp_path_factory):
     """A results folder with two runs of one name (two seeds) from a campaign."""
-    from validation.batch.campaign import campaign_from_mapping, run_campaign
+    from validation.batch.campaign import campaign_from_mapping
+    from validation.batch.queue import run_campaign
     out = tmp_path_factory.mktemp("stored")
     run_campaign(campaign_from_mapping({"name": "c", "scenario": NOISY, "sweep": [
         {"name": "noisy", "grid": {"seed": [1, 2]}}]}), out, progress=False)

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+from validation.batch.queue import run_campaign
 from validation.cli import main
 from validation.batch.store import ResultStore, StoreError
 

@@ -10,7 +10,8 @@ import pytest
 
 from campaign_testing import metrics_table
 from validation.batch import committing
-from validation.batch.campaign import campaign_from_mapping, expand, run_campaign
+from validation.batch.campaign import campaign_from_mapping, expand
+from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
 from validation.batch.resimulate import full_result
 from validation.batch.store import ResultStore, environment

@@ -26,7 +26,7 @@ _EXPORTS = {
     "build": "run.loop", "RunResult": "run.results", "all_metrics": "run.metrics",
     "Campaign": "batch.campaign", "load_campaign": "batch.campaign",
     "campaign_from_mapping": "batch.campaign", "expand": "batch.campaign",
-    "run_campaign": "batch.campaign", "make_runner": "batch.executor",
+    "run_campaign": "batch.queue", "make_runner": "batch.executor",
     "ResultStore": "batch.store",
     "nu_gap": "verdicts.nugap", "stability_margin": "verdicts.nugap",
     "reduced_linear_model": "verdicts.linear", "law_gain": "verdicts.linear",

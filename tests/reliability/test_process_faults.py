@@ -340,7 +340,8 @@ def test_a_helper_process_of_a_stopped_run_is_stopped_with_it(tmp_path):
 @pytest.mark.slow  # 19 s (a real Dask cluster); the local runners' limit is tested above
 def test_a_run_past_its_time_limit_is_stopped_on_dask(lab, monkeypatch, tmp_path):
     distributed = pytest.importorskip("distributed")
-    from validation.batch.campaign import campaign_from_mapping, run_campaign
+    from validation.batch.campaign import campaign_from_mapping
+    from validation.batch.queue import run_campaign
     from validation.batch.executor import make_runner
     monkeypatch.syspath_prepend(str(lab))  # the Dask workers find the plug-in module
     spec = {"name": "dask", "scenario": {"duration": 0.5, "transient": 0.1},

@@ -17,7 +17,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+
+from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
 from reduced_model._cache_guard import kernel_keys
 from validation.batch.fingerprint import (_ROOT, forget_plugins, plugin_sources,

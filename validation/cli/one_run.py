@@ -9,9 +9,11 @@ import math
 import sys
 from pathlib import Path
 
+from ..batch.campaign import PlannedRun
 from ..batch.executor import available_cores, check_runner, make_runner
+from ..batch.interrupts import Interrupted
+from ..batch.queue import run_planned
 from ..batch.store import ResultStore, StoreError, run_id
-from ..batch.storing import landed, one_task
 from ..run._config import ConfigError, check_label
 from ..run.plants import is_truth, plant_settings
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
@@ -237,12 +239,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     with make_runner("local", workers, run_timeout=args.run_timeout,
                      memory_limit=args.memory_limit, scenarios=[scenario],
                      progress=sys.stderr) as runner:  # worker processes
-        with one_task(rid, scenario, store.out) as task:  # its worker writes the file
-            (_, stored), = runner.results([(rid, task)])
-        stored = landed(store.out, stored)
-        if stored.values is None:
-            raise StoreError(stored.error)
-        store.insert([stored.values])
+        summary = run_planned([PlannedRun(rid, scenario, "", {})], store.out, name="",
+                              runner=runner, progress=False, export=False, rerun=True)
+        if summary.unstored:
+            raise StoreError(summary.unstored[0])
+        if summary.interrupted:
+            raise Interrupted(summary.interrupted)
         result = store.row(rid)
         path = store.out / result.file
         metrics = result.metrics

@@ -165,7 +165,7 @@ def _case_figures(v: dict, store) -> list:
         return []
     from ..batch.store import run_id
     from ..run._config import to_mapping
-    from ..run.metrics import vibration_cutoff
+    from ..run.vibration import vibration_cutoff
     from ..run.plants import plant_for_role, plant_settings
     from reduced_model import ArmParameters
     truth = store.row(truth_id)

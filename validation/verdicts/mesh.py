@@ -30,7 +30,9 @@ from __future__ import annotations
 
 import math
 
-from ..batch.campaign import PlannedRun, run_planned
+from ..batch.campaign import PlannedRun
+
+from ..batch.queue import run_planned
 from ..batch.executor import Runner
 from ..batch.store import run_id
 from ..run.plants import LEVELS, Refinement, is_truth, plant_settings

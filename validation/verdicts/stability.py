@@ -39,7 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..batch.campaign import PlannedRun, run_planned
+from ..batch.campaign import PlannedRun
+
+from ..batch.queue import run_planned
 from ..batch.executor import Runner
 from ..run.laws import applies_generalised_forces
 from ..run.plants import is_truth, plant_settings, with_plant
