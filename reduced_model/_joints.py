@@ -41,7 +41,7 @@ from numba import njit
 from . import _kernels as kern
 
 __all__ = ["PARAMETERS", "new_joint_buffers", "joints_active", "reset_joints",
-           "advance_joints", "advance_joints_packed", "motor_state_into"]
+           "advance_joints", "advance_joints_packed", "motor_state_into", "lag_step"]
 
 #: The joint fields of `ArmParameters` in ``jp`` (entry 2·field + joint).
 PARAMETERS = ("coulomb", "static", "stribeck_velocity", "viscous", "gear_stiffness",
@@ -103,6 +103,16 @@ def motor_state_into(jp, js, x, out):
         drive = jp[_K + i] > 0.0
         out[i] = js[_ROT + i] if drive else x[i]
         out[2 + i] = js[_ROT_RATE + i] if drive else x[n + i]
+
+
+@njit(cache=True)
+def lag_step(command, start, T, h):
+    """(mean, end) over a step ``h`` of the first-order lag (time constant ``T``; 0:
+    none) from ``start`` towards the held ``command``: u(t) = c + (u0 − c) e^{−t/T}."""
+    if T <= 0.0:
+        return command, command
+    a = math.exp(-h / T)
+    return command + (start - command) * T / h * (1.0 - a), command + (start - command) * a
 
 
 @njit(cache=True, inline="always")
@@ -256,13 +266,7 @@ def advance_joints(d, x, tau, ext, h, nsteps, ws, jp, js, jw):
     rot = js[_ROT:_ROT + 4]
     for _ in range(nsteps):
         for i in range(2):  # the lag: this step's mean torque and its value at the end
-            c, u0, T = tau[i], js[_APPLIED + i], jp[_T + i]
-            if T > 0.0:
-                a = math.exp(-h / T)
-                u[i] = c + (u0 - c) * T / h * (1.0 - a)
-                u_end[i] = c + (u0 - c) * a
-            else:
-                u[i] = u_end[i] = c
+            u[i], u_end[i] = lag_step(tau[i], js[_APPLIED + i], jp[_T + i], h)
         for i in range(n):  # generalised forces of the step: ext plus the modal inputs
             fext[i] = ext[i] + (tau[i] if 2 <= i < tau.shape[0] else 0.0)
         for _pass in range(4):  # stuck coordinates whose holding torque exceeds τs slip
