@@ -8,7 +8,9 @@ from scipy.integrate import cumulative_trapezoid
 
 from reduced_model import (ArmModel, ArmParameters, FieldError, LinkModes, Measurement,
                            Plant, PlantFailure, SensorConfig, cached_model)
+from reduced_model._joint_linear import with_joints
 from reduced_model._joints import lag_step
+from reduced_model._parameters import JOINT_EFFECTS
 from reduced_model._plant import positive_step
 from reduced_model._plant_base import LEVELS, PlantSettings, Refinement
 
@@ -270,13 +272,18 @@ class ExudynPlant(Plant):
                                       or new[2] != applied[2] or new[3] != applied[3]):
             self.hold.apply((new[0] - applied[0], new[1] - applied[1],
                              new[2] - applied[2], new[3] - applied[3]))
+        self.set_loads(new)
+
+    def set_loads(self, new) -> None:
+        """Set the loads of the inputs (τ1, τ2, Fx, Fy) ``new`` that changed (no hold)."""
+        applied = self._applied
         set_load, scaled = self._set_load, self._scaled
         for j in (0, 1):
             if new[j] != applied[j]:
                 for load, parameter, value in self._inputs[j]:
                     set_load(load, parameter, scaled(value, new[j]))
-        if fx != applied[2] or fy != applied[3]:
-            set_load(self.system.tip_load, "loadVector", [fx, fy, 0.0])
+        if new[2] != applied[2] or new[3] != applied[3]:
+            set_load(self.system.tip_load, "loadVector", [new[2], new[3], 0.0])
         applied[:] = new
 
     def measure(self) -> Measurement:
@@ -453,7 +460,16 @@ def linear_model(params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
     control.StateSpace
         Inputs ``tau1``, ``tau2`` [N m]; outputs `reduced_model.output_names` (deviations
         from the configuration: rad, m, rad/s, m/s); states ``eta1…`` (FE modes, the first
-        two rigid) and their rates.  Continuous, or discrete with ``dt = Ts``.
+        two rigid) and their rates, then the drives' and current loops' (the linear part
+        of the arm's joints, `reduced_model._joint_linear.with_joints`; dry friction and
+        backlash are left out).  Continuous, or discrete with ``dt = Ts``.
     """
+    import control
+
     from ._linear import linearise
-    return linearise(ExudynPlant(params, model=model, mesh=mesh), theta=theta, Ts=Ts)
+    params = params if params is not None else ArmParameters()
+    arm = linearise(ExudynPlant(params.without(*JOINT_EFFECTS), model=model, mesh=mesh),
+                    theta=theta)
+    sys_ = with_joints(arm, params)
+    return sys_ if Ts is None else control.sample_system(sys_, Ts, method="zoh",
+                                                         name=sys_.name + "_zoh")

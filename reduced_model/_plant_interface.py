@@ -6,11 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["Measurement", "TrueState", "PlantFailure", "check_sample_time",
-           "TRUTH_EXTRAS", "true_state_from_vector", "coordinate_names", "output_names"]
+           "TRUTH_EXTRAS", "MOTOR_OUTPUTS", "true_state_from_vector", "coordinate_names",
+           "output_names"]
 
 #: After the state [θ, q, θ̇, q̇], `truth_vector()` holds these, in this order.
 TRUTH_EXTRAS = ("tip1_x", "tip1_y", "tip2_x", "tip2_y", "tip_defl1", "tip_defl2",
                 "proj_res1", "proj_res2", "motor1", "motor2", "motor1_dot", "motor2_dot")
+#: What the encoders read (a drive's rotor, else θ) and its rate: the last of both.
+MOTOR_OUTPUTS = TRUTH_EXTRAS[-4:]
 
 
 def coordinate_names(modes_per_link: tuple[int, int]) -> tuple[str, ...]:
@@ -47,10 +50,11 @@ def output_names(modes_per_link: tuple[int, int]) -> tuple[str, ...]:
     -------
     tuple of str
         The coordinates (`coordinate_names`), their rates (``..._dot``), then
-        ``tip_defl1``, ``tip_defl2``.
+        ``tip_defl1``, ``tip_defl2``, then `MOTOR_OUTPUTS` (what the encoders read).
     """
     coords = coordinate_names(modes_per_link)
-    return coords + tuple(f"{c}_dot" for c in coords) + ("tip_defl1", "tip_defl2")
+    return (coords + tuple(f"{c}_dot" for c in coords) + ("tip_defl1", "tip_defl2")
+            + MOTOR_OUTPUTS)
 
 
 class PlantFailure(RuntimeError):
