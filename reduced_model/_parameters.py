@@ -237,6 +237,29 @@ class ArmParameters:
         """Whether joint ``i`` has a drive (gear compliance and rotor inertia)."""
         return getattr(self, f"gear_stiffness{i}") > 0
 
+    def joints_text(self) -> str:
+        """The joint physics of this arm in words ("" for ideal joints), e.g. "joint 1:
+        friction 0.3/0.4 N m, viscous 0.2 N m s/rad; drive 1e+04 N m/rad, rotor 0.1 kg m²
+        (encoder on the motor)"."""
+        parts = []
+        for i in (1, 2):
+            get = lambda name: getattr(self, f"{name}{i}")  # noqa: E731
+            items = []
+            if self.static_friction(i) > 0:
+                items.append(f"friction {get('coulomb'):g}/{self.static_friction(i):g} N m")
+            if get("viscous") > 0:
+                items.append(f"viscous {get('viscous'):g} N m s/rad")
+            if self.has_drive(i):
+                items.append(f"drive {get('gear_stiffness'):g} N m/rad, rotor "
+                             f"{get('rotor_inertia'):g} kg m²"
+                             + (f", backlash {get('backlash'):g} rad" if get("backlash") else "")
+                             + " (encoder on the motor)")
+            if get("torque_time_constant") > 0:
+                items.append(f"torque lag {get('torque_time_constant'):g} s")
+            if items:
+                parts.append(f"joint {i}: " + ", ".join(items))
+        return "; ".join(parts)
+
     def without(self, *effects: str) -> "ArmParameters":
         """A copy with the `JOINT_EFFECTS` ``effects`` (e.g. "friction") switched off."""
         return self.replace(**{f"{name}{i}": 0.0 for effect in effects

@@ -93,7 +93,8 @@ def _add_cases(p) -> None:
     p.add_argument("--plant", action="append", choices=PLANT_KINDS,
                    help="plant(s) (default: both for a scenario, the campaign's own)")
     p.add_argument("--arm", action="append", choices=tuple(ARMS),
-                   help="arm(s) (default: both for a scenario, the campaign's own)")
+                   help="arm(s) (default: default and table1 for a scenario, the campaign's "
+                        "own)")
 
 
 def _add_execution(p, *, dask: bool = True) -> None:
@@ -149,7 +150,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="rerun a stored run exactly (RUN: its id or name; a name shared "
                           "with mesh/step checks means the nominal run), with the flags and "
                           "--set as changes")
-    run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm or the paper's table1 "
+    run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm, the paper's table1 or "
+                                                        f"the harmonic-drive lab arm "
                                                         f"(default: {d.arm})")
     run.add_argument("--plant", choices=PLANT_KINDS, help=f"reduced model or Exudyn truth plant "
                                                      f"(default: {d.plant.kind})")
