@@ -50,7 +50,7 @@ class Joints:
         Per joint, its rotor node (None: no drive).
     friction : list
         Per bristle connector, (data node, (node, coordinate) of its base and of its
-        moving side, joint 1 or 2).
+        moving side, joint 1 or 2, the connector).
     stator, ground : int or None
         The stator's node (joint 2's base), the ground node (joint 1's, if needed).
     """
@@ -91,7 +91,7 @@ class Joints:
         gear in its backlash's contact."""
         sd = mbs.systemData
         data = np.zeros(sd.DataSize())
-        for node, base, moving, i in self.friction:
+        for node, base, moving, *_ in self.friction:
             def value(x, side):
                 return 0.0 if side[0] == self.ground else x[sd.GetNodeLTGODE2(side[0])[side[1]]]
             rel, rate = value(u, moving) - value(u, base), value(v, moving) - value(v, base)
@@ -195,6 +195,7 @@ def _add_friction(mbs, params, i, base, moving, coordinate, joints, step) -> Non
             stickingStiffness=inertia / step**2,
             stickingDamping=2.0 * BRISTLE_DAMPING_RATIO * inertia / step,
             frictionProportionalZone=0.0)
-        joints.friction.append((data, base, moving, i))
-    mbs.AddObject(CoordinateSpringDamperExt(
+    connector = mbs.AddObject(CoordinateSpringDamperExt(
         markerNumbers=[coordinate(*base), coordinate(*moving)], **options))
+    if static > 0:
+        joints.friction.append((data, base, moving, i, connector))
