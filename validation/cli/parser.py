@@ -219,7 +219,11 @@ def build_parser() -> argparse.ArgumentParser:
     paper = sub.add_parser("reproduce-paper",
                            help="run campaigns/paper.toml, the stability map, the claims "
                                 "table and the report")
-    paper.add_argument("--out", metavar="DIR", help="results folder (default results/paper)")
+    paper.add_argument("--lab", action="store_true",
+                       help="the paper's claims on the lab arm (harmonic drives: friction, "
+                            "drives, current loops; campaigns/lab.toml) instead of its two arms")
+    paper.add_argument("--out", metavar="DIR",
+                       help="results folder (default results/paper, with --lab results/lab)")
     _add_execution(paper, dask=False)
     paper.add_argument("--no-stability", action="store_true", help="skip the stability map")
     paper.add_argument("--no-report", action="store_true", help="skip the report")
