@@ -10,17 +10,14 @@ when that holding torque exceeds the breakaway level, and sticks again when the 
 reverses (a post-Newton switch, the step repeated).  The viscous part is the connector's
 linear damping.  The bristle is resolved by the integration step h: on the inertia J it
 holds its natural frequency is 1/h and its damping ratio `BRISTLE_DAMPING_RATIO`
-(stiffness J/h², damping 2ζJ/h).  Its deflection at breakaway, τs h²/J, is 7.6e-6 rad
-for τs = 0.3 N m on joint 2 at the default 0.5 ms (J ≈ 0.01 kg m², the stator); it
-vanishes as the step is refined, where the bristle tends to the reduced plant's exact
-stick.  Measured on joint 2 (τs = 0.3 N m, 1 s of 0.26 − 0.02 sin(10πt) N m), the choices
-this rests on: a stiff, unresolved bristle (1e-7 rad at breakaway) broke loose below τs —
-the exact hold (`_hold`) restarts a step with the acceleration jump of the new torque, as
-a finite spring must, and the bristle's damping reads that velocity — and slid 0.02 rad
-under a constant 0.25 N m; resolved, with ζ = 1, 2, 5, it held to 5e-6, 4e-6, 1.6e-5 rad
-(ζ = 5: its fast pole, −10/h, is not resolved and the first torque step slips it briefly).
-ζ = 2: a torque step loads the bristle by at most 4.8 % more than the torque (ζ = 1:
-13.5 %), so a step above 0.95 τs can break it loose where the exact stick holds.
+(stiffness J/h², damping 2ζJ/h).  Unresolved (stiffer), it breaks loose below the
+breakaway level: the exact hold (`_hold`) restarts a step with the acceleration jump of
+the new torque, as a finite spring must, and the bristle's damping reads that velocity as
+a large force.  ζ = 2 keeps the force a torque step puts on the bristle within 4.8 % of
+the torque (ζ = 1: 13.5 %, a break-loose at 0.88 τs where the exact stick holds) while
+its fast pole, −(2 + √3)/h, stays within what the step resolves.  Its deflection at
+breakaway, τs h²/J, vanishes as the step is refined: the bristle tends to the reduced
+plant's exact stick (docs/theory/joints.rst).
 """
 from __future__ import annotations
 
