@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import inspect
 import math
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,7 +19,7 @@ import numpy as np
 from controllers import ReferenceKind
 from reduced_model import STRAIN_QUANTITIES, ArmParameters, validate_modes_per_link
 
-from ._config import ConfigError, check, from_mapping, to_mapping
+from .config import ConfigError, check, from_mapping, to_mapping
 from ._sample import DisturbanceKind, DisturbanceTarget
 from .laws import check_laws, nominal_model
 from .plants import PLANTS, PlantTable
@@ -477,10 +478,15 @@ class Scenario:
                                                and self.observer.kind != "none")
 
 
+#: The scenario objects checked in this process (a frozen scenario checked stays valid):
+#: by id, held weakly (a scenario holds tables, so it has no hash).
+_CHECKED: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
+
+
 def check_scenario(s: Scenario) -> None:
     """Reject combinations that cannot run, before anything is simulated (once per
     scenario object: a frozen scenario checked stays valid)."""
-    if s.__dict__.get("_checked"):
+    if _CHECKED.get(id(s)) is s:
         return
     samples = s.duration / s.Ts
     check(samples <= MAX_SAMPLES, "duration", f"{s.duration:g} s at Ts = {s.Ts:g} s is "
@@ -531,7 +537,7 @@ def check_scenario(s: Scenario) -> None:
                   f"gauges at {list(gauges)} cannot tell the link's {modes} modes apart "
                   "(coincident, or at nodes of a mode)")
     check_requirements(s)
-    object.__setattr__(s, "_checked", True)  # frozen: what passed once passes again
+    _CHECKED[id(s)] = s
 
 
 def arm_parameters(arm: str) -> ArmParameters:

@@ -37,7 +37,7 @@ import itertools
 import math
 from dataclasses import dataclass, field
 
-from ..run._config import ConfigError, check
+from ..run.config import ConfigError, check
 from ..batch.campaign import PlannedRun
 from ..batch.queue import run_planned
 from ..run.plants import with_plant
