@@ -17,8 +17,8 @@ import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
-from reduced_model._kernels import (cholesky_factor_inplace, cholesky_solve_factored,
-                                    rk4_advance_packed)
+from reduced_model._cholesky import cholesky_factor_inplace, cholesky_solve_factored
+from reduced_model._kernels import rk4_advance_packed
 from reduced_model._views import matrix_view
 
 from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
