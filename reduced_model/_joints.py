@@ -39,6 +39,7 @@ import numpy as np
 from numba import njit
 
 from . import _kernels as kern
+from ._cholesky import cholesky_factor_inplace, cholesky_solve_factored, cholesky_solve_inplace
 
 __all__ = ["PARAMETERS", "new_joint_buffers", "joints_active", "reset_joints",
            "advance_joints", "advance_joints_packed", "motor_state_into", "lag_step"]
@@ -189,7 +190,7 @@ def _derivatives(d, x, rot, u, ext, xdot, rdot, lam, ws, jp, js, jw):
                 M[k, j] = 0.0
             M[j, j] = 1.0
             Qdd[j] = 0.0
-    if not kern.cholesky_solve_inplace(M, Qdd):
+    if not cholesky_solve_inplace(M, Qdd):
         Qdd[:] = np.nan
         return
     for j in range(2):
@@ -223,7 +224,7 @@ def _stop(d, x, rot, jp, js, jw, ws):
         return
     # Q̇ −= Y S⁻¹ Gᵀ Q̇, Y = M⁻¹ G, S = Gᵀ Y, G the columns e_j of the stuck joints.
     kern.mass_matrix_into(d, x[:n], ws.M, ws)
-    if not kern.cholesky_factor_inplace(ws.M):
+    if not cholesky_factor_inplace(ws.M):
         x[n:] = np.nan
         return
     Y = _work(jw, n)[4]
@@ -233,7 +234,7 @@ def _stop(d, x, rot, jp, js, jw, ws):
             col = Y[n:] if first >= 0 else Y[:n]
             col[:] = 0.0
             col[j] = 1.0
-            kern.cholesky_solve_factored(ws.M, col)
+            cholesky_solve_factored(ws.M, col)
             if first < 0:
                 first = j
             last = j

@@ -17,7 +17,7 @@ from ._modes import LinkModes
 from ._parameters import FieldError
 from ._plant_interface import TRUTH_EXTRAS, Measurement, coordinate_names
 
-__all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES"]
+__all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES", "measured_names"]
 
 STRAIN_QUANTITIES = {"deflection": 0, "curvature": 2}
 
@@ -70,6 +70,33 @@ class SensorConfig:
                                tuple(tuple(float(x) for x in g) for g in gauges))
 
 
+def measured_names(modes_per_link: tuple[int, int], *, modal: bool, rates: bool,
+                   tip_position: bool) -> tuple[str, ...]:
+    """The names of a measurement, in its order.
+
+    Parameters
+    ----------
+    modes_per_link : (int, int)
+        Modes of link 1 and link 2 of the basis q is expressed in.
+    modal : bool
+        Whether the modal coordinates are measured.
+    rates : bool
+        Whether the rates are.
+    tip_position : bool
+        Whether the payload position is.
+
+    Returns
+    -------
+    tuple of str
+        θ, then q (``modal``), then their rates (``rates``), then ``tip_x``, ``tip_y``.
+    """
+    coords = coordinate_names(modes_per_link)
+    names = coords if modal else coords[:2]
+    if rates:
+        names += tuple(f"{n}_dot" for n in names)
+    return names + (("tip_x", "tip_y") if tip_position else ())
+
+
 class SensorModel:
     """Builds the `Measurement` of a plant from a `SensorConfig`.
 
@@ -94,13 +121,11 @@ class SensorModel:
         self.config = config
         self._plant = plant
         self.encoder_side = tuple(plant.encoder_side)
-        states = coordinate_names(tuple(m.n for m in modes))
-        names = states if config.modal else states[:2]
-        if config.rates:
-            names += tuple(f"{n}_dot" for n in names)
-        if config.tip_position:
-            names += ("tip_x", "tip_y")
-        self.names = names
+        modes_per_link = tuple(m.n for m in modes)
+        self.names = names = measured_names(modes_per_link, modal=config.modal,
+                                            rates=config.rates,
+                                            tip_position=config.tip_position)
+        states = coordinate_names(modes_per_link)
         states += tuple(f"{n}_dot" for n in states)
         layout = list(states + TRUTH_EXTRAS)
         for i, side in enumerate(self.encoder_side):  # a motor-side encoder reads the rotor

@@ -21,7 +21,7 @@ import importlib
 #: Public name → the module that defines it.
 _EXPORTS = {
     "Scenario": "run.scenario", "scenario_from_mapping": "run.scenario",
-    "scenario_to_mapping": "run.scenario", "ConfigError": "run._config",
+    "scenario_to_mapping": "run.scenario", "ConfigError": "run.config",
     "load_toml": "run.tomlfiles", "simulate": "run.loop", "run_scenario": "run.loop",
     "build": "run.loop", "RunResult": "run.results", "all_metrics": "run.metrics",
     "Campaign": "batch.campaign", "load_campaign": "batch.campaign",

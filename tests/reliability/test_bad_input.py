@@ -300,7 +300,7 @@ def test_a_refused_runner_keeps_a_results_folder_that_was_there(tmp_path, monkey
     """Known-good of removing what a refused command created: a folder that held results
     before stays, runs and all."""
     from validation.cli import common
-    from validation.run._config import ConfigError
+    from validation.run.config import ConfigError
     (tmp_path / "ok.toml").write_text(CAMPAIGN_OK)
     out = tmp_path / "out"
     assert main(["campaign", str(tmp_path / "ok.toml"), "--out", str(out),

@@ -14,7 +14,7 @@ from ..batch.executor import available_cores, check_runner, make_runner
 from ..batch.interrupts import Interrupted
 from ..batch.queue import run_planned
 from ..batch.store import ResultStore, StoreError, run_id
-from ..run._config import ConfigError, check_label
+from ..run.config import ConfigError, check_label
 from ..run.plants import is_truth, plant_settings
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..batch.interrupts import signals_interrupt
 from ..batch.store import ResultStore, StoreError
-from ..run._config import ConfigError
+from ..run.config import ConfigError
 from ..run.plants import ROLES
 from ..run.results import own_folder
 from ..run.scenario import PAPER_ARMS, PLANT_KINDS, scenario_from_mapping

@@ -24,7 +24,7 @@ from controllers._compiled import absent
 from reduced_model import ArmModel, PlantFailure, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
-from ._config import short_repr, short_str
+from .config import short_repr, short_str
 from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
                       check_bounds, context, law_fields, noise_stream, post_sample, pre_sample,
                       run_reduced, sample_laws, signal_layout, status_message)

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 
 from reduced_model._parameters import JOINT_EFFECTS
 
-from ..run._config import ConfigError, check
+from ..run.config import ConfigError, check
 from ..batch.campaign import PlannedRun
 from ..batch.queue import run_planned
 from ..run.plants import with_plant

@@ -95,7 +95,7 @@ import scipy.stats
 from reduced_model import ArmParameters, output_names
 
 from ..batch.store import run_id
-from ..run._config import ConfigError, check
+from ..run.config import ConfigError, check
 from ..run.experiments import Experiment, FrequencyResponse, check_experiment, write_experiment
 from ..run.laws import measurement_names, nominal_model
 from ..run.loop import measurement_noise

@@ -80,7 +80,7 @@ def _probe_value(value):
 
 
 def _allowed(cls, name: str, annotation, required: dict, special: dict) -> str:
-    from validation.run._config import ConfigError
+    from validation.run.config import ConfigError
     from reduced_model import FieldError
     if (cls, name) in special:
         return special[(cls, name)]
