@@ -20,8 +20,8 @@ is decided per internal step: at its start, a stuck coordinate whose holding tor
 exceeds τs slips (direction −sign λ); at its end, a slipping coordinate whose velocity
 reached zero or reversed sticks, its velocity set to zero by the impulse that the
 constrained arm takes (a projection in the mass metric: it only removes energy).
-Between switches the step is RK4 on a smooth right-hand side; a switch costs first
-order in the step (bench/bench_joints.py measures both).
+Between switches the step is RK4 on a smooth right-hand side; a switch costs an error
+set by where within its step it fell (bench/bench_joints.py measures the truth plant's).
 
 The torque lag: over each internal step the motor torque is the exact mean of the lag's
 response to the held command, u(t) = c + (u0 − c) e^{−t/T}, so both plants apply the
