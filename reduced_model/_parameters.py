@@ -218,7 +218,9 @@ class ArmParameters:
              "friction falls from one to the other over it)")
         drive = get("gear_stiffness") > 0
         need(drive == (get("rotor_inertia") > 0), "rotor_inertia",
-             f"and gear_stiffness{i} must both be > 0 (a drive) or both 0 (a rigid joint)")
+             f"must be > 0 where gear_stiffness{i} > 0 (a drive) and 0 where it is 0 (a "
+             f"rigid joint), got {get('rotor_inertia')!r} with gear_stiffness{i} = "
+             f"{get('gear_stiffness')!r}")
         for name in ("gear_damping", "backlash"):
             need(drive or get(name) == 0, name, f"needs a drive (gear_stiffness{i} > 0)")
         acting = [n for n in (*JOINT_EFFECTS["friction"], *JOINT_EFFECTS["drive"])

@@ -140,3 +140,18 @@ def test_the_current_loop_lag_is_the_same_first_order_lag_everywhere():
     response = control.forced_response(P, t, np.vstack([np.ones_like(t), 0 * t]))
     linear = response.outputs[list(P.output_labels).index("theta1")]
     assert np.abs(linear - runs[0][:, 0]).max() <= 1e-3 * travel
+
+
+@pytest.mark.parametrize("bad, field, good", [
+    ({"gear_stiffness1": 100.0}, "rotor_inertia1", {"rotor_inertia1": 0.1}),
+    ({"backlash2": 1e-3}, "backlash2", {"gear_stiffness2": 1e3, "rotor_inertia2": 0.05}),
+    ({"coulomb1": 0.3, "breakaway1": 0.2}, "breakaway1", {"breakaway1": 0.3}),
+    ({"coulomb1": 0.3, "breakaway1": 0.4}, "stribeck_velocity1", {"stribeck_velocity1": 0.01}),
+    ({"stator_inertia": 0.0, "viscous2": 0.1}, "viscous2", {"stator_inertia": 0.01}),
+])
+def test_a_joint_that_is_not_one_is_refused_naming_its_field(bad, field, good):
+    """Known-bad values fail naming the field; the same with the missing part given
+    (known-good) is an arm."""
+    with pytest.raises(ValueError, match=rf"^ArmParameters\.{field} "):
+        ArmParameters(**bad)
+    ArmParameters(**bad | good)
