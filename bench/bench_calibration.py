@@ -76,8 +76,7 @@ def coverage(folder: Path) -> list[dict]:
     from validation import run_scenario, scenario_from_mapping
     from validation.batch.executor import SerialRunner
     from validation.run.experiments import from_run
-    from validation.verdicts.calibration import (calibrate, calibration_settings,
-                                                 plan_calibration)
+    from validation import calibrate, calibration_settings, plan_calibration
     names = ["true_params.EI1", "true_params.EI2", "true_params.Mp"]
     truth = {"true_params.EI1": 10.0, "true_params.EI2": 10.0, "true_params.Mp": 0.1}
     held = {n: 0 for n in names}

@@ -18,8 +18,10 @@ from validation.batch.executor import SerialRunner
 from validation.run._config import ConfigError
 from validation.run.experiments import from_run, read_experiment, write_experiment
 from validation.run.tomlfiles import load_toml
-from validation.verdicts.calibration import (calibrate, calibration_settings, linear_response,
-                                             parameter_uncertainty, plan_calibration)
+from validation.verdicts.calibration import calibrate
+from validation.verdicts.calibration_intervals import parameter_uncertainty
+from validation.verdicts.calibration_plan import linear_response, plan_calibration
+from validation.verdicts.calibration_settings import calibration_settings
 
 NOISE = {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}  # campaigns/base.toml
 EI_MP = ["true_params.EI1", "true_params.EI2", "true_params.Mp"]
@@ -378,7 +380,7 @@ def test_the_shipped_example_is_labelled_small_and_plans():
     """Every data file says it is synthetic, the set stays small (issue: a few hundred
     KB), and its files pass every check of a calibration."""
     from validation.run.experiments import read_frequency_response
-    from validation.verdicts.calibration import base_scenario
+    from validation.verdicts.calibration_settings import base_scenario
     files = sorted(EXAMPLE.glob("*.csv"))
     assert {f.name for f in files} == {"tracking.csv", "moving.csv", "frf.csv"}
     assert sum(f.stat().st_size for f in files) < 400_000

@@ -26,8 +26,9 @@ def _fit_names(text: str | None) -> list[str] | None:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from ..verdicts.calibration import base_scenario, calibrate, calibration_settings, \
-        plan_calibration
+    from ..verdicts.calibration import calibrate
+    from ..verdicts.calibration_plan import plan_calibration
+    from ..verdicts.calibration_settings import base_scenario, calibration_settings
     base, table = base_scenario(args.config)
     settings = calibration_settings(table, _fit_names(args.fit), base)
     experiments = [_experiment(spec) for spec in args.data]

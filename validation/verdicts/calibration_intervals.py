@@ -1,0 +1,121 @@
+"""Calibration's uncertainty: standard errors, intervals, correlations and
+identifiability from the Jacobian at the estimate (``flexarm calibrate``).
+
+**Uncertainty.**  At the estimate the Jacobian is recomputed by central differences
+(truncation error O(h²), so an exact degeneracy shows as one), and with the residual
+variance s² = rᵀr / (m − p) the covariance is s² (JᵀJ)⁻¹, by the singular value
+decomposition J = U S Vᵀ.  A direction v_k of parameter space is *not identifiable*
+when the data cannot see it: its singular value is within the Jacobian's own error (the
+float32 resolution of stored signals over the difference step, ×10), or the data
+determine it only to more than ±100 % of the starting values (s / S_k > 1).  Every
+parameter with a weight |v_k,i| ≥ 0.1 on such a direction is reported *not
+identifiable*, with the direction (e.g. +0.45 mh2 − 0.89 stator_mass: two masses at
+the same point, which the arm sees only as their sum) and no standard error; the others
+get their standard error, a 95 % interval (Student t, m − p degrees of freedom) and
+their correlations, from the identifiable directions alone.  A parameter whose estimate
+sits on a bound has no valid interval either (the data ask for a value beyond it).  The
+intervals assume what the weighting says: white measurement noise of the stated levels
+and a model that can reproduce the data; the residual RMS of every signal is reported
+next to its noise level so that a model error (RMS well above the noise) shows.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.stats
+
+__all__ = ["parameter_uncertainty"]
+
+#: A direction is not identifiable when the data determine it only to more than this (relative to the starts).
+_MAX_RELATIVE_STD = 1.0
+#: A parameter whose weight on an unidentifiable direction is at least this is named.
+_NAMED_WEIGHT = 0.1
+
+
+def _direction(v: np.ndarray, names, scale) -> str:
+    """A direction of parameter space in words: its components relative to the starts,
+    then in the parameters' own units (largest 1), e.g. +0.24 mh2 −0.97 stator_mass
+    (ΔSI: +1 mh2 −1 stator_mass: only their sum is seen)."""
+    relative = " ".join(f"{x:+.3g} {n}" for x, n in zip(v, names) if abs(x) >= 1e-3)
+    si = v * scale
+    si = si / np.abs(si).max()
+    own = " ".join(f"{x:+.3g} {n.rsplit('.', 1)[-1]}" for x, n in zip(si, names)
+                   if abs(x) >= 1e-3)
+    return f"{relative} (relative to the starts; in their own units {own})"
+
+
+def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, *,
+                          floor: float = 0.0, bounds=None, level: float = 0.95) -> dict:
+    """Standard errors, intervals, correlations and identifiability (module docstring).
+
+    Parameters
+    ----------
+    J : ndarray (m, p)
+        Jacobian of the weighted residual with respect to u = x / ``scale``.
+    r : ndarray (m,)
+        The weighted residual at the estimate.
+    names : sequence of str
+        The parameters.
+    estimate, scale : ndarray (p,)
+        The estimate x and the scale of each parameter.
+    floor : float
+        The Jacobian's own error (norm of one column's noise): a direction whose singular
+        value is not above it is invisible to the data.
+    bounds : list of (lower, upper), optional
+        An estimate on a bound has no valid interval.
+    level : float
+        Of the interval (Student t with m − p degrees of freedom).
+
+    Returns
+    -------
+    dict
+        ``parameters`` (name → estimate, std, ci95, identifiable, reason),
+        ``correlation`` (names, matrix), ``residual_variance``, ``dof``,
+        ``singular_values`` (relative to the largest).
+    """
+    m, p = J.shape
+    dof = max(m - p, 1)
+    s2 = float(r @ r) / dof
+    _, S, Vt = np.linalg.svd(J, full_matrices=False)
+    reasons: dict[int, list[str]] = {i: [] for i in range(p)}
+    keep = []
+    top = S[0] if S.size and S[0] > 0 else 1.0
+    for k in range(p):
+        if S[k] <= floor or S[k] <= 1e-12 * top:
+            why = (f"J is singular along {_direction(Vt[k], names, scale)}: its singular "
+                   f"value, {S[k] / top:.2g} of the largest, is within the Jacobian's own error "
+                   f"({floor / top:.2g}): the data do not see this change")
+        elif math.sqrt(s2) / S[k] > _MAX_RELATIVE_STD:
+            why = (f"the data determine {_direction(Vt[k], names, scale)} only to "
+                   f"±{100 * math.sqrt(s2) / S[k]:.3g} % of the starts")
+        else:
+            keep.append(k)
+            continue
+        for i in np.flatnonzero(np.abs(Vt[k]) >= _NAMED_WEIGHT):
+            reasons[int(i)].append(why)
+    cov_u = sum((s2 / S[k] ** 2) * np.outer(Vt[k], Vt[k]) for k in keep) if keep \
+        else np.zeros((p, p))
+    std = scale * np.sqrt(np.clip(np.diag(cov_u), 0.0, None))
+    quantile = float(scipy.stats.t.ppf(0.5 + level / 2, dof))
+    for i, (lo, hi) in enumerate(bounds or [(-math.inf, math.inf)] * p):
+        near = 1e-6 * scale[i]
+        if estimate[i] - lo <= near or hi - estimate[i] <= near:
+            reasons[i].append(f"the estimate is at its bound [{lo:g}, {hi:g}]: the data ask for "
+                              "a value beyond it (no valid interval)")
+    parameters = {}
+    for i, name in enumerate(names):
+        ok = not reasons[i]
+        parameters[name] = {
+            "estimate": float(estimate[i]),
+            "std": float(std[i]) if ok else None,
+            "ci95": [float(estimate[i] - quantile * std[i]),
+                     float(estimate[i] + quantile * std[i])] if ok else None,
+            "identifiable": ok, "reason": "; ".join(reasons[i])}
+    ident = [i for i in range(p) if parameters[names[i]]["identifiable"]]
+    d = np.sqrt(np.diag(cov_u))
+    matrix = [[float(cov_u[i, j] / (d[i] * d[j])) if i in ident and j in ident and d[i] * d[j] > 0
+               else None for j in range(p)] for i in range(p)]
+    return {"parameters": parameters, "correlation": {"names": list(names), "matrix": matrix},
+            "residual_variance": s2, "dof": dof,
+            "singular_values": [float(v / top) for v in S]}
