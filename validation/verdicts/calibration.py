@@ -77,6 +77,8 @@ from ..run._config import ConfigError
 from ..run.experiments import Experiment, FrequencyResponse
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from ..run.tomlfiles import deep_merge, set_dotted
+from .calibration_adequacy import adequacy, residual_blocks, residual_rms
+from .calibration_comparison import comparison, data_fingerprint, model_description
 from .calibration_intervals import parameter_uncertainty
 from .calibration_outputs import write_inputs, write_results
 from .calibration_plan import Plan, linear_response
@@ -213,34 +215,55 @@ class _Problem:
 
     # the fit's callables
     def jacobian(self, u: np.ndarray, f: np.ndarray, lower, upper, *, central: bool) -> np.ndarray:
-        """Finite differences at ``u`` (``f`` its residual): forward, or central; one
-        batch of simulations.  A step that would cross a bound goes the other way."""
-        h = self.settings.fd_step * np.maximum(np.abs(u), 1.0)
-        h = np.where(u + h > upper, -h, h)
-        points = [u + h[j] * np.eye(len(u))[j] for j in range(len(u))]
-        if central:
-            points += [u - h[j] * np.eye(len(u))[j] for j in range(len(u))]
-        values = self.residuals(points)
+        """Finite differences at ``u`` (``f`` its residual), one batch of simulations:
+        forward (a step that would cross the upper bound goes down), or of second order
+        — central, or, where a central step would cross a bound, one-sided into the
+        bounds, (−3 f(u) + 4 f(u + h) − f(u + 2h)) / 2h.  A step across a bound would read
+        the penalty of an arm that cannot be modelled (a negative mass) as a slope: with
+        stator_mass on its bound 0 the central difference hid that the data see only its
+        sum with mh2, and a false 95 % interval of mh2 was reported."""
         p = len(u)
-        if central:
-            return np.column_stack([(values[j] - values[p + j]) / (2 * h[j]) for j in range(p)])
-        return np.column_stack([(values[j] - f) / h[j] for j in range(p)])
+        h = self.settings.fd_step * np.maximum(np.abs(u), 1.0)
+        unit = np.eye(p)
+        if not central:
+            h = np.where(u + h > upper, -h, h)
+            values = self.residuals([u + h[j] * unit[j] for j in range(p)])
+            return np.column_stack([(values[j] - f) / h[j] for j in range(p)])
+        side = _one_sided(u, h, lower, upper)
+        near = np.where(side == 0, h, side * h)
+        far = np.where(side == 0, -h, 2 * side * h)
+        values = self.residuals([u + near[j] * unit[j] for j in range(p)] +
+                                [u + far[j] * unit[j] for j in range(p)])
+        return np.column_stack([
+            (values[j] - values[p + j]) / (2 * h[j]) if side[j] == 0 else
+            side[j] * (4 * values[j] - values[p + j] - 3 * f) / (2 * h[j]) for j in range(p)])
 
-    def resolution(self, central: bool) -> float:
+    def resolution(self, stencil: float) -> float:
         """The noise the float32 storage of the simulated signals puts into one column of
         the difference Jacobian (norm, in the residual's units per unit of u): a rounding
-        error of spacing δ is uniform, variance δ²/12, and a difference of two of them
-        over the step h has variance δ²/(6 h²) (forward) or δ²/(24 h²) (central)."""
+        error of spacing δ is uniform, variance δ²/12, and a difference formula Σ c_i f_i / h
+        has variance ``stencil`` δ²/(12 h²), ``stencil`` = Σ c_i² (`_STENCILS`)."""
         total = 0.0
         for i, target in enumerate(self.plan.targets):
             k = self.samples(i)
             spacing = np.spacing(np.abs(target.experiment.signals[:, :k]).astype(np.float32))
             total += float(np.sum((spacing.astype(np.float64) / target.sigma[:, None]) ** 2))
-        h = self.settings.fd_step
-        return math.sqrt(total / (24.0 if central else 6.0)) / h
+        return math.sqrt(total * stencil / 12.0) / self.settings.fd_step
 
 
-def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
+#: Σ c_i² of the difference formulas: forward (1, −1), central (1, −1)/2, one-sided of
+#: second order (−3, 4, −1)/2.
+_STENCILS = {"forward": 2.0, "central": 0.5, "one-sided": 6.5}
+
+
+def _one_sided(u: np.ndarray, h: np.ndarray, lower, upper) -> np.ndarray:
+    """Per parameter: 0 where a central step of ``h`` stays within the bounds, else the
+    direction (+1, −1) of a one-sided second-order difference that does."""
+    central = (u - h >= lower) & (u + h <= upper)
+    return np.where(central, 0.0, np.where(u + 2 * h <= upper, 1.0, -1.0))
+
+
+def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
     """Fit the plan's parameters with scipy's ``least_squares`` (module docstring).
 
     Parameters
@@ -255,6 +278,9 @@ def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
         Runs a list of planned scenarios (`make_runner`).
     log : callable
         Receives one line per iteration.
+    compare : list of (str, dict)
+        Other fits of the same data (`calibration_comparison.read_fits`): the result gets
+        a ``comparison`` of them and this one.
 
     Returns
     -------
@@ -279,8 +305,8 @@ def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
 
     def jac(v):
         J = problem.jacobian(v, fun(v), lower, upper, central=False)
-        return _without_invisible(J, _RESOLUTION_MARGIN * problem.resolution(central=False),
-                                  settings.fd_step)
+        floor = _RESOLUTION_MARGIN * problem.resolution(_STENCILS["forward"])
+        return _without_invisible(J, floor, settings.fd_step)
 
     stages = []
     for stage in _stages(plan):
@@ -302,13 +328,23 @@ def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
     cache.clear()
     r = fun(u)
     J = problem.jacobian(u, r, lower, upper, central=True)
-    floor = _RESOLUTION_MARGIN * problem.resolution(central=True) if plan.targets else 0.0
+    h = settings.fd_step * np.maximum(np.abs(u), 1.0)
+    stencil = _STENCILS["one-sided" if _one_sided(u, h, lower, upper).any() else "central"]
+    floor = _RESOLUTION_MARGIN * problem.resolution(stencil) if plan.targets else 0.0
     estimate = u * problem.scale
-    stats = parameter_uncertainty(J, r, settings.names, estimate, problem.scale, floor=floor,
-                                  bounds=[(q.lower, q.upper) for q in settings.parameters])
+    blocks = residual_blocks(plan, r)
+    verdict = adequacy(blocks, judged=settings.inputs == "replay")
+    effective = verdict["model_adequate"] is not True
+    stats = parameter_uncertainty(
+        J, r, settings.names, estimate, problem.scale, floor=floor,
+        bounds=[(q.lower, q.upper) for q in settings.parameters],
+        model_error=verdict["model_error"] if effective else None,
+        noise_variance=verdict["noise_variance"])
     result = {
-        "parameters": stats["parameters"], "correlation": stats["correlation"],
-        "residual_rms": _residual_rms(plan, problem, u),
+        "model_adequate": verdict["model_adequate"], "adequacy": verdict,
+        "parameters": stats["parameters"], "interval_kind": stats["interval_kind"],
+        "correlation": stats["correlation"], "residual_rms": residual_rms(plan, blocks),
+        "model": model_description(plan), "data": data_fingerprint(plan),
         "cost": float(0.5 * r @ r), "iterations": sum(s["iterations"] for s in stages),
         "simulations": len(problem.evals.seen),
         "residual_variance": stats["residual_variance"], "dof": stats["dof"],
@@ -323,6 +359,8 @@ def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
                        "pairs": [f"{o}/{i}" for o, i in r_.pairs]} for r_ in plan.responses],
         "failed_runs": problem.evals.failed,
     }
+    if compare:
+        result["comparison"] = comparison([(str(out), result), *compare])
     if plan.targets:  # a fit of frequency responses alone simulates nothing: no store
         problem.evals.finish()
     write_results(out, plan, result)
@@ -349,29 +387,3 @@ def _without_invisible(J: np.ndarray, floor: float, collinear: float) -> np.ndar
     J = ((U * np.where(S <= collinear * S[0], 0.0, S)) @ Vt) * norms
     U, S, Vt = np.linalg.svd(J, full_matrices=False)
     return (U * np.where((S <= floor) | (S <= 1e-12 * S[0]), 0.0, S)) @ Vt
-
-
-
-def _residual_rms(plan: Plan, problem: _Problem, u: np.ndarray) -> dict:
-    """RMS of the fitted residual of every signal of every experiment [SI units], next to
-    its declared noise level (None: none declared)."""
-    out = {}
-    r = problem.residuals([u])[0]
-    offset = 0
-    for i, target in enumerate(plan.targets):
-        exp, k = target.experiment, problem.samples(i)
-        block = r[offset:offset + len(exp.names) * k].reshape(len(exp.names), k)
-        offset += block.size
-        out[exp.name] = {n: {"rms": float(np.sqrt(np.mean(b ** 2)) * sigma),
-                             "noise": float(noise) if noise > 0 else None}
-                         for n, b, sigma, noise in zip(exp.names, block, target.sigma,
-                                                       target.noise)}
-    for response in plan.responses:
-        size = response.values.size
-        e = r[offset:offset + 2 * size]
-        offset += 2 * size
-        out[response.name] = {"relative_rms": float(np.sqrt(np.mean(e ** 2)) *
-                                                    plan.settings.frf_noise),
-                              "noise": plan.settings.frf_noise}
-    return out
-

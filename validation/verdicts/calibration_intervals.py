@@ -25,10 +25,14 @@ import math
 import numpy as np
 import scipy.stats
 
-__all__ = ["parameter_uncertainty"]
+__all__ = ["parameter_uncertainty", "MODEL_ERROR_FACTOR"]
 
-#: A direction is not identifiable when the data determine it only to more than this (relative to the starts).
+#: A direction is not identifiable when the data determine it only to more than this
+#: (relative to the starts).
 _MAX_RELATIVE_STD = 1.0
+#: κ: an inadequate model's intervals allow a parameter error κ times the largest that a
+#: model error of the residual's size could hide (module docstring).
+MODEL_ERROR_FACTOR = 3.0
 #: A parameter whose weight on an unidentifiable direction is at least this is named.
 _NAMED_WEIGHT = 0.1
 
@@ -46,7 +50,9 @@ def _direction(v: np.ndarray, names, scale) -> str:
 
 
 def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, *,
-                          floor: float = 0.0, bounds=None, level: float = 0.95) -> dict:
+                          floor: float = 0.0, bounds=None, level: float = 0.95,
+                          model_error: float | None = None,
+                          noise_variance: float | None = None) -> dict:
     """Standard errors, intervals, correlations and identifiability (module docstring).
 
     Parameters
@@ -65,18 +71,32 @@ def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, 
     bounds : list of (lower, upper), optional
         An estimate on a bound has no valid interval.
     level : float
-        Of the interval (Student t with m − p degrees of freedom).
+        Of the noise's interval (Student t with m − p degrees of freedom).
+    model_error : float or None
+        None for an adequate model: 95 % intervals from the residual variance.  Else the
+        norm of the model error the fit leaves (the residual beyond its white part, in
+        units of the weights): intervals of effective parameters, the noise's interval
+        widened by `MODEL_ERROR_FACTOR` times the parameter change that error can hide.
+    noise_variance : float, optional
+        With ``model_error``: the variance of the residual's white part (in units of the
+        weights), the noise's share of the interval.
 
     Returns
     -------
     dict
-        ``parameters`` (name → estimate, std, ci95, identifiable, reason),
-        ``correlation`` (names, matrix), ``residual_variance``, ``dof``,
-        ``singular_values`` (relative to the largest).
+        ``parameters`` (name → estimate, std, ci95 (None for an inadequate model),
+        interval, model_error, identifiable, reason), ``interval_kind``, ``correlation``
+        (names, matrix), ``residual_variance``, ``dof``, ``singular_values`` (relative to
+        the largest).
     """
     m, p = J.shape
     dof = max(m - p, 1)
     s2 = float(r @ r) / dof
+    quantile = float(scipy.stats.t.ppf(0.5 + level / 2, dof))
+    effective = model_error is not None
+    noise = math.sqrt(noise_variance if effective else s2)
+    # the size of the residual that a direction's singular value turns into a step
+    spread = noise + (MODEL_ERROR_FACTOR * model_error / quantile if effective else 0.0)
     _, S, Vt = np.linalg.svd(J, full_matrices=False)
     reasons: dict[int, list[str]] = {i: [] for i in range(p)}
     keep = []
@@ -86,36 +106,48 @@ def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, 
             why = (f"J is singular along {_direction(Vt[k], names, scale)}: its singular "
                    f"value, {S[k] / top:.2g} of the largest, is within the Jacobian's own error "
                    f"({floor / top:.2g}): the data do not see this change")
-        elif math.sqrt(s2) / S[k] > _MAX_RELATIVE_STD:
-            why = (f"the data determine {_direction(Vt[k], names, scale)} only to "
-                   f"±{100 * math.sqrt(s2) / S[k]:.3g} % of the starts")
+        elif spread / S[k] > _MAX_RELATIVE_STD:
+            why = (f"the data {'and the model error ' if effective else ''}determine "
+                   f"{_direction(Vt[k], names, scale)} only to ±{100 * spread / S[k]:.3g} % "
+                   "of the starts")
         else:
             keep.append(k)
             continue
         for i in np.flatnonzero(np.abs(Vt[k]) >= _NAMED_WEIGHT):
             reasons[int(i)].append(why)
-    cov_u = sum((s2 / S[k] ** 2) * np.outer(Vt[k], Vt[k]) for k in keep) if keep \
-        else np.zeros((p, p))
-    std = scale * np.sqrt(np.clip(np.diag(cov_u), 0.0, None))
-    quantile = float(scipy.stats.t.ppf(0.5 + level / 2, dof))
+    unit = sum(np.outer(Vt[k], Vt[k]) / S[k] ** 2 for k in keep) if keep else np.zeros((p, p))
+    per_unit = scale * np.sqrt(np.clip(np.diag(unit), 0.0, None))  # per unit of residual norm
+    std = noise * per_unit
+    hidden = MODEL_ERROR_FACTOR * model_error * per_unit if effective else np.zeros(p)
+    half = quantile * std + hidden
+    step = -(J.T @ r) / np.maximum(np.sum(J ** 2, axis=0), 1e-300)  # each parameter alone
     for i, (lo, hi) in enumerate(bounds or [(-math.inf, math.inf)] * p):
         near = 1e-6 * scale[i]
-        if estimate[i] - lo <= near or hi - estimate[i] <= near:
-            reasons[i].append(f"the estimate is at its bound [{lo:g}, {hi:g}]: the data ask for "
-                              "a value beyond it (no valid interval)")
+        at_lower, at_upper = estimate[i] - lo <= near, hi - estimate[i] <= near
+        if not (at_lower or at_upper):
+            continue
+        alone = quantile * spread / max(float(np.linalg.norm(J[:, i])), 1e-300)
+        beyond = (step[i] < -alone) if at_lower else (step[i] > alone)
+        reasons[i].append(f"the estimate is at its bound [{lo:g}, {hi:g}]"
+                          + (" and the data ask for a value beyond it" if beyond else "")
+                          + " (no valid interval)")
     parameters = {}
     for i, name in enumerate(names):
         ok = not reasons[i]
+        interval = [float(estimate[i] - half[i]), float(estimate[i] + half[i])] if ok else None
         parameters[name] = {
-            "estimate": float(estimate[i]),
-            "std": float(std[i]) if ok else None,
-            "ci95": [float(estimate[i] - quantile * std[i]),
-                     float(estimate[i] + quantile * std[i])] if ok else None,
+            "estimate": float(estimate[i]), "std": float(std[i]) if ok else None,
+            "ci95": interval if ok and not effective else None, "interval": interval,
+            "model_error": float(hidden[i]) if ok and effective else None,
             "identifiable": ok, "reason": "; ".join(reasons[i])}
     ident = [i for i in range(p) if parameters[names[i]]["identifiable"]]
-    d = np.sqrt(np.diag(cov_u))
-    matrix = [[float(cov_u[i, j] / (d[i] * d[j])) if i in ident and j in ident and d[i] * d[j] > 0
+    d = np.sqrt(np.diag(unit))
+    matrix = [[float(unit[i, j] / (d[i] * d[j])) if i in ident and j in ident and d[i] * d[j] > 0
                else None for j in range(p)] for i in range(p)]
-    return {"parameters": parameters, "correlation": {"names": list(names), "matrix": matrix},
+    kind = (f"effective parameters of an inadequate model: the noise's {100 * level:g} % "
+            f"interval ± {MODEL_ERROR_FACTOR:g}× the change the model error can hide"
+            if effective else f"{100 * level:g} % (the noise)")
+    return {"parameters": parameters, "interval_kind": kind,
+            "correlation": {"names": list(names), "matrix": matrix},
             "residual_variance": s2, "dof": dof,
             "singular_values": [float(v / top) for v in S]}

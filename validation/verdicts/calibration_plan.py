@@ -127,6 +127,14 @@ def plan_calibration(base: Scenario, settings: CalibrationSettings,
                   f"{out!r} is not an output of the linear model ({', '.join(outputs)})")
             check(inp in ("tau1", "tau2"), f"{response.source}: column {out}/{inp}.re",
                   f"{inp!r} is not an input (tau1, tau2)")
+    if responses:  # the plant must have a linearisation (one frequency of one pair)
+        try:
+            linear_response(base, settings.frf_theta, responses[0].frequency[:1],
+                            responses[0].pairs[:1])
+        except NotImplementedError as exc:
+            raise ConfigError("--frf", f"{exc} ({base.plant.kind}): a frequency response is "
+                                       "fitted on the plant's linearisation; fit time series, "
+                                       "or the responses on a built-in plant") from None
     return Plan(settings, mapping, tuple(targets), tuple(responses))
 
 
@@ -140,16 +148,16 @@ def linear_response(s: Scenario, theta, frequency: np.ndarray, pairs) -> np.ndar
     """The frequency responses ``pairs`` = [(output, input)] of the scenario's plant
     linearised about rest at ``theta``, at ``frequency`` [Hz]: (len(pairs), F) complex.
     The q outputs are in the basis the sensors report them in (the controller's model).
-    The reduced plant is the model of its own order; any other plant is the FE arm of
-    its mesh (`plant_exudyn.linear_model`)."""
+    The reduced plant is the model of its own order; any other plant is its own
+    linearisation (`PlantSpec.linear_model`: the FE arm of its mesh); NotImplementedError
+    for a plant that has none (a plug-in's)."""
     from .linear import reduced_linear_model
     basis = nominal_model(s.nominal_params, s.model.modes_per_link).mode_shapes
     if s.plant.kind == "reduced":
         own = cached_model(s.true_params, tuple(s.plant.modes_per_link))
         system = reduced_linear_model(own, theta=theta, modal_basis=basis)
     else:
-        from plant_exudyn import linear_model
-        system = linear_model(s.true_params, s.plant.mesh, theta=theta, modal_basis=basis)
+        system = s.plant.linear_model(s.true_params, theta=theta, modal_basis=basis)
     A, B, C = (np.asarray(m) for m in (system.A, system.B, system.C))
     outs, ins = list(system.output_labels), list(system.input_labels)
     rows = [outs.index(o) for o, _ in pairs]
