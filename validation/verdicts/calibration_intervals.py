@@ -99,29 +99,33 @@ def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, 
     spread = noise + (MODEL_ERROR_FACTOR * model_error / quantile if effective else 0.0)
     _, S, Vt = np.linalg.svd(J, full_matrices=False)
     reasons: dict[int, list[str]] = {i: [] for i in range(p)}
-    keep = []
+    visible = []
     top = S[0] if S.size and S[0] > 0 else 1.0
     for k in range(p):
         if S[k] <= floor or S[k] <= 1e-12 * top:
             why = (f"J is singular along {_direction(Vt[k], names, scale)}: its singular "
                    f"value, {S[k] / top:.2g} of the largest, is within the Jacobian's own error "
                    f"({floor / top:.2g}): the data do not see this change")
-        elif spread / S[k] > _MAX_RELATIVE_STD:
+        else:
+            visible.append(k)
+            if spread / S[k] <= _MAX_RELATIVE_STD:
+                continue
             why = (f"the data {'and the model error ' if effective else ''}determine "
                    f"{_direction(Vt[k], names, scale)} only to ±{100 * spread / S[k]:.3g} % "
                    "of the starts")
-        else:
-            keep.append(k)
-            continue
         for i in np.flatnonzero(np.abs(Vt[k]) >= _NAMED_WEIGHT):
             reasons[int(i)].append(why)
-    unit = sum(np.outer(Vt[k], Vt[k]) / S[k] ** 2 for k in keep) if keep else np.zeros((p, p))
+    # A parameter's interval takes every direction the data see, the poorly determined
+    # ones too (its small weight on them still moves it); not those within the error.
+    unit = sum(np.outer(Vt[k], Vt[k]) / S[k] ** 2 for k in visible) if visible \
+        else np.zeros((p, p))
     per_unit = scale * np.sqrt(np.clip(np.diag(unit), 0.0, None))  # per unit of residual norm
     std = noise * per_unit
     hidden = MODEL_ERROR_FACTOR * model_error * per_unit if effective else np.zeros(p)
     half = quantile * std + hidden
     step = -(J.T @ r) / np.maximum(np.sum(J ** 2, axis=0), 1e-300)  # each parameter alone
-    for i, (lo, hi) in enumerate(bounds or [(-math.inf, math.inf)] * p):
+    limits = bounds or [(-math.inf, math.inf)] * p
+    for i, (lo, hi) in enumerate(limits):
         near = 1e-6 * scale[i]
         at_lower, at_upper = estimate[i] - lo <= near, hi - estimate[i] <= near
         if not (at_lower or at_upper):
@@ -134,7 +138,8 @@ def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, 
     parameters = {}
     for i, name in enumerate(names):
         ok = not reasons[i]
-        interval = [float(estimate[i] - half[i]), float(estimate[i] + half[i])] if ok else None
+        interval = [float(max(estimate[i] - half[i], limits[i][0])),
+                    float(min(estimate[i] + half[i], limits[i][1]))] if ok else None
         parameters[name] = {
             "estimate": float(estimate[i]), "std": float(std[i]) if ok else None,
             "ci95": interval if ok and not effective else None, "interval": interval,
