@@ -6,11 +6,51 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["Measurement", "TrueState", "PlantFailure", "check_sample_time",
-           "TRUTH_EXTRAS", "true_state_from_vector"]
+           "TRUTH_EXTRAS", "true_state_from_vector", "coordinate_names", "output_names"]
 
 #: After the state [θ, q, θ̇, q̇], `truth_vector()` holds these, in this order.
 TRUTH_EXTRAS = ("tip1_x", "tip1_y", "tip2_x", "tip2_y", "tip_defl1", "tip_defl2",
                 "proj_res1", "proj_res2")
+
+
+def coordinate_names(modes_per_link: tuple[int, int]) -> tuple[str, ...]:
+    """The names every model, plant, measurement and linear model gives its coordinates.
+
+    Parameters
+    ----------
+    modes_per_link : (int, int)
+        Assumed modes of link 1 and link 2.
+
+    Returns
+    -------
+    tuple of str
+        ``theta1``, ``theta2``, then ``q<i><j>`` (link i, mode j).
+
+    Examples
+    --------
+    >>> coordinate_names((2, 1))
+    ('theta1', 'theta2', 'q11', 'q12', 'q21')
+    """
+    return ("theta1", "theta2", *(f"q{i + 1}{j + 1}" for i, n in enumerate(modes_per_link)
+                                  for j in range(n)))
+
+
+def output_names(modes_per_link: tuple[int, int]) -> tuple[str, ...]:
+    """The outputs of both plants' linear models.
+
+    Parameters
+    ----------
+    modes_per_link : (int, int)
+        Assumed modes of link 1 and link 2 of the basis q is expressed in.
+
+    Returns
+    -------
+    tuple of str
+        The coordinates (`coordinate_names`), their rates (``..._dot``), then
+        ``tip_defl1``, ``tip_defl2``.
+    """
+    coords = coordinate_names(modes_per_link)
+    return coords + tuple(f"{c}_dot" for c in coords) + ("tip_defl1", "tip_defl2")
 
 
 class PlantFailure(RuntimeError):

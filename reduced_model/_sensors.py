@@ -15,9 +15,9 @@ import numpy as np
 
 from ._modes import LinkModes
 from ._parameters import FieldError
-from ._plant_interface import Measurement
+from ._plant_interface import Measurement, coordinate_names
 
-__all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES"]
+__all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES", "measured_names"]
 
 STRAIN_QUANTITIES = {"deflection": 0, "curvature": 2}
 
@@ -70,6 +70,33 @@ class SensorConfig:
                                tuple(tuple(float(x) for x in g) for g in gauges))
 
 
+def measured_names(modes_per_link: tuple[int, int], *, modal: bool, rates: bool,
+                   tip_position: bool) -> tuple[str, ...]:
+    """The names of a measurement, in its order.
+
+    Parameters
+    ----------
+    modes_per_link : (int, int)
+        Modes of link 1 and link 2 of the basis q is expressed in.
+    modal : bool
+        Whether the modal coordinates are measured.
+    rates : bool
+        Whether the rates are.
+    tip_position : bool
+        Whether the payload position is.
+
+    Returns
+    -------
+    tuple of str
+        θ, then q (``modal``), then their rates (``rates``), then ``tip_x``, ``tip_y``.
+    """
+    coords = coordinate_names(modes_per_link)
+    names = coords if modal else coords[:2]
+    if rates:
+        names += tuple(f"{n}_dot" for n in names)
+    return names + (("tip_x", "tip_y") if tip_position else ())
+
+
 class SensorModel:
     """Builds the `Measurement` of a plant from a `SensorConfig`.
 
@@ -85,14 +112,11 @@ class SensorModel:
     def __init__(self, config: SensorConfig, modes: tuple[LinkModes, LinkModes], plant) -> None:
         self.config = config
         self._plant = plant
-        q_names = tuple(f"q{i + 1}{j + 1}" for i, m in enumerate(modes) for j in range(m.n))
-        names = ("theta1", "theta2") + (q_names if config.modal else ())
-        if config.rates:
-            names += tuple(f"{n}_dot" for n in names)
-        if config.tip_position:
-            names += ("tip_x", "tip_y")
-        self.names = names
-        states = ("theta1", "theta2") + q_names
+        modes_per_link = tuple(m.n for m in modes)
+        self.names = names = measured_names(modes_per_link, modal=config.modal,
+                                            rates=config.rates,
+                                            tip_position=config.tip_position)
+        states = coordinate_names(modes_per_link)
         states += tuple(f"{n}_dot" for n in states)
         direct = (config.strain_gauges is None or not config.modal) and \
             config.encoder_resolution == 0 and not config.tip_position

@@ -15,7 +15,7 @@ import pytest
 
 from validation import cli, run_scenario, scenario_from_mapping
 from validation.batch.executor import SerialRunner
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 from validation.run.experiments import from_run, read_experiment, write_experiment
 from validation.run.tomlfiles import load_toml
 from validation.verdicts.calibration import calibrate

@@ -180,11 +180,11 @@ def arm_loop_pair():
     names = list(model.state_names)
     x = np.zeros(12)
     x[1] = 0.5
-    K = law_gain(PassivityBasedController(model), x, 0.0,
+    K = law_gain(PassivityBasedController(model, Ts=1e-3), x, 0.0,
                  lambda t: (x[:2].copy(), np.zeros(2), np.zeros(2)))
     gain = control.ss(np.zeros((0, 0)), np.zeros((0, 12)), np.zeros((2, 0)), K)
     red = reduced_linear_model(model, theta=(0.0, 0.5))[names, :]
-    fe = linear_model(ArmParameters(), theta=(0.0, 0.5), modal_basis=model.mode_shapes)[names, :]
+    fe = linear_model(ArmParameters(), theta=(0.0, 0.5), model=model)[names, :]
     return gain * control.sample_system(red, 1e-3), gain * control.sample_system(fe, 1e-3)
 
 

@@ -10,13 +10,14 @@ import pytest
 
 from campaign_testing import metrics_table
 from validation.batch import committing
-from validation.batch.campaign import campaign_from_mapping, expand, run_campaign
+from validation.batch.campaign import campaign_from_mapping, expand
+from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
 from validation.batch.resimulate import full_result
 from validation.batch.store import ResultStore, environment
 from validation.batch.storing import (Destination, StoreTask, landed, leave_token,
                                       run_and_store)
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 
 SMALL = {"name": "small", "scenario": {"duration": 0.3, "transient": 0.1,
                                        "observer": {"kind": "smo-paper"},

@@ -5,7 +5,9 @@ import math
 
 import pytest
 
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+
+from validation.batch.queue import run_campaign
 from validation.cli import main
 from validation.report.report import write_report
 from validation.report.verdict_tables import write_validity

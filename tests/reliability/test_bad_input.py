@@ -302,7 +302,7 @@ def test_calibrate_frf_with_a_plugin_plant_is_one_line_and_leaves_nothing(
     linearisation: refused before anything is written."""
     from conftest import FINE_ARM_PLANT
     (tmp_path / "labplants.py").write_text(FINE_ARM_PLANT)
-    (tmp_path / "fine.toml").write_text('[plant]\nkind = "labplants:FineArm"\n'
+    (tmp_path / "fine.toml").write_text('[plant]\nkind = "labplants:FineArm"\nrole = "truth"\n'
                                         '[calibrate]\nfit = ["true_params.EI1"]\n')
     (tmp_path / "frf.csv").write_text("f,theta1/tau1.re,theta1/tau1.im\n1.0,-0.1,0.01\n"
                                       "2.0,-0.02,0.002\n")
@@ -316,7 +316,7 @@ def test_a_refused_runner_keeps_a_results_folder_that_was_there(tmp_path, monkey
     """Known-good of removing what a refused command created: a folder that held results
     before stays, runs and all."""
     from validation.cli import common
-    from validation.run._config import ConfigError
+    from validation.run.config import ConfigError
     (tmp_path / "ok.toml").write_text(CAMPAIGN_OK)
     out = tmp_path / "out"
     assert main(["campaign", str(tmp_path / "ok.toml"), "--out", str(out),

@@ -12,7 +12,8 @@ from .verdicts import stability_map_into
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
-    from ..batch.campaign import classify, expand, load_campaign, run_campaign
+    from ..batch.campaign import expand, load_campaign
+    from ..batch.queue import classify, run_campaign
     campaign = load_campaign(args.file)
     runs = expand(campaign)  # every scenario checked before anything runs
     out = Path(args.out or Path("results") / campaign.name)
@@ -54,7 +55,8 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     """The paper's campaign, its mesh checks, the stability map, the claims and the report;
     a short summary on the terminal.  Exit 1 only if a verdict is missing (a run that
     decides one failed); failures that decide nothing are counted in the summary."""
-    from ..batch.campaign import expand, load_campaign, run_campaign
+    from ..batch.campaign import expand, load_campaign
+    from ..batch.queue import run_campaign
     from ..report.verdict_tables import write_claims
     from ..verdicts.claims import claim_columns
     from .summaries import claims_summary

@@ -8,7 +8,7 @@ from importlib.metadata import version
 from controllers import CONTROLLERS, OBSERVERS
 
 from ..batch.executor import available_cores
-from ..run.scenario import ARMS, DEFAULT_TRANSIENT, PLANTS, Scenario
+from ..run.scenario import ARMS, DEFAULT_TRANSIENT, PLANT_KINDS, Scenario
 
 from .calibrate import cmd_calibrate
 from .campaigns import cmd_campaign, cmd_reproduce_paper
@@ -90,7 +90,7 @@ def _add_limits(p) -> None:
 
 def _add_cases(p) -> None:
     """--plant and --arm of the commands that take a scenario or a campaign's cases."""
-    p.add_argument("--plant", action="append", choices=PLANTS,
+    p.add_argument("--plant", action="append", choices=PLANT_KINDS,
                    help="plant(s) (default: both for a scenario, the campaign's own)")
     p.add_argument("--arm", action="append", choices=tuple(ARMS),
                    help="arm(s) (default: both for a scenario, the campaign's own)")
@@ -151,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "--set as changes")
     run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm or the paper's table1 "
                                                         f"(default: {d.arm})")
-    run.add_argument("--plant", choices=PLANTS, help=f"reduced model or Exudyn truth plant "
+    run.add_argument("--plant", choices=PLANT_KINDS, help=f"reduced model or Exudyn truth plant "
                                                      f"(default: {d.plant.kind})")
     run.add_argument("--controller", metavar="KIND",
                      help=f"{', '.join(CONTROLLERS)} or package.module:Class "
@@ -189,7 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--no-open", action="store_true",
                       help="do not open the figures in a browser (never opened without a "
                            "display)")
-    show.set_defaults(func=cmd_show, reads_only=True)
+    show.set_defaults(func=cmd_show, imports_no_plugin=True)
 
     camp = sub.add_parser("campaign", help="run a campaign of scenarios (resumable)")
     camp.add_argument("file", metavar="CAMPAIGN.toml")
@@ -212,7 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-progress", action="store_true", help="no progress bar")
     rep.add_argument("--force", action="store_true",
                      help="render even if the report is up to date (same runs, same code)")
-    rep.set_defaults(func=cmd_report, reads_only=True)
+    rep.set_defaults(func=cmd_report, imports_no_plugin=True)
 
     paper = sub.add_parser("reproduce-paper",
                            help="run campaigns/paper.toml, the stability map, the claims "
@@ -253,13 +253,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write this run's torques and measurements as the CSV flexarm "
                           "calibrate reads (to stdout, or --to FILE)")
     exp.add_argument("--to", metavar="FILE", help="with --signals: the CSV file to write")
-    exp.add_argument("--format", choices=("csv", "json"), default="csv",
-                     help="the file to name in the output (both are written)")
-    exp.set_defaults(func=cmd_export, reads_only=True)
+    exp.set_defaults(func=cmd_export, imports_no_plugin=True)
 
     rep = sub.add_parser("repair", help="rebuild a results folder's index from its run files")
     rep.add_argument("results", metavar="RESULTS_DIR")
-    rep.set_defaults(func=cmd_repair, reads_only=True)
+    rep.set_defaults(func=cmd_repair, imports_no_plugin=True)
 
     att = sub.add_parser("attribute", help="which modelling assumption costs how much "
                                            "(Shapley attribution over 2^k runs)")
@@ -361,5 +359,5 @@ def build_parser() -> argparse.ArgumentParser:
     add.add_argument("--name", help="the check's name (default: scenario-metric)")
     add.add_argument("--file", default=str(DEFAULT_FILE), metavar="TOML",
                      help="the checks (default: the repository's baselines.toml)")
-    add.set_defaults(func=cmd_baseline_add, reads_only=True)
+    add.set_defaults(func=cmd_baseline_add, imports_no_plugin=True)
     return parser

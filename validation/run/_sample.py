@@ -366,7 +366,7 @@ def sample_laws(c, t, k, row):
     if c.has_observer:
         for i in range(c.obs_idx.shape[0]):
             c.y_obs[i] = c.y_used[c.obs_idx[i]]
-        failed = c.observer(t, c.Ts, c.y_obs, c.last_tau[:c.counts[1]], c.o_ints, c.o_reals,
+        failed = c.observer(t, c.y_obs, c.last_tau[:c.counts[1]], c.o_ints, c.o_reals,
                             c.o_state, c.o_mi, c.o_mr, c.o_wc, c.o_wr, c.x_hat)
         for i in range(N):
             row[off[Group.XHAT] + i] = c.x_hat[i]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import inspect
 import math
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,17 +19,16 @@ import numpy as np
 from controllers import ReferenceKind
 from reduced_model import STRAIN_QUANTITIES, ArmParameters, validate_modes_per_link
 
-from ._config import ConfigError, check, from_mapping, to_mapping
+from .config import ConfigError, check, from_mapping, to_mapping
 from ._sample import DisturbanceKind, DisturbanceTarget
 from .laws import check_laws, nominal_model
-from .plants import PLANTS as REGISTERED
-from .plants import ExudynPlantSpec, PluginPlantSpec, ReducedPlantSpec, with_plant
+from .plants import PLANTS, PlantTable
 from .requirements import Requirement, check_requirements
 
 __all__ = [
-    "Scenario", "PlantSpec", "ReducedPlantSpec", "ExudynPlantSpec", "with_plant", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
+    "Scenario", "PlantTable", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
     "SensorSpec", "DisturbanceSpec", "DivergenceSpec", "check_scenario",
-    "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "PLANTS", "ARMS",
+    "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "PLANT_KINDS", "ARMS",
     "DEFAULT_TRANSIENT", "default_transient",
 ]
 
@@ -80,10 +80,9 @@ def _modes(value) -> None:
                                             f"{list(value)!r}") from None
 
 
-#: A plant is a tagged choice of registered kinds (`validation.run.plants`): each kind
-#: takes only its own settings; "package.module:Class" names a plug-in plant.
-PlantSpec = ReducedPlantSpec | ExudynPlantSpec | PluginPlantSpec
-PLANTS = tuple(REGISTERED)
+#: The built-in plant kinds (`validation.run.plants.PLANTS`): a scenario's ``plant`` is a
+#: tagged choice of their settings, or "package.module:Class" for a plug-in plant.
+PLANT_KINDS = tuple(PLANTS)
 
 
 @dataclass(frozen=True)
@@ -102,19 +101,20 @@ class ModelSpec:
         _modes(self.modes_per_link)
 
 
-def law_path(law, where: str) -> str:
-    """The import path ``"module:Class"`` of a law's class given from Python (a class
-    defined in a notebook or a script: ``"__main__:Class"``, found in the process that
-    runs it); ConfigError naming ``where`` for anything else."""
-    if not inspect.isclass(law):
-        hint = (f"the class {type(law).__name__}, not an instance of it (a law is built "
-                "for each run as Cls(model, **options): its settings go in options)"
-                if callable(law) or hasattr(law, "update") else "a class or its name")
-        raise ConfigError(where, f"give {hint}, got {law!r}")
-    check("<locals>" not in law.__qualname__, where,
-          f"{law.__qualname__} is defined inside a function: define it at module level, "
+def class_path(cls, where: str) -> str:
+    """The import path ``"module:Class"`` of a law's or plant's class given from Python
+    (a class defined in a notebook or a script: ``"__main__:Class"``, found in the process
+    that runs it); ConfigError naming ``where`` for anything else."""
+    if not inspect.isclass(cls):
+        hint = (f"the class {type(cls).__name__}, not an instance of it (it is built for "
+                "each run from its options)"
+                if callable(cls) or hasattr(cls, "update") or hasattr(cls, "step")
+                else "a class or its name")
+        raise ConfigError(where, f"give {hint}, got {cls!r}")
+    check("<locals>" not in cls.__qualname__, where,
+          f"{cls.__qualname__} is defined inside a function: define it at module level, "
           "where its import path finds it")
-    return f"{law.__module__}:{law.__qualname__}"
+    return f"{cls.__module__}:{cls.__qualname__}"
 
 
 def _law_kind(value) -> None:
@@ -381,8 +381,10 @@ class Scenario:
         The arm both parameter tables start from: the practical default (Table 1 + a
         motor-2 stator inertia + structural damping) or the paper's Table 1 exactly
         (`ARMS`).
-    plant : ReducedPlantSpec or ExudynPlantSpec
-        The plant simulated, chosen by its ``kind``.
+    plant : PlantTable
+        The plant simulated, chosen by its ``kind``: the settings of a built-in plant
+        (`reduced_model.ReducedPlant.Settings`, `plant_exudyn.ExudynPlant.Settings`) or
+        of a plug-in (`validation.run.plants.PluginSettings`).
     true_params : reduced_model.ArmParameters
         The arm simulated: ``arm``'s parameters, overridden key by key.
     nominal_params : reduced_model.ArmParameters
@@ -424,7 +426,7 @@ class Scenario:
 
     name: str = "paper"
     arm: str = "default"
-    plant: PlantSpec = ReducedPlantSpec()
+    plant: PlantTable = PLANTS["reduced"].Settings()
     true_params: ArmParameters = ArmParameters()
     nominal_params: ArmParameters = ArmParameters()
     model: ModelSpec = ModelSpec()
@@ -476,10 +478,15 @@ class Scenario:
                                                and self.observer.kind != "none")
 
 
+#: The scenario objects checked in this process (a frozen scenario checked stays valid):
+#: by id, held weakly (a scenario holds tables, so it has no hash).
+_CHECKED: weakref.WeakValueDictionary = weakref.WeakValueDictionary()
+
+
 def check_scenario(s: Scenario) -> None:
     """Reject combinations that cannot run, before anything is simulated (once per
     scenario object: a frozen scenario checked stays valid)."""
-    if s.__dict__.get("_checked"):
+    if _CHECKED.get(id(s)) is s:
         return
     samples = s.duration / s.Ts
     check(samples <= MAX_SAMPLES, "duration", f"{s.duration:g} s at Ts = {s.Ts:g} s is "
@@ -500,9 +507,6 @@ def check_scenario(s: Scenario) -> None:
     check(s.transient < s.duration, "transient", f"{s.transient!r} s leaves nothing of the "
                                                  f"{s.duration!r} s run to measure")
     s.plant.check()
-    check(not (s.controller.kind == "pbc-idealised" and s.plant.actuated == 2),
-          "controller.kind", f"the {s.plant.label} has two actuators; the idealised PBC "
-          "(all n rows of eq. 20 applied) runs only on the reduced plant")
     check(not (s.feedback == "estimate" and s.observer.kind == "none"), "feedback",
           "'estimate' needs an observer (observer.kind is 'none')")
     for link, name in ((1, "L1"), (2, "L2")):
@@ -533,7 +537,7 @@ def check_scenario(s: Scenario) -> None:
                   f"gauges at {list(gauges)} cannot tell the link's {modes} modes apart "
                   "(coincident, or at nodes of a mode)")
     check_requirements(s)
-    object.__setattr__(s, "_checked", True)  # frozen: what passed once passes again
+    _CHECKED[id(s)] = s
 
 
 def arm_parameters(arm: str) -> ArmParameters:
@@ -569,8 +573,9 @@ def scenario_from_mapping(data: dict) -> Scenario:
     ----------
     data : dict
         Any subset of the scenario keys, as a TOML file would hold them; from Python,
-        ``controller.kind`` and ``observer.kind`` may also be a law's class (it becomes
-        its import path, ``"__main__:MyPD"`` for a class defined in a notebook or script).
+        ``controller.kind``, ``observer.kind`` and ``plant.kind`` may also be a class (it
+        becomes its import path, ``"__main__:MyPD"`` for a class defined in a notebook or
+        script).
 
     Returns
     -------
@@ -579,10 +584,10 @@ def scenario_from_mapping(data: dict) -> Scenario:
     """
     base = to_mapping(arm_parameters(data.get("arm", "default")))
     data = dict(data)
-    for role in ("controller", "observer"):
+    for role in ("controller", "observer", "plant"):
         spec = data.get(role)
         if isinstance(spec, dict) and "kind" in spec and not isinstance(spec["kind"], str):
-            data[role] = dict(spec, kind=law_path(spec["kind"], f"{role}.kind"))
+            data[role] = dict(spec, kind=class_path(spec["kind"], f"{role}.kind"))
     for key in ("true_params", "nominal_params"):
         given = data.get(key, {})
         data[key] = {**base, **given} if isinstance(given, dict) else given

@@ -37,9 +37,11 @@ import itertools
 import math
 from dataclasses import dataclass, field
 
-from ..run._config import ConfigError, check
-from ..batch.campaign import PlannedRun, run_planned
-from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping, with_plant
+from ..run.config import ConfigError, check
+from ..batch.campaign import PlannedRun
+from ..batch.queue import run_planned
+from ..run.plants import with_plant
+from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import ResultStore, run_id
 
 __all__ = ["FACTORS", "METRICS", "METRIC_NAMES", "DIVERGED_RULE", "World", "Attribution",

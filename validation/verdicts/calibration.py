@@ -73,7 +73,7 @@ import numpy as np
 import scipy.optimize
 
 from ..batch.store import run_id
-from ..run._config import ConfigError
+from ..run.config import ConfigError
 from ..run.experiments import Experiment, FrequencyResponse
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from ..run.tomlfiles import deep_merge, set_dotted

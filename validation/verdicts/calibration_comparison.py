@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run._config import ConfigError, check
+from ..run.config import ConfigError, check
 from ..run.plants import label_of
 from ..run.results import read_json
 from ..run.scenario import scenario_from_mapping

@@ -97,9 +97,9 @@ def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, 
     noise = math.sqrt(noise_variance if effective else s2)
     # the size of the residual that a direction's singular value turns into a step
     spread = noise + (MODEL_ERROR_FACTOR * model_error / quantile if effective else 0.0)
-    _, S, Vt = np.linalg.svd(J, full_matrices=False)
+    U, S, Vt = np.linalg.svd(J, full_matrices=False)
     reasons: dict[int, list[str]] = {i: [] for i in range(p)}
-    visible = []
+    visible, determined = [], []
     top = S[0] if S.size and S[0] > 0 else 1.0
     for k in range(p):
         if S[k] <= floor or S[k] <= 1e-12 * top:
@@ -109,6 +109,7 @@ def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, 
         else:
             visible.append(k)
             if spread / S[k] <= _MAX_RELATIVE_STD:
+                determined.append(k)
                 continue
             why = (f"the data {'and the model error ' if effective else ''}determine "
                    f"{_direction(Vt[k], names, scale)} only to ±{100 * spread / S[k]:.3g} % "
@@ -123,15 +124,18 @@ def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, 
     std = noise * per_unit
     hidden = MODEL_ERROR_FACTOR * model_error * per_unit if effective else np.zeros(p)
     half = quantile * std + hidden
-    step = -(J.T @ r) / np.maximum(np.sum(J ** 2, axis=0), 1e-300)  # each parameter alone
+    # the Gauss-Newton step along the directions the data determine; a parameter on a
+    # direction they do not (two masses at one point) can be relieved by the others: the
+    # data ask nothing of it alone
+    step = -sum(Vt[k] * (U[:, k] @ r) / S[k] for k in determined) * scale if determined \
+        else np.zeros(p)
     limits = bounds or [(-math.inf, math.inf)] * p
     for i, (lo, hi) in enumerate(limits):
         near = 1e-6 * scale[i]
         at_lower, at_upper = estimate[i] - lo <= near, hi - estimate[i] <= near
         if not (at_lower or at_upper):
             continue
-        alone = quantile * spread / max(float(np.linalg.norm(J[:, i])), 1e-300)
-        beyond = (step[i] < -alone) if at_lower else (step[i] > alone)
+        beyond = not reasons[i] and ((step[i] < -half[i]) if at_lower else (step[i] > half[i]))
         reasons[i].append(f"the estimate is at its bound [{lo:g}, {hi:g}]"
                           + (" and the data ask for a value beyond it" if beyond else "")
                           + " (no valid interval)")

@@ -8,9 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reduced_model import cached_model
+from reduced_model import output_names
 
-from ..run._config import ConfigError, check
+from ..run.config import ConfigError, check
 from ..run.experiments import Experiment, FrequencyResponse, check_experiment
 from ..run.laws import measurement_names, nominal_model
 from ..run.loop import measurement_noise
@@ -132,32 +132,26 @@ def plan_calibration(base: Scenario, settings: CalibrationSettings,
             linear_response(base, settings.frf_theta, responses[0].frequency[:1],
                             responses[0].pairs[:1])
         except NotImplementedError as exc:
-            raise ConfigError("--frf", f"{exc} ({base.plant.kind}): a frequency response is "
-                                       "fitted on the plant's linearisation; fit time series, "
-                                       "or the responses on a built-in plant") from None
+            raise ConfigError("--frf", f"{exc}: a frequency response is fitted on the "
+                                       "plant's linearisation; fit time series, or the "
+                                       "responses on a built-in plant") from None
     return Plan(settings, mapping, tuple(targets), tuple(responses))
 
 
 # --- the plant's frequency response ---------------------------------------------------------
 def _linear_outputs(s: Scenario) -> tuple[str, ...]:
-    from plant_exudyn._linear import output_names  # one list of names for both plants
-    return output_names(nominal_model(s.nominal_params, s.model.modes_per_link).mode_shapes)
+    return output_names(tuple(s.model.modes_per_link))
 
 
 def linear_response(s: Scenario, theta, frequency: np.ndarray, pairs) -> np.ndarray:
     """The frequency responses ``pairs`` = [(output, input)] of the scenario's plant
     linearised about rest at ``theta``, at ``frequency`` [Hz]: (len(pairs), F) complex.
     The q outputs are in the basis the sensors report them in (the controller's model).
-    The reduced plant is the model of its own order; any other plant is its own
-    linearisation (`PlantSpec.linear_model`: the FE arm of its mesh); NotImplementedError
-    for a plant that has none (a plug-in's)."""
-    from .linear import reduced_linear_model
-    basis = nominal_model(s.nominal_params, s.model.modes_per_link).mode_shapes
-    if s.plant.kind == "reduced":
-        own = cached_model(s.true_params, tuple(s.plant.modes_per_link))
-        system = reduced_linear_model(own, theta=theta, modal_basis=basis)
-    else:
-        system = s.plant.linear_model(s.true_params, theta=theta, modal_basis=basis)
+    The reduced plant is the model of its own order; any other plant is the FE arm of
+    its mesh (`plant_exudyn.linear_model`): the linear model its kind declares
+    (NotImplementedError for a kind that has none: a plug-in's)."""
+    system = s.plant.linear_model(s.true_params, theta=theta,
+                                  model=nominal_model(s.nominal_params, s.model.modes_per_link))
     A, B, C = (np.asarray(m) for m in (system.A, system.B, system.C))
     outs, ins = list(system.output_labels), list(system.input_labels)
     rows = [outs.index(o) for o, _ in pairs]

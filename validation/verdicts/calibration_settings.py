@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from reduced_model import ArmParameters
 
-from ..run._config import ConfigError, check
+from ..run.config import ConfigError, check
 from ..run.scenario import Scenario, scenario_from_mapping
 from ..run.tomlfiles import flatten
 

@@ -49,7 +49,7 @@ import numpy as np
 
 from ..batch.campaign import (RandomAxis, draw_points, expand, flatten_axes, load_study,
                               random_axis)
-from ..run._config import ConfigError, check
+from ..run.config import ConfigError, check
 from ..run.plants import ROLES, plant_for_role
 from ..run.requirements import Requirement
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping

@@ -36,7 +36,7 @@ import numpy as np
 from reduced_model import ArmModel
 
 from ..run.laws import build_controller
-from ..run.plants import is_truth, truth_spec
+from ..run.plants import is_truth, truth_settings
 from ..run.results import read_json
 from ..run.scenario import scenario_from_mapping
 from .linear import law_gain, reduced_linear_model
@@ -67,15 +67,14 @@ def arm_validity(config: dict) -> dict:
     JSON-able data (module docstring)."""
     s = scenario_from_mapping(config)
     model = ArmModel(s.true_params, s.model.modes_per_link)
-    truth = truth_spec(config)
+    truth = truth_settings(config)
     names = list(model.state_names)
     w = 2 * np.pi * np.asarray(FREQUENCIES_HZ)
     law = build_controller(s, model)
     responses, gaps = [], []
     for theta2 in THETA2:
         red = reduced_linear_model(model, theta=(0.0, theta2))
-        fe = truth.linear_model(s.true_params, theta=(0.0, theta2),
-                                modal_basis=model.mode_shapes)
+        fe = truth.linear_model(s.true_params, theta=(0.0, theta2), model=model)
         entry = {"theta2": theta2}
         for label, P in (("reduced", red), ("fe", fe)):
             H = P(1j * w)  # (outputs, inputs, frequencies)
@@ -111,12 +110,12 @@ def arm_validity(config: dict) -> dict:
 
 def _refined(config: dict) -> dict:
     """``config`` on its truth plant refined once (mesh and step)."""
-    return dict(config, plant=truth_spec(config).refined(1))
+    return dict(config, plant=truth_settings(config).refined(1))
 
 
 def _truth_text(config: dict) -> str:
     """"truth plant (Exudyn), ANCF 4 el/link": the truth plant a case is set against."""
-    spec = truth_spec(config)
+    spec = truth_settings(config)
     return ", ".join(x for x in (spec.label, spec.discretisation()) if x)
 
 
