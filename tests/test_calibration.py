@@ -280,6 +280,7 @@ def test_the_command_writes_a_runnable_scenario_and_a_verify_set(tmp_path, capsy
                      "cal", "--workers", "1", "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "true_params.EI1" in out and f"residual RMS / noise, {rid}" in out
+    assert '"model_adequate": true' in out
     calibrated = load_toml(tmp_path / "cal" / "calibrated.toml")
     scenario_from_mapping(calibrated)  # flexarm run --config takes it
     (tmp_path / "verify.toml").write_text(
@@ -293,6 +294,7 @@ def test_the_command_writes_a_runnable_scenario_and_a_verify_set(tmp_path, capsy
     assert cli.main(["report", "cal", "--no-animation", "--no-progress"]) == 0
     report = (tmp_path / "cal" / "report" / "report.md").read_text()
     assert "## Calibration" in report and "measured and fitted signals" in report
+    assert "**The model: model adequate" in report and "Ljung–Box" in report
     assert "calibrate/" not in report
 
 

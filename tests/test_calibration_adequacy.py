@@ -38,6 +38,15 @@ def lab_experiment(seed: int, duration: float):
     return from_run(result, "lab", "<lab>")
 
 
+def reads_tenfold(test: dict) -> bool:
+    """The white part's level reads noise 10× the stated: its statistic over 10 lies in
+    the band the noise test accepts for the stated level (±3.5 standard deviations at
+    500 samples: ±18 %; a level estimated from 500 samples of the fourth difference
+    has a relative standard deviation of 1.15/√496 = 5 %)."""
+    low, high = test["threshold"]
+    return low <= test["statistic"] / 10 <= high
+
+
 def covers(result, truth):
     """{name: True/False} whether each reported interval holds the hidden value (a
     parameter reported without interval, not identifiable, holds nothing false)."""
@@ -182,8 +191,8 @@ def test_the_reduced_model_on_fe_data_is_inadequate_and_no_interval_misses(tmp_p
 def test_noise_stated_ten_times_too_small_is_caught_by_chi2_not_taken_for_model_error(tmp_path):
     """The inverse crime with every noise level stated 10× too small: χ² fails on every
     signal, the model stays adequate, and the verdict says the noise is misstated by
-    ~10× (the white part, measured 9.8×); the intervals use the residual's own level, so
-    they still cover."""
+    10× (the white part reads it on every signal); the intervals use the residual's own
+    level, so they still cover."""
     data = experiment("reduced", duration=0.5, seed=7, noise=NOISE)
     stated = {k: v / 10 for k, v in NOISE.items()}
     result = fit(tmp_path, model("reduced", {"EI1": 10.5, "EI2": 9.5, "Mp": 0.105},
@@ -192,7 +201,7 @@ def test_noise_stated_ten_times_too_small_is_caught_by_chi2_not_taken_for_model_
     assert result["model_adequate"] is True and verdict["noise_as_stated"] is False
     signals = verdict["signals"]["e1"]
     assert all(not s["chi2"]["passed"] for s in signals.values())
-    assert all(s["noise"]["statistic"] == pytest.approx(10, rel=0.15) for s in signals.values())
+    assert all(reads_tenfold(s["noise"]) for s in signals.values())
     assert "noise misstated" in verdict["verdict"]
     assert all(covers(result, {k.split(".")[1]: v for k, v in TRUTH.items()}).values())
 
@@ -271,6 +280,6 @@ def test_noise_misstated_tenfold_is_caught_on_every_seed(tmp_path):
                      EI_MP, [data], table={"horizon": 0.5})
         signals = result["adequacy"]["signals"]["e1"].values()
         assert all(not s["chi2"]["passed"] for s in signals), seed
-        assert all(abs(s["noise"]["statistic"] / 10 - 1) < 0.15 for s in signals), seed
+        assert all(reads_tenfold(s["noise"]) for s in signals), seed
         adequate += result["model_adequate"] is True
     assert adequate >= 18, adequate
