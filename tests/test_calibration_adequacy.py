@@ -206,6 +206,19 @@ def test_noise_stated_ten_times_too_small_is_caught_by_chi2_not_taken_for_model_
     assert all(covers(result, {k.split(".")[1]: v for k, v in TRUTH.items()}).values())
 
 
+def test_a_closed_loop_fit_is_not_judged_and_says_so(tmp_path):
+    """With the controller in the loop the simulation draws its own noise: the residual
+    is not the measurement noise, the model is not judged (null), its intervals are
+    those of effective parameters, and uncertainty.toml says "not judged"."""
+    data = experiment("reduced", duration=0.3, seed=7, noise=NOISE)
+    result = fit(tmp_path, model("reduced", {"EI1": 10.5}), ["true_params.EI1"], [data],
+                 table={"inputs": "closed-loop"})
+    assert result["model_adequate"] is None
+    assert result["adequacy"]["verdict"].startswith("not judged")
+    assert result["parameters"]["true_params.EI1"]["ci95"] is None
+    assert 'calibration = "not judged"' in (tmp_path / "out" / "uncertainty.toml").read_text()
+
+
 # --- which model explains the data -----------------------------------------------------------
 def test_models_fitted_to_the_same_data_are_compared_in_one_table(tmp_path, capsys,
                                                                    monkeypatch):
