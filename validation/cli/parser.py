@@ -322,6 +322,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "linearised plant")
     cal.add_argument("--out", metavar="DIR",
                      help="results folder (default results/calibrate-<config name>)")
+    cal.add_argument("--compare", nargs="+", metavar="OTHER_DIR",
+                     help="calibrations of other models on the same data: one table of "
+                          "residual, adequacy and information criteria (AIC, BIC)")
     _add_execution(cal)
     cal.set_defaults(func=cmd_calibrate)
 
