@@ -255,6 +255,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     obs = "" if s.observer.kind == "none" else f" + {s.observer.kind}"
     print(f"{s.name}: {s.controller.kind}{obs} on the {s.plant.kind} plant, {s.arm} arm, "
           f"{s.duration:g} s at Ts = {s.Ts:g} s, from {s.initial_state}")
+    if s.true_params.joints_text():
+        print(f"  the true arm's joints: {s.true_params.joints_text()}")
     if result.message:
         print(f"  {result.status}: {result.message}")
     units = {r.metric: r for r in s.requirement}
