@@ -177,8 +177,7 @@ def test_a_failed_run_names_no_window_and_no_figures(tmp_path, capsys, plugin_la
     assert main(["run", "--controller", "wronglab:Wrong", "--duration", "1",
                  "--out", str(tmp_path)]) == 1
     out = capsys.readouterr().out
-    assert "no metrics after the transient: the run ended at 0 s, before its 0.5 s " \
-           "transient did" in out
+    assert "no metrics: the run failed after 0 of 1 s" in out
     assert "0.5–0 s" not in out and "real-time factor" not in out and "flexarm show" not in out
 
 

@@ -259,9 +259,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"  the true arm's joints: {s.true_params.joints_text()}")
     if result.message:
         print(f"  {result.status}: {result.message}")
-    units = {r.metric: r for r in s.requirement}
-    print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS},
-                         units))
+    if result.status == "failed":
+        if frames := failure_frames(store, rid):
+            print(frames)
+        print(f"  no metrics: the run failed after {result.end_time or 0:g} of {s.duration:g} s "
+              "(a run that failed measures nothing)")
+    else:
+        units = {r.metric: r for r in s.requirement}
+        print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS},
+                             units))
     if getattr(args, "like_row", None) is not None and result.status == "ok":
         print(_compare_with_stored(args.like_row, metrics))
     if truth:
@@ -297,12 +303,24 @@ def convergence_line(store, rid: str) -> str:
             f"+ {MESH_ATOL:.0%} of its bound")
 
 
+def failure_frames(store: ResultStore, rid: str) -> str:
+    """The stored frames of the code that raised in run ``rid`` (`RunResult.traceback`),
+    indented under a heading, or ""."""
+    frames = store.read(rid)[0].traceback
+    if not frames:
+        return ""
+    return "  where it raised (its own code; innermost last):\n" + "\n".join(
+        "  " + line for line in frames.splitlines())
+
+
 def cmd_show(args: argparse.Namespace) -> int:
     from ..report.show import open_in_browser, show_run
     row = stored_run(args.run, "RESULTS/RUN")
     if row.status != "ok":
         print(f"{row.run_id} ({row.name}) {row.status}: {row.message}; a run that did not "
               "complete is not drawn", file=sys.stderr)
+        if frames := failure_frames(row.store, row.run_id):
+            print(frames, file=sys.stderr)
         return EXIT_FAILED
     page, files, note = show_run(row)
     if note:

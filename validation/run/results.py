@@ -45,6 +45,10 @@ class RunResult:
         The fully resolved scenario.
     timings : dict
         Wall-clock seconds (total, plant, controller, observer) and the real-time factor.
+    traceback : str
+        Where a law or plug-in plant raised, if it did: the frames of its own code (its
+        module and package, file and line) as Python prints them
+        (`validation.run.tracebacks`); "" otherwise.  The message names the innermost.
     """
 
     time: np.ndarray
@@ -55,6 +59,7 @@ class RunResult:
     end_time: float = 0.0
     config: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    traceback: str = ""
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -138,7 +143,8 @@ class RunResult:
         compressed without loss (`validation.run.packing`; ``meta["packed"]`` says how,
         and their shape)."""
         meta = {"status": self.status, "message": self.message, "end_time": self.end_time,
-                "config": self.config, "timings": self.timings, **(extra or {})}
+                "config": self.config, "timings": self.timings,
+                **({"traceback": self.traceback} if self.traceback else {}), **(extra or {})}
         signals = self.signals
         if packed:
             from .packing import CODEC, pack
@@ -171,7 +177,8 @@ class RunResult:
                 result = cls(time=npz["time"], names=tuple(str(n) for n in npz["names"]),
                              signals=signals, status=meta["status"],
                              message=meta["message"], end_time=meta["end_time"],
-                             config=meta["config"], timings=meta["timings"])
+                             config=meta["config"], timings=meta["timings"],
+                             traceback=str(meta.get("traceback", "")))
         except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as exc:
             raise ValueError(f"not a stored run ({type(exc).__name__}: {exc})") from None
         return result, meta
