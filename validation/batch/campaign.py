@@ -42,7 +42,7 @@ from .runfiles import KEEP_ALL, Keep, keep_from_mapping
 from .store import run_id
 from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
-__all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
+__all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "own_name", "is_campaign",
            "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
            "MAX_RUNS", "run_name",
            "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes",
@@ -137,6 +137,13 @@ def load_study(path: str | Path, *, name: str | None = None) -> Campaign:
     for key, value in sections.items():
         check(isinstance(value, dict), key, "must be a table")
     return Campaign(name=label[:100], base=base, sweeps=(sweep,) if sweep else (), **sections)
+
+
+def own_name(study: Campaign) -> dict:
+    """``{"name": NAME}`` of a scenario file read by `load_study` that names its run (its
+    one sweep), else ``{}`` (a campaign's sweeps name its runs)."""
+    single = len(study.sweeps) == 1 and set(study.sweeps[0]) == {"name"}
+    return dict(study.sweeps[0]) if single else {}
 
 
 def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:

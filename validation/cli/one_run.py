@@ -89,7 +89,7 @@ def auto_name(s: Scenario) -> str:
 
 def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     """The scenario of ``flexarm run`` and what to tell the user about where it came from."""
-    from ..batch.campaign import load_study
+    from ..batch.campaign import load_study, own_name
     notes, like = [], getattr(args, "like", None)
     if like and args.config:
         raise ConfigError("--like", "--like and --config exclude each other")
@@ -109,10 +109,8 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
         data = copy.deepcopy(row.config)
     elif args.config:
         study = load_study(args.config, name=given)
-        data = deep_merge({}, study.base)
-        if len(study.sweeps) == 1 and set(study.sweeps[0]) == {"name"}:
-            data["name"] = study.sweeps[0]["name"]  # a scenario file's own name
-        elif study.sweeps:
+        data = deep_merge({}, study.base) | own_name(study)
+        if study.sweeps and not own_name(study):
             notes.append(f"{args.config} is a campaign: running its [scenario] base (its "
                          f"{len(study.sweeps)} sweep(s) are not run: flexarm campaign "
                          f"{args.config})")

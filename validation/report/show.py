@@ -25,7 +25,7 @@ def show_run(row) -> tuple[Path, list[Path], str]:
     """Draw the paper's figures of the stored run ``row`` (ok runs only); returns the
     page, the PNG files and a note naming the run drawn with it (or "")."""
     from ..batch.fingerprint import run_fingerprint
-    from .report import claim_bounds, figure_group, paper_figure_tasks
+    from .groups import claim_bounds, figure_group, paper_figure_tasks
     store = row.store
     group = [r for r in figure_group(row, store.rows()) if r.status == "ok"]
     others = [r for r in group if r.run_id != row.run_id]
