@@ -195,6 +195,48 @@ def test_commands_in_the_docs_name_real_flags(line):
             assert flag in known, f"{line!r}: {flag} is not a flag of {words[1]}"
 
 
+def prose(rst: str) -> str:
+    """A page's text as docutils would treat it as prose: without its code blocks (the
+    indented bodies of ``::`` directives) and inline literals."""
+    lines, keep = [], True
+    for line in rst.splitlines():
+        literal_block = line.startswith(".. code-block::") or (
+            not line.startswith("..") and line.rstrip().endswith("::"))
+        if literal_block:  # (a directive's "::", as list-table's, opens rst, not code)
+            keep = False
+            continue
+        if not keep:
+            if line.strip() and not line.startswith("   "):
+                keep = True
+            elif line.strip():
+                continue
+        lines.append(line)
+    return re.sub(r"``.*?``", "", "\n".join(lines))
+
+
+def test_the_cli_reference_has_no_flag_or_address_in_prose():
+    """Issue 47: the built CLI page showed 16 flags as "–set" (docutils' smart quotes turn
+    "--" into an en dash in prose: conf.py keeps quotes and ellipses only) and linked
+    "controller+observer@plant" as mailto:.  Every flag and "@" word of the generated
+    page is a literal (known-bad: the generator before wrapped none of them)."""
+    from flexarm_docs import cliref
+    text = prose(cliref.render(DOCS))
+    assert not re.findall(r"(?<![\w-])--?[A-Za-z][\w-]*", text), \
+        re.findall(r".{30}(?<![\w-])--?[A-Za-z][\w-]*.{10}", text)[:5]
+    assert not re.findall(r"\w@\w", text)
+    conf = (DOCS / "conf.py").read_text()
+    assert 'smartquotes_action = "qe"' in conf and "mathjax_path = COMPONENT" in conf
+
+
+def test_the_site_ships_its_math_renderer():
+    """Issue 47: MathJax came from a CDN (raw LaTeX offline).  The site loads the file the
+    build copies from the pinned package (constraints.txt), a path inside _static."""
+    from flexarm_docs.mathjax import COMPONENT
+    assert not re.match(r"\w+://", COMPONENT) and COMPONENT.endswith(".js")
+    pins = (ROOT / "constraints.txt").read_text()
+    assert re.search(r"^django-static-mathjax==", pins, flags=re.M)
+
+
 EXAMPLES = sorted((DOCS / "examples").glob("plot_*.py"))
 
 
