@@ -76,7 +76,36 @@ class PlannedRun:
 class Campaign:
     """A base scenario (a mapping, with the file's ``[[requirement]]`` entries), its sweeps
     and the sections of a campaign file (``uncertainty`` and ``verify`` are read by
-    ``flexarm verify``, `validation.verdicts.verify`)."""
+    ``flexarm verify``, `validation.verdicts.verify`).  Made by `load_campaign` or
+    `campaign_from_mapping`; the keys are those of a campaign file (the configuration
+    reference).
+
+    Parameters
+    ----------
+    name : str
+        The campaign's name: its results folder's default and its runs' prefix.
+    base : dict
+        The ``[scenario]`` every run starts from, as a mapping.
+    sweeps : tuple of dict
+        The ``[[sweep]]`` tables (``grid``, ``zip``, ``random``; `expand` runs them).
+    report : dict
+        The ``[report]`` table (which runs' figures the report draws).
+    description : str
+        What the campaign asks, for the report.
+    attribution, uncertainty, verify, calibrate, keep : dict
+        The ``[attribution]``, ``[uncertainty]``, ``[verify]``, ``[calibrate]`` and
+        ``[keep]`` tables (empty when the file has none).
+
+    Examples
+    --------
+    >>> from validation import campaign_from_mapping, expand
+    >>> campaign = campaign_from_mapping({
+    ...     "name": "gains", "scenario": {"duration": 1.0},
+    ...     "sweep": [{"name": "kp", "grid": {"plant.kind": ["reduced", "exudyn"],
+    ...                                       "seed": [1, 2, 3]}}]})
+    >>> campaign.name, len(expand(campaign))
+    ('gains', 6)
+    """
 
     name: str
     base: dict

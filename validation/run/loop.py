@@ -114,7 +114,19 @@ def run_scenario(scenario: Scenario) -> RunResult:
     -------
     RunResult
         Its named signals, status (``ok``, ``diverged`` or ``failed``) and resolved
-        scenario.
+        scenario; where a law raised, the frames of its own code (``traceback``).
+
+    Examples
+    --------
+    >>> from validation import all_metrics, run_scenario, scenario_from_mapping
+    >>> result = run_scenario(scenario_from_mapping({"duration": 0.5}))
+    >>> result.status, result.time.size, result["theta1"].shape
+    ('ok', 500, (500,))
+    >>> metrics = all_metrics(result)
+    >>> metrics["transient_s"], metrics["end_time"]  # the window measured [s]
+    (0.25, 0.5)
+    >>> 0 < metrics["track_max_1"] < 0.2  # the largest |θ1 − θ1d| in it [rad]
+    True
     """
     setup = build(scenario)
     return simulate(setup.plant, setup.controller, setup.observer, scenario,

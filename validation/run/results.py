@@ -29,11 +29,14 @@ STATUSES = ("ok", "diverged", "failed")
 class RunResult:
     """Signals of one run at the control instants t_k = k·Ts.
 
-    Attributes
+    Parameters
     ----------
     time : ndarray (n_samples,)
+        The control instants [s].
     names : tuple of str
+        The signals' names (the signal reference), one per row of ``signals``.
     signals : ndarray (n_signals, n_samples)
+        SI units, radians.
     status : {"ok", "diverged", "failed"}
         "diverged": the state left its bounds or became non-finite; "failed": the plant's
         solver gave up.  Signals then end at the last sample before that.
@@ -49,6 +52,16 @@ class RunResult:
         Where a law or plug-in plant raised, if it did: the frames of its own code (its
         module and package, file and line) as Python prints them
         (`validation.run.tracebacks`); "" otherwise.  The message names the innermost.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from validation import RunResult
+    >>> result = RunResult(time=np.array([0.0, 1e-3]), names=("theta1", "theta2"),
+    ...                    signals=np.array([[0.0, 0.1], [0.0, -0.1]]))
+    >>> t, y = result                     # unpacks like python-control's responses
+    >>> y.shape, result["theta2"][-1], result.ok
+    ((2, 2), np.float64(-0.1), True)
     """
 
     time: np.ndarray
