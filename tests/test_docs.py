@@ -224,6 +224,8 @@ def test_the_site_ships_its_math_renderer():
     assert not re.match(r"\w+://", COMPONENT) and COMPONENT.endswith(".js")
     pins = (ROOT / "constraints.txt").read_text()
     assert re.search(r"^django-static-mathjax==", pins, flags=re.M)
+    # sphinx-gallery's computation-time pages load jQuery and DataTables from CDNs
+    assert '"write_computation_times": False' in (DOCS / "conf.py").read_text()
 
 
 EXAMPLES = sorted((DOCS / "examples").glob("plot_*.py"))
