@@ -12,7 +12,8 @@ from campaign_testing import metrics_table
 from validation.batch import committing
 from validation.batch.campaign import campaign_from_mapping, expand, run_campaign
 from validation.batch.executor import SerialRunner
-from validation.batch.resimulate import full_result
+from validation.batch.errors import StoreError
+from validation.batch.resimulate import every_signal
 from validation.batch.store import ResultStore, environment
 from validation.batch.storing import (Destination, StoreTask, landed, leave_token,
                                       run_and_store)
@@ -125,25 +126,25 @@ def test_what_a_run_keeps_and_its_signals_on_demand(reference, tmp_path, keep):
             np.testing.assert_array_equal(stored.signals,
                                           everything.select(names)[:, ::every])
         assert row.size < full.row(row.run_id).size
-        again = full_result(row)
+        assert row.has_file == (names != ())  # metrics only: the row is all of it
+        again = every_signal(kept, row)
         assert again.names == everything.names
         np.testing.assert_array_equal(again.signals, everything.signals)
 
 
 def test_re_simulation_refuses_a_run_it_does_not_reproduce(tmp_path):
     """Known-bad: a stored metric that the scenario does not give (other code made it)."""
-    from validation.batch.index import transaction
+    from validation.batch.index import metric_column, transaction
     out = tmp_path / "kept"
     run_campaign(campaign_from_mapping(dict(SMALL, keep={"signals": "none"})), out,
                  runner=SerialRunner(), progress=False)
     store = ResultStore(out)
     row = store.rows()[0]
-    with transaction(store._connect(create=True)) as db:  # as if other code had stored it
-        metrics = dict(row.metrics, track_max_1=row.metrics["track_max_1"] * (1 + 1e-15))
-        db.execute("UPDATE runs SET metrics = ? WHERE run_id = ?",
-                   (__import__("json").dumps(metrics), row.run_id))
-    with pytest.raises(ValueError, match="did not reproduce its stored metrics"):
-        full_result(store.row(row.run_id))
+    with transaction(store.connection(create=True)) as db:  # as if other code had stored it
+        db.execute(f"UPDATE runs SET {metric_column('track_max_1')} = ? WHERE run_id = ?",
+                   (row.metrics["track_max_1"] * (1 + 1e-15), row.run_id))
+    with pytest.raises(StoreError, match="did not reproduce its stored metrics"):
+        every_signal(store, store.row(row.run_id))
 
 
 def test_packed_signals_unpack_exactly_or_not_at_all():

@@ -37,7 +37,8 @@ import numpy as np
 
 from ..run._config import ConfigError, check, check_label
 from .executor import Runner, SerialRunner
-from .fingerprint import run_fingerprint
+from .errors import NotARunFile
+from .fingerprint import is_fresh
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .runfiles import KEEP_ALL, Keep, keep_from_mapping
 from .store import ResultStore, run_id
@@ -532,11 +533,11 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
     # Every row is read (not only the wanted ones): a damaged index shows on any page.
     rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
     for run in planned:  # a file whose row was lost: its metadata rebuilds the row
-        path = store.runs_dir / f"{run.run_id}.npz"
-        if run.run_id not in rows and path.exists():
+        path = store.out / "runs" / f"{run.run_id}.npz" if store.out else None
+        if run.run_id not in rows and path is not None and path.exists():
             try:
                 rows[run.run_id] = store.adopt(path)
-            except ValueError:
+            except NotARunFile:
                 pass  # unreadable: the run is redone and the file replaced
     damaged = store.verify(list(rows.values()))
     todo = []
@@ -547,7 +548,7 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
         elif run.run_id in damaged:
             summary.damaged[run.run_id] = damaged[run.run_id]
             todo.append(run)
-        elif row.fingerprint != run_fingerprint(row.config) and not reuse_stale:
+        elif not is_fresh(row) and not reuse_stale:
             summary.stale.append(run.run_id)
             todo.append(run)
         elif row.status == "failed" and retry_failed:

@@ -32,7 +32,7 @@ from pathlib import Path
 from reduced_model._imports import walk
 
 __all__ = ["code_fingerprint", "run_fingerprint", "result_sources", "plugin_sources",
-           "plugin_kinds", "forget_plugins"]
+           "plugin_kinds", "forget_plugins", "is_fresh"]
 
 _ROOT = Path(__file__).resolve().parents[2]
 #: Where executing a run starts: everything it can import decides results.
@@ -127,7 +127,8 @@ def forget_plugins() -> None:
     """Forget which files each plug-in imports and which distributions are installed
     (found once per process): for a caller that edits or installs plug-ins while it
     runs, such as a test."""
-    for cached in (_plugin_walk, _top_levels, _distributions, _distribution_record):
+    for cached in (_plugin_walk, _top_levels, _distributions, _distribution_record,
+                   _plugins_fingerprint):
         cached.cache_clear()
 
 
@@ -153,6 +154,11 @@ def run_fingerprint(scenario: dict) -> str:
     kinds = plugin_kinds(scenario)
     if not kinds:
         return code_fingerprint()
+    return _plugins_fingerprint(tuple(kinds))
+
+
+@functools.lru_cache(maxsize=64)
+def _plugins_fingerprint(kinds: tuple[str, ...]) -> str:
     h = hashlib.sha256(code_fingerprint().encode())
     for kind in kinds:
         files = plugin_sources(kind)
@@ -163,3 +169,11 @@ def run_fingerprint(scenario: dict) -> str:
             h.update(b"unknown")
         _hash_packages(h, _plugin_walk(kind.partition(":")[0]).packages)
     return h.hexdigest()[:16]
+
+
+def is_fresh(row) -> bool:
+    """Whether the stored run ``row`` (`StoredRun`) was made by this installation's code:
+    its fingerprint is the one its laws and plant would get now (their kinds are columns
+    of the row: no scenario decoded)."""
+    kinds = {part: {"kind": getattr(row, part)} for part in ("controller", "observer", "plant")}
+    return row.fingerprint == run_fingerprint(kinds)

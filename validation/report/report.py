@@ -38,7 +38,8 @@ from .sweep_figures import short_value, sweep_figures
 from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
 from .drawing import draw_all
-from ..batch.fingerprint import run_fingerprint
+from ..batch.fingerprint import is_fresh
+from ..batch.resimulate import every_signal
 from .render import fmt_number, folded, folded_text, render
 from .calibration import calibration_section
 from .robust import robust_section
@@ -196,13 +197,13 @@ def _estimation_table(runs) -> dict | None:
     return {"compact": _table(head, rows), "detail": _table(detail_head, detail)}
 
 
-def _mesh_table(runs) -> dict | None:
+def _mesh_table(runs, signals) -> dict | None:
     """Closed-loop mesh convergence of the truth-plant runs that have checks: per run, its
     verdict and the values that moved (compact); each judged value (a claim's measure) on
     every mesh (detail)."""
     from ..verdicts.claims import mesh_rows
     from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
-    rows = sorted(mesh_rows(runs), key=lambda r: (r.run.name, _swept(r.run),
+    rows = sorted(mesh_rows(runs, signals), key=lambda r: (r.run.name, _swept(r.run),
                                                   r.run.config["Ts"]))
     if not rows:
         return None
@@ -318,7 +319,7 @@ def _included(store: ResultStore):
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
-    stale = [r for r in all_rows if r.fingerprint != run_fingerprint(r.config)]
+    stale = [r for r in all_rows if not is_fresh(r)]
     fresh = [r for r in all_rows if r.run_id not in damaged and r not in stale]
     runs = [r for r in fresh if r.sweep != "stability" and not is_check(r)
             and r.sweep not in (*ROBUST_SWEEPS, FIT_SWEEP)]
@@ -357,7 +358,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     all_rows, runs, warnings, evaluations = _included(store)
     fresh_ids = {r.run_id for r in runs}
     checks = [r for r in all_rows if is_check(r) and r.run_id not in fresh_ids
-              and r.fingerprint == run_fingerprint(r.config)]
+              and is_fresh(r)]
     damaged_checks = store.verify(checks)
     checks = [r for r in checks if r.run_id not in damaged_checks]
     campaigns = store.campaigns()
@@ -372,8 +373,9 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       counts=counts, scope=_scope(counted), warnings=warnings)
     bounds = claim_bounds()
 
-    columns = claim_columns(runs + checks)
-    data.mesh = _mesh_table(runs + checks)
+    signals = functools.partial(every_signal, store)
+    columns = claim_columns(runs + checks, signals)
+    data.mesh = _mesh_table(runs + checks, signals)
     if columns:
         data.summary = verdict_counts(columns)
         data.claims = claims_tables(columns)
@@ -424,7 +426,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     data.notes["paper_figures"] = [f"{r.name}, {fig.describe_run(r.config)}: not drawn, every "
                                    f"run of it {r.status} ({r.message})" for r in skipped]
     for group in groups:
-        tasks += paper_figure_tasks(group, bounds)
+        tasks += paper_figure_tasks(store, group, bounds)
     by_sweep: dict[str, list] = {}
     for r in runs:
         if r.sweep and r.axes:
@@ -450,7 +452,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       lambda p=params, m=modes, a=arm: validity_map(p, m, f"{a} arm")))
     makes = [make for _, _, make in tasks]
     if animate and groups and animation_path is not None:
-        makes.append(lambda: _animation(groups[0], animation_path))
+        makes.append(lambda: _animation(store, groups[0], animation_path))
     drawn = draw_all(makes, stores=[store], progress=progress)
     for (section, caption, _), made in zip(tasks, drawn):
         items = made if isinstance(made, list) else [(caption, made)]
@@ -462,10 +464,10 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     return data
 
 
-def _loaded(group):
+def _loaded(store, group):
     """(row, every signal) of each run of a figure group (re-simulated where a run's file
-    keeps less: `StoredRun.load`)."""
-    return [(r, r.load()) for r in group]
+    keeps less: `validation.batch.resimulate.every_signal`)."""
+    return [(r, every_signal(store, r)) for r in group]
 
 
 def _title(group) -> str:
@@ -480,7 +482,7 @@ def _title(group) -> str:
         f" — {stopped}" if stopped else "")
 
 
-def paper_figure_tasks(group, bounds: dict | None = None) -> list:
+def paper_figure_tasks(store, group, bounds: dict | None = None) -> list:
     """The paper's figures of one group as (section, caption, draw) tasks; runs that
     diverged or failed are named in the title, not drawn (their last samples before
     leaving the bounds are not data).  ``bounds``: the claims' bounds by claim key."""
@@ -495,7 +497,7 @@ def paper_figure_tasks(group, bounds: dict | None = None) -> list:
 
     def results():
         if "r" not in cache:
-            cache["r"] = _loaded(group)
+            cache["r"] = _loaded(store, group)
         return cache["r"]
     what, _, stopped = title.partition(" — ")
 
@@ -518,14 +520,14 @@ def paper_figure_tasks(group, bounds: dict | None = None) -> list:
     return tasks
 
 
-def _animation(group, path: Path) -> tuple[str, bytes] | None:
+def _animation(store, group, path: Path) -> tuple[str, bytes] | None:
     """The GIF of a group written to ``path`` and its still for print: (caption, PNG);
     None when no run moves (one sample)."""
     from ..run.laws import nominal_model
     head = group[0]
     params = ArmParameters.from_mapping(head.config["nominal_params"])
     model = nominal_model(params, tuple(head.config["model"]["modes_per_link"]))
-    loaded = _loaded([r for r in group if r.status == "ok"])
+    loaded = _loaded(store, [r for r in group if r.status == "ok"])
     caption = fig.animation(loaded, params, model, _title(group), path)
     if caption is None:
         return None
@@ -595,7 +597,7 @@ def _rows_digest(store: ResultStore) -> list:
     if not store.exists():
         return []
     return sorted([r.run_id, r.sha256, r.size, r.status, r.name, r.sweep, r.axes,
-                   r.fingerprint == run_fingerprint(r.config)] for r in store.rows())
+                   is_fresh(r)] for r in store.rows())
 
 
 def content_key(results_dir, *, animate: bool) -> str:

@@ -102,6 +102,7 @@ from ..run.loop import measurement_noise
 from ..run.results import write_atomic
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from ..run.tomlfiles import deep_merge, flatten, set_dotted, toml_text, toml_value
+from ..batch.resimulate import every_signal
 from .verify import Evaluations
 
 __all__ = ["Parameter", "CalibrationSettings", "calibration_settings", "Target", "Plan",
@@ -447,7 +448,7 @@ class _Problem:
     """The residuals of a plan at points u (the parameters over their scales), each
     simulation a stored run on the campaign runner."""
 
-    def __init__(self, plan: Plan, out: Path, runner, inputs: list[dict]) -> None:
+    def __init__(self, plan: Plan, out, runner, inputs: list[dict]) -> None:
         self.plan, self.settings = plan, plan.settings
         self.scale = np.array([p.scale for p in plan.settings.parameters])
         self.inputs = inputs  # per target: the scenario keys that reproduce its input
@@ -505,7 +506,7 @@ class _Problem:
         measured = exp.signals[:, :k]
         r = np.full(measured.shape, _PENALTY)
         if row is not None and row.status != "failed":
-            result = row.load()
+            result = every_signal(self.evals.store, row)
             done = min(k, len(result.time))
             sim = result.select([f"y_{n}" for n in exp.names])[:, :done].astype(np.float64)
             r[:, :done] = (sim - measured[:, :done]) / target.sigma[:, None]
@@ -557,7 +558,7 @@ class _Problem:
         return math.sqrt(total / (24.0 if central else 6.0)) / h
 
 
-def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
+def calibrate(plan: Plan, out, *, runner, log=print, store=None) -> dict:
     """Fit the plan's parameters with scipy's ``least_squares`` (module docstring).
 
     Parameters
@@ -572,6 +573,11 @@ def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
         Runs a list of planned scenarios (`make_runner`).
     log : callable
         Receives one line per iteration.
+    store : BaseStore, optional
+        Where the simulations are kept (default: the folder ``out``, which a calibration
+        stopped and started again resumes from); an in-memory store
+        (`validation.batch.memory.MemoryStore`) keeps them in this process, every signal
+        in float64, nothing written to ``runs/``.
 
     Returns
     -------
@@ -582,7 +588,7 @@ def calibrate(plan: Plan, out, *, runner, log=print) -> dict:
     out = Path(out)
     settings = plan.settings
     inputs = _write_inputs(plan, out)
-    problem = _Problem(plan, out, runner, inputs)
+    problem = _Problem(plan, store or out, runner, inputs)
     lower = np.array([q.lower for q in settings.parameters]) / problem.scale
     upper = np.array([q.upper for q in settings.parameters]) / problem.scale
     u = np.array([q.start for q in settings.parameters]) / problem.scale
