@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 from .index import decode_detail, is_run_id
 
-__all__ = ["StoredRun", "Detail", "records"]
+__all__ = ["StoredRun", "Detail", "records", "metric_matrix"]
 
 
 class Detail:
@@ -171,3 +171,24 @@ def records(cursor, sets: dict, dictionary):
             yield values[0], str(exc)
             continue
         yield values[0], row
+
+
+def metric_matrix(rows, names) -> "np.ndarray":
+    """The metrics ``names`` of ``rows`` as a float array (len(rows), len(names)): NaN
+    where a run lacks a metric or its value is not a number (no dict built per row: runs
+    of one metric layout share the positions of the names)."""
+    import numpy as np
+    names = list(names)
+    out = np.full((len(rows), len(names)), np.nan)
+    pickers: dict = {}
+    for i, row in enumerate(rows):
+        layout = row.metric_names
+        if id(layout) not in pickers:  # rows of one layout share its tuple
+            found = [(j, layout.index(n)) for j, n in enumerate(names) if n in layout]
+            pickers[id(layout)] = ([j for j, _ in found], _picker([k for _, k in found]),
+                                   layout)
+        columns, pick, _ = pickers[id(layout)]
+        if columns:
+            out[i, columns] = [v if isinstance(v, float) else np.nan
+                               for v in pick(row.metric_values)]
+    return out

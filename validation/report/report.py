@@ -43,6 +43,8 @@ from ..batch.resimulate import every_signal
 from .render import fmt_number, folded, folded_text, render
 from .calibration import calibration_section
 from .robust import robust_section
+from .many import distributions, histograms, is_many
+from ..batch.records import metric_matrix
 from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
@@ -98,6 +100,7 @@ class ReportData:
     validity: dict | None = None
     robust: dict | None = None
     calibration: dict | None = None
+    many: dict | None = None
 
 
 def _table(head: list[str], rows: list[list], classes: list[str] | None = None) -> dict:
@@ -334,18 +337,32 @@ def _included(store: ResultStore):
 
 
 def _scope(runs) -> list[str]:
-    arms = sorted({r.config.get("arm", "default") for r in runs})
+    arms = sorted({r.arm for r in runs})
     scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in arms]
-    scope.append("plants: " + ", ".join(sorted({r.plant_label for r in runs})))
+    scope.append("plants: " + ", ".join(sorted({(r.plant, r.role): r.plant_label
+                                                 for r in runs}.values())))
     scope.append("control periods Ts: " + ", ".join(f"{1e3 * t:g} ms" for t in
-                                                     sorted({r.config["Ts"] for r in runs})))
+                                                     sorted({r.Ts for r in runs})))
     scope.append("initial conditions: " + ", ".join(sorted(
-        {"at rest" if _start(r.config) == "rest" else "moving with the reference" for r in runs})))
-    windows = sorted({(r.config["transient"], r.config["duration"]) for r in runs})
+        {"at rest" if r.initial_state == "rest" else "moving with the reference"
+         for r in runs})))
+    windows = sorted(_windows(runs))
     scope.append("metrics after the transient: " + ", ".join(
         f"{t:g} s of {d:g} s runs" for t, d in windows[:6]) + (", …" if len(windows) > 6 else "")
         + " (maxima of deflection and torque, torque variation: the whole run)")
     return scope
+
+
+def _windows(runs) -> set:
+    """(transient, duration) of ``runs``: from each run's scenario, or for many runs from
+    the metrics that say them (the transient applied; the end time of a run that
+    completed) and the scenarios of the others."""
+    if not is_many(runs):
+        return {(r.config["transient"], r.config["duration"]) for r in runs}
+    ok = [r for r in runs if r.status == "ok"]
+    pairs = {tuple(p) for p in metric_matrix(ok, ["transient_s", "end_time"]).tolist()}
+    return pairs | {(r.config["transient"], r.config["duration"])
+                    for r in runs if r.status != "ok"}
 
 
 def report_data(results_dir, *, animate: bool = True, progress: bool = True,
@@ -384,7 +401,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                                  "rationale": c.rationale} for c in CLAIMS]
         data.claim_notes = [f"{c.text.split(':')[0]} ({c.key.replace('_', ' ')}): "
                             f"{NOTE_MEANING[c.key]}" for c in CLAIMS if c.key in NOTE_MEANING]
-    data.pairs = pairs_table(runs, fig.describe_run)
+    data.pairs = pairs_table(runs, fig.describe_run) if len({r.role for r in runs}) > 1 \
+        else None
     stability_dir = store.out / "stability"
     tasks = []
     if ResultStore(stability_dir).exists():
@@ -418,17 +436,26 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     tasks += robust_tasks
     data.calibration, calibration_tasks = calibration_section(store)
     tasks += calibration_tasks
-    data.estimation = _estimation_table(runs)
-    if runs:  # a folder of `flexarm verify` alone has its section instead
+    many = is_many(runs)
+    if many:  # summarised: no table row and no figure per run
+        data.many = distributions(runs)
+        tasks.append(("Distributions", "distributions over the runs that completed",
+                      lambda: histograms(runs)))
+    else:
+        data.estimation = _estimation_table(runs)
+    if runs and not many:  # a folder of `flexarm verify` alone has its section instead
         data.runs, data.metrics = _runs_table(runs), _metrics_table(runs)
 
-    groups, skipped = _figure_groups(runs, wanted)
+    groups, skipped = _figure_groups(runs, wanted) if not many else ([], [])
+    if many and data.many:  # a run's figures: `flexarm show`, e.g. of a worst run
+        data.many["stopped"].append(f"no run's figures are drawn here: 'flexarm show "
+                                    f"{store.out}/RUN' draws any run's")
     data.notes["paper_figures"] = [f"{r.name}, {fig.describe_run(r.config)}: not drawn, every "
                                    f"run of it {r.status} ({r.message})" for r in skipped]
     for group in groups:
         tasks += paper_figure_tasks(store, group, bounds)
     by_sweep: dict[str, list] = {}
-    for r in runs:
+    for r in runs if not many else ():  # many runs: their distributions instead
         if r.sweep and r.axes:
             by_sweep.setdefault(r.sweep, []).append(r)
     sweep_bounds = {"track_max": bounds["tracking"], "vib_rms": bounds["vibration"],
@@ -442,8 +469,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                          "gaps": _table(*gap_rows(validity))}
         tasks.append(("Validity of the reduced model", None,
                       lambda: linear_figures.validity_figures(validity)))
-    for arm in sorted({r.config.get("arm", "default") for r in runs}):
-        example = next(r for r in runs if r.config.get("arm", "default") == arm)
+    for arm in sorted({r.arm for r in runs}):
+        example = next(r for r in runs if r.arm == arm)
         params = ArmParameters.from_mapping(example.config["true_params"])
         modes = tuple(example.config["model"]["modes_per_link"])
         tasks.append(("Validity of the reduced model",
@@ -536,7 +563,7 @@ def _animation(store, group, path: Path) -> tuple[str, bytes] | None:
 
 # --- the pages ------------------------------------------------------------------------------
 #: The figure sections, in the order the report shows them.
-SECTIONS = ["Stability map", "Attribution", "Paper figures", "Sweeps",
+SECTIONS = ["Stability map", "Attribution", "Distributions", "Paper figures", "Sweeps",
             "Validity of the reduced model"]
 
 
@@ -567,6 +594,7 @@ def contents(data: ReportData) -> list[tuple[str, str]]:
                ("calibration", "Calibration", data.calibration),
                ("estimation", "Estimation against the measurement", data.estimation),
                ("runs", "Runs and metrics", data.runs),
+               ("many", "Distributions and worst cases", data.many),
                ("paper-figures", "Paper figures", has["Paper figures"]),
                ("sweeps", "Sweeps", has["Sweeps"]),
                ("validity", "Validity of the reduced model",
@@ -593,11 +621,16 @@ def _drawing_code() -> str:
     return h.hexdigest()
 
 
-def _rows_digest(store: ResultStore) -> list:
+def _rows_digest(store: ResultStore) -> str:
+    """A hash of what the report reads of each stored run (its detail whole: swept values
+    included, never decoded)."""
     if not store.exists():
-        return []
-    return sorted([r.run_id, r.sha256, r.size, r.status, r.name, r.sweep, r.axes,
-                   is_fresh(r)] for r in store.rows())
+        return ""
+    h = hashlib.sha256()
+    for r in sorted(store.rows(), key=lambda r: r.run_id):
+        h.update(f"{r.run_id}\0{r.sha256}\0{r.size}\0{r.status}\0{r.name}\0{r.sweep}\0"
+                 f"{is_fresh(r)}\0".encode() + r.detail.blob)
+    return h.hexdigest()
 
 
 def content_key(results_dir, *, animate: bool) -> str:

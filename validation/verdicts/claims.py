@@ -274,7 +274,7 @@ def mesh_rows(runs, signals=None) -> list[MeshRow]:
     by_id = {r.run_id: r for r in runs}
     out, cache = [], _Cache(signals)
     for r in runs:
-        if not is_truth(r.config) or mesh_check.is_check(r):
+        if r.role != "truth" or mesh_check.is_check(r):
             continue
         checks = mesh_check.checks_of(r, by_id)
         if not any(checks.values()):
