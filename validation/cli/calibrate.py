@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..run._config import ConfigError
 from ..run.experiments import from_run, read_experiment, read_frequency_response, write_experiment
 
 from .common import EXIT_FAILED, runner_for
@@ -73,6 +74,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def export_signals(args: argparse.Namespace) -> int:
     """``flexarm export --signals RESULTS/RUN [--to FILE]``: the run as an experiment CSV."""
+    if args.to is not None and (Path(args.to).is_dir() or Path(args.to).is_symlink()):
+        raise ConfigError("--to", f"{args.to} is a directory or a link: give the CSV "
+                                  "file to write")
     store, row = stored_run(args.signals, "--signals")
     exp = from_run(every_signal(store, row), row.run_id, args.signals)
     comment = (f"run {row.run_id} ({row.name}) of {store.out}, as flexarm calibrate reads "
