@@ -26,24 +26,14 @@ import time
 from pathlib import Path
 
 from _report import report, target
-from _workloads import CLI
+from _workloads import CLI, METRICS_ONLY, extract
 
 ROOT = Path(__file__).resolve().parent.parent
 
-CAMPAIGN = """name = "many"
-[scenario]
-duration = 0.3
-transient = 0.1
-observer.kind = "smo-paper"
-sensors.encoder_noise = 1e-4
-[keep]
-signals = "none"
-[[requirement]]
+#: A requirement, so that every run carries a robustness ρ to summarise.
+REQUIREMENT = """[[requirement]]
 name = "track"
 formula = "always[0.1,0.3](abs(theta1 - theta1_ref) <= 0.002)"
-[[sweep]]
-name = "seeds"
-grid.seed = {seeds}
 """
 
 #: Read every row, then the query, in the tree's own interpreter; prints two times.
@@ -81,7 +71,8 @@ def sizes(out: Path) -> tuple[int, int]:
 
 def measure(tree: Path, runs: int, tmp: Path, label: str) -> dict:
     spec, out = tmp / f"{label}-{runs}.toml", tmp / f"{label}-{runs}"
-    spec.write_text(CAMPAIGN.format(seeds=list(range(runs))))
+    spec.write_text(METRICS_ONLY.format(duration=0.3, transient=0.1, requirement=REQUIREMENT,
+                                        seeds=list(range(runs))))
     row = {"tree": label, "runs": runs}
     row["campaign_s"], _ = timed(tree, "-c", CLI, "campaign", str(spec), "--out", str(out),
                                  "--workers", "2", "--no-progress")
@@ -101,11 +92,7 @@ def main(rev: str, counts: list[int]) -> None:
     rows = []
     with tempfile.TemporaryDirectory(prefix="flexarm-many-") as tmp:
         tmp = Path(tmp)
-        before = tmp / "before"
-        before.mkdir()
-        archive = subprocess.run(["git", "archive", rev], cwd=ROOT, capture_output=True,
-                                 check=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(before)], input=archive, check=True)
+        before = extract(rev, tmp / "before")
         for runs in counts:
             old = measure(before, runs, tmp, "before")
             new = measure(ROOT, runs, tmp, "after")

@@ -217,3 +217,54 @@ def test_a_signal_between_two_results_ends_the_runs_in_flight_before_adopting_fi
     assert order == ["signal", "runs ended", "files looked for"]  # known bad: looked first
     # Known bad: 0 (the one being stored was skipped), then 1 (the one after never looked for).
     assert len(ResultStore(tmp_path).rows()) == 2
+
+
+def test_an_in_memory_store_keeps_float64_signals_and_writes_nothing(tmp_path, monkeypatch):
+    """Known-good: the runs an inner loop asks for come back with every signal as the run
+    made it (float64, equal to the run itself), rows and metrics as a folder's; nothing
+    is written (the working directory stays empty).  Known-bad: the folder's copy of
+    the same run is float32 (what calibration's residuals went through)."""
+    from validation.batch.memory import MemoryStore
+    from validation.run.loop import run_scenario
+    from validation.run.scenario import scenario_from_mapping
+    from validation.verdicts.verify import Evaluations
+    monkeypatch.chdir(tmp_path)
+    scenario = scenario_from_mapping(SMALL["scenario"] | {"seed": 5})
+    memory = Evaluations(MemoryStore(), SerialRunner(), "inner")
+    (row,) = memory.run([(scenario, "inner", {"seed": 5})])
+    direct = run_scenario(scenario)
+    kept = every_signal(memory.store, row)
+    assert kept.signals.dtype == np.float64
+    np.testing.assert_array_equal(kept.signals, direct.signals)
+    assert list(tmp_path.iterdir()) == []
+    folder = Evaluations(tmp_path / "out", SerialRunner(), "inner")
+    (stored,) = folder.run([(scenario, "inner", {"seed": 5})])
+    assert stored.metrics.keys() == row.metrics.keys()
+    assert all(stored.metrics[k] == row.metrics[k] or k in ("status",) or
+               (isinstance(row.metrics[k], float) and np.isnan(row.metrics[k]))
+               for k in row.metrics)
+    assert folder.store.load(stored.run_id).signals.dtype == np.float32
+
+
+def test_store_errors_are_not_value_errors_and_reach_the_caller(tmp_path, monkeypatch):
+    """A busy or damaged index while a campaign adopts a file without a row was swallowed
+    by `except ValueError` (StoreError was one) and the run redone; now it reaches the
+    caller.  Known-good: a file that is not a run file is still passed over."""
+    from validation.batch.campaign import classify
+    from validation.batch.errors import IndexBusy, NotARunFile
+    assert not issubclass(StoreError, ValueError)
+    c = campaign_from_mapping(SMALL)
+    planned = expand(c)
+    store = ResultStore(tmp_path)
+    store.prepare()
+    (tmp_path / "runs" / f"{planned[0].run_id}.npz").write_bytes(b"not a run file")
+    todo, _ = classify(planned, store, retry_failed=False, reuse_stale=False)
+    assert len(todo) == len(planned)  # unreadable: redone
+    with pytest.raises(NotARunFile):
+        store.adopt(tmp_path / "runs" / f"{planned[0].run_id}.npz")
+
+    def busy(path):
+        raise IndexBusy("busy")
+    monkeypatch.setattr(store, "adopt", busy)
+    with pytest.raises(IndexBusy):
+        classify(planned, store, retry_failed=False, reuse_stale=False)

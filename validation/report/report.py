@@ -323,7 +323,8 @@ def _included(store: ResultStore):
         raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
     stale = [r for r in all_rows if not is_fresh(r)]
-    fresh = [r for r in all_rows if r.run_id not in damaged and r not in stale]
+    left_out = set(damaged) | {r.run_id for r in stale}  # a set: a list was quadratic
+    fresh = [r for r in all_rows if r.run_id not in left_out]
     runs = [r for r in fresh if r.sweep != "stability" and not is_check(r)
             and r.sweep not in (*ROBUST_SWEEPS, FIT_SWEEP)]
     evaluations = [r for r in fresh if r.sweep in ROBUST_SWEEPS]
