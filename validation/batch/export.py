@@ -59,8 +59,11 @@ def _export(store, allow_fewer: bool) -> tuple[Path, Path]:
                              f"last export listed (e.g. {min(lost)}); metrics.csv and "
                              f"manifest.json kept; 'flexarm repair {store.out}' rebuilds "
                              "the index from runs/")
-    at = {name: i for i, name in enumerate([*head, *(f"axis:{a}" for a in axes), *metrics])}
-    blank = len(at)  # the index of "" appended to a row: a column the run lacks
+    selected = [*head, *(f"axis:{a}" for a in axes), *metrics]
+    at: dict[str, int] = {}
+    for i, name in enumerate(selected):  # the metric "status" is the identity's
+        at.setdefault(name, i)
+    blank = len(selected)  # the index of "" appended to a row: a column the run lacks
     columns: dict[str, None] = dict.fromkeys(IDENTITY_COLUMNS)  # first-seen order
     for set_id in dict.fromkeys(row[12] for row in table):  # layouts as rows first show them
         a_names, m_names = layouts[set_id]

@@ -169,8 +169,10 @@ def row_values(row: dict, dictionary: bytes = b"") -> tuple:
              row["message"], row["end_time"], row["fingerprint"],
              *scenario_columns(row["scenario"]), dictionary_key(dictionary), detail,
              row["file"], row["sha256"], row["size"], row["finished"])
-    metrics = {k: (None if isinstance(v, float) and math.isnan(v) else v)
-               for k, v in metric_values(row["metrics"]).items()}
+    # The metrics as a run file keeps them (`finite_or_none`: NaN as None, ±∞ as
+    # strings); a column is NULL for NaN and holds ±∞ as a REAL.
+    metrics = {k: _INFINITIES.get(v, v) if isinstance(v, str) else v
+               for k, v in row["metrics"].items()}
     # A swept value as metrics.csv writes it where it is not a number or a string.
     axes = {k: json.dumps(v) if isinstance(v, (list, dict)) else str(v)
             if isinstance(v, bool) else v for k, v in row["axes"].items()}

@@ -39,7 +39,8 @@ class MemoryStore(BaseStore):
             result, _ = self._results[rid]
             self._rows[rid] = StoredRun(
                 **{k: values[k] for k in StoredRun.__dataclass_fields__
-                   if k in values}, metric_names=m_names, metric_values=m_values,
+                   if k in values and k != "detail"}, metric_names=m_names,
+                metric_values=m_values,
                 detail=Detail(values["detail"]))
 
     def rows(self, *, where: str = "", params: tuple = ()) -> list[StoredRun]:
