@@ -21,7 +21,8 @@ import tomllib
 
 from _report import report, target
 from _workloads import REDUCED_48, TRUTH_8
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+from validation.batch.queue import run_campaign
 from validation.batch.executor import make_runner
 from validation.run.metrics import all_metrics
 from validation.batch.store import ResultStore

@@ -26,7 +26,7 @@ def run_one(element: str, n_el: int) -> dict:
 
     plant = ExudynPlant(mesh=Mesh(element=element, elements_per_link=(n_el, n_el)))
     from reduced_model import ArmModel
-    pd, ref = JointPD(ArmModel()), PaperReference()
+    pd, ref = JointPD(ArmModel(), Ts=1e-3), PaperReference()
     plant.reset()
     steps = int(round(SECONDS / TS))
     t_plant = t_truth = 0.0

@@ -24,7 +24,8 @@ import numpy as np
 from _report import report, target
 from validation.run.loop import run_scenario
 from validation.run.replay import bare_replay
-from validation.run.scenario import ExudynPlantSpec, scenario_from_mapping
+from plant_exudyn import ExudynPlant
+from validation.run.scenario import scenario_from_mapping
 
 REPEATS = 5
 TS = 1e-3
@@ -55,7 +56,7 @@ def applied_torques(loop: dict) -> np.ndarray:
 
 def accuracy_rows() -> list[dict]:
     rows = []
-    default = ExudynPlantSpec().step
+    default = ExudynPlant.Settings.step
     for name, loop in LOOPS.items():
         torques = applied_torques(loop)
         for exact in (False, True):
@@ -88,7 +89,7 @@ def cost_rows(repeats: int) -> list[dict]:
     rows = [{"what": "replay per step, blended hold (before)", "us": per_step[False]},
             {"what": "replay per step, exact hold", "us": per_step[True], "ratio": ratio,
              **target(ratio, "<=", 1.3)}]
-    for step in (TS, ExudynPlantSpec().step):  # the closed loop holds exactly at both
+    for step in (TS, ExudynPlant.Settings.step):  # the closed loop holds exactly at both
         run = scenario(loop, step, duration=20.0)
         walls = [run_scenario(run).timings["wall_s"] for _ in range(max(1, repeats // 2))]
         rows.append({"what": f"20 s closed loop, step {step * 1e3:g} ms",

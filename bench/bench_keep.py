@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from _report import report
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+from validation.batch.queue import run_campaign
 from validation.batch.store import ResultStore
 from validation.batch.worker import execute_run
 

@@ -47,11 +47,11 @@ def main():
 
     def hold(t):
         return x[:2].copy(), np.zeros(2), np.zeros(2)
-    K = law_gain(PassivityBasedController(model), x, 0.0, hold)
+    K = law_gain(PassivityBasedController(model, Ts=1e-3), x, 0.0, hold)
     gain = control.ss(np.zeros((0, 0)), np.zeros((0, 12)), np.zeros((2, 0)), K)
     red = control.sample_system(reduced_linear_model(model, theta=(0, 0.5))[names, :], 1e-3)
     fe = control.sample_system(linear_model(params, theta=(0, 0.5),
-                                            modal_basis=model.mode_shapes)[names, :], 1e-3)
+                                            model=model)[names, :], 1e-3)
     tf = control.tf
 
     def case(controller, plant):
@@ -70,7 +70,7 @@ def main():
         ("FE arm, StateSpace, ANCF 8+8 (136 states)",
          lambda: linear_model(params, Mesh(elements_per_link=(8, 8)))),
         ("PBC linearised from its object (12 states)",
-         lambda: law_gain(PassivityBasedController(model), x, 0.0, hold)),
+         lambda: law_gain(PassivityBasedController(model, Ts=1e-3), x, 0.0, hold)),
         ("ν-gap, SISO (MATLAB example)",
          lambda: nu_gap(tf([1, 2], [1, 5, 10]), tf([1, 1], [1, 3, 10]))),
         ("ν-gap, PBC loop, reduced vs FE (12 + 72 states, ZOH)",

@@ -107,7 +107,8 @@ def cpu_row(what: str, spec: Path, one_worker: float, start: tuple[float, float]
 
 IN_PROCESS = """
 import json, sys, time
-from validation.batch.campaign import load_campaign, run_campaign
+from validation.batch.campaign import load_campaign
+from validation.batch.queue import run_campaign
 from validation.batch.executor import make_runner
 campaign = load_campaign(sys.argv[1])
 with make_runner("local", 2, force=True) as runner:  # started: imports, kernels, workers

@@ -1,9 +1,9 @@
 """Controllers and observers: the paper's passivity-based controller (eq. 14–20), its
 sliding-mode observer (eq. 21–36) with practical variants, baselines, and reference
 trajectories (eq. 37).  All are plug-ins of one interface (`controllers._interface`):
-``Cls(model, **options)`` on a `reduced_model.ArmModel`; a controller is called as
-``tau = controller(t, x, ref)``; an observer has ``measured``, ``reset(x_hat0)`` and
-``update(t, y, tau, Ts) -> x_hat``.
+``Cls(model, *, Ts, **options)`` on a `reduced_model.ArmModel` at the control period
+``Ts``; a controller is called as ``tau = controller(t, x, ref)``; an observer has
+``measured``, ``reset(x_hat0)`` and ``update(t, y, tau) -> x_hat``.
 """
 from ._baselines import JointPD, RigidArm, RigidComputedTorque
 from ._compiled import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, CompiledLaw, compiled_form

@@ -20,7 +20,7 @@ from numba import njit
 from reduced_model import ArmModel
 
 from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
-from ._gains import gain_vector
+from ._gains import control_period, gain_vector
 
 __all__ = ["JointPD", "RigidComputedTorque", "RigidArm", "rigid_torque"]
 
@@ -82,6 +82,8 @@ class JointPD:
     ----------
     model : ArmModel
         The nominal model (for the feedforward).
+    Ts : float
+        The control period [s] (the law is continuous: it is recorded, not used).
     kp, kd : one or two numbers
         Joint gains [N m/rad], [N m s/rad].  Defaults (30, 15) and (18.1, 8.2): the PBC's
         joint error dynamics (module docstring).
@@ -92,11 +94,11 @@ class JointPD:
 
     name = "pd"
 
-    def __init__(self, model: ArmModel, *, kp=(30.0, 15.0), kd=(18.1, 8.2),
+    def __init__(self, model: ArmModel, *, Ts: float, kp=(30.0, 15.0), kd=(18.1, 8.2),
                  feedforward: bool = True) -> None:
         if not isinstance(feedforward, (bool, np.bool_)):
             raise ValueError(f"feedforward must be true or false, got {feedforward!r}")
-        self.model = model
+        self.model, self.Ts = model, control_period(Ts)
         self.rigid = RigidArm(model) if feedforward else None
         self.kp, self.kd = gain_vector("kp", kp, 2), gain_vector("kd", kd, 2)
 
@@ -108,7 +110,7 @@ class JointPD:
             tau = tau + self.rigid.torque(theta_d, dtheta_d, ddtheta_d)
         return tau
 
-    def compiled(self, Ts: float) -> CompiledLaw:
+    def compiled(self) -> CompiledLaw:
         """The compiled form (`controllers._compiled`): gains and the rigid constants."""
         ff = self.rigid.constants if self.rigid is not None else np.zeros(4)
         return CompiledLaw.of(pd_kernel, CONTROLLER_SIGNATURE, self.model,
@@ -139,8 +141,8 @@ class RigidComputedTorque:
 
     name = "ct"
 
-    def __init__(self, model: ArmModel, *, kp=(11.1, 14.1), kd=(6.7, 7.7)) -> None:
-        self.model = model
+    def __init__(self, model: ArmModel, *, Ts: float, kp=(11.1, 14.1), kd=(6.7, 7.7)) -> None:
+        self.model, self.Ts = model, control_period(Ts)
         self.rigid = RigidArm(model)
         self.kp, self.kd = gain_vector("kp", kp, 2), gain_vector("kd", kd, 2)
 
@@ -151,7 +153,7 @@ class RigidComputedTorque:
         accel = ddtheta_d + self.kd * (dtheta_d - dtheta) + self.kp * (theta_d - theta)
         return self.rigid.torque(theta, dtheta, accel)
 
-    def compiled(self, Ts: float) -> CompiledLaw:
+    def compiled(self) -> CompiledLaw:
         """The compiled form (`controllers._compiled`): gains and the rigid constants."""
         return CompiledLaw.of(ct_kernel, CONTROLLER_SIGNATURE, self.model,
                               reals=np.concatenate([self.kp, self.kd, self.rigid.constants]),

@@ -4,7 +4,7 @@ buffers it works on.
 A compiled loop (`validation.run._sample`) calls a law through a function pointer of
 the role's signature, so the loop is compiled once for every law, and each law's kernel
 is compiled — and cached by numba — on its own, the first time a run uses it.  A law
-offers its compiled form with a method ``compiled(Ts) -> CompiledLaw`` on the class that
+offers its compiled form with a method ``compiled() -> CompiledLaw`` on the class that
 defines its Python form (``__call__`` for a controller, ``update`` for an observer);
 the buffers are copies, so a compiled run never changes the Python object.  Any law may
 do so, built-in or plug-in; a law without it runs as the Python object it is.
@@ -20,10 +20,11 @@ applies generalised forces to every coordinate) and what it cannot apply into
 
 Observer kernel::
 
-    status = kernel(t, Ts, y, tau, ints, reals, state, model_ints, model_reals,
+    status = kernel(t, y, tau, ints, reals, state, model_ints, model_reals,
                     work_complex, work_real, x_hat)
 
-advances over the last period with ``tau`` (skipped on the first call after a reset),
+advances over the last period (of the law's own control period, which its buffers
+carry) with ``tau`` (skipped on the first call after a reset),
 corrects with ``y`` (in the order of ``measured``) and writes the estimate into
 ``x_hat``; ``status`` is 0, or non-zero when the observer failed (its `CompiledLaw.failure`
 says how).
@@ -58,7 +59,7 @@ CONTROLLER_SIGNATURE = _i8(_f8, _vector(_f8), _vector(_f8), _vector(_i8), _vecto
                            _vector(_f8), _vector(_i8), _vector(_f8), _vector(_c16),
                            _vector(_f8), _vector(_f8), _vector(_f8))
 #: The compiled observer's signature (module docstring).
-OBSERVER_SIGNATURE = _i8(_f8, _f8, _vector(_f8), _vector(_f8), _vector(_i8), _vector(_f8),
+OBSERVER_SIGNATURE = _i8(_f8, _vector(_f8), _vector(_f8), _vector(_i8), _vector(_f8),
                          _vector(_f8), _vector(_i8), _vector(_f8), _vector(_c16),
                          _vector(_f8), _vector(_f8))
 
@@ -119,17 +120,17 @@ class CompiledLaw(NamedTuple):
                    *model.packed, work_complex, work_real, failure)
 
 
-def compiled_form(law, role: str, Ts: float) -> CompiledLaw | None:
-    """The compiled form of ``law`` (``role`` "controller" or "observer") at the control
-    period ``Ts``, or None: the law has no ``compiled`` method, or it comes from another
-    class than the law's Python form (a subclass that changes ``__call__``/``update`` but
-    not ``compiled`` must not run the parent's kernel)."""
+def compiled_form(law, role: str) -> CompiledLaw | None:
+    """The compiled form of ``law`` (``role`` "controller" or "observer"), or None: the
+    law has no ``compiled`` method, or it comes from another class than the law's Python
+    form (a subclass that changes ``__call__``/``update`` but not ``compiled`` must not
+    run the parent's kernel)."""
     method = "__call__" if role == "controller" else "update"
     cls = type(law)
     defining = next((c for c in cls.__mro__ if method in c.__dict__), None)
     if defining is None or "compiled" not in defining.__dict__:
         return None
-    return law.compiled(Ts)
+    return law.compiled()
 
 
 @njit(cache=True)
@@ -138,7 +139,7 @@ def _no_controller(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual)
 
 
 @njit(cache=True)
-def _no_observer(t, Ts, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+def _no_observer(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
     return 0
 
 

@@ -12,18 +12,17 @@ measured states (the whole state, as the paper's SMO assumes, or the positions o
 from __future__ import annotations
 
 import math
-import numbers
 
 import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
-from reduced_model._kernels import (cholesky_factor_inplace, cholesky_solve_factored,
-                                    rk4_advance_packed)
+from reduced_model._cholesky import cholesky_factor_inplace, cholesky_solve_factored
+from reduced_model._kernels import rk4_advance_packed
 from reduced_model._views import matrix_view
 
 from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
-from ._gains import gain_vector
+from ._gains import control_period, gain_vector
 from ._interface import ObserverFailure
 
 __all__ = ["ExtendedKalmanFilter", "PositionEKF"]
@@ -46,6 +45,8 @@ class ExtendedKalmanFilter:
     ----------
     model : ArmModel
         The nominal model providing F (any modes per link).
+    Ts : float
+        The control period [s]: the prediction's horizon and Q_d's.
     sigma_theta, sigma_q, sigma_theta_dot, sigma_q_dot : float (or one per coordinate)
         Measurement-noise standard deviations [rad, m, rad/s, m/s], > 0 (R is their
         squares on the diagonal).  Defaults 1e-4, 1e-5, 1e-3, 1e-3: the shipped
@@ -80,15 +81,14 @@ class ExtendedKalmanFilter:
     with the prediction at any Ts; central differences would double the cost for
     accuracy the covariance does not need.
 
-    Cost per `update` at Ts = 1 ms, 2+2 modes: ≈ 40 µs (best of 7 on a busy 2-core
-    machine; the Jacobian's 12 RK4 steps are ≈ 33 µs of it, the correction ≈ 7 µs);
-    ≈ 150 µs for 4+4 modes.  No allocation; the RK4 kernel is called, not inlined, so
-    this module compiles in ≈ 8 s instead of minutes.
+    No allocation; the RK4 kernel is called, not inlined, so this module compiles in
+    seconds instead of minutes (bench/bench_closed_loop.py measures the filter's cost in the
+    loop).
     """
 
     name = "ekf"
 
-    def __init__(self, model: ArmModel, *, sigma_theta=1e-4, sigma_q=1e-5,
+    def __init__(self, model: ArmModel, *, Ts: float, sigma_theta=1e-4, sigma_q=1e-5,
                  sigma_theta_dot=1e-3, sigma_q_dot=1e-3, accel_noise_theta=0.03,
                  accel_noise_q=0.03, p0_theta=0.1, p0_q=5e-3, p0_theta_dot=0.3,
                  p0_q_dot=0.05) -> None:
@@ -97,11 +97,12 @@ class ExtendedKalmanFilter:
                  gain_vector("sigma_q", sigma_q, nf, positive=True),
                  gain_vector("sigma_theta_dot", sigma_theta_dot, 2, positive=True),
                  gain_vector("sigma_q_dot", sigma_q_dot, nf, positive=True)]
-        self._setup(model, sigma, accel_noise_theta, accel_noise_q,
+        self._setup(model, Ts, sigma, accel_noise_theta, accel_noise_q,
                     (p0_theta, p0_q, p0_theta_dot, p0_q_dot))
 
-    def _setup(self, model, sigma, accel_noise_theta, accel_noise_q, p0) -> None:
-        self.model = model
+    def _setup(self, model, Ts, sigma, accel_noise_theta, accel_noise_q, p0) -> None:
+        self.model, self.Ts = model, control_period(Ts)
+        self._nsub = max(1, math.ceil(self.Ts / _MAX_SUBSTEP - 1e-9))  # RK4 sub-steps
         n, nf = model.n, model.n - 2
         self._sigma = np.concatenate(sigma)
         self._accel = np.concatenate([
@@ -123,7 +124,11 @@ class ExtendedKalmanFilter:
                      np.zeros((N, N)), np.zeros((N, self._m)), np.zeros((self._m, self._m)),
                      np.zeros(self._m))
         self._fresh = True
-        self._Ts, self._nsub = None, 1
+        s2, T = self._accel ** 2, self.Ts
+        for i in range(n):  # white-noise acceleration on coordinate i, over one period
+            self._Qd[i, i] = s2[i] * T ** 3 / 3.0
+            self._Qd[i, n + i] = self._Qd[n + i, i] = s2[i] * T ** 2 / 2.0
+            self._Qd[n + i, n + i] = s2[i] * T
 
     @property
     def measured(self) -> tuple[str, ...]:
@@ -144,34 +149,18 @@ class ExtendedKalmanFilter:
         self._fresh = True
         return self._x.copy()
 
-    def _set_period(self, Ts: float) -> None:
-        if Ts == self._Ts:
-            return
-        if not (isinstance(Ts, numbers.Real) and math.isfinite(Ts) and Ts > 0):
-            raise ValueError(f"Ts must be a finite number of seconds > 0, got {Ts!r}")
-        self._Ts, self._nsub = Ts, max(1, math.ceil(Ts / _MAX_SUBSTEP - 1e-9))
-        n = self.model.n
-        s2 = self._accel ** 2
-        Qd = self._Qd
-        Qd[:] = 0.0
-        for i in range(n):  # white-noise acceleration on coordinate i, over one period
-            Qd[i, i] = s2[i] * Ts ** 3 / 3.0
-            Qd[i, n + i] = Qd[n + i, i] = s2[i] * Ts ** 2 / 2.0
-            Qd[n + i, n + i] = s2[i] * Ts
-
-    def update(self, t: float, y: np.ndarray, tau: np.ndarray, Ts: float) -> np.ndarray:
+    def update(self, t: float, y: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """Predict over the last period with the torque ``tau`` held (skipped on the first
         call after `reset`), then correct with ``y`` (in the order of `measured`)
         measured at ``t``.  Returns a copy of x̂; raises `ObserverFailure` if the
         covariance update failed (the closed loop then ends the run as diverged)."""
-        self._set_period(Ts)
         y = np.asarray(y, dtype=float)
         if y.shape != (self._m,):
             raise ValueError(f"y must have shape ({self._m},) (measured), got {y.shape}")
         ints, reals = self.model.packed
         wc, wr = self._work
         ok = _ekf_update(ints, reals, wc, wr, self._x, self._P, np.asarray(tau, dtype=float),
-                         Ts / self._nsub, self._nsub, not self._fresh, y, self._r, self._Qd,
+                         self.Ts / self._nsub, self._nsub, not self._fresh, y, self._r, self._Qd,
                          *self._buf)
         self._fresh = False
         if not ok:
@@ -179,29 +168,27 @@ class ExtendedKalmanFilter:
             raise ObserverFailure(COVARIANCE_FAILURE)
         return self._x.copy()
 
-    def compiled(self, Ts: float) -> CompiledLaw:
-        """The compiled form (`controllers._compiled`) at the control period ``Ts``, its
-        state (x̂, P) copied as it is now."""
-        self._set_period(Ts)
+    def compiled(self) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`), its state (x̂, P) copied as it is
+        now."""
         N, m = self._x.shape[0], self._m
         scratch = 2 * N + 3 * N * N + N * m + m * m + m
         return CompiledLaw.of(ekf_kernel, OBSERVER_SIGNATURE, self.model,
                               ints=[m, self._nsub, int(self._fresh)],
-                              reals=np.concatenate([self._r, self._Qd.ravel()]),
+                              reals=np.concatenate([self._r, self._Qd.ravel(), [self.Ts]]),
                               state=np.concatenate([self._x, self._P.ravel(), np.zeros(scratch)]),
                               failure=COVARIANCE_FAILURE)
 
-    def jacobian(self, x, tau, Ts: float) -> np.ndarray:
+    def jacobian(self, x, tau) -> np.ndarray:
         """Φ = ∂F/∂x of the prediction map F (RK4 over ``Ts``, ``tau`` held) at ``x``,
         computed by the same compiled routine `update` uses."""
-        self._set_period(Ts)
         x = np.array(x, dtype=float)
         if x.shape != self._x.shape:
             raise ValueError(f"x must have shape {self._x.shape}, got {x.shape}")
         N = x.shape[0]
         Phi, xn, xp = np.zeros((N, N)), np.zeros(N), np.zeros(N)
         _jacobian(*self.model.packed, *self.model.new_workspace()[0], x,
-                  np.asarray(tau, dtype=float), Ts / self._nsub, self._nsub, xn, xp, Phi)
+                  np.asarray(tau, dtype=float), self.Ts / self._nsub, self._nsub, xn, xp, Phi)
         return Phi
 
 
@@ -212,12 +199,12 @@ class PositionEKF(ExtendedKalmanFilter):
 
     name = "ekf-pos"
 
-    def __init__(self, model: ArmModel, *, sigma_theta=1e-4, sigma_q=1e-5,
+    def __init__(self, model: ArmModel, *, Ts: float, sigma_theta=1e-4, sigma_q=1e-5,
                  accel_noise_theta=0.03, accel_noise_q=0.03, p0_theta=0.1, p0_q=5e-3,
                  p0_theta_dot=0.3, p0_q_dot=0.05) -> None:
         sigma = [gain_vector("sigma_theta", sigma_theta, 2, positive=True),
                  gain_vector("sigma_q", sigma_q, model.n - 2, positive=True)]
-        self._setup(model, sigma, accel_noise_theta, accel_noise_q,
+        self._setup(model, Ts, sigma, accel_noise_theta, accel_noise_q,
                     (p0_theta, p0_q, p0_theta_dot, p0_q_dot))
 
 
@@ -309,9 +296,9 @@ def _ekf_update(ints, reals, wc, wr, x, P, tau, h, nsub, predict, y, r, Qd, xn, 
 
 
 @njit(cache=True)
-def ekf_kernel(t, Ts, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+def ekf_kernel(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
     """The EKF compiled (`controllers._compiled`): ints = [m measured, RK4 sub-steps,
-    fresh], reals = [R diagonal, Q_d], state = [x̂, P, scratch]; status 1 when the
+    fresh], reals = [R diagonal, Q_d, Ts], state = [x̂, P, scratch]; status 1 when the
     covariance update fails."""
     N = x_hat.shape[0]
     m, nsub = ints[0], ints[1]
@@ -320,7 +307,7 @@ def ekf_kernel(t, Ts, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
     P = matrix_view(state, N, N, N)
     b = N + nn  # the scratch: two vectors, three N x N, N x m, m x m, m
     s = b + 2 * N + 3 * nn
-    ok = _ekf_update(mi, mr, wc, wr, x, P, tau, Ts / nsub, nsub, ints[2] == 0, y, reals[:m],
+    ok = _ekf_update(mi, mr, wc, wr, x, P, tau, reals[m + nn] / nsub, nsub, ints[2] == 0, y, reals[:m],
                      matrix_view(reals, m, N, N), state[b:b + N], state[b + N:b + 2 * N],
                      matrix_view(state, b + 2 * N, N, N),
                      matrix_view(state, b + 2 * N + nn, N, N),

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["gain_vector", "joint_flex_gains"]
+__all__ = ["gain_vector", "joint_flex_gains", "control_period"]
 
 
 def gain_vector(name: str, value, length: int, *, positive: bool = False) -> np.ndarray:
@@ -21,6 +21,14 @@ def gain_vector(name: str, value, length: int, *, positive: bool = False) -> np.
         raise ValueError(f"{name} must be finite and {'> 0' if positive else '>= 0'}, "
                          f"got {g.tolist()}")
     return g
+
+
+def control_period(Ts) -> float:
+    """The control period ``Ts`` [s] a law is built for, checked: a finite number > 0."""
+    if isinstance(Ts, bool) or not isinstance(Ts, (int, float, np.number)) or not (
+            np.isfinite(Ts) and Ts > 0):
+        raise ValueError(f"Ts must be a finite number of seconds > 0, got {Ts!r}")
+    return float(Ts)
 
 
 def joint_flex_gains(name: str, joint, flex, n_flex: int) -> np.ndarray:

@@ -1,8 +1,9 @@
 """The plug-in interface every controller and observer implements, built-in or not.
 
-A controller is a class constructed as ``Cls(model, **options)``: ``model`` is the nominal
-`reduced_model.ArmModel` (what the controller believes), ``options`` the keyword options
-of the scenario's ``[controller] options`` table.  Calling it returns the two joint
+A controller is a class constructed as ``Cls(model, *, Ts, **options)``: ``model`` is the
+nominal `reduced_model.ArmModel` (what the controller believes), ``Ts`` the control period
+[s] — set once, when the law is built, as python-control's ``dt``: no method receives it
+again —, ``options`` the keyword options of the scenario's ``[controller] options`` table.  Calling it returns the two joint
 torques::
 
     tau = controller(t, x, ref)      # float array (2,) [N m]
@@ -15,15 +16,15 @@ the PBC's unrealisable forces).
 
 An observer is constructed the same way and has ``measured`` (the tuple of measurement
 names it needs, in the order of ``y``), ``reset(x_hat0)`` and
-``update(t, y, tau, Ts) -> x_hat`` (advance over the last period with the torque applied
-during it, then correct with ``y`` measured at ``t``; the first call after ``reset`` only
-corrects).  The state names are ``model.state_names``.  An observer that cannot go on
+``update(t, y, tau) -> x_hat`` (advance over the last period, of its ``Ts``, with the
+torque applied during it, then correct with ``y`` measured at ``t``; the first call after
+``reset`` only corrects).  The state names are ``model.state_names``.  An observer that cannot go on
 (e.g. a covariance that lost positive definiteness) raises `ObserverFailure`: the run
 ends as diverged with its message.
 
-Either may also offer a compiled form, ``compiled(Ts) -> CompiledLaw``
-(`controllers._compiled`): compiled loops then call its numba kernel instead of the
-Python object.
+Either may also offer a compiled form, ``compiled() -> CompiledLaw``
+(`controllers._compiled`; its kernel reads the period from the law's own buffers):
+compiled loops then call its numba kernel instead of the Python object.
 """
 from __future__ import annotations
 
@@ -49,4 +50,4 @@ class Observer(Protocol):
 
     def reset(self, x_hat0) -> np.ndarray: ...
 
-    def update(self, t: float, y: np.ndarray, tau: np.ndarray, Ts: float) -> np.ndarray: ...
+    def update(self, t: float, y: np.ndarray, tau: np.ndarray) -> np.ndarray: ...

@@ -22,6 +22,7 @@ from reduced_model import ArmModel
 
 from ._baselines import RigidArm, rigid_torque
 from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
+from ._gains import control_period
 from ._gains import gain_vector as _weights
 
 #: The most θ2 grid points: one per degree.  Each is one Riccati design (16 ms measured),
@@ -111,6 +112,8 @@ class GainScheduledLQR:
     ----------
     model : ArmModel
         The nominal model (any modes per link).
+    Ts : float
+        The control period [s]: the sample time of the design, > 0.
     q_theta : float or (float, float)
         Weight on the joint-angle errors [1/rad²]; must be > 0 (θ1 is a pure integrator
         the cost must see).
@@ -122,17 +125,14 @@ class GainScheduledLQR:
         Weight on the modal rates q̇ [s²/m²], >= 0.
     r : float or (float, float)
         Torque weight [1/(N m)²], > 0.
-    Ts : float
-        Sample time [s] of the design (the loop's control period), > 0.
     grid_points : int
         Number of θ2 grid points over one period, 4..`MAX_GRID_POINTS`.
     """
 
     name = "lqr"
 
-    def __init__(self, model: ArmModel, *, q_theta=(1600.0, 1600.0), q_q=100.0,
-                 q_theta_dot=0.0, q_q_dot=1.0, r=1.0, Ts: float = 1e-3,
-                 grid_points: int = 24) -> None:
+    def __init__(self, model: ArmModel, *, Ts: float, q_theta=(1600.0, 1600.0), q_q=100.0,
+                 q_theta_dot=0.0, q_q_dot=1.0, r=1.0, grid_points: int = 24) -> None:
         n = model.n
         self.model = model
         self.q_theta = _weights("q_theta", q_theta, 2, positive=True)
@@ -140,13 +140,11 @@ class GainScheduledLQR:
         self.q_theta_dot = _weights("q_theta_dot", q_theta_dot, 2)
         self.q_q_dot = _weights("q_q_dot", q_q_dot, n - 2)
         self.r = _weights("r", r, 2, positive=True)
-        if not (isinstance(Ts, numbers.Real) and math.isfinite(Ts) and Ts > 0):
-            raise ValueError(f"Ts must be a finite number of seconds > 0, got {Ts!r}")
         if (isinstance(grid_points, bool) or not isinstance(grid_points, numbers.Integral)
                 or not 4 <= grid_points <= MAX_GRID_POINTS):
             raise ValueError(f"grid_points must be an integer in 4..{MAX_GRID_POINTS}, "
                              f"got {grid_points!r}")
-        self.Ts = float(Ts)
+        self.Ts = control_period(Ts)
         N = int(grid_points)
         #: θ2 grid [rad]: N points over [−π, π); K(−π) = K(π).
         self.grid = -np.pi + 2.0 * np.pi * np.arange(N) / N
@@ -204,7 +202,7 @@ class GainScheduledLQR:
                     ddtheta_d, self._tau)
         return self._tau.copy()
 
-    def compiled(self, Ts: float) -> CompiledLaw:
+    def compiled(self) -> CompiledLaw:
         """The compiled form (`controllers._compiled`): the gain table (designed at this
         law's own ``Ts``), the scheduling scale and the rigid feedforward constants."""
         return CompiledLaw.of(lqr_kernel, CONTROLLER_SIGNATURE, self.model,

@@ -27,7 +27,7 @@ from reduced_model._kernels import (coriolis_matrix_into, mass_matrix_into, unpa
 from reduced_model._views import matrix_view
 
 from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
-from ._gains import gain_vector
+from ._gains import control_period, gain_vector
 
 __all__ = ["PassivityBasedController", "IdealisedPBC"]
 
@@ -39,6 +39,8 @@ class PassivityBasedController:
     ----------
     model : ArmModel
         The nominal model (its M, Christoffel C, K, D).
+    Ts : float
+        The control period [s] (the law is continuous: it is recorded, not used).
     lambda_joint, lambda_flex : gains of Λ [1/s] on θ (one or two numbers) and on q (one
         number, or one per mode).
     kv_joint : gains of K_v on θ [N m s/rad].
@@ -53,14 +55,14 @@ class PassivityBasedController:
     name = "pbc"
     _rows = 2  # rows of eq. (20) applied
 
-    def __init__(self, model: ArmModel, *, lambda_joint=(3.0, 3.0), lambda_flex=1.0,
-                 kv_joint=(10.0, 5.0)) -> None:
-        self._setup(model, lambda_joint, lambda_flex, kv_joint, 0.0, False)
+    def __init__(self, model: ArmModel, *, Ts: float, lambda_joint=(3.0, 3.0),
+                 lambda_flex=1.0, kv_joint=(10.0, 5.0)) -> None:
+        self._setup(model, Ts, lambda_joint, lambda_flex, kv_joint, 0.0, False)
         #: Unrealisable flexible-coordinate forces of the last call (rows 2… of eq. 20).
         self.residual = np.zeros(model.n - 2)
 
-    def _setup(self, model, lambda_joint, lambda_flex, kv_joint, kv_flex, damping) -> None:
-        self.model = model
+    def _setup(self, model, Ts, lambda_joint, lambda_flex, kv_joint, kv_flex, damping) -> None:
+        self.model, self.Ts = model, control_period(Ts)
         n = model.n
         self.lam = np.concatenate([gain_vector("lambda_joint", lambda_joint, 2),
                                    gain_vector("lambda_flex", lambda_flex, n - 2)])
@@ -85,7 +87,7 @@ class PassivityBasedController:
         self.residual[:] = tau[2:]
         return tau[:2].copy()
 
-    def compiled(self, Ts: float) -> CompiledLaw:
+    def compiled(self) -> CompiledLaw:
         """The compiled form (`controllers._compiled`): this law's kernel and gains."""
         return self._compiled(rows=2)
 
@@ -108,17 +110,20 @@ class IdealisedPBC(PassivityBasedController):
     """
 
     name = "pbc-idealised"
+    #: It applies forces to every coordinate, not only the two joint torques.
+    generalised_forces = True
 
-    def __init__(self, model: ArmModel, *, lambda_joint=(3.0, 3.0), lambda_flex=1.0,
-                 kv_joint=(10.0, 5.0), kv_flex=5.0, compensate_damping: bool = True) -> None:
+    def __init__(self, model: ArmModel, *, Ts: float, lambda_joint=(3.0, 3.0),
+                 lambda_flex=1.0, kv_joint=(10.0, 5.0), kv_flex=5.0,
+                 compensate_damping: bool = True) -> None:
         if not isinstance(compensate_damping, (bool, np.bool_)):
             raise ValueError(f"compensate_damping must be true or false, got {compensate_damping!r}")
-        self._setup(model, lambda_joint, lambda_flex, kv_joint, kv_flex, compensate_damping)
+        self._setup(model, Ts, lambda_joint, lambda_flex, kv_joint, kv_flex, compensate_damping)
 
     def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
         return self._eq20(t, x, ref).copy()
 
-    def compiled(self, Ts: float) -> CompiledLaw:
+    def compiled(self) -> CompiledLaw:
         """The compiled form (`controllers._compiled`): all n rows applied."""
         return self._compiled(rows=self.model.n)
 

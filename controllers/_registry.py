@@ -1,7 +1,8 @@
 """Built-in laws by short name, and plug-ins by import path ``"package.module:Class"``.
 
 Built-in and plug-in laws are found the same way and constructed the same way,
-``Cls(model, **options)`` (`controllers._interface`); nothing else distinguishes them.
+``Cls(model, *, Ts, **options)`` (`controllers._interface`); nothing else distinguishes
+them.
 """
 from __future__ import annotations
 
@@ -68,14 +69,15 @@ def resolve(kind: str, builtins: dict[str, type], role: str) -> type:
         inspect.signature(cls)
     except (TypeError, ValueError):  # a builtin type (dict, type): no readable signature
         raise PluginError(f"{kind!r}: the signature of its constructor cannot be read (a law "
-                          "is a class constructed as Cls(model, **options))") from None
+                          "is a class constructed as Cls(model, *, Ts, **options))") from None
     return cls
 
 
 @functools.cache  # a signature costs ~0.15 ms; every scenario check asks twice
 def accepted_options(cls: type) -> types.MappingProxyType | None:
-    """Keyword options of ``cls(model, **options)`` with their defaults (``inspect.empty``
-    if required); None if it takes ``**kwargs`` (anything goes)."""
+    """Keyword arguments of ``cls(model, ...)`` with their defaults (``inspect.empty`` if
+    required): a law's ``Ts`` and options, a plant's settings; None if it takes
+    ``**kwargs`` (anything goes)."""
     params = list(inspect.signature(cls).parameters.values())[1:]  # after ``model``
     if any(p.kind is p.VAR_KEYWORD for p in params):
         return None

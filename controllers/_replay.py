@@ -19,6 +19,7 @@ from numba import njit
 from reduced_model import ArmModel
 
 from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
+from ._gains import control_period
 
 __all__ = ["TorqueReplay", "file_sha256"]
 
@@ -35,17 +36,17 @@ class TorqueReplay:
     ----------
     model : ArmModel
         The nominal model (unused: the interface's first argument).
+    Ts : float
+        The control period [s] (the scenario's; row k is applied at t = k·Ts).
     file : str
         A ``.npy`` file of shape (samples, 2) [N m].
     sha256 : str
         The file's SHA-256 (hex): a file with other content is refused.
-    Ts : float
-        The control period [s] (the scenario's; row k is applied at t = k·Ts).
     """
 
     name = "replay"
 
-    def __init__(self, model: ArmModel, *, file: str, sha256: str, Ts: float) -> None:
+    def __init__(self, model: ArmModel, *, Ts: float, file: str, sha256: str) -> None:
         path = Path(file)
         try:
             data = path.read_bytes()
@@ -58,10 +59,8 @@ class TorqueReplay:
         if torques.ndim != 2 or torques.shape[1] != 2 or not np.all(np.isfinite(torques)):
             raise ValueError(f"file {file}: expected finite torques of shape (samples, 2), "
                              f"got shape {torques.shape}")
-        if not (np.isfinite(Ts) and Ts > 0):
-            raise ValueError(f"Ts must be > 0, got {Ts!r}")
         self.torques = np.ascontiguousarray(torques, dtype=np.float64)
-        self.model, self.Ts = model, float(Ts)
+        self.model, self.Ts = model, control_period(Ts)
 
     def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
         k = int(round(t / self.Ts))
@@ -69,11 +68,11 @@ class TorqueReplay:
             return np.full(2, np.nan)
         return self.torques[k].copy()
 
-    def compiled(self, Ts: float) -> CompiledLaw:
+    def compiled(self) -> CompiledLaw:
         """The compiled form (`controllers._compiled`): reals = [1/Ts, τ rows...]."""
         return CompiledLaw.of(replay_kernel, CONTROLLER_SIGNATURE, self.model,
                               ints=[len(self.torques)],
-                              reals=np.concatenate([[1.0 / Ts], self.torques.ravel()]))
+                              reals=np.concatenate([[1.0 / self.Ts], self.torques.ravel()]))
 
 
 @njit(cache=True)

@@ -48,7 +48,7 @@ from reduced_model import ArmModel
 from reduced_model._kernels import rk4_advance_packed
 
 from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
-from ._gains import joint_flex_gains
+from ._gains import control_period, joint_flex_gains
 
 __all__ = ["PaperSMO", "BoundaryLayerSMO", "PositionOnlySMO"]
 
@@ -91,9 +91,10 @@ class _SlidingModeObserver:
     _variant = 0
     _positions_only = False
 
-    def _setup(self, model: ArmModel, l_position, l_velocity, boundary_layer=1.0,
+    def _setup(self, model: ArmModel, Ts, l_position, l_velocity, boundary_layer=1.0,
                filter_time=1.0, gate=1.0) -> None:
-        self.model = model
+        self.model, self.Ts = model, control_period(Ts)
+        self._nsub = max(1, math.ceil(self.Ts / _MAX_SUBSTEP - 1e-9))  # RK4 sub-steps
         n = model.n
         self.lp = _joint_flex("l_position", l_position, n - 2)
         self.lv = _joint_flex("l_velocity", l_velocity, n - 2)
@@ -104,7 +105,6 @@ class _SlidingModeObserver:
         self._x = np.zeros(2 * n)
         self._nu = np.zeros(n)
         self._fresh = True
-        self._Ts, self._nsub = None, 1
 
     @property
     def measured(self) -> tuple[str, ...]:
@@ -121,30 +121,26 @@ class _SlidingModeObserver:
         self._fresh = True
         return self._x.copy()
 
-    def update(self, t: float, y: np.ndarray, tau: np.ndarray, Ts: float) -> np.ndarray:
+    def update(self, t: float, y: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """Advance the estimate over the last period (torque ``tau``, float array) and
         correct it with ``y`` (float array, in the order of `measured`) measured at ``t``;
         the first call after `reset` only corrects."""
-        if Ts != self._Ts:
-            self._Ts, self._nsub = Ts, max(1, math.ceil(Ts / _MAX_SUBSTEP - 1e-9))
         ints, reals = self.model.packed
         wc, wr = self._work
-        _smo_update(ints, reals, wc, wr, self._x, tau, Ts, self._nsub, not self._fresh, y,
-                    self.lp, self.lv, self._variant, self.boundary_layer,
-                    min(1.0, Ts / self.filter_time), self.gate, self._nu)
+        _smo_update(ints, reals, wc, wr, self._x, tau, self.Ts, self._nsub, not self._fresh,
+                    y, self.lp, self.lv, self._variant, self.boundary_layer,
+                    min(1.0, self.Ts / self.filter_time), self.gate, self._nu)
         self._fresh = False
         return self._x.copy()
 
-    def compiled(self, Ts: float) -> CompiledLaw:
-        """The compiled form (`controllers._compiled`) at the control period ``Ts``, its
-        state copied as it is now."""
-        nsub = max(1, math.ceil(Ts / _MAX_SUBSTEP - 1e-9))
+    def compiled(self) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`), its state copied as it is now."""
         return CompiledLaw.of(
             smo_kernel, OBSERVER_SIGNATURE, self.model,
-            ints=[nsub, int(self._fresh), self._variant],
+            ints=[self._nsub, int(self._fresh), self._variant],
             reals=np.concatenate([self.lp, self.lv, [self.boundary_layer,
-                                                     min(1.0, Ts / self.filter_time),
-                                                     self.gate]]),
+                                                     min(1.0, self.Ts / self.filter_time),
+                                                     self.gate, self.Ts]]),
             state=np.concatenate([self._x, self._nu]))
 
 
@@ -154,8 +150,9 @@ class PaperSMO(_SlidingModeObserver):
 
     name = "smo-paper"
 
-    def __init__(self, model: ArmModel, *, l_position=(1.0, 0.5), l_velocity=(5.0, 2.0)):
-        self._setup(model, l_position, l_velocity)
+    def __init__(self, model: ArmModel, *, Ts: float, l_position=(1.0, 0.5),
+                 l_velocity=(5.0, 2.0)):
+        self._setup(model, Ts, l_position, l_velocity)
 
 
 class BoundaryLayerSMO(_SlidingModeObserver):
@@ -165,9 +162,9 @@ class BoundaryLayerSMO(_SlidingModeObserver):
     name = "smo-bl"
     _variant = 1
 
-    def __init__(self, model: ArmModel, *, l_position=(1.0, 0.5), l_velocity=(5.0, 2.0),
-                 boundary_layer: float = 2.0):
-        self._setup(model, l_position, l_velocity, boundary_layer=boundary_layer)
+    def __init__(self, model: ArmModel, *, Ts: float, l_position=(1.0, 0.5),
+                 l_velocity=(5.0, 2.0), boundary_layer: float = 2.0):
+        self._setup(model, Ts, l_position, l_velocity, boundary_layer=boundary_layer)
 
 
 class PositionOnlySMO(_SlidingModeObserver):
@@ -183,9 +180,9 @@ class PositionOnlySMO(_SlidingModeObserver):
     _variant = 2
     _positions_only = True
 
-    def __init__(self, model: ArmModel, *, l_position=(1.0, 0.5), l_velocity=(5.0, 2.0),
-                 filter_time: float = 5e-3, gate: float = 2.0):
-        self._setup(model, l_position, l_velocity, filter_time=filter_time, gate=gate)
+    def __init__(self, model: ArmModel, *, Ts: float, l_position=(1.0, 0.5),
+                 l_velocity=(5.0, 2.0), filter_time: float = 5e-3, gate: float = 2.0):
+        self._setup(model, Ts, l_position, l_velocity, filter_time=filter_time, gate=gate)
 
 
 # Inlined into `smo_kernel`: called there as a separate compiled function it cost 0.7 µs
@@ -215,13 +212,14 @@ def _smo_update(ints, reals, wc, wr, x, tau, Ts, nsub, predict, y, lp, lv, varia
 
 
 @njit(cache=True)
-def smo_kernel(t, Ts, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+def smo_kernel(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
     """Eq. (23)–(24) compiled (`controllers._compiled`): ints = [RK4 sub-steps, fresh,
-    variant], reals = [L_P, L_V, boundary layer, filter factor, gate], state = [x̂, ν̄]."""
+    variant], reals = [L_P, L_V, boundary layer, filter factor, gate, Ts], state =
+    [x̂, ν̄]."""
     N = x_hat.shape[0]
     n = N // 2
     x = state[:N]
-    _smo_update(mi, mr, wc, wr, x, tau, Ts, ints[0], ints[1] == 0, y, reals[:n],
+    _smo_update(mi, mr, wc, wr, x, tau, reals[2 * n + 3], ints[0], ints[1] == 0, y, reals[:n],
                 reals[n:2 * n], ints[2], reals[2 * n], reals[2 * n + 1], reals[2 * n + 2],
                 state[N:N + n])
     ints[1] = 0  # no longer fresh: later calls predict

@@ -6,20 +6,21 @@ projected onto the reduced model's mode shapes so that both plants report the sa
 coordinates.  `ExudynPlant` implements the plant contract (`reduced_model.Plant`);
 `linear_model` linearises the FE arm about a configuration (a `control.StateSpace`).
 
-Only `Mesh` is loaded with the package: everything else imports Exudyn (and its OpenGL
-libraries) and is loaded on first use, so that describing a scenario — or reading,
-reporting and exporting stored results — never loads the solver.
+Loading the package (`Mesh`, the `ExudynPlant` class and its settings) never loads
+Exudyn: the solver (and its OpenGL libraries) is imported when a plant is built, so that
+describing a scenario — or reading, reporting and exporting stored results — never loads
+it.
 """
 import importlib
 
-from ._mesh import ELEMENTS, Mesh
+from ._mesh import ELEMENTS, Mesh, mesh_label
+from ._plant import ExudynPlant, linear_model
 
-__all__ = ["ExudynPlant", "Mesh", "ELEMENTS", "ArmSystem", "build_arm", "LinkField",
-           "natural_frequencies", "simulation_settings", "linear_model"]
+__all__ = ["ExudynPlant", "Mesh", "ELEMENTS", "mesh_label", "ArmSystem", "build_arm",
+           "LinkField", "natural_frequencies", "simulation_settings", "linear_model"]
 
-_LAZY = {"ExudynPlant": "._plant", "simulation_settings": "._plant", "ArmSystem": "._build",
-         "build_arm": "._build", "LinkField": "._fields", "natural_frequencies": "._modal",
-         "linear_model": "._linear"}
+_LAZY = {"simulation_settings": "._build", "ArmSystem": "._build", "build_arm": "._build",
+         "LinkField": "._fields", "natural_frequencies": "._modal"}
 
 
 def __getattr__(name: str):

@@ -8,7 +8,7 @@ Jacobian at the configuration (u = Nᵀ z), so the joints and clamps are exact. 
 - inputs: the generalised forces of unit torques τ1 (hub 1) and τ2 (hub 2, with the
   reaction −τ2 on the link-1 tip), read as the change of Exudyn's own ODE2 right-hand
   side when the loads are set — the same loads the plant applies;
-- outputs: the plant's own readout (`_plant.readout_into`: θ, the modal coordinates q
+- outputs: the plant's own readout (`_readout.readout_into`: θ, the modal coordinates q
   projected on ``modal_basis``, their rates, the tip deflections), linearised by central
   differences in the ODE2 coordinates (step 1e-6; the rates are linear in the ODE2
   velocities, so their columns are exact differences);
@@ -35,54 +35,22 @@ import exudyn as exu
 import numpy as np
 import scipy.linalg
 
-from reduced_model import ArmParameters, LinkModes
-from reduced_model._plant_interface import TRUTH_EXTRAS
+from reduced_model import output_names
+from reduced_model._plant_interface import MOTOR_OUTPUTS, TRUTH_EXTRAS
 
-from ._build import Mesh
-from ._plant import ExudynPlant, readout_into, simulation_settings
+from ._build import simulation_settings
+from ._readout import readout_into
 
-__all__ = ["linear_model", "output_names"]
+__all__ = ["linearise"]
 
 _FD_STEP = 1e-6  # m, rad or slope: central differences of a smooth readout, error ~1e-10
 _RIGID_RATIO = 1e-4  # a "rigid" mode's ω² must be below this × the first flexible one's
 
 
-def output_names(modal_basis: tuple[LinkModes, LinkModes]) -> tuple[str, ...]:
-    """θ, q (in ``modal_basis``), their rates, then the tip deflections: the names the
-    linear models of both plants give their outputs."""
-    coords = ("theta1", "theta2", *(f"q{i + 1}{j + 1}" for i, m in enumerate(modal_basis)
-                                    for j in range(m.n)))
-    return coords + tuple(f"{c}_dot" for c in coords) + ("tip_defl1", "tip_defl2")
-
-
-def linear_model(params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
-                 theta=(0.0, 0.0), Ts: float | None = None,
-                 modal_basis: tuple[LinkModes, LinkModes] | None = None) -> control.StateSpace:
-    """The FE arm linearised about rest at joint angles ``theta`` (module docstring).
-
-    Parameters
-    ----------
-    params : ArmParameters
-        The arm (default: `ArmParameters()`).
-    mesh : Mesh
-        Element type and elements per link.
-    theta : (float, float)
-        θ1, θ2 [rad] of the configuration (θ2 relative to the link-1 tip tangent).
-    Ts : float, optional
-        If given, the exact zero-order-hold discretisation at this period [s].
-    modal_basis : (LinkModes, LinkModes), optional
-        Mode shapes the deflection is projected on for the q outputs (default: the reduced
-        model of ``params`` with 2 modes per link, as `ExudynPlant`).
-
-    Returns
-    -------
-    control.StateSpace
-        Inputs ``tau1``, ``tau2`` [N m]; outputs `output_names` (deviations from the
-        configuration: rad, m, rad/s, m/s); states ``eta1…`` (FE modes, the first two
-        rigid) and their rates.  Continuous, or discrete with ``dt = Ts``.
-    """
-    params = params if params is not None else ArmParameters()
-    plant = ExudynPlant(params, mesh, modal_basis=modal_basis)
+def linearise(plant, *, theta=(0.0, 0.0)) -> control.StateSpace:
+    """The FE arm of ``plant`` (an `ExudynPlant` whose arm has ideal joints, reset here)
+    linearised about rest at joint angles ``theta`` (module docstring;
+    `plant_exudyn.linear_model` adds the joints)."""
     n = plant.state_size // 2
     x0 = np.zeros(2 * n)
     x0[:2] = np.asarray(theta, dtype=float)
@@ -107,16 +75,15 @@ def linear_model(params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
     B = np.vstack([np.zeros((k, 2)), Phi.T @ N @ F])
     C = np.hstack([Cu @ N.T @ Phi, Cv @ N.T @ Phi])
     states = [f"eta{i + 1}" for i in range(k)]
-    sys_ = control.ss(A, B, C, np.zeros((C.shape[0], 2)), inputs=["tau1", "tau2"],
-                      outputs=list(output_names(plant.modal_basis)),
-                      states=states + [f"{s}_dot" for s in states],
+    mesh = plant.mesh
+    outputs = output_names(tuple(m.n for m in plant.modal_basis))[:-len(MOTOR_OUTPUTS)]
+    return control.ss(A, B, C, np.zeros((C.shape[0], 2)), inputs=["tau1", "tau2"],
+                      outputs=list(outputs), states=states + [f"{s}_dot" for s in states],
                       name=f"fe_{mesh.element}_{mesh.elements_per_link[0]}_"
                            f"{mesh.elements_per_link[1]}")
-    return sys_ if Ts is None else control.sample_system(sys_, Ts, method="zoh",
-                                                         name=sys_.name + "_zoh")
 
 
-def _rigid_motions(plant: ExudynPlant, Q0: np.ndarray) -> np.ndarray:
+def _rigid_motions(plant, Q0: np.ndarray) -> np.ndarray:
     """ODE2 displacement directions (size, 2) of turning joint 1 and joint 2 at Q0: central
     differences of the exact node placement (`ExudynPlant._node_displacements`); for a
     rotation the difference quotient is parallel to the derivative, so no deformation
@@ -150,7 +117,7 @@ def _modes(K: np.ndarray, M: np.ndarray, rigid: np.ndarray) -> tuple[np.ndarray,
             np.concatenate([[0.0, 0.0], omega2]))
 
 
-def _input_forces(plant: ExudynPlant, settings) -> np.ndarray:
+def _input_forces(plant, settings) -> np.ndarray:
     """Generalised forces (ODE2 size, 2) of unit torques τ1 and τ2 as the plant applies
     them (`ExudynPlant.step`), from Exudyn's own right-hand side."""
     mbs = plant.system.mbs
@@ -159,10 +126,7 @@ def _input_forces(plant: ExudynPlant, settings) -> np.ndarray:
     size = mbs.systemData.ODE2Size()
 
     def rhs(t1: float, t2: float) -> np.ndarray:
-        l1, l2, l2r = plant.system.loads
-        mbs.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])
-        mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
-        mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
+        plant.set_loads((t1, t2, 0.0, 0.0))
         solver.ComputeODE2RHS(mbs)
         return np.array(solver.GetSystemResidual())[:size]
 
@@ -172,7 +136,7 @@ def _input_forces(plant: ExudynPlant, settings) -> np.ndarray:
     return forces
 
 
-def _output_jacobians(plant: ExudynPlant, u0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _output_jacobians(plant, u0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """∂y/∂u (central differences) and ∂y/∂v (exact: y is linear in v) of the plant's
     readout at displacements ``u0`` and rest, for the outputs of `output_names`."""
     m = plant.state_size // 2

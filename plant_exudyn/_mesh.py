@@ -8,7 +8,7 @@ import numpy as np
 
 from reduced_model import FieldError
 
-__all__ = ["Mesh", "ELEMENTS"]
+__all__ = ["Mesh", "ELEMENTS", "mesh_label"]
 
 ELEMENTS = ("ancf", "geometrically_exact")
 
@@ -53,3 +53,26 @@ class Mesh:
                 or ea <= 0:
             raise FieldError("mesh", "axial_stiffness", f"must be a finite number > 0, got {ea!r}")
         object.__setattr__(self, "axial_stiffness", float(ea))
+
+
+def mesh_label(mesh: Mesh) -> str:
+    """How tables name a mesh.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The finite elements of both links.
+
+    Returns
+    -------
+    str
+        "ANCF 4 el/link", "GE 16 el/link", or "ANCF 4+8 el/link" where the links differ.
+
+    Examples
+    --------
+    >>> mesh_label(Mesh("geometrically_exact", (16, 8)))
+    'GE 16+8 el/link'
+    """
+    n1, n2 = mesh.elements_per_link
+    name = "ANCF" if mesh.element == "ancf" else "GE"
+    return f"{name} {n1 if n1 == n2 else f'{n1}+{n2}'} el/link"

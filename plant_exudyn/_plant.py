@@ -1,74 +1,45 @@
 """The truth plant: the arm's Exudyn model stepped one control period at a time."""
 from __future__ import annotations
 
-import exudyn as exu
+from dataclasses import dataclass
+
 import numpy as np
-from numba import njit, types
-from numba.experimental import structref
 from scipy.integrate import cumulative_trapezoid
 
-from reduced_model import (ArmParameters, LinkModes, Measurement, Plant, PlantFailure,
-                           SensorConfig, cached_model)
+from reduced_model import (ArmModel, ArmParameters, FieldError, LinkModes, Measurement,
+                           Plant, PlantFailure, SensorConfig, cached_model)
+from reduced_model._joint_linear import with_joints
+from reduced_model._joints import lag_step
+from reduced_model._parameters import JOINT_EFFECTS
+from reduced_model._plant import positive_step
+from reduced_model._plant_base import LEVELS, PlantSettings, Refinement
 
-from ._build import ArmSystem, Mesh, build_arm
-from ._fields import LinkField, link_readout
-from ._hold import ExactHold
-from ._modal import natural_frequencies
+from ._mesh import Mesh, mesh_label
 
-__all__ = ["ExudynPlant", "simulation_settings"]
+__all__ = ["ExudynPlant", "linear_model"]
 
-
-def simulation_settings(*, step: float, spectral_radius: float = 0.9,
-                        newton_tolerance: float = 1e-6) -> exu.SimulationSettings:
-    """Generalised-α settings measured on this model (README, *The truth plant*): Newton tolerances
-    1e-6 (the default absolute 1e-10 is below ANCF round-off), sparse linear solver
-    reusing its analysed pattern, no solution file, no console output, fixed step ``step``, halved on Newton failure
-    down to step/1000 (ten halvings; Exudyn's default 1e-8 s makes a hopeless step take
-    seconds to be declared failed)."""
-    ss = exu.SimulationSettings()
-    ti = ss.timeIntegration
-    ti.endTime = step
-    ti.numberOfSteps = 1
-    ti.startTime = 0.0
-    ti.verboseMode = 0
-    ti.automaticStepSize = False
-    ti.minimumStepSize = step * 1e-3
-    ti.newton.absoluteTolerance = newton_tolerance
-    ti.newton.relativeTolerance = newton_tolerance
-    ti.generalizedAlpha.spectralRadius = spectral_radius
-    ss.linearSolver.solverType = exu.LinearSolverType.EigenSparse
-    ss.linearSolver.reuseAnalyzedPattern = True  # the sparsity never changes: identical results
-    ss.solution.file.write = False
-    ss.solution.sensors.writePeriod = 1e30
-    ss.show.computationTime = False
-    ss.show.statistics = False
-    return ss
+#: Element-count ratio of the geometrically exact beam to ANCF in a check: it converges
+#: slower (open-loop 4th-mode error: GE 16 el/link 0.6 %, ANCF 4 0.04 %).
+_GE_PER_ANCF = 8
+_MAX_ELEMENTS = 64
 
 
 class ExudynPlant(Plant):
-    """Two-link flexible arm as an Exudyn FE model (the plant contract: `reduced_model.Plant`).
+    """Two-link flexible arm as an Exudyn FE model (``kind = "exudyn"``: the truth plant;
+    the plant contract: `reduced_model.Plant`).
 
     Parameters
     ----------
     params : ArmParameters
         The true arm.
-    mesh : Mesh
-        Beam element type and elements per link (default: ANCF, 4 per link).
-    step : float
-        Time step [s] of the generalised-α integrator (default 0.5 ms; each control period
-        must be a whole number of steps).  The solver is initialised once per `reset`
-        and advanced period by period: identical to a continuous run.
-    modal_basis : (LinkModes, LinkModes), optional
-        Mode shapes the deflection is projected on for `truth` and for measurements;
-        default: the reduced model of ``params`` with 2 modes per link.
+    model : ArmModel, optional
+        The model whose mode shapes the deflection is projected on for `truth` and for
+        measurements (the controller's nominal model); default: the reduced model of
+        ``params`` with 2 modes per link.
     sensors : SensorConfig
         What `step` returns (default: encoders θ and the projected modal q).
-    spectral_radius : float
-        Generalised-α ρ∞ (1: no numerical damping; the default 0.9 damps only modes far
-        above 1/step).
-    newton_tolerance : float
-        Absolute and relative Newton tolerance (default 1e-6; ANCF round-off makes much
-        smaller absolute tolerances unreachable: the solver then fails).
+    step, mesh, spectral_radius, newton_tolerance
+        Its settings (`ExudynPlant.Settings`).
     exact_hold : bool
         Apply each period's loads as an exact zero-order hold (default; `ExactHold`:
         second order in the step).  False gives Exudyn's own treatment of a load that
@@ -78,47 +49,141 @@ class ExudynPlant(Plant):
     Coordinates: θ1 is hub 1's angle; θ2 is hub 2's angle relative to the tangent of
     link 1 at its tip (what a motor-2 encoder reads).  q, q̇ are the mass-weighted
     projections of each link's transverse deflection in its root frame (`LinkField`).
+    The solver is initialised once per `reset` and advanced period by period: identical
+    to a continuous run.
     """
 
-    name = "exudyn"
     role = "truth"
+    label = "truth plant (Exudyn)"
 
-    def __init__(self, params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
-                 step: float = 5e-4, modal_basis: tuple[LinkModes, LinkModes] | None = None,
-                 sensors: SensorConfig = SensorConfig(), spectral_radius: float = 0.9,
+    @dataclass(frozen=True)
+    class Settings(PlantSettings):
+        """``kind = "exudyn"``: the FE truth plant.
+
+        The default step, 0.5 ms, is half the campaigns' 1 ms period: a sign observer's
+        chatter drives the FE arm at the Nyquist frequency, where a 1 ms step moved a 5 s
+        PBC + sign-SMO run's tracking error by 40 % (0.0138 rad against 0.0094-0.0111 on
+        finer meshes and steps).
+
+        Parameters
+        ----------
+        kind : {"exudyn"}
+            Selects this plant.
+        step : float
+            Generalised-α integration step [s]; ``Ts`` must be a whole multiple of it.
+        mesh : Mesh
+            The finite elements of both links (`plant_exudyn.Mesh`).
+        spectral_radius : float
+            Generalised-α ρ∞ (1: no numerical damping; the default 0.9 damps only modes
+            far above 1/step).
+        newton_tolerance : float
+            Absolute and relative tolerance of Exudyn's Newton iterations (ANCF round-off
+            makes much smaller absolute tolerances unreachable: the solver then fails).
+        """
+
+        kind: str = "exudyn"
+        step: float = 5e-4
+        mesh: Mesh = Mesh()
+        spectral_radius: float = 0.9
+        newton_tolerance: float = 1e-6
+
+        def __post_init__(self):
+            if self.kind != "exudyn":
+                raise FieldError("plant", "kind", f"must be 'exudyn', got {self.kind!r}")
+            positive_step(self.step)
+            tol = self.newton_tolerance
+            if not (np.isfinite(tol) and tol > 0):
+                raise FieldError("plant", "newton_tolerance", f"must be > 0, got {tol!r}")
+            if not 0 < self.spectral_radius <= 1:
+                raise FieldError("plant", "spectral_radius", "must be in (0, 1] (the exact "
+                                 "zero-order hold needs alpha_f > 0), got "
+                                 f"{self.spectral_radius!r}")
+
+        def discretisation(self) -> str:
+            return mesh_label(self.mesh)
+
+        def refined(self, level: int) -> dict:
+            table = self.table()
+            table["mesh"]["elements_per_link"] = [2 ** level * n for n in
+                                                  self.mesh.elements_per_link]
+            table["step"] = self.step / 2 ** level
+            return table
+
+        def refinements(self) -> list[Refinement]:
+            """Level 1 and 2 of the same element (mesh and step refined together), then
+            the other formulation at a resolution at least as fine with half the step (GE
+            8× the ANCF elements; ANCF 1/8 of GE's); meshes beyond 64 el/link are left
+            out."""
+            out = []
+            for level in LEVELS:
+                table = self.refined(level)
+                out.append(Refinement(f"{mesh_label(Mesh(**table['mesh']))}, "
+                                      f"step/{2 ** level}", table, level))
+            n = self.mesh.elements_per_link
+            table = self.refined(1)
+            if self.mesh.element == "ancf":
+                table["mesh"].update(element="geometrically_exact",
+                                     elements_per_link=[_GE_PER_ANCF * k for k in n])
+            else:
+                table["mesh"].update(element="ancf",
+                                     elements_per_link=[max(1, k // _GE_PER_ANCF) for k in n])
+            out.append(Refinement(f"{mesh_label(Mesh(**table['mesh']))}, step/2", table, None))
+            return [r for r in out
+                    if max(r.plant["mesh"]["elements_per_link"]) <= _MAX_ELEMENTS]
+
+        def step_cost(self) -> float:
+            return 2.5e-4 + 3e-5 * sum(self.mesh.elements_per_link)  # pessimistic, measured
+
+        def linear_model(self, params, *, theta, model):
+            return linear_model(params, self.mesh, theta=theta, model=model)
+
+    def __init__(self, params: ArmParameters | None = None, *, model: ArmModel | None = None,
+                 sensors: SensorConfig = SensorConfig(), step: float = 5e-4,
+                 mesh: Mesh = Mesh(), spectral_radius: float = 0.9,
                  newton_tolerance: float = 1e-6, exact_hold: bool = True) -> None:
-        if not (np.isfinite(step) and step > 0.0):
-            raise ValueError(f"step must be a positive number of seconds, got {step!r}")
+        import exudyn as exu  # the solver is loaded by the runs that use it
+
+        from ._build import build_arm, simulation_settings
+        from ._fields import LinkField
+        from ._hold import ExactHold, scaled
+        from ._readout import new_readout, readout_into
         if not 0.0 < spectral_radius <= 1.0:
             raise ValueError(f"spectral_radius must be in (0, 1], got {spectral_radius!r}")
-        self.params = params if params is not None else ArmParameters()
-        self.mesh = mesh
-        self.h = float(step)
-        basis = tuple(modal_basis or cached_model(self.params, (2, 2)).mode_shapes)
-        self.modal_basis = basis
-        self.system: ArmSystem = build_arm(self.params, mesh)
-        self.fields = (LinkField(self.system, 0, basis[0]), LinkField(self.system, 1, basis[1]))
         if not (np.isfinite(newton_tolerance) and newton_tolerance > 0):
             raise ValueError(f"newton_tolerance must be > 0, got {newton_tolerance!r}")
+        self.params = params if params is not None else ArmParameters()
+        self.mesh = mesh
+        basis = (model or cached_model(self.params, (2, 2))).mode_shapes
+        self.modal_basis = basis
+        self.system = build_arm(self.params, mesh, step=step)
+        self.fields = (LinkField(self.system, 0, basis[0]), LinkField(self.system, 1, basis[1]))
+        p = self.params
+        self.encoder_side = tuple("motor" if p.has_drive(i) else "link" for i in (1, 2))
+        Plant.__init__(self, sensors, basis, step)
         self.settings = simulation_settings(step=self.h, spectral_radius=spectral_radius,
                                             newton_tolerance=newton_tolerance)
         self.solver = exu.MainSolverImplicitSecondOrder()
-        l1, l2, l2r = self.system.loads
         tip = self.system.tip_load
+        self._inputs = self.system.joints.inputs  # the loads τ1 and τ2 set (`_drives`)
+        self._scaled = scaled
         self.hold = ExactHold(
             self.system.mbs, self.settings, self.h,
-            [[(l1, (0, 0, 1))], [(l2, (0, 0, 1)), (l2r, (0, 0, -1))], [(tip, (1, 0, 0))],
-             [(tip, (0, 1, 0))]],
+            [*self._inputs, [(tip, "loadVector", (1.0, 0.0, 0.0))],
+             [(tip, "loadVector", (0.0, 1.0, 0.0))]],
             [n for link in self.system.links for n in link.nodes]
             if self.system.element == "ancf" else []) if exact_hold else None
         self._applied = np.zeros(4)  # the loads held now: τ1, τ2, Fx, Fy
+        #: The current loops' time constants and outputs (`reduced_model._joints.lag_step`).
+        self._lag = np.array([p.torque_time_constant1, p.torque_time_constant2])
+        self._lagged = np.zeros(2)
+        self._read_motors = self.system.joints.motor_reader(self.system.mbs)
         self._index_state()
         self._readout = new_readout(self.system.element == "ancf", *self._joint_arrays(),
                                     *self.fields[0].compiled(), *self.fields[1].compiled())
+        self._readout_into = readout_into
         self._truth = None
-        self._steps = 0
-        Plant.__init__(self, sensors, basis)
         self._cache = None  # state readout of the current step (see _read)
+        self._initial = exu.ConfigurationType.Initial
         # Bound once: the loop advances and reads the plant every sample.
         self._set_load = self.system.mbs.SetLoadParameter
         self._iteration = self.solver.it
@@ -146,53 +211,56 @@ class ExudynPlant(Plant):
         """Length of [θ, q, θ̇, q̇] with q in the modal basis (what `reset` takes)."""
         return 2 * (2 + sum(m.n for m in self.modal_basis))
 
-    def reset(self, state0=None) -> Measurement:
-        """Start at t = 0 from ``state0`` = [θ, q, θ̇, q̇] (q in the modal basis, length
-        2·(2 + n1 + n2)); default: at rest, undeformed, θ = 0.  The FE nodes are placed on
-        the inextensible curve with that modal deflection."""
+    def _reset(self, x0: np.ndarray) -> None:
+        """Place the FE nodes on the inextensible curve of ``x0``'s modal deflection (q in
+        the modal basis) and restart the solver there."""
         n = self.state_size // 2
-        x0 = np.zeros(2 * n) if state0 is None else np.asarray(state0, dtype=float)
-        if x0.shape != (2 * n,) or not np.all(np.isfinite(x0)):
-            raise ValueError(f"state0 must be {2 * n} finite numbers [theta, q, theta_dot, "
-                             f"q_dot], got shape {x0.shape}")
         u = self._node_displacements(x0[:n])
         eps = 1e-6  # central difference along the velocity: exact for the linear part
         v = (self._node_displacements(x0[:n] + eps * x0[n:])
              - self._node_displacements(x0[:n] - eps * x0[n:])) / (2 * eps)
-        sd, cfg = self.system.mbs.systemData, exu.ConfigurationType.Initial
-        sd.SetODE2Coordinates(u, configuration=cfg)
-        sd.SetODE2Coordinates_t(v, configuration=cfg)
-        for load in (*self.system.loads, self.system.tip_load):
-            self.system.mbs.SetLoadParameter(load, "loadVector", [0.0, 0.0, 0.0])
+        sd = self.system.mbs.systemData
+        sd.SetODE2Coordinates(u, configuration=self._initial)
+        sd.SetODE2Coordinates_t(v, configuration=self._initial)
+        if sd.DataSize():
+            sd.SetDataCoordinates(self.system.joints.initial_data(self.system.mbs, u, v),
+                                  configuration=self._initial)
+        for load, parameter, value in (*(part for parts in self._inputs for part in parts),
+                                       (self.system.tip_load, "loadVector", (0.0, 0.0, 0.0))):
+            self.system.mbs.SetLoadParameter(load, parameter, self._scaled(value, 0.0))
         self._applied[:] = 0.0
+        self._lagged[:] = 0.0
         self.settings.timeIntegration.startTime = 0.0
         if not self.solver.InitializeSolver(self.system.mbs, self.settings):
             raise PlantFailure(f"Exudyn could not initialise the solver: "
                                f"{self.solver.GetErrorString()}")
-        self._steps = 0
-        self.time = 0.0
         self._cache = self._truth = None
-        return self.measure()
 
-    def advance(self, tau, Ts: float, tip_force=None) -> None:
-        """Hold joint torques ``tau`` (2,) [N m] and the payload force ``tip_force``
-        (Fx, Fy) [N, base frame] for ``Ts`` seconds (an exact zero-order hold,
-        `hold_loads`).  Raises `PlantFailure` with Exudyn's message if the solver fails."""
-        steps = self.periods(Ts)
-        if len(tau) != 2:
-            raise ValueError("the Exudyn plant has two actuators: tau must have 2 values, "
-                             f"got {len(tau)}")
+    def _advance(self, tau: np.ndarray, steps: int, tip_force) -> None:
+        """Hold joint torques ``tau`` and the payload force ``tip_force`` over ``steps``
+        steps (an exact zero-order hold, `hold_loads`); `PlantFailure` with Exudyn's
+        message if the solver fails."""
         fx, fy = (0.0, 0.0) if tip_force is None else (float(tip_force[0]),
                                                        float(tip_force[1]))
-        self.hold_loads(float(tau[0]), float(tau[1]), fx, fy)
-        self._steps += steps
         self._cache = self._truth = None
-        self._iteration.endTime = self._steps * self.h
+        if not self._lag.any():
+            self.hold_loads(float(tau[0]), float(tau[1]), fx, fy)
+            self._solve_to(self._steps + steps)
+            return
+        lagged = self._lagged
+        for k in range(steps):  # the current loops' mean torque step by step
+            (u1, lagged[0]), (u2, lagged[1]) = (lag_step(float(tau[i]), lagged[i], self._lag[i],
+                                                         self.h) for i in (0, 1))
+            self.hold_loads(u1, u2, fx, fy)
+            self._solve_to(self._steps + k + 1)
+
+    def _solve_to(self, step: int) -> None:
+        """Advance Exudyn's solver to the end of internal step ``step``."""
+        self._iteration.endTime = step * self.h
         if not self.solver.SolveSteps(self.system.mbs, self.settings):
             msg = self.solver.GetErrorString() or "Newton iteration did not converge"
             raise PlantFailure(f"Exudyn solver failed at t = {self._iteration.currentTime:.6g} "
                                f"s: {msg.strip()}")
-        self.time = self._steps * self.h
 
     def hold_loads(self, t1: float, t2: float, fx: float = 0.0, fy: float = 0.0) -> None:
         """Hold joint torques ``t1``, ``t2`` [N m] and the payload force (``fx``, ``fy``)
@@ -204,14 +272,18 @@ class ExudynPlant(Plant):
                                       or new[2] != applied[2] or new[3] != applied[3]):
             self.hold.apply((new[0] - applied[0], new[1] - applied[1],
                              new[2] - applied[2], new[3] - applied[3]))
-        set_load, (l1, l2, l2r) = self._set_load, self.system.loads
-        if t1 != applied[0]:
-            set_load(l1, "loadVector", [0.0, 0.0, t1])
-        if t2 != applied[1]:
-            set_load(l2, "loadVector", [0.0, 0.0, t2])
-            set_load(l2r, "loadVector", [0.0, 0.0, -t2])
-        if fx != applied[2] or fy != applied[3]:
-            set_load(self.system.tip_load, "loadVector", [fx, fy, 0.0])
+        self.set_loads(new)
+
+    def set_loads(self, new) -> None:
+        """Set the loads of the inputs (τ1, τ2, Fx, Fy) ``new`` that changed (no hold)."""
+        applied = self._applied
+        set_load, scaled = self._set_load, self._scaled
+        for j in (0, 1):
+            if new[j] != applied[j]:
+                for load, parameter, value in self._inputs[j]:
+                    set_load(load, parameter, scaled(value, new[j]))
+        if new[2] != applied[2] or new[3] != applied[3]:
+            set_load(self.system.tip_load, "loadVector", [new[2], new[3], 0.0])
         applied[:] = new
 
     def measure(self) -> Measurement:
@@ -226,9 +298,12 @@ class ExudynPlant(Plant):
         return self._truth_now().copy()
 
     def truth_into(self, out: np.ndarray) -> None:
-        """`truth_vector` written into ``out`` (one compiled call on Exudyn's coordinates)."""
+        """`truth_vector` written into ``out`` (one compiled call on Exudyn's coordinates,
+        then the motors)."""
         sd = self._system_data
-        readout_into(self._readout, sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), out)
+        u, v = sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t()
+        self._readout_into(self._readout, u, v, out)
+        self._read_motors(u, v, out, self.state_size // 2)
 
     def _truth_now(self) -> np.ndarray:
         """The truth vector of the current step, read once (treat as read-only)."""
@@ -346,83 +421,55 @@ class ExudynPlant(Plant):
             place(sys_.stator, tip1, tangent1)
         if sys_.payload is not None:
             place(sys_.payload, tip2, tangent2)
+        for rotor, hub_angle in zip(sys_.joints.rotors, (th1, alpha)):
+            if rotor is not None:  # on its hub: the gear unloaded
+                u[mbs.systemData.GetNodeLTGODE2(rotor)[0]] = hub_angle - mbs.GetNodeParameter(
+                    rotor, "referenceCoordinates")[0]
         return u
 
     # --- modal analysis ---------------------------------------------------------------------------
     def natural_frequencies(self, theta=(0.0, 0.0), joints: str = "locked",
                             n: int = 4) -> np.ndarray:
         """First ``n`` bending frequencies [Hz] of this plant's FE model linearised at
-        ``theta`` (see `natural_frequencies`)."""
+        ``theta`` (see `plant_exudyn.natural_frequencies`)."""
+        from ._modal import natural_frequencies
         return natural_frequencies(self.params, self.mesh, theta=theta, joints=joints, n=n)
 
 
-# --- the truth readout, compiled -----------------------------------------------------------------
-_V, _I = types.Array(types.float64, 1, "C"), types.Array(types.int64, 1, "C")
-_M, _MI = types.Array(types.float64, 2, "C"), types.Array(types.int64, 2, "C")
-_LINK = (("idx", _MI), ("ref", _M), ("hub_idx", _I), ("hub_ref", _V), ("d", _V), ("dd", _V),
-         ("projector", _M), ("H_quad", _M), ("phi_T", _M), ("rho_w", _V))  # `LinkField.compiled`
+def linear_model(params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
+                 theta=(0.0, 0.0), Ts: float | None = None,
+                 model: ArmModel | None = None):
+    """The FE arm linearised about rest at joint angles ``theta`` (`plant_exudyn._linear`).
 
+    Parameters
+    ----------
+    params : ArmParameters
+        The arm (default: `ArmParameters()`).
+    mesh : Mesh
+        Element type and elements per link.
+    theta : (float, float)
+        θ1, θ2 [rad] of the configuration (θ2 relative to the link-1 tip tangent).
+    Ts : float, optional
+        If given, the exact zero-order-hold discretisation at this period [s].
+    model : ArmModel, optional
+        The model whose mode shapes the deflection is projected on for the q outputs
+        (default: the reduced model of ``params`` with 2 modes per link, as `ExudynPlant`).
 
-@structref.register
-class _ReadoutType(types.StructRef):
-    def preprocess_fields(self, fields):
-        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+    Returns
+    -------
+    control.StateSpace
+        Inputs ``tau1``, ``tau2`` [N m]; outputs `reduced_model.output_names` (deviations
+        from the configuration: rad, m, rad/s, m/s); states ``eta1…`` (FE modes, the first
+        two rigid) and their rates, then the drives' and current loops' (the linear part
+        of the arm's joints, `reduced_model._joint_linear.with_joints`; dry friction and
+        backlash are left out).  Continuous, or discrete with ``dt = Ts``.
+    """
+    import control
 
-
-class Readout(structref.StructRefProxy):
-    """What `readout_into` reads the truth from Exudyn's coordinates with: the joints'
-    and tips' indices and reference values, and each link's `LinkField` arrays (one
-    structure passed by reference: a call costs ~1 µs, 27 separate arrays cost ~5)."""
-
-
-structref.define_boxing(_ReadoutType, Readout)
-_READOUT = _ReadoutType((("ancf", types.boolean), ("jidx", _I), ("jref", _V),
-                         ("tip_idx", _MI), ("tip_ref", _M),
-                         *((f"{name}1", typ) for name, typ in _LINK),
-                         *((f"{name}2", typ) for name, typ in _LINK)))
-
-
-@njit(cache=True)
-def new_readout(ancf, jidx, jref, tip_idx, tip_ref,
-                idx1, ref1, hub_idx1, hub_ref1, d1, dd1, projector1, H_quad1, phi_T1, rho_w1,
-                idx2, ref2, hub_idx2, hub_ref2, d2, dd2, projector2, H_quad2, phi_T2, rho_w2):
-    """A `Readout` of these arrays (shared, not copied)."""
-    r = structref.new(_READOUT)
-    r.ancf, r.jidx, r.jref, r.tip_idx, r.tip_ref = ancf, jidx, jref, tip_idx, tip_ref
-    r.idx1, r.ref1, r.hub_idx1, r.hub_ref1, r.d1, r.dd1 = idx1, ref1, hub_idx1, hub_ref1, d1, dd1
-    r.projector1, r.H_quad1, r.phi_T1, r.rho_w1 = projector1, H_quad1, phi_T1, rho_w1
-    r.idx2, r.ref2, r.hub_idx2, r.hub_ref2, r.d2, r.dd2 = idx2, ref2, hub_idx2, hub_ref2, d2, dd2
-    r.projector2, r.H_quad2, r.phi_T2, r.rho_w2 = projector2, H_quad2, phi_T2, rho_w2
-    return r
-
-
-@njit(cache=True)
-def readout_into(r, u, v, out):
-    """The truth vector from Exudyn's ODE2 coordinates ``u`` and rates ``v``, in one
-    compiled call (`ExudynPlant._joints` and `LinkField` written out)."""
-    n1, n2 = r.projector1.shape[0], r.projector2.shape[0]
-    m = 2 + n1 + n2
-    jidx, jref = r.jidx, r.jref
-    th1 = jref[0] + u[jidx[0]]
-    hub2 = jref[1] + u[jidx[1]]
-    if r.ancf:
-        sx, sy = jref[2] + u[jidx[2]], jref[3] + u[jidx[3]]
-        sxd, syd = v[jidx[2]], v[jidx[3]]
-        c, s = np.cos(th1), np.sin(th1)
-        tangent = th1 + np.arctan2(-s * sx + c * sy, c * sx + s * sy)
-        tangent_rate = (sx * syd - sy * sxd) / (sx * sx + sy * sy)
-    else:
-        tangent = jref[2] + u[jidx[2]]
-        tangent_rate = v[jidx[2]]
-    out[0], out[1] = th1, hub2 - tangent
-    out[m], out[m + 1] = v[jidx[0]], v[jidx[1]] - tangent_rate
-    e = 2 * m
-    for k in range(2):
-        for j in range(2):
-            out[e + 2 * k + j] = r.tip_ref[k, j] + u[r.tip_idx[k, j]]
-    out[e + 4], out[e + 6] = link_readout(u, v, r.ancf, r.idx1, r.ref1, r.hub_idx1, r.hub_ref1,
-                                          r.d1, r.dd1, r.projector1, r.H_quad1, r.phi_T1,
-                                          r.rho_w1, out[2:2 + n1], out[m + 2:m + 2 + n1])
-    out[e + 5], out[e + 7] = link_readout(u, v, r.ancf, r.idx2, r.ref2, r.hub_idx2, r.hub_ref2,
-                                          r.d2, r.dd2, r.projector2, r.H_quad2, r.phi_T2,
-                                          r.rho_w2, out[2 + n1:m], out[m + 2 + n1:2 * m])
+    from ._linear import linearise
+    params = params if params is not None else ArmParameters()
+    arm = linearise(ExudynPlant(params.without(*JOINT_EFFECTS), model=model, mesh=mesh),
+                    theta=theta)
+    sys_ = with_joints(arm, params)
+    return sys_ if Ts is None else control.sample_system(sys_, Ts, method="zoh",
+                                                         name=sys_.name + "_zoh")

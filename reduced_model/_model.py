@@ -13,8 +13,10 @@ import numpy as np
 import scipy.linalg
 
 from . import _kernels as kern
+from ._cache_guard import fresh_kernel_caches
 from ._modes import LinkModes, gauss_legendre
 from ._parameters import ArmParameters
+from ._plant_interface import coordinate_names
 
 __all__ = ["ArmModel", "validate_modes_per_link", "cached_model"]
 
@@ -91,6 +93,7 @@ class ArmModel:
 
     def __init__(self, params: ArmParameters | None = None,
                  modes_per_link: tuple[int, int] = (2, 2)) -> None:
+        fresh_kernel_caches()  # before any kernel runs: every kernel works on a model
         self.params = params if params is not None else ArmParameters()
         n1, n2 = validate_modes_per_link(modes_per_link)
         self.modes_per_link = (n1, n2)
@@ -139,9 +142,7 @@ class ArmModel:
     # --- names -------------------------------------------------------------------
     @property
     def coordinate_names(self) -> tuple[str, ...]:
-        n1, n2 = self.modes_per_link
-        return ("theta1", "theta2", *(f"q1{j + 1}" for j in range(n1)),
-                *(f"q2{j + 1}" for j in range(n2)))
+        return coordinate_names(self.modes_per_link)
 
     @property
     def state_names(self) -> tuple[str, ...]:

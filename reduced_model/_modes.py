@@ -17,7 +17,7 @@ import functools
 
 import numpy as np
 
-__all__ = ["LinkModes", "clamped_mass_roots", "weighted_projector", "gauss_legendre"]
+__all__ = ["LinkModes", "clamped_mass_roots", "weighted_projector", "gauss_legendre", "projection"]
 
 _SCAN_STEP = 2e-3  # in λ; roots are ≈ π apart, so two roots are never within one step
 
@@ -201,3 +201,23 @@ def weighted_projector(basis: LinkModes, *, w_quad, basis_quad, basis_tip, targe
     gram = weighted @ basis_quad + (basis_tip.T * loads) @ basis_tip
     rhs = weighted @ target_quad + (basis_tip.T * loads) @ target_tip
     return np.linalg.solve(gram, rhs)
+
+
+@functools.lru_cache(maxsize=64)
+def projection(own: tuple[LinkModes, LinkModes], basis: tuple[LinkModes, LinkModes]) -> np.ndarray:
+    """Block matrix mapping modal coordinates of the mode shapes ``own`` to ``basis``'s
+    (cached by the shapes' identity: the models of a sweep are shared, `cached_model`;
+    callers must not modify it)."""
+    blocks = []
+    for link, (b, mine) in enumerate(zip(basis, own)):
+        if abs(b.L - mine.L) > 1e-12 * mine.L:
+            raise ValueError(f"modal_basis: link {link + 1} has L = {b.L}, the plant "
+                             f"L = {mine.L}; the deflection cannot be projected")
+        x, w = gauss_legendre(0.0, mine.L)
+        blocks.append(weighted_projector(
+            b, w_quad=w, basis_quad=b.phi(x).T, basis_tip=np.vstack(b.tip_values),
+            target_quad=mine.phi(x).T, target_tip=np.vstack(mine.tip_values)))
+    out = np.zeros((sum(p.shape[0] for p in blocks), sum(p.shape[1] for p in blocks)))
+    out[:blocks[0].shape[0], :blocks[0].shape[1]] = blocks[0]
+    out[blocks[0].shape[0]:, blocks[0].shape[1]:] = blocks[1]
+    return out

@@ -1,69 +1,115 @@
 """The reduced model used as a plant: fixed-step RK4 on the paper's eq. (2)."""
 from __future__ import annotations
 
-import functools
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import _kernels as kern
-from ._model import cached_model, validate_modes_per_link
-from ._modes import LinkModes, gauss_legendre, weighted_projector
-from ._parameters import ArmParameters
-from ._plant_base import Plant
-from ._plant_interface import Measurement, check_sample_time
+from ._joints import (advance_joints_packed, joints_active, motor_state_into,
+                      new_joint_buffers, reset_joints)
+from ._linear import reduced_linear_model
+from ._model import ArmModel, cached_model, validate_modes_per_link
+from ._modes import projection
+from ._parameters import ArmParameters, FieldError
+from ._plant_base import Plant, PlantSettings
+from ._plant_interface import check_sample_time
 from ._sensors import SensorConfig
 
-__all__ = ["ReducedPlant"]
+__all__ = ["ReducedPlant", "positive_step"]
 
 
 class ReducedPlant(Plant):
-    """`ArmModel` integrated with classical RK4 at a fixed internal step.
+    """`ArmModel` integrated with classical RK4 at a fixed internal step
+    (``kind = "reduced"``: the paper's model as the plant).
 
     Torques are held constant over each call of `step` (zero-order hold).  The
     measurement is set by ``sensors`` (default: encoders θ and the modal coordinates q
-    read directly, as the paper assumes); noise belongs to the closed loop.
+    read directly, as the paper assumes); noise belongs to the closed loop.  The joints
+    of ``params`` (friction, drives, torque lag: `reduced_model._joints`) act as on the
+    truth plant; with all of them off the plant is the paper's model.
 
     Parameters
     ----------
     params : ArmParameters, optional
         The arm simulated (the "true" arm of a scenario).
+    model : ArmModel, optional
+        The model whose mode shapes `truth` and the measurement express q in (the
+        controller's nominal model).  Default, or a model of the same arm and order: the
+        plant's own.  Otherwise each link's modal deflection is projected onto its modes
+        by weighted least squares (the same projection as the FE plant's); the link
+        lengths must agree.
+    sensors : SensorConfig
+        What is measured (see `SensorConfig`).
     modes_per_link : (int, int)
         Assumed modes per link of the plant model (1..4 each).
     step : float
         Internal RK4 step [s], default 1 ms.  At 1 ms RK4 resolves the default arm's
         highest mode with 2+2 modes (34 Hz, ω h = 0.21) to ~1e-5 amplitude error
         per period; use 0.25 ms or less with 4 modes per link (up to ~250 Hz).
-    modal_basis : (LinkModes, LinkModes), optional
-        Mode shapes in which `truth` and the measurement express q (e.g. those of the
-        controller's nominal model).  Default: the plant's own.  Otherwise each link's
-        modal deflection is projected onto the basis by weighted least squares (the same
-        projection as the FE plant's); the link lengths must agree.
-    sensors : SensorConfig
-        What is measured (see `SensorConfig`).
     """
 
-    name = "reduced"
     role = "reduced"
+    label = "reduced plant"
+    actuated = 0  # any: two joint torques, or n generalised forces
 
-    def __init__(self, params: ArmParameters | None = None, *,
-                 modes_per_link: tuple[int, int] = (2, 2), step: float = 1e-3,
-                 modal_basis: tuple[LinkModes, LinkModes] | None = None,
-                 sensors: SensorConfig = SensorConfig()) -> None:
-        if not (np.isfinite(step) and step > 0.0):
-            raise ValueError(f"step must be a positive number of seconds, got {step!r}")
-        self.model = cached_model(params if params is not None else ArmParameters(),
-                                  validate_modes_per_link(modes_per_link))
-        self.h = float(step)
+    @dataclass(frozen=True)
+    class Settings(PlantSettings):
+        """``kind = "reduced"``: the paper's model as the plant (fixed-step RK4).
+
+        Parameters
+        ----------
+        kind : {"reduced"}
+            Selects this plant.
+        modes_per_link : (int, int)
+            The plant's own model order, assumed modes of link 1 and link 2 (1..4 each).
+        step : float
+            Internal RK4 step [s]; ``Ts`` must be a whole multiple of it.
+        """
+
+        kind: str = "reduced"
+        modes_per_link: tuple[int, int] = (2, 2)
+        step: float = 1e-3
+
+        def __post_init__(self):
+            if self.kind != "reduced":
+                raise FieldError("plant", "kind", f"must be 'reduced', got {self.kind!r}")
+            try:
+                validate_modes_per_link(self.modes_per_link)
+            except ValueError:
+                raise FieldError("plant", "modes_per_link", "must be two integers in 1..4, "
+                                 f"got {list(self.modes_per_link)!r}") from None
+            positive_step(self.step)
+
+        def step_cost(self) -> float:
+            return 1e-4  # RK4 of 2n states, pessimistic
+
+        def linear_model(self, params, *, theta, model):
+            """The plant's own model linearised at ``theta``, its q outputs in ``model``'s
+            mode shapes (as the plant reports them)."""
+            own = cached_model(params, tuple(self.modes_per_link))
+            same = model.params == params and model.modes_per_link == own.modes_per_link
+            return reduced_linear_model(own, theta=theta,
+                                        modal_basis=None if same else model.mode_shapes)
+
+    def __init__(self, params: ArmParameters | None = None, *, model: ArmModel | None = None,
+                 sensors: SensorConfig = SensorConfig(),
+                 modes_per_link: tuple[int, int] = (2, 2), step: float = 1e-3) -> None:
+        params = params if params is not None else ArmParameters()
+        self.model = cached_model(params, validate_modes_per_link(modes_per_link))
         n = self.model.n
         self._x = np.zeros(2 * n)
         self._f = np.zeros(n)  # generalised forces when a tip force acts
-        basis = tuple(modal_basis) if modal_basis is not None else self.model.mode_shapes
-        self._basis_map = None if modal_basis is None else _projection(self.model.mode_shapes,
-                                                                      basis)
+        own = model is None or (model.params == params
+                                and model.modes_per_link == self.model.modes_per_link)
+        basis = self.model.mode_shapes if own else model.mode_shapes
+        self._basis_map = None if own else projection(self.model.mode_shapes, basis)
         self._tau = np.zeros(2)
-        self._steps = 0  # internal steps since reset: time = steps · h without round-off drift
         self._work = self.model.new_workspace()[0]
-        Plant.__init__(self, sensors, basis)
+        self._joints = new_joint_buffers(params, n)
+        self._joints_on = joints_active(self._joints[0])
+        self.encoder_side = tuple("motor" if params.has_drive(i) else "link" for i in (1, 2))
+        Plant.__init__(self, sensors, basis, step)
 
     # --- sensor primitives (see reduced_model._sensors) ---------------------------------
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
@@ -88,48 +134,35 @@ class ReducedPlant(Plant):
     def tip_positions(self) -> np.ndarray:
         return self.model.tip_position(self._x[:self.model.n])
 
-    def reset(self, state0=None) -> Measurement:
-        """Start at ``state0`` = [Q, Q̇] (length 2n) at t = 0; default: rest at Q = 0."""
-        n = self.model.n
-        if state0 is None:
-            self._x[:] = 0.0
-        else:
-            x0 = np.asarray(state0, dtype=float)
-            if x0.shape != (2 * n,) or not np.all(np.isfinite(x0)):
-                raise ValueError(f"state0 must be {2 * n} finite numbers [Q, Qdot] in the order "
-                                 f"{self.model.state_names}, got shape {x0.shape}")
-            self._x[:] = x0
-        self._steps = 0
-        self.time = 0.0
-        return self.measure()
+    def _reset(self, x0: np.ndarray) -> None:
+        """Start at ``x0`` = [Q, Q̇] in the plant's own coordinates."""
+        self._x[:] = x0
+        reset_joints(self._joints[0], self._joints[1], self._x)
 
-    def advance(self, tau, Ts: float, tip_force=None) -> None:
-        """Hold joint torques ``tau`` (2,) [N m] for ``Ts`` seconds.
-
-        ``tau`` of length n applies generalised forces to every coordinate (the paper's
-        idealised, unrealisable input); only the reduced plant accepts it.  ``tip_force``
-        (Fx, Fy) [N] in the base frame acts on the payload as generalised forces Jᵀ F,
-        with the tip Jacobian J taken at the start of the period.
-        """
-        nsteps = self.periods(Ts)
-        tau = np.asarray(tau, dtype=float)
+    def _advance(self, tau: np.ndarray, steps: int, tip_force) -> None:
+        """Hold ``tau`` (2 joint torques, or n generalised forces: the paper's idealised,
+        unrealisable input) over ``steps`` RK4 steps.  ``tip_force`` (Fx, Fy) [N] in the
+        base frame acts on the payload as generalised forces Jᵀ F, with the tip Jacobian
+        J taken at the start of the period."""
         if tau.shape == (2,):
             self._tau[:] = tau
             tau_in = self._tau
-        elif tau.shape == (self.model.n,):
-            tau_in = np.ascontiguousarray(tau)
         else:
-            raise ValueError(f"tau must have shape (2,) or ({self.model.n},), got {tau.shape}")
-        if tip_force is not None and np.any(tip_force):
-            f = self._f
-            f[:] = self.model.tip_jacobian(self._x[:self.model.n]).T @ np.asarray(tip_force, float)
-            f[:tau_in.shape[0]] += tau_in
-            tau_in = f
+            tau_in = np.ascontiguousarray(tau)
+        f = self._f
+        force = tip_force is not None and np.any(tip_force)
+        f[:] = (self.model.tip_jacobian(self._x[:self.model.n]).T @ np.asarray(tip_force, float)
+                if force else 0.0)
         ints, reals = self.model.packed
         wc, wr = self._work
-        kern.rk4_advance_packed(ints, reals, wc, wr, self._x, tau_in, self.h, nsteps)
-        self._steps += nsteps
-        self.time = self._steps * self.h
+        if self._joints_on:  # the motor torques go through the joints, Jᵀ F to the arm
+            advance_joints_packed(ints, reals, wc, wr, self._x, tau_in, f, self.h, steps,
+                                  *self._joints)
+            return
+        if force:
+            f[:tau_in.shape[0]] += tau_in
+            tau_in = f
+        kern.rk4_advance_packed(ints, reals, wc, wr, self._x, tau_in, self.h, steps)
 
     def compiled_stepping(self) -> dict | None:
         """What a compiled loop needs to step this plant itself (`validation.run._sample.
@@ -141,7 +174,7 @@ class ReducedPlant(Plant):
             return None
         basis = np.zeros((0, 0)) if self._basis_map is None else self._basis_map
         return {"model": (*self.model.packed, *self._work), "x": self._x, "h": self.h,
-                "basis": np.ascontiguousarray(basis, dtype=float),
+                "joints": self._joints, "basis": np.ascontiguousarray(basis, dtype=float),
                 "nsteps": lambda Ts: check_sample_time(Ts, self.h)}
 
     @property
@@ -156,7 +189,7 @@ class ReducedPlant(Plant):
 
     def truth_into(self, out: np.ndarray) -> None:
         """The truth vector [θ, q, θ̇, q̇ (q in the modal basis), tips, tip deflections,
-        0, 0] written into ``out``."""
+        0, 0, motor angles and rates] written into ``out``."""
         n, x = self.model.n, self._x
         if self._basis_map is None:
             out[:2 * n] = x
@@ -165,25 +198,13 @@ class ReducedPlant(Plant):
             out[:2], out[m:m + 2] = x[:2], x[n:n + 2]
             out[2:m] = self._basis_map @ x[2:n]
             out[m + 2:2 * m] = self._basis_map @ x[n + 2:]
-        kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-8:-2])
-        out[-2:] = 0.0  # a modal field is represented exactly by its own modes
+        kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-12:-6])
+        out[-6:-4] = 0.0  # a modal field is represented exactly by its own modes
+        motor_state_into(self._joints[0], self._joints[1], x, out[-4:])
 
 
-@functools.lru_cache(maxsize=64)
-def _projection(own: tuple[LinkModes, LinkModes], basis: tuple[LinkModes, LinkModes]) -> np.ndarray:
-    """Block matrix mapping modal coordinates of the mode shapes ``own`` to ``basis``'s
-    (cached by the shapes' identity: the models of a sweep are shared, `cached_model`;
-    callers must not modify it)."""
-    blocks = []
-    for link, (b, mine) in enumerate(zip(basis, own)):
-        if abs(b.L - mine.L) > 1e-12 * mine.L:
-            raise ValueError(f"modal_basis: link {link + 1} has L = {b.L}, the plant "
-                             f"L = {mine.L}; the deflection cannot be projected")
-        x, w = gauss_legendre(0.0, mine.L)
-        blocks.append(weighted_projector(
-            b, w_quad=w, basis_quad=b.phi(x).T, basis_tip=np.vstack(b.tip_values),
-            target_quad=mine.phi(x).T, target_tip=np.vstack(mine.tip_values)))
-    out = np.zeros((sum(p.shape[0] for p in blocks), sum(p.shape[1] for p in blocks)))
-    out[:blocks[0].shape[0], :blocks[0].shape[1]] = blocks[0]
-    out[blocks[0].shape[0]:, blocks[0].shape[1]:] = blocks[1]
-    return out
+def positive_step(step) -> None:
+    """FieldError naming ``plant.step`` unless it is a positive number of seconds."""
+    if isinstance(step, bool) or not isinstance(step, (int, float)) or not (
+            np.isfinite(step) and step > 0):
+        raise FieldError("plant", "step", f"must be > 0, got {step!r}")

@@ -1,37 +1,51 @@
-"""The plant contract: what the closed loop of `validation` needs of a plant, and the
-base class that owns what every plant shares.
+"""The plant contract: one class per kind of plant, what the closed loop of `validation`
+needs of it, and the base class that owns what every plant shares (after SciPy's
+``OdeSolver``: the base owns the public methods and their checks, a plant fills the
+private hooks).
 
 A plant simulates the two-link arm from joint torques held over each control period and
 reports what really happened in the reduced model's coordinates.  To write one (a second
-FE engine, a user's model, hardware), subclass `Plant`:
+FE engine, a user's model, hardware), subclass `Plant` — or a built-in plant, whose
+settings and behaviour it then inherits:
 
-1. Set ``name`` (a short label) and ``role``: "truth" (the arm verdicts trust; its
-   results are checked under refinement) or "reduced" (the paper's model).
-2. Call ``Plant.__init__(self, sensors, modal_basis)`` once the plant can answer the
-   sensor primitives below: it builds the sensor model of `SensorConfig` ``sensors`` in
-   the mode shapes ``modal_basis`` (the controller's, for a truth plant).
-3. Implement ``state_size``: the length of [θ, q, θ̇, q̇] that ``reset`` takes (q in
-   ``modal_basis``).
-4. Implement ``reset(state0=None) -> Measurement``: place the arm at ``state0`` (None:
-   at rest, undeformed, θ = 0), set ``time`` to 0 and return ``self.measure()``.
-5. Implement ``advance(tau, Ts, tip_force=None)``: hold the joint torques ``tau`` (2,)
-   [N m] and the payload force ``tip_force`` (Fx, Fy) [N, base frame] over [t, t + Ts)
-   exactly (a zero-order hold), then set ``time``; ``self.periods(Ts)`` checks Ts against
-   the internal step.  A solver that cannot complete raises `PlantFailure` with its
-   reason: the run is then recorded as failed, never lost.
-6. Implement ``truth_into(out)``: write the truth vector [θ, q, θ̇, q̇, *TRUTH_EXTRAS]
-   into ``out`` (no allocation: the loop calls it every sample).
-7. Implement the sensor primitives `SensorModel` reads: ``joint_state()`` → (θ, θ̇),
-   ``modal_state()`` → (q, q̇) in ``modal_basis``, ``field_sampler(link, x, derivative)``
-   → a callable giving the transverse deflection (or its s-derivatives) at points ``x``
-   of link ``link`` (0 or 1), ``tip_positions()`` → (2, 2).
-8. Optionally, ``compiled_stepping``: a plant that can step itself in compiled code (the
-   reduced plant) returns its kernels there, and the loop runs whole in one call.
+1. Declare ``role``: "truth" (the arm verdicts trust; its results are checked under
+   refinement) or "reduced" (the paper's model).  Nothing defaults it: a class that
+   declares none is refused.  ``label`` names it in tables and figures.
+2. Declare its configuration as a frozen dataclass ``Settings`` (the keys of a
+   scenario's ``[plant]`` table; a plug-in's ``options``) and take them as keyword
+   arguments of the constructor ``Cls(params, *, model, sensors, **settings)``:
+   ``params`` is the true arm, ``model`` the `ArmModel` whose mode shapes q is expressed
+   in (the controller's nominal model; None: the plant's own), ``sensors`` a
+   `SensorConfig`.  Call ``Plant.__init__(self, sensors, modal_basis, step)`` once the
+   plant can answer the sensor primitives (7.).
+3. ``state_size``: the length of [θ, q, θ̇, q̇] that ``reset`` takes (q in the modal
+   basis).
+4. ``_reset(x0)``: place the arm at the state ``x0`` (checked: finite, ``state_size``).
+5. ``_advance(tau, steps, tip_force)``: hold the joint torques ``tau`` and the payload
+   force ``tip_force`` ((Fx, Fy) [N, base frame] or None) over ``steps`` internal steps
+   of ``h`` exactly (a zero-order hold).  A solver that cannot complete raises
+   `PlantFailure` with its reason: the run is then recorded as failed, never lost.
+6. ``truth_into(out)``: write the truth vector [θ, q, θ̇, q̇, *TRUTH_EXTRAS] into
+   ``out`` (no allocation: the loop calls it every sample).
+7. The sensor primitives `SensorModel` reads: ``joint_state()`` → (θ, θ̇),
+   ``modal_state()`` → (q, q̇) in the modal basis, ``field_sampler(link, x,
+   derivative)`` → a callable giving the transverse deflection (or its s-derivatives) at
+   points ``x`` of link ``link`` (0 or 1), ``tip_positions()`` → (2, 2).
+8. Optionally, what verdicts ask of the kind (methods of its ``Settings``):
+   ``discretisation``, ``refined``, ``refinements`` (the checks a truth result must
+   survive), ``step_cost`` (for time limits) and ``linear_model``; and
+   ``compiled_stepping`` (a plant that steps itself in compiled code).
 
-The base class gives the rest: ``step`` (advance, then measure), ``measure``,
-``measurement_index``, ``truth`` and ``truth_vector``.
+The base class gives the rest: ``reset``, ``advance`` (the checks, then ``_advance``),
+``step`` (advance, then measure), ``measure``, ``measurement_index``, ``truth`` and
+``truth_vector``.
 """
 from __future__ import annotations
+
+import abc
+import dataclasses
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -39,10 +53,105 @@ from ._plant_interface import (TRUTH_EXTRAS, Measurement, TrueState, check_sampl
                                true_state_from_vector)
 from ._sensors import SensorConfig, SensorModel
 
-__all__ = ["Plant"]
+__all__ = ["Plant", "PlantSettings", "Refinement", "ROLES", "LEVELS"]
+
+#: The roles a plant plays: the arm verdicts trust, and the paper's model.
+ROLES = ("truth", "reduced")
+#: The levels of the refined sequence a truth result is checked on.
+LEVELS = (1, 2)
 
 
-class Plant:
+@dataclass(frozen=True)
+class Refinement:
+    """One check of a truth-plant result.
+
+    Parameters
+    ----------
+    label : str
+        What it runs on ("ANCF 8 el/link, step/2").
+    plant : dict
+        The plant table it runs on.
+    level : int or None
+        k: 2^k times finer in mesh and step; None: the other formulation.
+    """
+
+    label: str
+    plant: dict
+    level: int | None
+
+
+@dataclass(frozen=True)
+class PlantSettings:
+    """What every plant kind's ``Settings`` shares: the kind's questions — its role,
+    label, refinements, cost, linear model — answered for the class they configure
+    (``plant``, set when a `Plant` subclass declares its own ``Settings``).  A built-in
+    kind's settings carry a ``kind`` field naming it; they take no parameters here."""
+
+    plant: ClassVar[type]
+
+    @property
+    def role(self) -> str:
+        """"truth" or "reduced"."""
+        return self.plant.role
+
+    @property
+    def label(self) -> str:
+        """How tables and figures name the plant."""
+        return self.plant.label
+
+    @property
+    def actuated(self) -> int:
+        """The joint torques it takes (2; 0: also n generalised forces)."""
+        return self.plant.actuated
+
+    def table(self) -> dict:
+        """These settings as a plant table (plain data, as a scenario stores it)."""
+        def plain(value):
+            if dataclasses.is_dataclass(value):
+                return {f.name: plain(getattr(value, f.name))
+                        for f in dataclasses.fields(value)}
+            if isinstance(value, (tuple, list)):
+                return [plain(v) for v in value]
+            return value
+        return plain(self)
+
+    def check(self) -> None:
+        """What only running can check (a plug-in's class and options); nothing here."""
+
+    def build(self, params, model, sensors: SensorConfig) -> "Plant":
+        """The plant of the true arm ``params``, measuring with ``sensors`` in the modal
+        basis of ``model`` (the controller's nominal `ArmModel`)."""
+        keywords = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                    if f.name != "kind"}
+        return self.plant(params, model=model, sensors=sensors, **keywords)
+
+    def discretisation(self) -> str:
+        """A label of its own resolution ("ANCF 4 el/link"; "" if none)."""
+        return ""
+
+    def refined(self, level: int) -> dict:
+        """Its plant table 2^level times finer in space and time (itself without a
+        discretisation)."""
+        return self.table()
+
+    def refinements(self) -> list[Refinement]:
+        """The checks a result on it must survive (none for a plant without a
+        discretisation)."""
+        return []
+
+    def step_cost(self) -> float:
+        """A pessimistic wall time per internal step [s], for time limits."""
+        raise NotImplementedError
+
+    def linear_model(self, params, *, theta, model):
+        """The plant linearised about rest at joint angles ``theta`` (a
+        `control.StateSpace` with inputs tau1, tau2 and the outputs of ``model``'s
+        coordinates), for the linear verdicts; NotImplementedError for a kind that has
+        none."""
+        raise NotImplementedError(f"the {self.label} has no linearisation")
+
+
+class Plant(abc.ABC):
     """Base class of every plant (module docstring: the contract).
 
     Parameters
@@ -51,30 +160,72 @@ class Plant:
         What the plant measures.
     modal_basis : (LinkModes, LinkModes)
         The mode shapes its modal coordinates q are expressed in.
+    step : float
+        Its internal step [s]: a control period is a whole number of them.
     """
 
-    name: str = "plant"
-    role: str = "truth"
+    #: "truth" or "reduced": declared by every plant class (never defaulted).
+    role: ClassVar[str]
+    #: How tables and figures name it.
+    label: ClassVar[str] = "plug-in plant"
+    #: The joint torques it takes (2; 0: two, or n generalised forces).
+    actuated: ClassVar[int] = 2
+    #: Its configuration (module docstring, 2.).
+    Settings: ClassVar[type] = PlantSettings
+    #: What each joint's encoder reads: "link" (θ) or "motor" (a drive's rotor; set by
+    #: the plant before ``Plant.__init__`` where its arm has drives).
+    encoder_side: tuple[str, str] = ("link", "link")
 
-    def __init__(self, sensors: SensorConfig, modal_basis) -> None:
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if "Settings" in cls.__dict__:  # the class that declares them answers for them
+            cls.Settings.plant = cls
+
+    def __init__(self, sensors: SensorConfig, modal_basis, step: float) -> None:
+        if not (np.isfinite(step) and step > 0.0):
+            raise ValueError(f"step must be a positive number of seconds, got {step!r}")
+        #: The internal step [s].
+        self.h = float(step)
         self.modal_basis = tuple(modal_basis)
         self.sensors = SensorModel(sensors, self.modal_basis, self)
         self._periods = (None, 0)  # (last Ts, its number of internal steps)
+        self._steps = 0  # internal steps since reset: time = steps · h, no drift
         self.time = 0.0
 
     # --- what a subclass implements ------------------------------------------------------
     @property
+    @abc.abstractmethod
     def state_size(self) -> int:
-        raise NotImplementedError
+        """Length of [θ, q, θ̇, q̇] that `reset` takes."""
 
-    def reset(self, state0=None) -> Measurement:
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _reset(self, x0: np.ndarray) -> None:
+        """Place the arm at ``x0`` (checked)."""
 
-    def advance(self, tau, Ts: float, tip_force=None) -> None:
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _advance(self, tau: np.ndarray, steps: int, tip_force) -> None:
+        """Hold ``tau`` and ``tip_force`` over ``steps`` internal steps from ``time``."""
 
+    @abc.abstractmethod
     def truth_into(self, out: np.ndarray) -> None:
-        raise NotImplementedError
+        """Write the truth vector into ``out``."""
+
+    @abc.abstractmethod
+    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """(θ, θ̇) now."""
+
+    @abc.abstractmethod
+    def modal_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """(q, q̇) in the modal basis now."""
+
+    @abc.abstractmethod
+    def field_sampler(self, link: int, x, derivative: int):
+        """A callable giving link ``link``'s deflection (its ``derivative``-th
+        s-derivative) at the points ``x`` [m]."""
+
+    @abc.abstractmethod
+    def tip_positions(self) -> np.ndarray:
+        """(x, y) [m] of the link-1 tip and of the payload, (2, 2)."""
 
     def compiled_stepping(self) -> dict | None:
         """What a compiled loop needs to step this plant itself (None: step it from
@@ -82,14 +233,41 @@ class Plant:
         return None
 
     # --- what every plant shares ----------------------------------------------------------
+    def reset(self, state0=None) -> Measurement:
+        """Start at t = 0 from ``state0`` = [θ, q, θ̇, q̇] (length `state_size`; None: at
+        rest, undeformed, θ = 0); returns the measurement there."""
+        n = self.state_size
+        x0 = np.zeros(n) if state0 is None else np.asarray(state0, dtype=float)
+        if x0.shape != (n,) or not np.all(np.isfinite(x0)):
+            raise ValueError(f"state0 must be {n} finite numbers [theta, q, theta_dot, "
+                             f"q_dot], got shape {x0.shape}")
+        self._reset(x0)
+        self._steps = 0
+        self.time = 0.0
+        return self.measure()
+
     def periods(self, Ts: float) -> int:
-        """Internal steps of ``self.h`` in one control period ``Ts`` (checked once per
+        """Internal steps of ``h`` in one control period ``Ts`` (checked once per
         distinct Ts: ValueError unless Ts is a whole multiple of the step)."""
         last, steps = self._periods
         if Ts != last:
             steps = check_sample_time(Ts, self.h)
             self._periods = (Ts, steps)
         return steps
+
+    def advance(self, tau, Ts: float, tip_force=None) -> None:
+        """Hold joint torques ``tau`` (2,) [N m] (or n generalised forces, where
+        ``actuated`` is 0) and the payload force ``tip_force`` (Fx, Fy) [N, base frame]
+        for ``Ts`` seconds.  Raises `PlantFailure` when the plant's solver fails."""
+        steps = self.periods(Ts)
+        tau = np.asarray(tau, dtype=float)
+        if tau.shape != (2,) and (self.actuated != 0 or tau.shape != (self.state_size // 2,)):
+            allowed = "2" if self.actuated else f"2 or {self.state_size // 2}"
+            raise ValueError(f"the {self.label} takes {allowed} torques, got shape "
+                             f"{tau.shape}")
+        self._advance(tau, steps, tip_force)
+        self._steps += steps
+        self.time = self._steps * self.h
 
     def step(self, tau, Ts: float, tip_force=None) -> Measurement:
         """Hold ``tau`` (and ``tip_force``) for ``Ts`` seconds; return y(t + Ts)

@@ -14,16 +14,25 @@ from validation.batch.fingerprint import forget_plugins
 #: the truth, ``plant.kind = "labplants:FineArm"`` — a truth plant that costs little.
 FINE_ARM_PLANT = textwrap.dedent('''
     """A finer assumed-modes arm playing the truth: the reduced plant with its own modes."""
-    from reduced_model import ReducedPlant
+    from reduced_model import Plant, ReducedPlant
 
 
     class FineArm(ReducedPlant):
-        name = "fine-arm"
         role = "truth"
 
         def __init__(self, params, *, model, sensors, modes=3):
-            super().__init__(params, modes_per_link=(modes, modes), step=2.5e-4,
-                             modal_basis=model.mode_shapes, sensors=sensors)
+            super().__init__(params, model=model, sensors=sensors,
+                             modes_per_link=(modes, modes), step=2.5e-4)
+
+
+    class NoRole(Plant):
+        """A plant that forgot to declare its role."""
+
+
+    class Half(Plant):
+        """A plant with a role and little else."""
+
+        role = "truth"
 ''')
 
 def write_files(folder: Path, files: dict[str, str]) -> Path:

@@ -249,7 +249,8 @@ def mesh_store(tmp_path_factory):
     """The paper's system on the truth plant, 2 s from the reference, on both arms (Table 1
     at Ts = 0.2 ms, where its sampled loop runs; the default arm at 1 ms), stored with
     their checks (ANCF 8 el/link at half the step, ANCF 16 at a quarter, GE 32 at half)."""
-    from validation.batch.campaign import Campaign, PlannedRun, run_campaign
+    from validation.batch.campaign import Campaign, PlannedRun
+    from validation.batch.queue import run_campaign
     from validation.batch.store import ResultStore, run_id
     from validation.run.scenario import scenario_to_mapping
     from validation.verdicts.mesh import run_checks

@@ -78,7 +78,8 @@ NOISY = {"duration": 0.6, "transient": 0.2, "sensors": {"encoder_noise": 1e-4,
 @pytest.fixture(scope="module")
 def stored(tmp_path_factory):
     """A results folder with two runs of one name (two seeds) from a campaign."""
-    from validation.batch.campaign import campaign_from_mapping, run_campaign
+    from validation.batch.campaign import campaign_from_mapping
+    from validation.batch.queue import run_campaign
     out = tmp_path_factory.mktemp("stored")
     run_campaign(campaign_from_mapping({"name": "c", "scenario": NOISY, "sweep": [
         {"name": "noisy", "grid": {"seed": [1, 2]}}]}), out, progress=False)
@@ -170,7 +171,7 @@ def test_a_truth_plant_run_says_whether_it_converged(tmp_path, capsys):
 def test_a_failed_run_names_no_window_and_no_figures(tmp_path, capsys, plugin_lab):
     """A plug-in returning torques of the wrong shape fails at t = 0: no "window over
     0.5–0 s", no negative real-time factor, no `flexarm show` hint (it draws ok runs)."""
-    plugin_lab({"wronglab.py": "import numpy as np\n\nclass Wrong:\n    def __init__(self, m):"
+    plugin_lab({"wronglab.py": "import numpy as np\n\nclass Wrong:\n    def __init__(self, m, *, Ts):"
                                "\n        pass\n\n    def __call__(self, t, x, ref):\n"
                                "        return np.zeros(3)\n"})
     assert main(["run", "--controller", "wronglab:Wrong", "--duration", "1",

@@ -55,9 +55,9 @@ def random_state():
 def test_pbc_kernel_matches_numpy_and_splits_residual():
     ref = PaperReference()
     lam = np.array([3, 4, 1, 2, 3, 4.0])
-    pbc = PassivityBasedController(MODEL, lambda_joint=(3, 4), lambda_flex=(1, 2, 3, 4),
+    pbc = PassivityBasedController(MODEL, Ts=1e-3, lambda_joint=(3, 4), lambda_flex=(1, 2, 3, 4),
                                    kv_joint=(10, 5))
-    ideal = IdealisedPBC(MODEL, lambda_joint=(3, 4), lambda_flex=(1, 2, 3, 4),
+    ideal = IdealisedPBC(MODEL, Ts=1e-3, lambda_joint=(3, 4), lambda_flex=(1, 2, 3, 4),
                          kv_joint=(10, 5), kv_flex=6.0)
     for _ in range(5):
         x, t = random_state(), RNG.uniform(0, 20)
@@ -78,7 +78,7 @@ def test_pbc_kernel_matches_numpy_and_splits_residual():
 def test_idealised_pbc_gives_the_passive_closed_loop_of_eq_17():
     """With all n inputs, M ṡ + C s = −K_v s (eq. 17): check it on the model's dynamics."""
     ref = PaperReference()
-    ideal = IdealisedPBC(MODEL)
+    ideal = IdealisedPBC(MODEL, Ts=1e-3)
     lam, kv = ideal.lam, ideal.kv
     for _ in range(5):
         x, t = random_state(), RNG.uniform(0, 20)
@@ -99,7 +99,7 @@ def test_idealised_pbc_gives_the_passive_closed_loop_of_eq_17():
 
 def test_computed_torque_on_the_rigid_arm_gives_the_error_dynamics():
     ref = PaperReference()
-    ct = RigidComputedTorque(MODEL, kp=(16, 16), kd=(8, 8))
+    ct = RigidComputedTorque(MODEL, Ts=1e-3, kp=(16, 16), kd=(8, 8))
     for _ in range(3):
         x = random_state()
         tau = ct(1.0, x, ref)
@@ -116,7 +116,7 @@ def test_computed_torque_on_the_rigid_arm_gives_the_error_dynamics():
 def ct_error(params) -> float:
     ref = QuinticMove(goal=(1.0, -1.0), duration=2.0)
     model, plant = ArmModel(params), ReducedPlant(params, step=2.5e-4)
-    ct = RigidComputedTorque(model)
+    ct = RigidComputedTorque(model, Ts=1e-3)
     plant.reset()
     for k in range(3000):
         plant.step(ct(k * 1e-3, plant.state, ref), 1e-3)
@@ -147,10 +147,10 @@ def test_joint_pd():
         x = random_state()
         th, dth, ddth = ref(t)
         feedback = [40, 20] * (th - x[:2]) + [8, 4] * (dth - x[6:8])
-        pd = JointPD(MODEL, kp=(40, 20), kd=(8, 4), feedforward=False)
+        pd = JointPD(MODEL, Ts=1e-3, kp=(40, 20), kd=(8, 4), feedforward=False)
         # Same formula twice: round-off only.
         np.testing.assert_allclose(pd(t, x, ref), feedback, rtol=1e-13, atol=1e-13)
-        with_ff = JointPD(MODEL, kp=(40, 20), kd=(8, 4))  # feedforward is the default
+        with_ff = JointPD(MODEL, Ts=1e-3, kp=(40, 20), kd=(8, 4))  # feedforward is the default
         ff = rigid_feedforward(MODEL, th, dth, ddth)
         assert np.abs(ff).max() > 0.1  # the feedforward is not negligible
         # The law's own rigid-arm formula against the general M and C: both exact, so
@@ -161,10 +161,10 @@ def test_joint_pd():
 def test_baseline_defaults_match_the_pbc_joint_error_dynamics():
     """The baselines' default gains are the PBC's defaults (Λ = 3, K_v = (10, 5)) mapped
     onto each law on the rigid arm at θ2 = 0 (controllers._baselines docstring)."""
-    pbc = PassivityBasedController(MODEL)
+    pbc = PassivityBasedController(MODEL, Ts=1e-3)
     lam, kv = pbc.lam[:2], pbc.kv[:2]
     M = np.diag(MODEL.mass_matrix(np.zeros(MODEL.n)))[:2]
-    pd, ct = JointPD(MODEL), RigidComputedTorque(MODEL)
+    pd, ct = JointPD(MODEL, Ts=1e-3), RigidComputedTorque(MODEL, Ts=1e-3)
     # The defaults are written with one decimal: half a unit of it.
     np.testing.assert_allclose(pd.kp, kv * lam, atol=0.05)
     np.testing.assert_allclose(pd.kd, M * lam + kv, atol=0.05)
@@ -184,7 +184,7 @@ def test_baseline_defaults_match_the_pbc_joint_error_dynamics():
 ])
 def test_controllers_reject_bad_gains(cls, kwargs, match):
     with pytest.raises(ValueError, match=match):
-        cls(MODEL, **kwargs)
+        cls(MODEL, Ts=1e-3, **kwargs)
 
 
 def test_realisable_pbc_takes_no_flexible_gain():
@@ -192,7 +192,7 @@ def test_realisable_pbc_takes_no_flexible_gain():
     # not accept them rather than silently ignoring them.
     for option in ("kv_flex", "compensate_damping"):
         with pytest.raises(TypeError, match=option):
-            PassivityBasedController(MODEL, **{option: 1.0})
+            PassivityBasedController(MODEL, Ts=1e-3, **{option: 1.0})
 
 
 @pytest.mark.parametrize("cls, kwargs, match", [
@@ -204,7 +204,7 @@ def test_realisable_pbc_takes_no_flexible_gain():
 ])
 def test_observer_rejects_bad_settings(cls, kwargs, match):
     with pytest.raises(ValueError, match=match):
-        cls(MODEL, **kwargs)
+        cls(MODEL, Ts=1e-3, **kwargs)
 
 
 def test_unknown_observer_kind_is_rejected():
@@ -224,7 +224,7 @@ def test_observer_alone_converges_from_a_wrong_estimate(cls):
     0.5 rad/s off and must reach its sliding band in finite time."""
     position_only = cls is PositionOnlySMO
     plant = ReducedPlant(sensors=SensorConfig(rates=not position_only))
-    obs = cls(MODEL)
+    obs = cls(MODEL, Ts=1e-3)
     assert obs.measured == MODEL.state_names[:MODEL.n if position_only else 2 * MODEL.n]
     y = plant.reset()
     error0 = np.array([0.2, -0.2, 5e-3, -2e-3, 5e-3, 1e-3, 0.5, -0.5, 0.05, 0.0, -0.05, 0.0])
@@ -232,7 +232,7 @@ def test_observer_alone_converges_from_a_wrong_estimate(cls):
     Ts, tau = 1e-3, np.zeros(2)
     errors, states = [], []
     for k in range(3000):
-        x_hat = obs.update(k * Ts, y.values, tau, Ts)
+        x_hat = obs.update(k * Ts, y.values, tau)
         errors.append(x_hat - plant.state)
         states.append(plant.state.copy())
         tau = np.array([0.5 * np.sin(2 * k * Ts), -0.3 * np.cos(3 * k * Ts)])

@@ -52,7 +52,7 @@ def simulated(substeps: int, exact: bool) -> np.ndarray:
     mbs.Assemble()
     h = TS / substeps
     settings = simulation_settings(step=h)
-    hold = ExactHold(mbs, settings, h, [[(load, (1.0, 0.0, 0.0))]], []) if exact else None
+    hold = ExactHold(mbs, settings, h, [[(load, "loadVector", (1.0, 0.0, 0.0))]], []) if exact else None
     solver = exu.MainSolverImplicitSecondOrder()
     assert solver.InitializeSolver(mbs, settings)
     out, applied = [], 0.0
@@ -87,7 +87,7 @@ def test_a_single_mode_holds_its_force_to_second_order():
 def test_the_response_to_a_load_change_is_the_constrained_one(params, mesh):
     """Δq̈ of the compiled update equals the KKT solution [M Cᵀ; C 0] with Exudyn's own
     mass matrix, constraint Jacobian and load vectors, at a deformed, moving state."""
-    plant = ExudynPlant(params, mesh)
+    plant = ExudynPlant(params, mesh=mesh)
     x0 = np.zeros(plant.state_size)
     n = plant.state_size // 2
     x0[:2], x0[n:n + 2] = (0.7, -1.1), (0.5, -0.3)

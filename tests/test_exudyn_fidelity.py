@@ -94,7 +94,7 @@ def test_energy_balance_undamped(element):
     # tip takes the −τ2 reaction on a node of mesh-dependent, undamped rotary frequency,
     # which the exact hold drives each period until Newton fails (0.22 s at ANCF 8).
     undamped = ArmParameters(bending_damping1=0.0, bending_damping2=0.0)
-    plant = ExudynPlant(undamped, Mesh(element=element, elements_per_link=(8, 8)),
+    plant = ExudynPlant(undamped, mesh=Mesh(element=element, elements_per_link=(8, 8)),
                         spectral_radius=1.0)
     plant.reset()
     e0, work = fe_energy(plant), 0.0
@@ -150,7 +150,7 @@ def test_reduced_and_fe_frequencies_side_by_side(theta2):
 def test_locked_arm_at_an_angle_stays_at_rest():
     """The locking clamps keep the reference relative angles (no spurious prestress)."""
     from plant_exudyn import build_arm
-    from plant_exudyn._plant import simulation_settings
+    from plant_exudyn import simulation_settings
     system = build_arm(ArmParameters(), Mesh(), theta=(0.3, 1.2), lock_joints=True)
     ss = simulation_settings(step=1e-3)
     ss.timeIntegration.endTime, ss.timeIntegration.numberOfSteps = 0.1, 100
@@ -165,7 +165,7 @@ def test_tip_force_work_equals_energy_change(plant_kind):
     from reduced_model import ReducedPlant
     params = TABLE1
     if plant_kind == "exudyn":
-        plant = ExudynPlant(params, Mesh(elements_per_link=(8, 8)), spectral_radius=1.0)
+        plant = ExudynPlant(params, mesh=Mesh(elements_per_link=(8, 8)), spectral_radius=1.0)
     else:
         plant = ReducedPlant(params, step=1e-4)
 

@@ -24,7 +24,7 @@ def test_behaves_as_a_plant(plant):
     method names: reset returns y(0) of the given state, truth_vector() is truth()
     flattened, step holds the torque for Ts and returns y(t + Ts), and the torque moves
     the arm as it moves the reduced plant."""
-    assert plant.name == "exudyn" and plant.state_size == 12
+    assert plant.role == "truth" and plant.state_size == 12
     x0 = np.zeros(12)  # undeformed and moving, as the loop starts a run
     x0[:2], x0[6:8] = (0.3, -0.5), (0.2, 0.1)
     y = plant.reset(x0)
@@ -158,7 +158,7 @@ def pd_tracking(plant, kd2, seconds=3.0):
     plant.reset()
     # The gains this test was measured with: K_p = (40, 20), no feedforward.
     # (The model only feeds the feedforward, which is off.)
-    pd = JointPD(ArmModel(), kp=(40.0, 20.0), kd=(8.0, kd2), feedforward=False)
+    pd = JointPD(ArmModel(), Ts=1e-3, kp=(40.0, 20.0), kd=(8.0, kd2), feedforward=False)
     ref = PaperReference()
     try:
         for k in range(int(round(seconds / 1e-3))):
@@ -236,7 +236,7 @@ def test_bad_steps():
     plant.reset()
     with pytest.raises(ValueError, match="not a whole multiple"):
         plant.step([0.0, 0.0], 1.25e-3)  # 2.5 steps of 0.5 ms
-    with pytest.raises(ValueError, match="two actuators"):
+    with pytest.raises(ValueError, match=r"takes 2 torques, got shape \(6,\)"):
         plant.step(np.zeros(6), 1e-3)
     with pytest.raises(ValueError, match="state0 must be 12"):
         plant.reset(np.zeros(4))
@@ -256,6 +256,6 @@ def test_solver_failure_is_reported_and_nothing_is_written(tmp_path, monkeypatch
 
 
 def test_modal_basis_of_another_model_must_match_lengths():
-    other = ArmModel(ArmParameters(L1=0.6)).mode_shapes
+    other = ArmModel(ArmParameters(L1=0.6))
     with pytest.raises(ValueError, match="mode shapes are for L = 0.6"):
-        ExudynPlant(modal_basis=other)
+        ExudynPlant(model=other)

@@ -38,7 +38,7 @@ def test_fe_step_response_matches_an_open_loop_exudyn_run():
     below the bound).  θ moves by ~1e-3 rad, so the nonlinearity is ~1e-3 relative."""
     params, theta, tau = ArmParameters(), (0.3, 0.7), np.array([0.02, 0.01])
     P = linear_model(params, Mesh(), theta=theta)
-    plant = ExudynPlant(params, Mesh(), step=1e-4)
+    plant = ExudynPlant(params, mesh=Mesh(), step=1e-4)
     x0 = np.zeros(plant.state_size)
     x0[:2] = theta
     plant.reset(x0)
@@ -88,7 +88,7 @@ def test_reduced_state_space_is_the_models_linearisation():
 def test_reduced_and_fe_models_share_their_outputs():
     model = ArmModel(ArmParameters())
     red = reduced_linear_model(model)
-    fe = linear_model(ArmParameters(), Mesh(), modal_basis=model.mode_shapes)
+    fe = linear_model(ArmParameters(), Mesh(), model=model)
     assert list(red.output_labels) == list(fe.output_labels)
     # Their static rigid-body response agrees: the high-frequency mobility of θ̇ (the
     # Markov parameter C_θ̇ B) is the joint block of M⁻¹: 91 on the reduced model and 101
@@ -104,7 +104,7 @@ def test_reduced_and_fe_models_share_their_outputs():
 # --- the laws linearised from their objects ------------------------------------------------------
 def test_pd_gain_is_its_own_gains():
     model = ArmModel(ArmParameters())
-    pd = JointPD(model, kp=(30.0, 15.0), kd=(18.1, 8.2))
+    pd = JointPD(model, Ts=1e-3, kp=(30.0, 15.0), kd=(18.1, 8.2))
     x = np.zeros(2 * model.n)
     x[:2] = (0.4, -0.3)
     K = law_gain(pd, x, 1.0, PaperReference())
@@ -119,7 +119,7 @@ def test_pbc_gain_holds_the_flexible_rate_feedback_of_eq_20():
     −M_θq Λ_f (the term M v̇ with v̇ = −Λ ė): K's q̇ columns are M_θq Λ_f — the gain the
     old 2/λmax(W G) prediction left out."""
     model = ArmModel(ArmParameters())
-    pbc = PassivityBasedController(model, lambda_flex=(1.0, 2.0, 0.5, 3.0))
+    pbc = PassivityBasedController(model, Ts=1e-3, lambda_flex=(1.0, 2.0, 0.5, 3.0))
     x = np.zeros(2 * model.n)
     x[:2] = (0.1, 0.8)
     K = law_gain(pbc, x, 0.0, hold(x[:2]))

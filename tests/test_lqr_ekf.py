@@ -28,7 +28,7 @@ RNG = np.random.default_rng(5)
 def arm(request):
     """(name, nominal 2+2 model, LQR with the default weights) of each arm."""
     model = ArmModel(ARMS[request.param], (2, 2))
-    return request.param, model, GainScheduledLQR(model)
+    return request.param, model, GainScheduledLQR(model, Ts=1e-3)
 
 
 def linearised(model, theta2):
@@ -90,7 +90,7 @@ def test_lqr_continuous_closed_loop_is_hurwitz(arm, theta2):
 
 def test_lqr_damps_no_worse_than_structure_anywhere_on_the_default_arm():
     model = ArmModel(ARMS["default"], (2, 2))
-    lqr = GainScheduledLQR(model)
+    lqr = GainScheduledLQR(model, Ts=1e-3)
     for theta2 in np.linspace(-np.pi, np.pi, 97):  # 4 points per grid cell
         A, B = linearised(model, theta2)
         worst = np.linalg.eigvals(A - B @ lqr.gain(theta2)).real.max()
@@ -158,7 +158,7 @@ def test_lqr_law_matches_numpy(arm):
 @pytest.mark.parametrize("arm_name", list(ARMS))
 def test_lqr_any_model_order(arm_name, modes):
     model = ArmModel(ARMS[arm_name], modes)
-    lqr = GainScheduledLQR(model)
+    lqr = GainScheduledLQR(model, Ts=1e-3)
     assert lqr.gains.shape == (24, 2, 2 * model.n) and np.all(np.isfinite(lqr.gains))
     for k in (0, 7, 15):
         Ad, Bd = zoh(*linearised(model, lqr.grid[k]))
@@ -194,10 +194,10 @@ def lqr_runs(request):
     """(arm name, model, {variant: result}) for the default LQR and two known-bad ones."""
     name = request.param
     model = ArmModel(ARMS[name], (2, 2))
-    good = GainScheduledLQR(model)
+    good = GainScheduledLQR(model, Ts=1e-3)
     # Known-bad 1: no weight on the flexible states or on any rate (LQR still uses q, q̇,
     # but only to help the joints; it no longer damps the modes).
-    no_flex = GainScheduledLQR(model, q_q=0.0, q_q_dot=0.0, q_theta_dot=0.0)
+    no_flex = GainScheduledLQR(model, Ts=1e-3, q_q=0.0, q_q_dot=0.0, q_theta_dot=0.0)
     # Known-bad 2: the flexible feedback with the wrong sign (flip q, q̇ before the law).
     flip = np.ones(2 * model.n)
     flip[2:model.n] = flip[model.n + 2:] = -1.0
@@ -245,7 +245,7 @@ def test_lqr_known_bad_variants_do_worse(lqr_runs):
 ])
 def test_lqr_rejects_bad_options(option, value):
     with pytest.raises(ValueError, match=f"^{option}"):
-        GainScheduledLQR(ArmModel(), **{option: value})
+        GainScheduledLQR(ArmModel(), **{"Ts": 1e-3, option: value})
 
 
 def test_lqr_reports_an_undetectable_design():
@@ -253,13 +253,13 @@ def test_lqr_reports_an_undetectable_design():
     # the cost and stay on the unit circle (computed 1 − |z| = ±7e-10: round-off); the
     # design asks a decay rate ≥ MIN_DECAY_RATE, 1 − |z| ≥ 1e-8 at 1 ms: 14× clear.
     with pytest.raises(ValueError, match="^q_q, q_q_dot: no stabilising"):
-        GainScheduledLQR(ArmModel(ARMS["table1"], (4, 4)), q_q=0.0, q_q_dot=0.0)
+        GainScheduledLQR(ArmModel(ARMS["table1"], (4, 4)), Ts=1e-3, q_q=0.0, q_q_dot=0.0)
 
 
 def test_lqr_accepts_damped_modes_the_cost_does_not_see():
     # Known good: the same weights on the default arm, whose structural damping decays
     # every mode at ≥ 0.116 1/s (1 − |z| = 1.16e-4): 10⁴× above MIN_DECAY_RATE.
-    lqr = GainScheduledLQR(ArmModel(ARMS["default"], (4, 4)), q_q=0.0, q_q_dot=0.0)
+    lqr = GainScheduledLQR(ArmModel(ARMS["default"], (4, 4)), Ts=1e-3, q_q=0.0, q_q_dot=0.0)
     assert np.all(np.isfinite(lqr.gains)) and np.abs(lqr.gains).max() > 1.0
 
 
@@ -277,12 +277,12 @@ def rk4_map(model, x, tau, Ts):
                                                  ("default", (1, 3), 2.5e-3)])
 def test_ekf_jacobian_matches_central_differences(arm_name, modes, Ts):
     model = ArmModel(ARMS[arm_name], modes)
-    ekf = ExtendedKalmanFilter(model)
+    ekf = ExtendedKalmanFilter(model, Ts=Ts)
     n = model.n
     x = np.concatenate([[0.7, -1.2], RNG.normal(0, 0.01, n - 2), [0.5, -1.0],
                         RNG.normal(0, 0.2, n - 2)])
     tau = np.array([0.8, -0.4])
-    Phi = ekf.jacobian(x, tau, Ts)
+    Phi = ekf.jacobian(x, tau)
     J = np.empty_like(Phi)
     for j in range(2 * n):
         h = 1e-5 * max(1.0, abs(x[j]))
@@ -328,7 +328,7 @@ def test_ekf_step_matches_numpy(measure):
                    p0_theta_dot=0.3, p0_q_dot=0.05)
     if measure == "positions":
         options = {k: v for k, v in options.items() if k not in ("sigma_theta_dot", "sigma_q_dot")}
-    ekf = (ExtendedKalmanFilter if measure == "full" else PositionEKF)(model, **options)
+    ekf = (ExtendedKalmanFilter if measure == "full" else PositionEKF)(model, Ts=TS, **options)
     m = len(ekf.measured)
     sig = np.array([2e-4] * 2 + [3e-5] * (n - 2) + [4e-3] * 2 + [5e-3] * (n - 2))[:m]
     s2 = np.array([0.05 ** 2] * 2 + [0.02 ** 2] * (n - 2))
@@ -341,9 +341,9 @@ def test_ekf_step_matches_numpy(measure):
         y = x[:m] + RNG.normal(0, 1, m) * sig * 3
         # Φ (checked above) at the filter's own x̂, which equals x to ~1e-15: a finite-
         # difference Jacobian at a differently rounded point would differ by ~1e-7.
-        Phi = ekf.jacobian(x_hat, tau, TS) if k else None
+        Phi = ekf.jacobian(x_hat, tau) if k else None
         x, P = numpy_ekf_step(model, x, P, y, tau, TS, sig ** 2, s2, k > 0, Phi)
-        x_hat = ekf.update(k * TS, y, tau, TS)
+        x_hat = ekf.update(k * TS, y, tau)
         # Same arithmetic in another order: measured ≤ 1e-13 relative, but S = H P Hᵀ + R
         # has condition up to ~1e6 (P0 = 0.3² against R = 2e-4²), which could amplify
         # round-off to ~1e-10; 1e-8 covers that, and a wrong formula (a missing K R Kᵀ,
@@ -354,16 +354,16 @@ def test_ekf_step_matches_numpy(measure):
 
 def test_ekf_first_update_only_corrects():
     model = ArmModel(ARMS["default"], (2, 2))
-    ekf = ExtendedKalmanFilter(model)
+    ekf = ExtendedKalmanFilter(model, Ts=1e-3)
     x0 = np.concatenate([[0.2, -0.4], np.full(model.n - 2, 1e-3), [1.0, -0.5],
                          np.full(model.n - 2, 0.01)])
     tau = np.array([1.0, 0.5])
     ekf.reset(x0)
     # y equal to the estimate: nothing to correct, and no prediction on the first call.
-    np.testing.assert_array_equal(ekf.update(0.0, x0.copy(), tau, TS), x0)
+    np.testing.assert_array_equal(ekf.update(0.0, x0.copy(), tau), x0)
     # Second call: predicts over Ts with τ held; y equal to the prediction leaves it.
     x1 = rk4_map(model, x0, tau, TS)
-    np.testing.assert_allclose(ekf.update(TS, x1.copy(), tau, TS), x1, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(ekf.update(TS, x1.copy(), tau), x1, rtol=0, atol=1e-15)
     # reset restores the initial covariance.
     P1 = ekf.covariance
     ekf.reset(x0)
@@ -397,8 +397,8 @@ def beats_measurement(ratios) -> bool:
 @pytest.mark.parametrize("arm_name", list(ARMS))
 def test_ekf_converges_and_beats_the_measurement(arm_name):
     model = ArmModel(ARMS[arm_name], (2, 2))
-    ekf = ExtendedKalmanFilter(model)
-    result, _ = run(arm_name, GainScheduledLQR(model), ekf, duration=3.0, noise=NOISE)
+    ekf = ExtendedKalmanFilter(model, Ts=1e-3)
+    result, _ = run(arm_name, GainScheduledLQR(model, Ts=1e-3), ekf, duration=3.0, noise=NOISE)
     assert result.status == "ok", result.message
     names = ekf.measured
     assert names == model.state_names
@@ -416,9 +416,9 @@ def test_ekf_converges_and_beats_the_measurement(arm_name):
 
 def test_ekf_positions_only_reconstructs_the_rates():
     model = ArmModel(ARMS["default"], (2, 2))
-    ekf = PositionEKF(model)
+    ekf = PositionEKF(model, Ts=1e-3)
     assert ekf.measured == model.state_names[:model.n] and ekf.name == "ekf-pos"
-    result, _ = run("default", GainScheduledLQR(model), ekf, duration=3.0,
+    result, _ = run("default", GainScheduledLQR(model, Ts=1e-3), ekf, duration=3.0,
                     measure_rates=False, noise=NOISE)
     assert result.status == "ok", result.message
     ratios = estimation_vs_measurement(result, ekf.measured, lambda s: result["xhat_" + s],
@@ -440,7 +440,7 @@ def test_ekf_positions_only_reconstructs_the_rates():
 
 def test_lqr_with_ekf_estimate_feedback_tracks():
     model = ArmModel(ARMS["default"], (2, 2))
-    result, _ = run("default", GainScheduledLQR(model), ExtendedKalmanFilter(model),
+    result, _ = run("default", GainScheduledLQR(model, Ts=TS), ExtendedKalmanFilter(model, Ts=TS),
                     feedback="estimate", noise=NOISE)
     assert result.status == "ok", result.message
     err = max_tracking_error(result, 2.0)
@@ -458,16 +458,16 @@ def test_lqr_with_ekf_estimate_feedback_tracks():
 ])
 def test_ekf_rejects_bad_options(option, value):
     with pytest.raises(ValueError, match=f"^{option}"):
-        ExtendedKalmanFilter(ArmModel(), **{option: value})
+        ExtendedKalmanFilter(ArmModel(), Ts=1e-3, **{option: value})
 
 
 def test_ekf_rejects_bad_calls():
     model = ArmModel()
-    ekf = ExtendedKalmanFilter(model)
+    ekf = ExtendedKalmanFilter(model, Ts=1e-3)
     with pytest.raises(ValueError, match="^x_hat0"):
         ekf.reset(np.zeros(3))
     ekf.reset(np.zeros(2 * model.n))
     with pytest.raises(ValueError, match="^y must"):
-        ekf.update(0.0, np.zeros(model.n), np.zeros(2), TS)
+        ekf.update(0.0, np.zeros(model.n), np.zeros(2))
     with pytest.raises(ValueError, match="^Ts"):
-        ekf.update(0.0, np.zeros(2 * model.n), np.zeros(2), -1e-3)
+        ExtendedKalmanFilter(model, Ts=-1e-3)

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from validation.run.metrics import (CONVERGENCE_FRACTION, CONVERGENCE_NOISE_FACTOR,
-                                    PAPER_ANGLE_BOUND, convergence_time, estimation, vibration,
-                                    vibration_cutoff)
+                                    PAPER_ANGLE_BOUND, convergence_time, estimation)
+from validation.run.vibration import vibration, vibration_cutoff
 from validation.run.results import RunResult
 from reduced_model import ArmModel, ArmParameters
 

@@ -15,7 +15,7 @@ matplotlib.use("Agg")
 class NotebookPD:
     """A PD defined where the user works (here: this test module)."""
 
-    def __init__(self, model):
+    def __init__(self, model, *, Ts):
         pass
 
     def __call__(self, t, x, ref):
@@ -31,7 +31,8 @@ def test_a_law_given_as_a_class_runs_by_its_import_path():
 
 
 @pytest.mark.parametrize("kind, text", [
-    (NotebookPD(None), "controller.kind: give the class NotebookPD, not an instance of it"),
+    (NotebookPD(None, Ts=1e-3),
+     "controller.kind: give the class NotebookPD, not an instance of it"),
     (3, "controller.kind: give a class or its name, got 3")])
 def test_what_is_no_law_says_what_to_give(kind, text):
     with pytest.raises(ConfigError) as err:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from validation import nu_gap, stability_margin
-from validation.verdicts import nugap
+from validation.verdicts import graphs
 from validation.verdicts.nugap import gap_detail, margin_detail
 
 tf = control.tf
@@ -180,16 +180,16 @@ def arm_loop_pair():
     names = list(model.state_names)
     x = np.zeros(12)
     x[1] = 0.5
-    K = law_gain(PassivityBasedController(model), x, 0.0,
+    K = law_gain(PassivityBasedController(model, Ts=1e-3), x, 0.0,
                  lambda t: (x[:2].copy(), np.zeros(2), np.zeros(2)))
     gain = control.ss(np.zeros((0, 0)), np.zeros((0, 12)), np.zeros((2, 0)), K)
     red = reduced_linear_model(model, theta=(0.0, 0.5))[names, :]
-    fe = linear_model(ArmParameters(), theta=(0.0, 0.5), modal_basis=model.mode_shapes)[names, :]
+    fe = linear_model(ArmParameters(), theta=(0.0, 0.5), model=model)[names, :]
     return gain * control.sample_system(red, 1e-3), gain * control.sample_system(fe, 1e-3)
 
 
 def _factors(P, discrete):
-    G = nugap._graph_symbol(nugap._prepared(P, discrete), discrete)
+    G = graphs.graph_symbol(graphs.prepared(P, discrete), discrete)
     return control.ss(*G.matrices, P.dt)
 
 

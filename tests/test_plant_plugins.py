@@ -18,6 +18,7 @@ SCENARIO = textwrap.dedent('''
     initial_state = "reference"
     [plant]
     kind = "labplants:FineArm"
+    role = "truth"
     options = { modes = 3 }
 ''')
 
@@ -27,7 +28,7 @@ STUDY = textwrap.dedent('''
     duration = 1.0
     transient = 0.5
     initial_state = "reference"
-    plant = { kind = "labplants:FineArm", options = { modes = 3 } }
+    plant = { kind = "labplants:FineArm", role = "truth", options = { modes = 3 } }
     [[requirement]]
     name = "tracking"
     claim = "tracking"
@@ -65,7 +66,7 @@ def test_a_plugin_plant_runs_in_a_campaign_and_in_verify(lab):
         [scenario]
         duration = 1.0
         transient = 0.5
-        plant = { kind = "labplants:FineArm", options = { modes = 3 } }
+        plant = { kind = "labplants:FineArm", role = "truth", options = { modes = 3 } }
         [[sweep]]
         grid.seed = [0, 1]
     '''))
@@ -80,12 +81,18 @@ def test_a_plugin_plant_runs_in_a_campaign_and_in_verify(lab):
 
 
 @pytest.mark.parametrize("table, message", [
-    ('kind = "labplants:Nope"', "plant.kind: module 'labplants' has no 'Nope'"),
-    ('kind = "json:JSONDecoder"', "plant.kind: json:JSONDecoder is not a reduced_model.Plant"),
+    ('kind = "labplants:Nope"\nrole = "truth"', "plant.kind: module 'labplants' has no 'Nope'"),
+    ('kind = "json:JSONDecoder"\nrole = "truth"',
+     "plant.kind: json:JSONDecoder is not a reduced_model.Plant"),
     ('kind = "labplants:FineArm"\nrole = "reduced"',
      "plant.role: labplants:FineArm is a 'truth' plant, the scenario says 'reduced'"),
-    ('kind = "labplants:FineArm"\noptions = { modez = 3 }',
+    ('kind = "labplants:FineArm"\nrole = "truth"\noptions = { modez = 3 }',
      "plant.options.modez: not an option of labplants:FineArm (options: modes)"),
+    # Known-bad (issue 48, 5): a plug-in that says no role ran as the truth.
+    ('kind = "labplants:FineArm"', "plant.role: a plug-in plant must say its role"),
+    ('kind = "labplants:NoRole"\nrole = "truth"', "plant.kind: labplants:NoRole declares no role"),
+    ('kind = "labplants:Half"\nrole = "truth"',
+     "plant.kind: labplants:Half does not implement _advance, _reset"),
 ])
 def test_a_bad_plugin_plant_is_one_line(lab, table, message):
     (lab / "bad.toml").write_text(f"duration = 0.1\n[plant]\n{table}\n")
@@ -93,3 +100,39 @@ def test_a_bad_plugin_plant_is_one_line(lab, table, message):
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
     assert message in proc.stderr, proc.stderr
     assert not (lab / "bad").exists()
+
+
+def test_a_subclass_of_the_reduced_plant_with_no_code_is_the_reduced_plant(plugin_lab):
+    """Known-bad (issue 44): ``class BarPlant(ReducedPlant)`` with only a docstring was
+    refused for its role, then failed on "unexpected keyword argument 'model'".  Now it
+    runs, as the plug-in it is, to the built-in reduced plant's metrics exactly."""
+    from validation import all_metrics, run_scenario, scenario_from_mapping
+    plugin_lab({"barplant.py": 'from reduced_model import ReducedPlant\n\n\n'
+                               'class BarPlant(ReducedPlant):\n    """Mine."""\n'})
+    base = {"duration": 1.0, "controller": {"kind": "pbc"}, "observer": {"kind": "smo-bl"}}
+    own = run_scenario(scenario_from_mapping(
+        {**base, "plant": {"kind": "barplant:BarPlant", "role": "reduced"}}))
+    builtin = run_scenario(scenario_from_mapping({**base, "plant": {"kind": "reduced"}}))
+    assert own.status == builtin.status == "ok"
+    assert own.config["plant"]["kind"] == "barplant:BarPlant"
+    assert all_metrics(own) == all_metrics(builtin)
+
+
+def test_verify_judges_a_reduced_plugin_plant_and_its_truth(plugin_lab):
+    """Known-bad (issue 48, 7): `flexarm verify` on a plug-in plant of role "reduced"
+    failed with "KeyError: 'step'" (the truth plant was made from a step the plug-in's
+    table does not have).  Now the reduced runs are the plug-in's own and the truth
+    confirmation runs on the default truth plant."""
+    lab = plugin_lab({"barplant.py": 'from reduced_model import ReducedPlant\n\n\n'
+                                     'class BarPlant(ReducedPlant):\n    """Mine."""\n',
+                      "study.toml": STUDY.replace(
+                          'plant = { kind = "labplants:FineArm", role = "truth", '
+                          'options = { modes = 3 } }',
+                          'plant = { kind = "barplant:BarPlant", role = "reduced" }')})
+    verify = flexarm(lab, "verify", "study.toml", "--mode", "estimate", "--samples", "3",
+                     "--out", "verify", "--no-progress")
+    assert verify.returncode in (0, 1), verify.stderr  # 1: a verdict is missing
+    verdict = json.loads((lab / "verify" / "verdict.json").read_text())
+    assert verdict["simulations"]["reduced"] >= 3, verdict["simulations"]
+    rows = ResultStore(lab / "verify").rows()
+    assert {r.plant for r in rows if r.role == "reduced"} == {"barplant:BarPlant"}

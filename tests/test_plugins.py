@@ -20,7 +20,7 @@ PLUGIN = textwrap.dedent('''
         """Joint PD without feedforward, as a user would write it."""
         name = "my-pd"
 
-        def __init__(self, model, *, kp=(30.0, 15.0), kd=(18.1, 8.2)):
+        def __init__(self, model, *, Ts, kp=(30.0, 15.0), kd=(18.1, 8.2)):
             self.kp, self.kd = np.asarray(kp, float), np.asarray(kd, float)
 
         def __call__(self, t, x, ref):
@@ -39,22 +39,32 @@ PLUGIN = textwrap.dedent('''
 
     class PassThrough:
         """An observer that returns the measured full state."""
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             self.measured = model.state_names
 
         def reset(self, x_hat0):
             self.x = np.array(x_hat0, float)
             return self.x.copy()
 
-        def update(self, t, y, tau, Ts):
+        def update(self, t, y, tau):
             self.x = np.array(y, float)
             return self.x.copy()
+
+
+    class Periodless:
+        """Known-bad: a law that does not take the control period."""
+
+        def __init__(self, model, *, kp=1.0):
+            self.kp = kp
+
+        def __call__(self, t, x, ref):
+            return self.kp * (ref(t)[0] - x[:2])
 
 
     class NoUpdate:
         measured = ("theta1",)
 
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             pass
 
         def reset(self, x_hat0):
@@ -124,6 +134,11 @@ def test_flexarm_run_and_a_two_worker_campaign_with_plugins(plugin_dir):
      "controller.options.kv_flex: not an option of pbc"),
     (["--observer", "mylab_plugins:PassThrough", "--set", "sensors.rates=false"],
      "observer.kind: mylab_plugins:PassThrough needs the measurements"),
+    # The control period is set once, when a law is built: never an option, always taken.
+    (["--controller", "mylab_plugins:Periodless"],
+     "controller.kind: mylab_plugins:Periodless does not take the control period"),
+    (["--controller", "lqr", "--set", "controller.options.Ts=2e-3"],
+     "controller.options.Ts: the control period is the scenario's Ts"),
 ])
 def test_bad_plugins_are_one_line_errors_and_nothing_is_written(plugin_dir, args, key):
     out = plugin_dir / "never"
@@ -135,7 +150,7 @@ def test_bad_plugins_are_one_line_errors_and_nothing_is_written(plugin_dir, args
 
 
 def test_the_realisable_pbc_refuses_its_dead_settings_with_the_reason():
-    from validation.run._config import ConfigError
+    from validation.run.config import ConfigError
     with pytest.raises(ConfigError) as exc:
         scenario_from_mapping({"controller": {"kind": "pbc", "options": {"compensate_damping": False}}})
     assert exc.value.path == "controller.options.compensate_damping"
@@ -154,3 +169,18 @@ def test_plugin_code_is_part_of_the_fingerprint(plugin_dir):
     (plugin_dir / "mylab_plugins.py").write_text(PLUGIN + "\n# edited\n")
     forget_plugins()
     assert run_fingerprint(config) != before
+
+
+@pytest.mark.parametrize("kind, role", [("lqr", "controller"), ("ekf", "observer"),
+                                        ("smo-bl", "observer"), ("pbc", "controller")])
+def test_a_law_is_built_at_the_scenarios_control_period(kind, role):
+    """The period reaches a law one way, at construction (issue 44: it reached laws
+    through constructor sniffing, ``update(..., Ts)`` and ``compiled(Ts)``, and the LQR's
+    compiled form ignored its argument): a law built for Ts = 2 ms says so, and its
+    compiled form takes no period of its own."""
+    from validation.run.laws import build_controller, build_observer, nominal_model
+    s = scenario_from_mapping({"Ts": 2e-3, role: {"kind": kind}})
+    model = nominal_model(s.nominal_params, s.model.modes_per_link)
+    law = (build_controller if role == "controller" else build_observer)(s, model)
+    assert law.Ts == 2e-3
+    assert law.compiled().pointer is not None  # compiled() takes no period

@@ -49,7 +49,7 @@ FAILING_LAW = '''
 class Boom:
     """A controller whose every call fails (a solver failure stands in for any)."""
 
-    def __init__(self, model):
+    def __init__(self, model, *, Ts):
         pass
 
     def __call__(self, t, x, ref):

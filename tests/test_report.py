@@ -9,7 +9,9 @@ from html.parser import HTMLParser
 
 import pytest
 
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+
+from validation.batch.queue import run_campaign
 from validation.report.sweep_figures import sweep_figures
 from validation.report.report import write_report
 from validation.batch.store import ResultStore

@@ -6,7 +6,8 @@ import math
 import pytest
 
 from validation.run.loop import run_scenario
-from validation.run.scenario import scenario_from_mapping, scenario_to_mapping, with_plant
+from validation.run.plants import with_plant
+from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 from validation.verdicts import stability
 from validation.verdicts.sampled import certificate, prediction
 

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+from validation.batch.queue import run_campaign
 from validation.cli import main
 from validation.batch.store import ResultStore, StoreError
 
@@ -291,7 +292,7 @@ pathlib.Path(__file__).with_name("IMPORTED").write_text("this module was importe
 
 class X:
     """A plug-in whose import leaves a mark."""
-    def __init__(self, model):
+    def __init__(self, model, *, Ts):
         pass
 
     def __call__(self, t, x, ref):

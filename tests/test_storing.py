@@ -10,14 +10,15 @@ import pytest
 
 from campaign_testing import metrics_table
 from validation.batch import committing
-from validation.batch.campaign import campaign_from_mapping, expand, run_campaign
+from validation.batch.campaign import campaign_from_mapping, expand
+from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
 from validation.batch.errors import StoreError
 from validation.batch.resimulate import every_signal
 from validation.batch.store import ResultStore, environment
 from validation.batch.storing import (Destination, StoreTask, landed, leave_token,
                                       run_and_store)
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 
 SMALL = {"name": "small", "scenario": {"duration": 0.3, "transient": 0.1,
                                        "observer": {"kind": "smo-paper"},
@@ -250,7 +251,7 @@ def test_store_errors_are_not_value_errors_and_reach_the_caller(tmp_path, monkey
     """A busy or damaged index while a campaign adopts a file without a row was swallowed
     by `except ValueError` (StoreError was one) and the run redone; now it reaches the
     caller.  Known-good: a file that is not a run file is still passed over."""
-    from validation.batch.campaign import classify
+    from validation.batch.queue import classify
     from validation.batch.errors import IndexBusy, NotARunFile
     assert not issubclass(StoreError, ValueError)
     c = campaign_from_mapping(SMALL)

@@ -2,7 +2,7 @@
 Your own controller, as a plug-in
 =================================
 
-A controller is any class built as ``Cls(model, **options)`` and called as
+A controller is any class built as ``Cls(model, *, Ts, **options)`` and called as
 ``tau = controller(t, x, ref)``.  Written in a module Python can import, a scenario names
 it ``"package.module:Class"`` — in a TOML file, on the command line, in a campaign — and it
 runs wherever the built-in laws run.  Here a joint PID, written to a module in a temporary
@@ -25,9 +25,9 @@ import numpy as np
 class JointPID:
     """A joint PID: tau = kp e + ki ∫e + kd ė (no feedforward)."""
 
-    def __init__(self, model, *, kp=(30.0, 15.0), ki=(5.0, 2.0), kd=(18.1, 8.2), Ts=1e-3):
+    def __init__(self, model, *, Ts, kp=(30.0, 15.0), ki=(5.0, 2.0), kd=(18.1, 8.2)):
         self.kp, self.ki, self.kd = (np.asarray(g, float) for g in (kp, ki, kd))
-        self.Ts, self.integral = Ts, np.zeros(2)   # Ts: the scenario's control period
+        self.Ts, self.integral = Ts, np.zeros(2)   # Ts: the control period, set once
 
     def __call__(self, t, x, ref):
         n = x.shape[0] // 2                       # x = [Q, Qdot] in the model's coordinates

@@ -24,11 +24,11 @@ gaps, margins = [], []
 for t2 in theta2:
     P = reduced_linear_model(model, theta=(0.0, t2), Ts=Ts)          # exact ZOH
     F = linear_model(ArmParameters(), Mesh(), theta=(0.0, t2), Ts=Ts,
-                     modal_basis=model.mode_shapes)                  # the FE arm, same outputs
+                     model=model)                                    # the FE arm, same outputs
     # The PBC (eq. 20) linearised about a resting point: δτ = −K δx.
     x = np.zeros(2 * model.n)
     x[1] = t2
-    K = law_gain(PassivityBasedController(model), x, 0.0,
+    K = law_gain(PassivityBasedController(model, Ts=1e-3), x, 0.0,
                  lambda t: (x[:2].copy(), np.zeros(2), np.zeros(2)))
     gaps.append(nu_gap(K * P[states, :], K * F[states, :]))
     margins.append(stability_margin(K * P[states, :], np.eye(2)))
@@ -39,7 +39,7 @@ for t2 in theta2:
 # The frequency responses τ2 → θ2 of both linear models at θ2 = 0 (continuous time):
 # where they part, the reduced model is missing what the FE arm has.
 P = reduced_linear_model(model, theta=(0.0, 0.0))
-F = linear_model(ArmParameters(), Mesh(), theta=(0.0, 0.0), modal_basis=model.mode_shapes)
+F = linear_model(ArmParameters(), Mesh(), theta=(0.0, 0.0), model=model)
 w = 2 * np.pi * np.logspace(-0.5, 2.5, 600)
 fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.8))
 for system, label, style in ((P, "reduced 2+2", dict(lw=4, alpha=0.35)),

@@ -18,7 +18,7 @@ import pytest
 from campaign_testing import wait_gone
 from conftest import write_files
 from validation.batch.store import ResultStore
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 
 FAULTS = textwrap.dedent('''
     """Laws that misbehave from t = 0.1 s on, written for the tests."""
@@ -37,7 +37,7 @@ FAULTS = textwrap.dedent('''
 
 
     class Fault:
-        def __init__(self, model, *, fault="none"):
+        def __init__(self, model, *, Ts, fault="none"):
             self.fault = fault
 
         def __call__(self, t, x, ref):
@@ -236,7 +236,7 @@ CHECKED = textwrap.dedent('''
 
 
     class Law:
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             if os.environ.get("FAULT_AT") == "__init__":
                 misbehave()
 
@@ -314,7 +314,7 @@ def test_a_helper_process_of_a_stopped_run_is_stopped_with_it(tmp_path):
 
 
         class Law:
-            def __init__(self, model):
+            def __init__(self, model, *, Ts):
                 pass
 
             def __call__(self, t, x, ref):
@@ -340,7 +340,8 @@ def test_a_helper_process_of_a_stopped_run_is_stopped_with_it(tmp_path):
 @pytest.mark.slow  # 19 s (a real Dask cluster); the local runners' limit is tested above
 def test_a_run_past_its_time_limit_is_stopped_on_dask(lab, monkeypatch, tmp_path):
     distributed = pytest.importorskip("distributed")
-    from validation.batch.campaign import campaign_from_mapping, run_campaign
+    from validation.batch.campaign import campaign_from_mapping
+    from validation.batch.queue import run_campaign
     from validation.batch.executor import make_runner
     monkeypatch.syspath_prepend(str(lab))  # the Dask workers find the plug-in module
     spec = {"name": "dask", "scenario": {"duration": 0.5, "transient": 0.1},

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml, metrics_table, stored_count
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
 from validation.run.loop import run_scenario
 from validation.run.scenario import scenario_from_mapping

@@ -19,7 +19,7 @@ HANGS = textwrap.dedent('''
 
     class Hangs:
         """A law that never returns: a command running it only ends when stopped."""
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             pass
 
         def __call__(self, t, x, ref):
@@ -78,7 +78,8 @@ def test_ctrl_c_stops_a_campaign_while_it_starts(lab, after):
 
 
 def test_ctrl_c_stops_a_report_being_written(lab):
-    from validation.batch.campaign import campaign_from_mapping, run_campaign
+    from validation.batch.campaign import campaign_from_mapping
+    from validation.batch.queue import run_campaign
     results = lab / "results"
     run_campaign(campaign_from_mapping({"name": "r", "scenario": {"duration": 0.5,
                                                                  "transient": 0.1},

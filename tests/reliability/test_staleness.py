@@ -17,7 +17,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+
+from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
 from reduced_model._cache_guard import kernel_keys
 from validation.batch.fingerprint import (_ROOT, forget_plugins, plugin_sources,
@@ -41,7 +43,7 @@ LAW = textwrap.dedent('''
 
 
     class HelperPD:
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             pass
 
         def __call__(self, t, x, ref):
@@ -132,7 +134,7 @@ def _fingerprint(kind: str) -> str:
 def _install(site_dir, version: str, gain: str) -> None:
     """A plug-in distribution "labinst" as pip leaves it in site-packages: its module,
     its metadata and its RECORD (a hash per file)."""
-    module = f"KP = {gain}\n\nclass PD:\n    def __init__(self, model):\n        pass\n"
+    module = f"KP = {gain}\n\nclass PD:\n    def __init__(self, model, *, Ts):\n        pass\n"
     (site_dir / "labinst.py").write_text(module)
     info = site_dir / "labinst-0.dist-info"
     for old in site_dir.glob("labinst-*.dist-info"):
@@ -167,7 +169,7 @@ def test_an_upgraded_installed_plugin_is_new_code(tmp_path, monkeypatch):
 def test_a_plugin_inside_a_project_package_is_hashed(plugin_lab):
     plugin_lab({})  # fresh caches
     inside = _ROOT / "controllers" / "zz_lab_plugin.py"
-    inside.write_text("class PD:\n    def __init__(self, model):\n        pass\n")
+    inside.write_text("class PD:\n    def __init__(self, model, *, Ts):\n        pass\n")
     try:
         forget_plugins()
         assert plugin_sources("controllers.zz_lab_plugin:PD") == (inside,)
@@ -183,7 +185,7 @@ def test_a_sourceless_plugin_and_what_its_bytecode_imports_are_hashed(plugin_lab
     lab = plugin_lab({"labdeep.py": "KP = 30.0\n",
                       "labpyc.py": "def helper():\n    from labdeep import KP\n    return KP\n",
                       "lablaw2.py": "import labpyc\n\nclass PD:\n"
-                                    "    def __init__(self, model):\n        pass\n"})
+                                    "    def __init__(self, model, *, Ts):\n        pass\n"})
     py_compile.compile(str(lab / "labpyc.py"), cfile=str(lab / "labpyc.pyc"))
     (lab / "labpyc.py").unlink()  # shipped as bytecode only
     files = {p.name for p in plugin_sources("lablaw2:PD")}
@@ -221,7 +223,7 @@ KERNEL_LAW = textwrap.dedent('''
 
 
     class PD:
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             pass
 ''')
 PROBE = textwrap.dedent('''
@@ -261,7 +263,7 @@ def test_a_compiled_plugin_never_runs_its_helpers_old_code(tmp_path, cache_dir):
 ZIP_LAW = textwrap.dedent('''
     class ZipPD:
         """A PD law shipped in a zip archive."""
-        def __init__(self, model):
+        def __init__(self, model, *, Ts):
             pass
 
         def __call__(self, t, x, ref):

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from validation.batch.campaign import campaign_from_mapping, run_campaign
+from validation.batch.campaign import campaign_from_mapping
+from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
 from validation.batch.index import transaction
 from validation.batch.store import ResultStore

@@ -23,7 +23,8 @@ Within a sweep the grid, zip and random parts combine by product.  A random axis
 ``scale`` draws a factor of the base value; ``also`` gives other fields the same draw.
 The same axes declare the uncertainty sets of ``flexarm verify`` (`RandomAxis`).  Each run's scenario is
 resolved and checked before anything runs; its id is a hash of the resolved scenario, so
-rerunning a campaign into the same folder skips what is done (resume).
+rerunning a campaign into the same folder skips what is done (resume; running is
+`validation.batch.queue`'s).
 """
 from __future__ import annotations
 
@@ -35,18 +36,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run._config import ConfigError, check, check_label
-from .executor import Runner, SerialRunner
-from .errors import NotARunFile
-from .fingerprint import is_fresh
+from ..run.config import ConfigError, check, check_label
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .runfiles import KEEP_ALL, Keep, keep_from_mapping
-from .store import ResultStore, run_id
+from .store import run_id
 from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
            "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
-           "run_campaign", "classify", "CampaignSummary", "MAX_RUNS", "run_name",
+           "MAX_RUNS", "run_name",
            "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes",
            "campaign_keep"]
 
@@ -462,136 +460,3 @@ def _name_axis(sweep: dict, where: str) -> str:
         if "name" in sweep.get(part, {}):
             return f"{where}.{part}.name"
     return f"{where}.name"
-
-
-# --- execution ----------------------------------------------------------------------------------
-@dataclass
-class CampaignSummary:
-    """What a campaign invocation did.  ``skipped`` runs were already stored (by the same
-    code, verified); ``stale`` were stored by other code and ``damaged`` had a bad file —
-    both rerun; ``failed_before`` failed earlier and were not retried."""
-
-    planned: int = 0
-    skipped: int = 0
-    ok: int = 0
-    diverged: int = 0
-    failed: int = 0
-    stale: list = field(default_factory=list)
-    damaged: dict = field(default_factory=dict)
-    failed_before: list = field(default_factory=list)
-    unstored: list = field(default_factory=list)  # why a finished run could not be stored
-    interrupted: int = 0  # the signal number, 0 if not interrupted
-
-    @property
-    def done(self) -> int:
-        return self.ok + self.diverged + self.failed
-
-    @property
-    def any_failed(self) -> bool:
-        return bool(self.failed or self.failed_before or self.unstored)
-
-    def __add__(self, other: "CampaignSummary") -> "CampaignSummary":
-        """Two invocations' summaries as one (e.g. the rounds of a stability map)."""
-        return CampaignSummary(
-            planned=self.planned + other.planned, skipped=self.skipped + other.skipped,
-            ok=self.ok + other.ok, diverged=self.diverged + other.diverged,
-            failed=self.failed + other.failed, stale=self.stale + other.stale,
-            damaged={**self.damaged, **other.damaged},
-            failed_before=self.failed_before + other.failed_before,
-            unstored=self.unstored + other.unstored,
-            interrupted=other.interrupted or self.interrupted)
-
-    def line(self, name: str, out) -> str:
-        parts = [f"{name}: {self.planned} runs"]
-        if self.skipped:
-            parts.append(f"{self.skipped} already stored")
-        if self.done or not self.skipped:
-            parts.append(f"ran {self.done}: {self.ok} ok, {self.diverged} diverged, "
-                         f"{self.failed} failed")
-        else:
-            parts.append("nothing to run")
-        if self.failed_before:
-            parts.append(f"{len(self.failed_before)} failed earlier (not retried: "
-                         "--retry-failed)")
-        if self.stale:
-            parts.append(f"{len(self.stale)} made by other code, rerun")
-        if self.damaged:
-            parts.append(f"{len(self.damaged)} damaged, rerun ({', '.join(self.damaged)})")
-        if self.unstored:
-            parts.append(f"{len(self.unstored)} NOT STORED ({'; '.join(self.unstored[:3])}"
-                         f"{'; ...' if len(self.unstored) > 3 else ''})")
-        return "; ".join(parts) + f" -> {out}"
-
-
-def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: bool,
-             reuse_stale: bool) -> tuple[list[PlannedRun], CampaignSummary]:
-    """Which planned runs to execute, after verifying what ``store`` holds: a run is
-    skipped only if its row exists, its file verifies (size and SHA-256), and it was made
-    by the same code (or ``reuse_stale``); failed runs are redone with ``retry_failed``."""
-    summary = CampaignSummary(planned=len(planned))
-    wanted = {r.run_id for r in planned}
-    # Every row is read (not only the wanted ones): a damaged index shows on any page.
-    rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
-    for run in planned:  # a file whose row was lost: its metadata rebuilds the row
-        path = store.out / "runs" / f"{run.run_id}.npz" if store.out else None
-        if run.run_id not in rows and path is not None and path.exists():
-            try:
-                rows[run.run_id] = store.adopt(path)
-            except NotARunFile:
-                pass  # unreadable: the run is redone and the file replaced
-    damaged = store.verify(list(rows.values()))
-    todo = []
-    for run in planned:
-        row = rows.get(run.run_id)
-        if row is None:
-            todo.append(run)
-        elif run.run_id in damaged:
-            summary.damaged[run.run_id] = damaged[run.run_id]
-            todo.append(run)
-        elif not is_fresh(row) and not reuse_stale:
-            summary.stale.append(run.run_id)
-            todo.append(run)
-        elif row.status == "failed" and retry_failed:
-            todo.append(run)
-        else:
-            summary.skipped += 1
-            if row.status == "failed":
-                summary.failed_before.append(run.run_id)
-    return todo, summary
-
-
-def run_planned(planned, out: str | Path, *, name: str, description: str = "",
-                runner: Runner | None = None, progress: bool = True, label: str | None = None,
-                export: bool = True) -> CampaignSummary:
-    """Run the runs ``planned`` (`PlannedRun`: made by a verdict — checks, bisections,
-    searches — not expanded from a campaign file) into ``out`` under the campaign
-    ``name``, as `run_campaign` runs a campaign's."""
-    campaign = Campaign(name=name, base={}, sweeps=(), description=description)
-    return run_campaign(campaign, out, runner=runner, progress=progress, only=list(planned),
-                        label=label, export=export)
-
-
-def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
-                 retry_failed: bool = False, reuse_stale: bool = False,
-                 progress: bool = True, only: list[PlannedRun] | None = None,
-                 label: str | None = None, export: bool = True) -> CampaignSummary:
-    """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
-    stored as soon as it finishes (`validation.batch.queue`); the progress bar is labelled
-    ``label`` (default: the campaign's name).  On SIGINT/SIGTERM, what finished is kept
-    and ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json
-    are exported at the end (unless ``export`` is false: a search calling this for every
-    batch exports once, when it is done)."""
-    from .queue import open_job, run_jobs  # the queue builds on this module
-    planned = only if only is not None else expand(campaign)
-    job = open_job(campaign, out, planned, retry_failed=retry_failed, reuse_stale=reuse_stale)
-    own = runner is None and bool(job.todo)
-    runner = runner or SerialRunner()
-    try:
-        run_jobs([job], runner, progress=progress, label=label or campaign.name)
-    finally:
-        if own:
-            runner.close()
-    if export:
-        job.store.export()
-    job.store.close()
-    return job.summary

@@ -2,7 +2,7 @@
 stored into its own results folder, executed together on one runner.
 
 A *job* is one campaign's runs into one folder (`open_job`: the folder prepared, what it
-holds already classified, `campaign.classify`).  `run_jobs` gives the runs of every job
+holds already classified, `classify`).  `run_jobs` gives the runs of every job
 to the runner at once — a worker never idles while any job has a run left — and stores
 each as it finishes: its worker has put the file in place (`validation.batch.storing`),
 the row is committed with the others that arrived meanwhile (`committing.Committer`).
@@ -24,7 +24,9 @@ import numpy as np
 from ..run.requirements import signal_names
 from ..run.scenario import scenario_to_mapping
 
-from .campaign import Campaign, CampaignSummary, PlannedRun, campaign_keep, classify
+from .campaign import Campaign, PlannedRun, campaign_keep, expand
+from .executor import Runner, SerialRunner
+from .fingerprint import is_fresh
 from .committing import Committer
 from .errors import NotARunFile
 from .index import dictionary_for
@@ -34,7 +36,106 @@ from .progress import progress as progress_counter
 from .store import ResultStore, environment
 from .storing import Destination, StoreTask, landed, leave_token
 
-__all__ = ["Job", "open_job", "run_jobs", "Batch", "answer_all"]
+__all__ = ["Job", "open_job", "run_jobs", "Batch", "answer_all", "CampaignSummary",
+           "classify", "run_planned", "run_campaign"]
+
+
+@dataclass
+class CampaignSummary:
+    """What a campaign invocation did.  ``skipped`` runs were already stored (by the same
+    code, verified); ``stale`` were stored by other code and ``damaged`` had a bad file —
+    both rerun; ``failed_before`` failed earlier and were not retried."""
+
+    planned: int = 0
+    skipped: int = 0
+    ok: int = 0
+    diverged: int = 0
+    failed: int = 0
+    stale: list = field(default_factory=list)
+    damaged: dict = field(default_factory=dict)
+    failed_before: list = field(default_factory=list)
+    unstored: list = field(default_factory=list)  # why a finished run could not be stored
+    interrupted: int = 0  # the signal number, 0 if not interrupted
+
+    @property
+    def done(self) -> int:
+        return self.ok + self.diverged + self.failed
+
+    @property
+    def any_failed(self) -> bool:
+        return bool(self.failed or self.failed_before or self.unstored)
+
+    def __add__(self, other: "CampaignSummary") -> "CampaignSummary":
+        """Two invocations' summaries as one (e.g. the rounds of a stability map)."""
+        return CampaignSummary(
+            planned=self.planned + other.planned, skipped=self.skipped + other.skipped,
+            ok=self.ok + other.ok, diverged=self.diverged + other.diverged,
+            failed=self.failed + other.failed, stale=self.stale + other.stale,
+            damaged={**self.damaged, **other.damaged},
+            failed_before=self.failed_before + other.failed_before,
+            unstored=self.unstored + other.unstored,
+            interrupted=other.interrupted or self.interrupted)
+
+    def line(self, name: str, out) -> str:
+        parts = [f"{name}: {self.planned} runs"]
+        if self.skipped:
+            parts.append(f"{self.skipped} already stored")
+        if self.done or not self.skipped:
+            parts.append(f"ran {self.done}: {self.ok} ok, {self.diverged} diverged, "
+                         f"{self.failed} failed")
+        else:
+            parts.append("nothing to run")
+        if self.failed_before:
+            parts.append(f"{len(self.failed_before)} failed earlier (not retried: "
+                         "--retry-failed)")
+        if self.stale:
+            parts.append(f"{len(self.stale)} made by other code, rerun")
+        if self.damaged:
+            parts.append(f"{len(self.damaged)} damaged, rerun ({', '.join(self.damaged)})")
+        if self.unstored:
+            parts.append(f"{len(self.unstored)} NOT STORED ({'; '.join(self.unstored[:3])}"
+                         f"{'; ...' if len(self.unstored) > 3 else ''})")
+        return "; ".join(parts) + f" -> {out}"
+
+
+def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: bool,
+             reuse_stale: bool, rerun: bool = False) -> tuple[list[PlannedRun], CampaignSummary]:
+    """Which planned runs to execute, after verifying what ``store`` holds: a run is
+    skipped only if its row exists, its file verifies (size and SHA-256), and it was made
+    by the same code (or ``reuse_stale``); failed runs are redone with ``retry_failed``;
+    with ``rerun`` every run is (``flexarm run``: asked to run, it runs)."""
+    summary = CampaignSummary(planned=len(planned))
+    if rerun:
+        return list(planned), summary
+    wanted = {r.run_id for r in planned}
+    # Every row is read (not only the wanted ones): a damaged index shows on any page.
+    rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
+    for run in planned:  # a file whose row was lost: its metadata rebuilds the row
+        path = store.out / "runs" / f"{run.run_id}.npz" if store.out else None
+        if run.run_id not in rows and path is not None and path.exists():
+            try:
+                rows[run.run_id] = store.adopt(path)
+            except NotARunFile:
+                pass  # unreadable: the run is redone and the file replaced
+    damaged = store.verify(list(rows.values()))
+    todo = []
+    for run in planned:
+        row = rows.get(run.run_id)
+        if row is None:
+            todo.append(run)
+        elif run.run_id in damaged:
+            summary.damaged[run.run_id] = damaged[run.run_id]
+            todo.append(run)
+        elif not is_fresh(row) and not reuse_stale:
+            summary.stale.append(run.run_id)
+            todo.append(run)
+        elif row.status == "failed" and retry_failed:
+            todo.append(run)
+        else:
+            summary.skipped += 1
+            if row.status == "failed":
+                summary.failed_before.append(run.run_id)
+    return todo, summary
 
 
 @dataclass
@@ -49,12 +150,12 @@ class Job:
 
 
 def open_job(campaign: Campaign, out, planned: list[PlannedRun], *, retry_failed: bool = False,
-             reuse_stale: bool = False) -> Job:
+             reuse_stale: bool = False, rerun: bool = False) -> Job:
     """Prepare ``out`` (a results folder, or a `MemoryStore`) for ``campaign``'s runs
     ``planned`` and find those it does not hold yet (`classify`)."""
     if isinstance(out, MemoryStore):
         todo, summary = classify(planned, out, retry_failed=retry_failed,
-                                 reuse_stale=reuse_stale)
+                                 reuse_stale=reuse_stale, rerun=rerun)
         return Job(out, Destination(None, campaign.name, environment()), todo, summary)
     store = ResultStore(out)
     store.prepare()
@@ -62,7 +163,7 @@ def open_job(campaign: Campaign, out, planned: list[PlannedRun], *, retry_failed
                                        "report": campaign.report})
     store.remove_stale_temporaries()
     todo, summary = classify(planned, store, retry_failed=retry_failed,
-                             reuse_stale=reuse_stale)
+                             reuse_stale=reuse_stale, rerun=rerun)
     dictionary = b""
     if todo:  # the details of a campaign's runs compressed against its first one
         first = todo[0].scenario
@@ -175,6 +276,45 @@ def answer_all(questions: list, runner, *, progress: bool = False, label: str = 
             del waiting[i]
             ask(i, [rows[r.run_id] for r in b.runs])
     return answers
+
+
+def run_planned(planned, out: str | Path, *, name: str, description: str = "",
+                runner: Runner | None = None, progress: bool = True, label: str | None = None,
+                export: bool = True, rerun: bool = False) -> CampaignSummary:
+    """Run the runs ``planned`` (`PlannedRun`: made by a verdict — checks, bisections,
+    searches — or ``flexarm run``'s one run, not expanded from a campaign file) into
+    ``out`` under the campaign ``name``, as `run_campaign` runs a campaign's; ``rerun``:
+    all of them, whatever the folder holds."""
+    campaign = Campaign(name=name, base={}, sweeps=(), description=description)
+    return run_campaign(campaign, out, runner=runner, progress=progress, only=list(planned),
+                        label=label, export=export, rerun=rerun)
+
+
+def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None = None,
+                 retry_failed: bool = False, reuse_stale: bool = False,
+                 progress: bool = True, only: list[PlannedRun] | None = None,
+                 label: str | None = None, export: bool = True,
+                 rerun: bool = False) -> CampaignSummary:
+    """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
+    stored as soon as it finishes (`validation.batch.queue`); the progress bar is labelled
+    ``label`` (default: the campaign's name).  On SIGINT/SIGTERM, what finished is kept
+    and ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json
+    are exported at the end (unless ``export`` is false: a search calling this for every
+    batch exports once, when it is done)."""
+    planned = only if only is not None else expand(campaign)
+    job = open_job(campaign, out, planned, retry_failed=retry_failed, reuse_stale=reuse_stale,
+                   rerun=rerun)
+    own = runner is None and bool(job.todo)
+    runner = runner or SerialRunner()
+    try:
+        run_jobs([job], runner, progress=progress, label=label or campaign.name)
+    finally:
+        if own:
+            runner.close()
+    if export:
+        job.store.export()
+    job.store.close()
+    return job.summary
 
 
 def _count(summary: CampaignSummary, status: str) -> None:

@@ -20,7 +20,6 @@ import dataclasses
 import errno
 import functools
 import secrets
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,7 +29,7 @@ from .runfiles import KEEP_ALL, KEEP_NONE, Keep, run_file, write_file
 from .worker import OVER_MEMORY, execute_run, failed_result, warm_up, worker_init
 
 __all__ = ["Destination", "StoreTask", "Stored", "run_and_store", "store_failure",
-           "landed", "one_task", "serve", "leave_token"]
+           "landed", "serve", "leave_token"]
 
 
 @dataclass(frozen=True)
@@ -149,19 +148,6 @@ def landed(out: Path, stored: Stored) -> Stored:
     if stored.errno == errno.ENOSPC:
         raise OSError(errno.ENOSPC, "No space left on device", str(out))
     return stored
-
-
-@contextmanager
-def one_task(rid: str, scenario, out: Path):
-    """The task of a single run (``flexarm run``) into the results folder ``out``, whose
-    worker writes the file there (its token left in ``runs/`` meanwhile)."""
-    from .provenance import environment
-    token = leave_token(out)
-    try:
-        yield StoreTask(rid, scenario, "", {}, Destination(str(out), "", environment(),
-                                                           reach=token))
-    finally:
-        (Path(out) / "runs" / token).unlink(missing_ok=True)
 
 
 def _written(out: Path, rid: str, data: bytes, values: tuple) -> Stored:

@@ -56,7 +56,7 @@ def failed_result(scenario, exc: BaseException | str) -> tuple[RunResult, dict]:
 
 def describe(exc: BaseException) -> str:
     """One line saying what ``exc`` means for a run."""
-    from ..run._config import short_repr, short_str
+    from ..run.config import short_repr, short_str
     if isinstance(exc, SystemExit):
         return f"the run called sys.exit({short_repr(exc.code)})"
     if isinstance(exc, KeyboardInterrupt):  # workers ignore SIGINT: raised by the code
@@ -163,7 +163,7 @@ def kernel_groups(scenarios) -> list[tuple[str, object]]:
                 continue
             seen.add(key)
             groups.append((f"{role} {spec.kind}", lambda b=build, s=s, m=model, r=role:
-                           compiled_form(b(s, m), r, s.Ts)))
+                           compiled_form(b(s, m), r)))
     for plant in sorted({s.plant.kind for s in scenarios}):
         example = next(s for s in scenarios if s.plant.kind == plant)
         groups.append((f"closed loop on the {plant} plant", lambda e=example: _short_run(e)))
@@ -204,6 +204,6 @@ def warm_up(scenarios=None) -> None:
 
 @functools.cache  # once per process: every runner it starts forks from the same state
 def _warm_up_default() -> None:
-    from ..run.scenario import PLANTS, scenario_from_mapping
+    from ..run.scenario import PLANT_KINDS, scenario_from_mapping
     warm_up([scenario_from_mapping({"plant": {"kind": kind}, "observer": {"kind": "smo-paper"}})
-             for kind in PLANTS])
+             for kind in PLANT_KINDS])

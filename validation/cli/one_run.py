@@ -10,12 +10,14 @@ import math
 import sys
 from pathlib import Path
 
+from ..batch.campaign import PlannedRun
 from ..batch.executor import available_cores, check_runner, make_runner
+from ..batch.interrupts import Interrupted
+from ..batch.queue import run_planned
 from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore, StoreError, run_id
-from ..batch.storing import landed, one_task
-from ..run._config import ConfigError, check_label
-from ..run.plants import is_truth, plant_spec
+from ..run.config import ConfigError, check_label
+from ..run.plants import is_truth, plant_settings
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
 from ..verdicts.mesh import is_check
@@ -240,12 +242,12 @@ def cmd_run(args: argparse.Namespace) -> int:
     with make_runner("local", workers, run_timeout=args.run_timeout,
                      memory_limit=args.memory_limit, scenarios=[scenario],
                      progress=sys.stderr) as runner:  # worker processes
-        with one_task(rid, scenario, store.out) as task:  # its worker writes the file
-            (_, stored), = runner.results([(rid, task)])
-        stored = landed(store.out, stored)
-        if stored.values is None:
-            raise StoreError(stored.error)
-        store.insert([stored.values])
+        summary = run_planned([PlannedRun(rid, scenario, "", {})], store.out, name="",
+                              runner=runner, progress=False, export=False, rerun=True)
+        if summary.unstored:
+            raise StoreError(summary.unstored[0])
+        if summary.interrupted:
+            raise Interrupted(summary.interrupted)
         result = store.row(rid)
         path = store.out / result.file
         metrics = result.metrics
@@ -256,6 +258,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     obs = "" if s.observer.kind == "none" else f" + {s.observer.kind}"
     print(f"{s.name}: {s.controller.kind}{obs} on the {s.plant.kind} plant, {s.arm} arm, "
           f"{s.duration:g} s at Ts = {s.Ts:g} s, from {s.initial_state}")
+    if s.true_params.joints_text():
+        print(f"  the true arm's joints: {s.true_params.joints_text()}")
     if result.message:
         print(f"  {result.status}: {result.message}")
     units = {r.metric: r for r in s.requirement}
@@ -266,7 +270,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if truth:
         print("  " + (convergence_line(store, rid) if args.mesh_check else
                       f"convergence not checked: these are the FE model's numbers on "
-                      f"{plant_spec(data['plant']).discretisation()}; --mesh-check runs the "
+                      f"{plant_settings(data['plant']).discretisation()}; --mesh-check runs the "
                       "same loop on refined meshes and steps"))
     print(f"results: {path} (index and metrics.csv in {store.out})" + (
         f"; figures: flexarm show {store.out}/{rid}" if result.status == "ok" else ""))

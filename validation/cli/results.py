@@ -25,7 +25,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     if args.signals is not None or args.to is not None:
-        from ..run._config import check
+        from ..run.config import check
         check(args.signals is not None and args.results is None, "--signals",
               "give RESULTS/RUN with --signals (and --to FILE), or a RESULTS_DIR alone")
         from .calibrate import export_signals
@@ -35,7 +35,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     store = ResultStore(args.results)
     csv_path, json_path = store.export()
     count = len(store.columns(["run_id"]))  # the rows exported, not read again whole
-    print(f"exported {count} runs: {csv_path if args.format == 'csv' else json_path}")
+    print(f"exported {count} runs: {csv_path} and {json_path}")
     return 0
 
 

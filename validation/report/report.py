@@ -514,7 +514,7 @@ def paper_figure_tasks(store, group, bounds: dict | None = None) -> list:
     """The paper's figures of one group as (section, caption, draw) tasks; runs that
     diverged or failed are named in the title, not drawn (their last samples before
     leaving the bounds are not data).  ``bounds``: the claims' bounds by claim key."""
-    from ..run.metrics import vibration_cutoff
+    from ..run.vibration import vibration_cutoff
     bounds = bounds or {}
     title = _title(group)
     group = [r for r in group if r.status == "ok"]

@@ -165,9 +165,9 @@ def _case_figures(v: dict, store) -> list:
         return []
     from ..batch.resimulate import every_signal
     from ..batch.store import run_id
-    from ..run._config import to_mapping
-    from ..run.metrics import vibration_cutoff
-    from ..run.plants import plant_for_role, plant_spec
+    from ..run.config import to_mapping
+    from ..run.vibration import vibration_cutoff
+    from ..run.plants import plant_for_role, plant_settings
     from reduced_model import ArmParameters
     truth = store.row(truth_id)
     if truth is None:
@@ -175,7 +175,7 @@ def _case_figures(v: dict, store) -> list:
     reduced_id = (v.get("runs") or {}).get("reduced")
     if reduced_id is None:  # a falsification's case: its reduced twin, if it was run
         # (its id from the stored, resolved scenario: checking it would build its laws)
-        plant = to_mapping(plant_spec(plant_for_role(truth.config, "reduced")))
+        plant = to_mapping(plant_settings(plant_for_role(truth.config, "reduced")))
         reduced_id = run_id(dict(truth.config, plant=plant))
     both = [r for r in (truth, store.row(reduced_id)) if r is not None]
     group = [r for r in both if r.status == "ok"]  # a run that diverged is named, not drawn

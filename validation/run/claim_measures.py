@@ -17,7 +17,8 @@ from typing import Callable
 import numpy as np
 
 from .metrics import (CONVERGENCE_FRACTION, CONVERGENCE_NOISE_FACTOR, CONVERGENCE_WINDOW,
-                      PAPER_ANGLE_BOUND, PAPER_SLOPE_RATE_BOUND, VIBRATION_WINDOW)
+                      PAPER_ANGLE_BOUND, PAPER_SLOPE_RATE_BOUND)
+from .vibration import VIBRATION_WINDOW
 
 __all__ = ["Claim", "CLAIMS", "SYSTEM", "DISTURBED", "claim_by_key"]
 

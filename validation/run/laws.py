@@ -1,8 +1,9 @@
 """Controllers and observers of a scenario: found, checked and built the same way for the
 built-in laws and for plug-ins (``kind = "package.module:Class"``).
 
-A law with an option named ``Ts`` (a discrete-time design such as the LQR) receives the
-scenario's control period there unless the scenario's options set it.
+Every law is built as ``Cls(model, Ts=Ts, **options)``: the control period is the
+scenario's ``Ts``, given once, when the law is built (`controllers._interface`), never an
+option.
 
 `check_laws` runs before anything is simulated: the class must resolve, accept the
 options and construct on the nominal model, have the methods of the interface
@@ -19,13 +20,13 @@ import inspect
 import json
 
 from controllers import CONTROLLERS, OBSERVERS, PluginError, accepted_options, resolve
-from reduced_model import ArmModel, ArmParameters, cached_model
+from reduced_model import ArmModel, ArmParameters, cached_model, measured_names
 
-from ._config import ConfigError, check
+from .config import ConfigError, check
 from .processes import checked_apart
 
 __all__ = ["check_laws", "build_controller", "build_observer", "nominal_model",
-           "measurement_names"]
+           "measurement_names", "applies_generalised_forces"]
 
 #: Options of the realisable PBC that eq. (20) puts only in the unactuated rows.
 _IDEALISED_ONLY = {"kv_flex", "compensate_damping"}
@@ -42,13 +43,8 @@ def measurement_names(scenario, model: ArmModel) -> tuple[str, ...]:
     """Names the plant will measure with the scenario's sensors (the order of
     `reduced_model.SensorModel`): θ, then q, then rates, then the payload position."""
     s = scenario.sensors
-    coords = model.coordinate_names
-    names = list(coords[:2]) + (list(coords[2:]) if s.modal != "none" else [])
-    if s.rates:
-        names += [f"{c}_dot" for c in names]
-    if s.tip_position:
-        names += ["tip_x", "tip_y"]
-    return tuple(names)
+    return measured_names(model.modes_per_link, modal=s.modal != "none", rates=s.rates,
+                          tip_position=s.tip_position)
 
 
 def _class(role: str, kind: str) -> type:
@@ -59,33 +55,30 @@ def _class(role: str, kind: str) -> type:
         raise ConfigError(f"{role}.kind", str(exc)) from None
 
 
-def _options(options: dict, cls: type, Ts: float) -> dict:
-    """The law's options; a law with an option named ``Ts`` (a discrete-time design)
-    receives the scenario's control period there unless the options set it."""
-    accepted = accepted_options(cls)
-    if "Ts" not in options and accepted is not None and "Ts" in accepted:
-        return {**options, "Ts": Ts}
-    return dict(options)
-
-
-def _construct(role: str, kind: str, cls: type, options: dict, model: ArmModel):
+def _construct(role: str, kind: str, cls: type, options: dict, model: ArmModel, Ts: float):
+    check("Ts" not in options, f"{role}.options.Ts", "the control period is the scenario's "
+                                                     "Ts (every law is built at it)")
     accepted = accepted_options(cls)
     if accepted is not None:
+        check("Ts" in accepted, f"{role}.kind",
+              f"{kind} does not take the control period: a law is built as "
+              f"Cls(model, *, Ts, **options) (add the keyword argument Ts)")
+        own = [k for k in accepted if k != "Ts"]
         for key in options:
-            if key in accepted:
+            if key in own:
                 continue
             hint = ""
             if kind == "pbc" and key in _IDEALISED_ONLY:
                 hint = ("; it enters only the unactuated rows of eq. (20), so it cannot change "
                         "the realisable PBC's torque (kind = \"pbc-idealised\" applies them)")
             raise ConfigError(f"{role}.options.{key}", f"not an option of {kind} (options: "
-                                                       f"{', '.join(accepted) or 'none'}){hint}")
-        missing = [k for k, v in accepted.items() if v is inspect.Parameter.empty
+                                                       f"{', '.join(own) or 'none'}){hint}")
+        missing = [k for k in own if accepted[k] is inspect.Parameter.empty
                    and k not in options]
         if missing:
             raise ConfigError(f"{role}.options", f"{kind} needs option(s) {', '.join(missing)}")
     try:
-        law = cls(model, **options)
+        law = cls(model, Ts=Ts, **options)
     except Exception as exc:  # noqa: BLE001 - a plug-in may raise anything; say what
         message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         named = next((k for k in options if message.startswith(k)), None)
@@ -96,8 +89,8 @@ def _construct(role: str, kind: str, cls: type, options: dict, model: ArmModel):
 
 def _build(scenario, role: str, model: ArmModel):
     spec = getattr(scenario, role)
-    cls = _class(role, spec.kind)
-    return _construct(role, spec.kind, cls, _options(spec.options, cls, scenario.Ts), model)
+    return _construct(role, spec.kind, _class(role, spec.kind), dict(spec.options), model,
+                      scenario.Ts)
 
 
 def _check_interface(role: str, kind: str, law) -> None:
@@ -116,13 +109,20 @@ def _check_interface(role: str, kind: str, law) -> None:
 
 def _check_here(role: str, kind: str, options_json: str, Ts: float, params: ArmParameters,
                 modes: tuple[int, int]) -> tuple[str, ...]:
-    """Construct and check; returns the observer's measured names (() for a
-    controller)."""
+    """Construct and check; returns the observer's measured names, or for a controller
+    ("generalised forces",) if it applies forces to every coordinate (its class says so:
+    ``generalised_forces = True``), else ()."""
     cls = _class(role, kind)
-    law = _construct(role, kind, cls, _options(json.loads(options_json), cls, Ts),
-                     nominal_model(params, modes))
+    law = _construct(role, kind, cls, json.loads(options_json), nominal_model(params, modes),
+                     Ts)
     _check_interface(role, kind, law)
-    return tuple(law.measured) if role == "observer" else ()
+    if role == "observer":
+        return tuple(law.measured)
+    return (_GENERALISED,) if getattr(law, "generalised_forces", False) is True else ()
+
+
+#: What `_check_here` says of a controller that applies forces to every coordinate.
+_GENERALISED = "generalised forces"
 
 
 @functools.lru_cache(maxsize=256)
@@ -140,8 +140,10 @@ def check_laws(scenario) -> None:
     """Raise `ConfigError` unless the scenario's controller and observer can be built."""
     s = scenario
     key = (s.Ts, s.nominal_params, s.model.modes_per_link)
-    _checked("controller", s.controller.kind, json.dumps(s.controller.options, sort_keys=True),
-             *key)
+    check(not (applies_generalised_forces(s) and s.plant.actuated == 2), "controller.kind",
+          f"the {s.plant.label} has two actuators; {s.controller.kind} applies forces to "
+          "every coordinate (the idealised PBC: all n rows of eq. 20), which runs only on "
+          "the reduced plant")
     if s.observer.kind == "none":
         check(not s.observer.options, "observer.options", "there is no observer "
                                                           "(observer.kind = 'none')")
@@ -154,6 +156,16 @@ def check_laws(scenario) -> None:
           f"{s.observer.kind} needs the measurements {', '.join(missing)}, which the sensors "
           f"do not provide (measured: {', '.join(available)}); set sensors.modal to 'direct' "
           "or 'gauges' for q, sensors.rates = true for rates")
+
+
+def applies_generalised_forces(scenario) -> bool:
+    """Whether the scenario's controller applies forces to every coordinate, not only the
+    two joint torques (a property of its class, ``generalised_forces``; the law is checked
+    once, a plug-in apart from the command)."""
+    s = scenario
+    return _GENERALISED in _checked("controller", s.controller.kind,
+                                    json.dumps(s.controller.options, sort_keys=True), s.Ts,
+                                    s.nominal_params, s.model.modes_per_link)
 
 
 def build_controller(scenario, model: ArmModel):

@@ -24,7 +24,7 @@ from controllers._compiled import absent
 from reduced_model import ArmModel, PlantFailure, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
-from ._config import short_repr, short_str
+from .config import short_repr, short_str
 from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
                       check_bounds, context, law_fields, noise_stream, post_sample, pre_sample,
                       run_reduced, sample_laws, signal_layout, status_message)
@@ -209,7 +209,7 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
     residual_names = () if residual is None else (
         model.coordinate_names[2:] if len(residual) == n - 2 else
         tuple(str(i + 1) for i in range(len(residual))))
-    laws = _compiled_laws(controller, observer, model, Ts)
+    laws = _compiled_laws(controller, observer, model)
     payload_force = any(d.target in ("tip_x", "tip_y") for d in s.disturbances)
     plant_form = plant.compiled_stepping() if laws is not None and not payload_force else None
     direct = plant.measurement_index()  # the measurement's place in the truth, or None
@@ -246,12 +246,12 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
                  "realtime_factor": (simulated - Ts) / steady if steady > 0 else math.nan})
 
 
-def _compiled_laws(controller, observer, model: ArmModel, Ts: float):
+def _compiled_laws(controller, observer, model: ArmModel):
     """The compiled forms of the laws (controller, observer) and what the observer's
     failure means ("name: reason"), or None if either law has none (both then run as
     the Python objects they are)."""
-    c = compiled_form(controller, "controller", Ts)
-    o = absent("observer", model) if observer is None else compiled_form(observer, "observer", Ts)
+    c = compiled_form(controller, "controller")
+    o = absent("observer", model) if observer is None else compiled_form(observer, "observer")
     if c is None or o is None:
         return None
     label = getattr(observer, "name", type(observer).__name__)
@@ -266,7 +266,8 @@ def _absent_laws(model: ArmModel):
 def _compiled_loop(plant_form: dict, r: _Run, s: Scenario):
     """The whole loop in one compiled call (`run_reduced`)."""
     k_done, code = run_reduced(r.context, r.rows, plant_form["h"], plant_form["nsteps"](s.Ts),
-                               plant_form["x"], *plant_form["model"], plant_form["basis"])
+                               plant_form["x"], *plant_form["model"], plant_form["basis"],
+                               *plant_form["joints"])
     message = status_message(code, r.info[0], s.divergence, min(k_done, r.N) * s.Ts, r.failure)
     status = "ok" if code == SampleStatus.OK else "diverged"
     return status, message, k_done, {"first": 0.0}  # one call: no split into plant and laws
@@ -338,7 +339,7 @@ class _PythonLaws:
     def __init__(self, controller, observer, s: Scenario, reference, r: _Run,
                  has_residual: bool) -> None:
         self.controller, self.observer, self.r = controller, observer, r
-        self.Ts, self.n, self.use_estimate = s.Ts, r.n, s.uses_estimate
+        self.n, self.use_estimate = r.n, s.uses_estimate
         self.divergence = s.divergence
         self.ref = _SampledReference(reference, r.ref)
         self.s_xhat = slice(r.off[Group.XHAT], r.off[Group.Y])
@@ -355,7 +356,7 @@ class _PythonLaws:
             x_hat = r.x_hat
             if self.observer is not None:
                 x_hat = _real_array(self.observer.update(t, r.y_used[r.obs_idx],
-                                                         r.last_tau[:r.counts[1]], self.Ts),
+                                                         r.last_tau[:r.counts[1]]),
                                     ((2 * self.n,),), "an estimate")
                 row[self.s_xhat] = x_hat
             calling = self.controller

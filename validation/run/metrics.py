@@ -5,16 +5,9 @@ Conventions: metrics "after the transient" use the samples at t ≥ the scenario
 excluded), recorded with them as ``transient_s`` (the window is [transient_s, end_time]);
 RMS and max are per joint / per state; angles in rad, lengths in m, torques in N m.
 
-Three metrics need a definition the paper does not give:
+Two metrics need a definition the paper does not give (vibration has its own module,
+`validation.run.vibration`):
 
-- **Vibration** is the oscillatory part of a tip deflection, separated from the
-  quasi-static bending the motion itself demands: the deflection high-passed at
-  ``VIBRATION_CUTOFF`` × the arm's first natural frequency with the joints locked
-  (0.8 × 0.632 = 0.51 Hz for the default arm), by a 4th-order Butterworth filter run
-  forward and backward (zero phase).  The paper's reference has its fundamentals at 0.05
-  and 0.1 Hz; the bending it demands (centrifugal and inertial loads, products of the two)
-  stays below 0.4 Hz, where the filter passes ≤ 15 % of the amplitude, while at the first
-  mode it passes ≥ 85 %.  ``vib_rms_i`` is its RMS after the transient.
 - **Estimation against the measurement**: for each estimated state the error RMS
   (``est_rms_*``) is set next to the RMS of the raw measurement's own error
   (``noise_rms_*``: y − x, noise and sensor error, for measured states) and the signal's
@@ -39,30 +32,26 @@ Three metrics need a definition the paper does not give:
   noise alone never keeps a state from converging.  A state whose RMS is below its
   tolerance cannot show convergence at all (x̂ ≡ 0 meets it too): ``est_worse_zero``
   names the states whose estimate is worse than x̂ ≡ 0 (error RMS ≥ the state's RMS).
-- **Vibration decay**: the oscillatory deflection's RMS per ``VIBRATION_WINDOW`` (2 s)
-  window from t = 0 (``vib_win_i_TT``, TT the window's start in s); the decay rate right
-  after the transient ``vib_decay_i`` [1/s] = ln(RMS of the first full window from the
-  transient ÷ RMS of the next) / 2 s (1.15/s: ten-fold in 2 s; 0: it does not decay);
-  and ``vib_late_i``, the RMS over the second half of the run: what stays.  A start-up
-  kick that dies out and a vibration that stays can have the same RMS after a transient;
-  these tell them apart.
 """
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
 
 from reduced_model import ArmParameters
 
+from .reductions import after as _after
+from .reductions import as_float as _f64
+from .reductions import peak as _max
+from .reductions import rms as _rms
 from .results import RunResult
+from .vibration import vibration, vibration_cutoff
 
-__all__ = ["tracking", "tip_error", "deflection", "vibration", "vibration_decay",
-           "estimation", "torque", "growth_rate", "residual", "convergence_time", "convergence_tolerances",
-           "all_metrics", "vibration_cutoff", "CONVERGENCE_FRACTION", "CONVERGENCE_WINDOW",
-           "CONVERGENCE_NOISE_FACTOR", "PAPER_ANGLE_BOUND", "PAPER_SLOPE_RATE_BOUND", "GROWTH_WINDOW", "GROWTH_FLOOR",
-           "VIBRATION_CUTOFF", "VIBRATION_WINDOW"]
+__all__ = ["tracking", "tip_error", "deflection", "estimation", "torque", "growth_rate",
+           "residual", "convergence_time", "convergence_tolerances", "all_metrics",
+           "CONVERGENCE_FRACTION", "CONVERGENCE_WINDOW", "CONVERGENCE_NOISE_FACTOR",
+           "PAPER_ANGLE_BOUND", "PAPER_SLOPE_RATE_BOUND", "GROWTH_WINDOW", "GROWTH_FLOOR"]
 
 #: Convergence, states the paper gives no number for: windowed error RMS within this
 #: fraction of the state's RMS.
@@ -86,27 +75,7 @@ GROWTH_FLOOR = 1e-3
 #: Length [s] of the sliding window of the convergence test (100 samples at 1 kHz: noise
 #: averages out, a real excursion of a few periods of the 34 Hz mode does not).
 CONVERGENCE_WINDOW = 0.1
-#: The vibration high-pass sits at this fraction of the first locked natural frequency.
-VIBRATION_CUTOFF = 0.8
-#: Length [s] of the windows of the vibration's decay (module docstring): 1.3 periods of
-#: the first mode at 0.63 Hz, 10 windows in the paper's 20 s.
-VIBRATION_WINDOW = 2.0
 
-
-def _after(result: RunResult, start: float) -> np.ndarray:
-    return result.time >= start - 1e-12
-
-
-def _rms(x: np.ndarray, axis=-1) -> np.ndarray:
-    return np.sqrt(np.mean(np.square(x), axis=axis)) if x.shape[-1] else np.full(x.shape[:-1], np.nan)
-
-
-def _max(x: np.ndarray, axis=-1) -> np.ndarray:
-    return np.max(np.abs(x), axis=axis) if x.shape[-1] else np.full(x.shape[:-1], np.nan)
-
-
-def _f64(result: RunResult, names) -> np.ndarray:
-    return result.select(list(names)).astype(float)
 
 
 def tracking(result: RunResult, transient: float) -> dict[str, float]:
@@ -198,104 +167,6 @@ def deflection(result: RunResult, transient: float) -> dict[str, float]:
         out[f"defl_rms_{i + 1}"] = float(_rms(w[i, late]))
     return out
 
-
-def vibration_cutoff(params: ArmParameters) -> float:
-    """The vibration high-pass frequency [Hz] for an arm (module docstring)."""
-    from .laws import nominal_model
-    return VIBRATION_CUTOFF * float(nominal_model(params, (2, 2)).natural_frequencies()[0])
-
-
-@functools.lru_cache(maxsize=64)  # every run of an arm at one Ts designs the same filter
-def _highpass(normalised_cutoff: float) -> np.ndarray:
-    from scipy.signal import butter  # 0.4 s to import: not on every command's start
-    sos = butter(4, normalised_cutoff, "highpass", output="sos")
-    sos.flags.writeable = False
-    return sos
-
-
-def oscillatory(result: RunResult, cutoff_hz: float) -> np.ndarray:
-    """The tip deflections' oscillatory part (2, n_samples): zero-phase high-pass."""
-    w = _f64(result, ["tip_defl1", "tip_defl2"])
-    dt = result.time[1] - result.time[0]
-    nyquist = 0.5 / dt
-    sos = _highpass(min(cutoff_hz / nyquist, 0.99)).copy()  # scipy wants it writable
-    padlen = min(3 * (2 * len(sos) + 1), w.shape[1] - 1)
-    from scipy.signal import sosfiltfilt
-    return sosfiltfilt(sos, w, axis=1, padlen=padlen)
-
-
-def vibration(result: RunResult, transient: float, cutoff_hz: float) -> dict[str, float]:
-    """The oscillatory tip deflection (module docstring) after ``transient``, and its
-    decay (`vibration_decay`).
-
-    Parameters
-    ----------
-    result : RunResult
-        The run.
-    transient : float
-        Start of the window measured [s].
-    cutoff_hz : float
-        The high-pass frequency that separates vibration from quasi-static bending [Hz].
-
-    Returns
-    -------
-    vib_cutoff_hz : float
-        That frequency [Hz].
-    vib_rms_i : float
-        RMS of link i's oscillatory tip deflection after the transient [m].
-    vib_max_i : float
-        Its max after the transient [m].
-    """
-    late = _after(result, transient)
-    out = {"vib_cutoff_hz": cutoff_hz}
-    if result.time.size < 16 or not late.any():
-        return out | {f"vib_{k}_{i}": math.nan for k in ("rms", "max") for i in (1, 2)}
-    v = oscillatory(result, cutoff_hz)
-    rms, mx = _rms(v[:, late]), _max(v[:, late])
-    return out | {f"vib_rms_{i + 1}": float(rms[i]) for i in range(2)} | \
-        {f"vib_max_{i + 1}": float(mx[i]) for i in range(2)} | \
-        vibration_decay(result.time, v, transient)
-
-
-def vibration_decay(time: np.ndarray, oscillation: np.ndarray, transient: float) -> dict:
-    """Per link: how the oscillatory tip deflection decays (module docstring); NaN where
-    the run is too short.
-
-    Parameters
-    ----------
-    time : ndarray
-        Sample times [s].
-    oscillation : ndarray
-        The oscillatory tip deflections (2, n_samples) [m].
-    transient : float
-        Where the decay is measured from [s].
-
-    Returns
-    -------
-    vib_win_i_TT : float
-        RMS of link i's oscillation in the full `VIBRATION_WINDOW` starting at TT
-        seconds [m].
-    vib_decay_i : float
-        Decay rate between the first two windows that start at or after the transient
-        [1/s] (ln of their RMS ratio ÷ the window).
-    vib_late_i : float
-        RMS over the run's second half: what stays [m].
-    """
-    dt = time[1] - time[0]
-    k = max(1, int(round(VIBRATION_WINDOW / dt)))
-    n = time.size // k
-    starts = time[0] + VIBRATION_WINDOW * np.arange(n)
-    first = int(np.searchsorted(starts, transient - 1e-9))
-    second_half = time >= time[0] + 0.5 * (time[-1] - time[0])
-    out = {}
-    for i in range(2):
-        rms = np.array([_rms(oscillation[i, j * k:(j + 1) * k]) for j in range(n)])
-        out |= {f"vib_win_{i + 1}_{s:02.0f}": float(r) for s, r in zip(starts, rms)}
-        pair = rms[first:first + 2]
-        out[f"vib_decay_{i + 1}"] = (float(np.log(pair[0] / pair[1]) / VIBRATION_WINDOW)
-                                     if pair.size == 2 and np.all(pair > 0) else math.nan)
-        out[f"vib_late_{i + 1}"] = float(_rms(oscillation[i, second_half]))
-    return out
 
 
 def convergence_time(time: np.ndarray, error: np.ndarray, tolerance: float,

@@ -136,7 +136,7 @@ def draw_deflections(axes, group, transient: float, cutoff_hz: float | None = No
     """The panels of the paper's Fig. 4 into ``axes`` (a row per link's tip deflection
     [mm], and with ``cutoff_hz`` a second row: its oscillatory part above that frequency,
     the vibration the claim judges, with the bound ``bound`` [m] on its RMS)."""
-    from .metrics import oscillatory
+    from .vibration import oscillatory
     vib, rms = {0: [], 1: []}, {0: [], 1: []}
     for run, res in group:
         for j in (0, 1):

@@ -33,12 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run._config import ConfigError, check, check_label
+from ..run.config import ConfigError, check, check_label
 from ..batch.campaign import expand, load_campaign
 from ..batch.worker import execute_run
 from ..batch.fingerprint import run_fingerprint
 from ..run.results import write_atomic
-from ..run.scenario import PLANTS, scenario_from_mapping, scenario_to_mapping
+from ..run.scenario import PLANT_KINDS, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import INDEX_NAME, ResultStore, StoreError, run_id
 from ..run.tomlfiles import flatten, load_toml, set_dotted, toml_value
 
@@ -153,9 +153,9 @@ def load_baselines(path: str | Path = DEFAULT_FILE) -> Baselines:
                 check(c.scenario in scenarios, f"{where}.scenario",
                       f"no scenario {c.scenario!r} in [scenarios]")
             else:
-                check(bool(c.run) and c.plant in PLANTS, where,
+                check(bool(c.run) and c.plant in PLANT_KINDS, where,
                       f"a campaign check needs run = NAME and plant = one of "
-                      f"{', '.join(map(repr, PLANTS))}")
+                      f"{', '.join(map(repr, PLANT_KINDS))}")
         checks.append(c)
     header = "".join(line + "\n" for line in path.read_text().splitlines()
                      if line.startswith("#")) if path.exists() else ""

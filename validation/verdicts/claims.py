@@ -34,7 +34,7 @@ import math
 from dataclasses import dataclass, field
 
 from ..run.claim_measures import CLAIMS, DISTURBED, SYSTEM, Claim
-from ..run.plants import is_truth, label_of, plant_spec
+from ..run.plants import is_truth, label_of, plant_settings
 from ..run.metrics import all_metrics
 from . import mesh as mesh_check
 
@@ -161,7 +161,7 @@ def _mesh_values(claim: Claim, run: _Measured, checks: dict,
                  cache: dict) -> tuple[bool | None, tuple]:
     """(converged?, ((mesh label, value or status text), ...)) of ``claim`` on the run's
     mesh and its check meshes; converged is None when a check has not been run."""
-    own = plant_spec(run.stored.config["plant"]).discretisation()
+    own = plant_settings(run.stored.config["plant"]).discretisation()
     value = run.value(claim)[0]
     values = [(own, value)]
     converged: bool | None = True
@@ -280,7 +280,7 @@ def mesh_rows(runs, signals=None) -> list[MeshRow]:
         if not any(checks.values()):
             continue
         if r.status != "ok":
-            values = [(plant_spec(r.config["plant"]).discretisation(),
+            values = [(plant_settings(r.config["plant"]).discretisation(),
                        f"{r.status} at {r.end_time:g} s")]
             agree = True
             for label, other in checks.items():

@@ -29,8 +29,7 @@ from collections.abc import Callable
 import control
 import numpy as np
 
-from reduced_model import ArmModel, LinkModes
-from reduced_model._plant import _projection
+from reduced_model import reduced_linear_model
 
 __all__ = ["reduced_linear_model", "law_gain", "closed_loop_matrix", "growth_rate",
            "largest_stable_period", "feedback_rows", "NotLinearisable", "STABLE_GROWTH"]
@@ -42,60 +41,6 @@ STABLE_GROWTH = 0.01  # 1/s: a mode growing faster is unstable (module docstring
 
 class NotLinearisable(ValueError):
     """The law is not differentiable at the point asked for."""
-
-
-def reduced_linear_model(model: ArmModel, *, theta=(0.0, 0.0), Ts: float | None = None,
-                         modal_basis: tuple[LinkModes, LinkModes] | None = None,
-                         generalised_forces: bool = False) -> control.StateSpace:
-    """The reduced model linearised about rest at joint angles ``theta``
-    (`ArmModel.linearize`, exact), with the outputs of `plant_exudyn.linear_model`.
-
-    Parameters
-    ----------
-    model : ArmModel
-        The reduced model (its parameters and modes per link).
-    theta : (float, float)
-        θ1, θ2 [rad] of the configuration.
-    Ts : float, optional
-        If given, the exact zero-order-hold discretisation at this period [s].
-    modal_basis : (LinkModes, LinkModes), optional
-        Mode shapes to express the q outputs in (default: the model's own); another basis
-        receives the model's deflection by the same weighted projection as `ReducedPlant`.
-    generalised_forces : bool
-        Inputs on every coordinate (``tau1``, ``tau2``, then ``f_q11``… [N]): what the
-        idealised PBC applies; default: the two joint torques only.
-
-    Returns
-    -------
-    control.StateSpace
-        Inputs ``tau1``, ``tau2`` [N m] (and the modal forces); outputs θ, q, θ̇, q̇ and ``tip_defl1``,
-        ``tip_defl2`` (deviations: rad, m, rad/s, m/s); states ``model.state_names``.
-    """
-    from plant_exudyn._linear import output_names  # one list of names for both plants
-    n = model.n
-    Q0 = np.zeros(n)
-    Q0[:2] = np.asarray(theta, dtype=float)
-    A, B = model.linearize(Q0)
-    inputs = ["tau1", "tau2"]
-    if generalised_forces:
-        B = np.vstack([np.zeros((n, n)), np.linalg.inv(model.mass_matrix(Q0))])
-        inputs += [f"f_{c}" for c in model.coordinate_names[2:]]
-    basis = model.mode_shapes if modal_basis is None else tuple(modal_basis)
-    T = np.eye(n - 2) if modal_basis is None else _projection(model.mode_shapes, basis)
-    m = 2 + T.shape[0]
-    Cq = np.zeros((m, n))
-    Cq[:2, :2] = np.eye(2)
-    Cq[2:, 2:] = T
-    n1 = model.modes_per_link[0]
-    tips = np.zeros((2, n))
-    tips[0, 2:2 + n1] = model.mode_shapes[0].tip_values[0]
-    tips[1, 2 + n1:] = model.mode_shapes[1].tip_values[0]
-    C = np.block([[Cq, np.zeros((m, n))], [np.zeros((m, n)), Cq], [tips, np.zeros((2, n))]])
-    sys_ = control.ss(A, B, C, np.zeros((C.shape[0], len(inputs))), inputs=inputs,
-                      outputs=list(output_names(basis)), states=list(model.state_names),
-                      name=f"reduced_{model.modes_per_link[0]}_{model.modes_per_link[1]}")
-    return sys_ if Ts is None else control.sample_system(sys_, Ts, method="zoh",
-                                                         name=sys_.name + "_zoh")
 
 
 def law_gain(controller, x, t: float, reference, *, shared=()) -> np.ndarray:

@@ -30,10 +30,12 @@ from __future__ import annotations
 
 import math
 
-from ..batch.campaign import PlannedRun, run_planned
+from ..batch.campaign import PlannedRun
+
+from ..batch.queue import run_planned
 from ..batch.executor import Runner
 from ..batch.store import run_id
-from ..run.plants import LEVELS, Refinement, is_truth, plant_spec
+from ..run.plants import LEVELS, Refinement, is_truth, plant_settings
 from ..run.scenario import scenario_from_mapping, scenario_to_mapping
 
 __all__ = ["MESH_SWEEP", "MESH_RTOL", "MESH_ATOL", "refinements", "refined_config",
@@ -55,7 +57,7 @@ MESH_ATOL = 0.05
 def refinements(config: dict) -> list[Refinement]:
     """The checks of a result on a truth plant (its kind's `PlantSpec.refinements`: the
     refined sequence, then another formulation); none for a reduced plant."""
-    return plant_spec(config["plant"]).refinements() if is_truth(config) else []
+    return plant_settings(config["plant"]).refinements() if is_truth(config) else []
 
 
 def refined_config(config: dict, r: Refinement) -> dict:

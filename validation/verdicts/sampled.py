@@ -7,7 +7,8 @@ linearised about the reference state x_d(t) = [θ_d, 0, θ̇_d, 0] (`linear.law_
 gain it applies, from the law object itself, built exactly as a run builds it), and the
 plant about rest at its configuration [θ_d(t), 0] (frozen time: the plant's
 velocity-dependent Coriolis terms, second order in the reference rates of at most 1.3
-rad/s, are left out).  A law with an option ``Ts`` (the LQR) is rebuilt at every period.
+rad/s, are left out).  The law is built at every period it is evaluated at, as a run at
+that period builds it (a discrete design such as the LQR differs from period to period).
 
 - **Predicted**: the largest Ts below which the sampled loop is stable at every point
   (`linear.largest_stable_period`), on the linearisation of the case's own plant — the
@@ -36,13 +37,12 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from controllers import CONTROLLERS, PluginError, accepted_options, resolve
 from reduced_model import cached_model
 
-from ..run._config import ConfigError
+from ..run.config import ConfigError
 from ..run.laws import build_controller, nominal_model
 from ..run.loop import make_reference
-from ..run.plants import truth_spec
+from ..run.plants import truth_settings
 from ..run.scenario import scenario_from_mapping
 from .linear import (NotLinearisable, closed_loop_matrix, growth_rate, largest_stable_period,
                      law_gain, reduced_linear_model)
@@ -97,29 +97,20 @@ class _Case:
             x = np.zeros(2 * n)
             x[:2], x[n:n + 2] = theta, rate
             self.points.append((float(t), x))
-        try:
-            accepted = accepted_options(resolve(s.controller.kind, CONTROLLERS, "controller"))
-        except PluginError:
-            accepted = None
-        self.per_period = (accepted is not None and "Ts" in accepted
-                           and "Ts" not in s.controller.options)
         self._gains: dict = {}
 
     def gains(self, Ts: float) -> list[np.ndarray] | None:
         """The law's gain at every point when run at period Ts (None if the law cannot be
         built at that period)."""
-        key = Ts if self.per_period else None
-        if key not in self._gains:
-            scenario = dataclasses.replace(self.scenario, Ts=Ts) if self.per_period \
-                else self.scenario
-            try:
-                law = build_controller(scenario, self.model)
+        if Ts not in self._gains:
+            try:  # built at the period it runs at, as a run builds it
+                law = build_controller(dataclasses.replace(self.scenario, Ts=Ts), self.model)
             except (ConfigError, ValueError):
-                self._gains[key] = None
+                self._gains[Ts] = None
             else:
-                self._gains[key] = [law_gain(law, x, t, self.reference, shared=(self.model,))
-                                    for t, x in self.points]
-        return self._gains[key]
+                self._gains[Ts] = [law_gain(law, x, t, self.reference, shared=(self.model,))
+                                   for t, x in self.points]
+        return self._gains[Ts]
 
     def theta(self, point: int) -> np.ndarray:
         return self.points[point][1][:2]
@@ -136,11 +127,11 @@ class _Case:
                                     modal_basis=None if own else self.model.mode_shapes,
                                     generalised_forces=forces)
 
-    def fe_plant(self, point: int, spec) -> control.StateSpace:
-        """The truth plant of kind ``spec`` linearised at a point (`PlantSpec.linear_model`;
-        NotImplementedError for a kind without one)."""
-        return spec.linear_model(self.scenario.true_params, theta=self.theta(point),
-                                 modal_basis=self.model.mode_shapes)
+    def fe_plant(self, point: int, settings) -> control.StateSpace:
+        """The truth plant of ``settings`` linearised at a point (its kind's
+        ``linear_model``; NotImplementedError for a kind without one)."""
+        return settings.linear_model(self.scenario.true_params, theta=self.theta(point),
+                                     model=self.model)
 
 
 @functools.lru_cache(maxsize=128)
@@ -211,7 +202,7 @@ def predicted_period(config: dict) -> float:
 
 
 def certificate(config: dict, periods) -> list[CertificateRow]:
-    """The ν-gap certificate of a case's law against its truth plant (`truth_spec`: the
+    """The ν-gap certificate of a case's law against its truth plant (`truth_settings`: the
     case's own, or the default truth kind for a reduced-plant case) at ``periods`` [s]
     in increasing order, up to the first that is not certified (module docstring).
     Empty for a law that cannot be certified (forces on the modal coordinates, an
@@ -219,7 +210,7 @@ def certificate(config: dict, periods) -> list[CertificateRow]:
     case = _case(_key(config))
     if case.scenario.observer.kind != "none":
         return []
-    spec = truth_spec(config)
+    spec = truth_settings(config)
     reduced = [case.reduced_plant(i, nominal=True)[case.names, :]
                for i in range(len(case.points))]
     try:

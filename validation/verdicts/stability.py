@@ -39,9 +39,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..batch.campaign import PlannedRun, run_planned
+from ..batch.campaign import PlannedRun
+
+from ..batch.queue import run_planned
 from ..batch.executor import Runner
-from ..run.plants import is_truth, plant_spec, with_plant
+from ..run.laws import applies_generalised_forces
+from ..run.plants import is_truth, plant_settings, with_plant
 from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import ResultStore, run_id
 from .sampled import predicted_period
@@ -160,9 +163,9 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
                 params = scenario_to_mapping(arm_parameters(arm))
                 if arm != data["arm"]:  # start the parameter tables from the other arm
                     base["true_params"] = base["nominal_params"] = params
-                if (plant_spec(base["plant"]).actuated == 2
-                        and data["controller"]["kind"] == "pbc-idealised"):
-                    continue  # two actuators: the idealised law cannot run there
+                if plant_settings(base["plant"]).actuated == 2 and \
+                        applies_generalised_forces(s):
+                    continue  # two actuators: a law of forces on every coordinate cannot run
                 label = _label(base)
                 key = (label, _options_key(base), plant, arm)
                 base["name"] = f"stability/{label}"
@@ -180,7 +183,7 @@ def _options_key(config: dict) -> str:
 def _scenario_at(case: StabilityCase, Ts: float) -> dict:
     data = dict(case.base, Ts=Ts)
     steps = math.ceil(Ts / _MAX_PLANT_STEP - 1e-9) * 2 ** case.level
-    data["plant"] = dict(plant_spec(case.base["plant"]).refined(case.level), step=Ts / steps)
+    data["plant"] = dict(plant_settings(case.base["plant"]).refined(case.level), step=Ts / steps)
     return data
 
 
@@ -365,7 +368,7 @@ def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[Stabili
     results: dict[tuple, StabilityResult] = {}
     for case in cases:
         tested, rows_at = {}, {}
-        plant = plant_spec(case.base["plant"]).refined(case.level)
+        plant = plant_settings(case.base["plant"]).refined(case.level)
         for row in all_rows:
             c = row.config
             if (c.get("name") != case.base.get("name") or c["arm"] != case.arm
@@ -392,7 +395,7 @@ def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[Stabili
 
 def _discretisation(config: dict, level: int) -> str:
     """"ANCF 8 el/link, step ≤ 0.5 ms" of a stored truth-plant run at ``level``."""
-    return (f"{plant_spec(config['plant']).discretisation()}, step ≤ "
+    return (f"{plant_settings(config['plant']).discretisation()}, step ≤ "
             f"{1e3 * _MAX_PLANT_STEP / 2 ** level:g} ms")
 
 

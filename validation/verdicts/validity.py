@@ -34,9 +34,10 @@ import control
 import numpy as np
 
 from reduced_model import ArmModel
+from reduced_model._joint_linear import nonlinear_joint_effects
 
 from ..run.laws import build_controller
-from ..run.plants import is_truth, truth_spec
+from ..run.plants import is_truth, truth_settings
 from ..run.results import read_json
 from ..run.scenario import scenario_from_mapping
 from .linear import law_gain, reduced_linear_model
@@ -67,15 +68,14 @@ def arm_validity(config: dict) -> dict:
     JSON-able data (module docstring)."""
     s = scenario_from_mapping(config)
     model = ArmModel(s.true_params, s.model.modes_per_link)
-    truth = truth_spec(config)
+    truth = truth_settings(config)
     names = list(model.state_names)
     w = 2 * np.pi * np.asarray(FREQUENCIES_HZ)
     law = build_controller(s, model)
     responses, gaps = [], []
     for theta2 in THETA2:
         red = reduced_linear_model(model, theta=(0.0, theta2))
-        fe = truth.linear_model(s.true_params, theta=(0.0, theta2),
-                                modal_basis=model.mode_shapes)
+        fe = truth.linear_model(s.true_params, theta=(0.0, theta2), model=model)
         entry = {"theta2": theta2}
         for label, P in (("reduced", red), ("fe", fe)):
             H = P(1j * w)  # (outputs, inputs, frequencies)
@@ -89,7 +89,8 @@ def arm_validity(config: dict) -> dict:
         def hold(t, x=x):
             return x[:2].copy(), np.zeros(2), np.zeros(2)
         gain = as_statespace(law_gain(law, x, 0.0, hold, shared=(model,)))
-        views = {"theta": (red[["theta1", "theta2"], :], fe[["theta1", "theta2"], :]),
+        encoders = ["motor1", "motor2"]  # θ, or a drive's rotor: what the encoders read
+        views = {"theta": (red[encoders, :], fe[encoders, :]),
                  "tip": (red[["tip_defl1", "tip_defl2"], :],
                          fe[["tip_defl1", "tip_defl2"], :]),
                  "loop": (gain * control.sample_system(red[names, :], s.Ts),
@@ -104,19 +105,19 @@ def arm_validity(config: dict) -> dict:
             row[view], row[f"{view}_peak_hz"] = detail.value, detail.frequency / (2 * np.pi)
         gaps.append(row)
     return {"arm": s.arm, "Ts": s.Ts, "modes": list(s.model.modes_per_link),
-            "law": s.controller.kind,
+            "law": s.controller.kind, "left_out": list(nonlinear_joint_effects(s.true_params)),
             "truth": _truth_text(config), "frequencies_hz": list(FREQUENCIES_HZ),
             "responses": responses, "gaps": gaps}
 
 
 def _refined(config: dict) -> dict:
     """``config`` on its truth plant refined once (mesh and step)."""
-    return dict(config, plant=truth_spec(config).refined(1))
+    return dict(config, plant=truth_settings(config).refined(1))
 
 
 def _truth_text(config: dict) -> str:
     """"truth plant (Exudyn), ANCF 4 el/link": the truth plant a case is set against."""
-    spec = truth_spec(config)
+    spec = truth_settings(config)
     return ", ".join(x for x in (spec.label, spec.discretisation()) if x)
 
 
@@ -225,7 +226,7 @@ _NUMBER = (int, float)
 _CURVES = {f"{i}->{o}": [_NUMBER] for i, o in CHANNELS}
 #: What the report reads of validity.json (`validation.run.results.read_json`).
 _SCHEMA = {
-    "arms": [{"arm": str, "Ts": _NUMBER, "modes": [int], "truth": str,
+    "arms": [{"arm": str, "Ts": _NUMBER, "modes": [int], "truth": str, "left_out": [str],
               "frequencies_hz": [_NUMBER],
               "responses": [{"theta2": _NUMBER, "reduced": _CURVES, "fe": _CURVES}],
               "gaps": [{"theta2": _NUMBER, **{k: _NUMBER for v in _GAP_VIEWS

@@ -51,7 +51,7 @@ from ..batch.base import BaseStore
 from ..batch.queue import Batch, answer_all
 from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore, run_id
-from ..run._config import ConfigError
+from ..run.config import ConfigError
 from ..run.requirements import Requirement
 from ..run.results import write_atomic
 from ..run.scenario import scenario_to_mapping

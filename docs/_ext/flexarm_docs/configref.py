@@ -80,7 +80,7 @@ def _probe_value(value):
 
 
 def _allowed(cls, name: str, annotation, required: dict, special: dict) -> str:
-    from validation.run._config import ConfigError
+    from validation.run.config import ConfigError
     from reduced_model import FieldError
     if (cls, name) in special:
         return special[(cls, name)]
@@ -141,7 +141,7 @@ def render(docs) -> str:
     from plant_exudyn import Mesh
     from reduced_model import ArmParameters
     from validation.run.requirements import Requirement
-    from validation.run.plants import ExudynPlantSpec, PluginPlantSpec, ReducedPlantSpec
+    from validation.run.plants import PLANTS, PluginSettings
     from validation.run.scenario import (ControllerSpec, DisturbanceSpec, DivergenceSpec,
                                          ModelSpec, ObserverSpec, ReferenceSpec, Scenario,
                                          SensorSpec)
@@ -151,26 +151,30 @@ def render(docs) -> str:
     special = {(ControllerSpec, "kind"): law.format(", ".join(map(literal, CONTROLLERS))),
                (ObserverSpec, "kind"): '``"none"``, ' + law.format(
                    ", ".join(map(literal, OBSERVERS)))}
-    table1, default = ArmParameters.table1(), ArmParameters()
-    arm_overrides = {f.name: f"``table1``: {_toml(getattr(table1, f.name))}"
+    default = ArmParameters()
+    arms = {"table1": ArmParameters.table1(), "lab": ArmParameters.lab()}
+    arm_overrides = {f.name: "; ".join(f"``{arm}``: {_toml(getattr(p, f.name))}"
+                                       for arm, p in arms.items()
+                                       if getattr(p, f.name) != getattr(default, f.name))
                      for f in dataclasses.fields(ArmParameters)
-                     if getattr(table1, f.name) != getattr(default, f.name)}
+                     if any(getattr(p, f.name) != getattr(default, f.name)
+                            for p in arms.values())}
     sections = [
         ("Top-level keys", Scenario, {}, None,
          "The keys of a scenario file (or of a campaign's ``[scenario]`` table)."),
-        ('``[plant]`` with ``kind = "reduced"``', ReducedPlantSpec, {}, None,
+        ('``[plant]`` with ``kind = "reduced"``', PLANTS["reduced"].Settings, {}, None,
          "The paper's model as the plant (the default)."),
-        ('``[plant]`` with ``kind = "exudyn"``', ExudynPlantSpec, {}, None,
+        ('``[plant]`` with ``kind = "exudyn"``', PLANTS["exudyn"].Settings, {}, None,
          "The finite-element truth plant.  Each kind takes only its own keys."),
-        ('``[plant]`` with ``kind = "package.module:Class"``', PluginPlantSpec, {}, None,
-         "A plant of your own: a ``reduced_model.Plant`` subclass (its contract is on "
-         "its API page)."),
+        ('``[plant]`` with ``kind = "package.module:Class"``', PluginSettings, {}, None,
+         "A plant of your own: a ``reduced_model.Plant`` subclass, or a subclass of a "
+         "built-in plant (the guide's *Write your own plant*)."),
         ("``[plant.mesh]``", Mesh, {}, None,
          'The truth plant\'s finite elements (``kind = "exudyn"`` only).'),
         ("``[true_params]`` and ``[nominal_params]``", ArmParameters, {}, arm_overrides,
          "The arm simulated and the arm the laws believe in, SI units; both start from "
-         "the parameters of ``arm`` (the defaults shown; ``table1``'s where they "
-         "differ) and override them key by key."),
+         "the parameters of ``arm`` (the defaults shown; ``table1``'s and ``lab``'s "
+         "where they differ) and override them key by key."),
         ("``[model]``", ModelSpec, {}, None, "The laws' model."),
         ("``[controller]``", ControllerSpec, {}, None,
          "The options each built-in law takes are listed on its API page."),

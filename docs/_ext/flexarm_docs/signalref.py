@@ -37,9 +37,10 @@ def metric_functions():
     """The functions whose ``Returns`` document the metric keys, in the order of
     `all_metrics`."""
     from validation.run import metrics as m
+    from validation.run import vibration as v
     from validation.run.requirements import requirement_metrics
-    return (m.all_metrics, m.tracking, m.tip_error, m.deflection, m.vibration,
-            m.vibration_decay, m.estimation, m.tip_slope_rate_error, m.torque, m.growth_rate,
+    return (m.all_metrics, m.tracking, m.tip_error, m.deflection, v.vibration,
+            v.vibration_decay, m.estimation, m.tip_slope_rate_error, m.torque, m.growth_rate,
             m.residual, requirement_metrics)
 
 
