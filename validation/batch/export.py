@@ -42,6 +42,7 @@ def export(store, *, allow_fewer: bool = False) -> tuple[Path, Path]:
 
 
 def _export(store, allow_fewer: bool) -> tuple[Path, Path]:
+    store.check_pages()  # metrics.csv is never rewritten from a damaged index
     store.refuse_malformed()
     layouts = store.layouts()
     axes = list(dict.fromkeys(a for names, _ in layouts.values() for a in names))

@@ -129,14 +129,14 @@ def encode_detail(scenario: dict, rest: dict, dictionary: bytes = b"") -> bytes:
     return pack.compress(text.encode()) + pack.flush()
 
 
-def decode_detail(blob: bytes, dictionary: bytes = b"") -> tuple[str, dict]:
-    """(scenario's canonical JSON, the rest) of `encode_detail`'s ``blob``; ValueError if
-    it is not one."""
+def decode_detail(blob: bytes, dictionary: bytes = b"") -> tuple[str, str]:
+    """(scenario's canonical JSON, the rest's JSON) of `encode_detail`'s ``blob``;
+    ValueError if it is not one."""
     try:
         unpack = zlib.decompressobj(zdict=dictionary) if dictionary else zlib.decompressobj()
         text = unpack.decompress(blob, 64 << 20).decode()
         scenario, _, rest = text.partition("\n")
-        return scenario, json_table(rest)
+        return scenario, rest
     except (zlib.error, UnicodeDecodeError, TypeError) as exc:
         raise ValueError(f"its detail is not one ({exc})") from None
 

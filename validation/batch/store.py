@@ -87,13 +87,10 @@ class ResultStore(BaseStore):
         self._db: sqlite3.Connection | None = None
         self._dictionaries: dict[str, bytes] = {}
 
-    @property
-    def out(self) -> Path:
-        return self._out
+    out = property(lambda self: self._out, doc="The results folder.")
 
     # --- the database ------------------------------------------------------------------
     def exists(self) -> bool:
-        """Whether the folder has an index."""
         return self.index_path.is_file()
 
     def connection(self, *, create: bool) -> sqlite3.Connection:
@@ -345,6 +342,16 @@ class ResultStore(BaseStore):
             out.append(row)
         out.sort(key=lambda r: (r.name, r.run_id))
         return out
+
+    @_sqlite_errors
+    def check_pages(self) -> None:
+        """`IndexDamaged` unless SQLite finds every page of the index sound
+        (``PRAGMA quick_check``: a damaged page a query does not read is found too)."""
+        found = self.connection(create=False).execute("PRAGMA quick_check(1)").fetchone()[0]
+        if found != "ok":
+            found = " ".join(found.replace("*** in database main ***", "").split())
+            raise IndexDamaged(f"{self.index_path}: the index is damaged ({found}); "
+                               f"'flexarm repair {self.out}' rebuilds it from runs/")
 
     def refuse_malformed(self) -> None:
         """`IndexDamaged` naming the first row that is not a stored run, checked in SQL

@@ -38,7 +38,7 @@ from .sweep_figures import short_value, sweep_figures
 from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
 from .drawing import draw_all
-from ..batch.fingerprint import is_fresh
+from ..batch.fingerprint import fingerprint_of, is_fresh
 from ..batch.resimulate import every_signal
 from .render import fmt_number, folded, folded_text, render
 from .calibration import calibration_section
@@ -627,10 +627,15 @@ def _rows_digest(store: ResultStore) -> str:
     included, never decoded)."""
     if not store.exists():
         return ""
-    h = hashlib.sha256()
-    for r in sorted(store.rows(), key=lambda r: r.run_id):
-        h.update(f"{r.run_id}\0{r.sha256}\0{r.size}\0{r.status}\0{r.name}\0{r.sweep}\0"
-                 f"{is_fresh(r)}\0".encode() + r.detail.blob)
+    store.rows(where="0")  # refuses an index it cannot read
+    h, now = hashlib.sha256(), {}
+    for *values, controller, observer, plant, detail in store.columns(
+            ["run_id", "sha256", "size", "status", "name", "sweep", "fingerprint",
+             "controller", "observer", "plant", "detail"], where="1 ORDER BY run_id"):
+        kinds = (controller, observer, plant)
+        if kinds not in now:  # the fingerprint each kind of run gets from this code
+            now[kinds] = fingerprint_of(*kinds)
+        h.update(f"{values}{values[-1] == now[kinds]}".encode() + detail)
     return h.hexdigest()
 
 
