@@ -128,7 +128,7 @@ def forget_plugins() -> None:
     (found once per process): for a caller that edits or installs plug-ins while it
     runs, such as a test."""
     for cached in (_plugin_walk, _top_levels, _distributions, _distribution_record,
-                   _plugins_fingerprint):
+                   _plugins_fingerprint, fingerprint_of):
         cached.cache_clear()
 
 
@@ -178,6 +178,7 @@ def is_fresh(row) -> bool:
     return row.fingerprint == fingerprint_of(row.controller, row.observer, row.plant)
 
 
+@functools.lru_cache(maxsize=256)
 def fingerprint_of(controller: str, observer: str, plant: str) -> str:
     """`run_fingerprint` of a run of these kinds of laws and plant (all that it reads of
     a scenario)."""

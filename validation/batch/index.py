@@ -32,7 +32,7 @@ __all__ = ["INDEX_NAME", "SCHEMA", "SCHEMA_VERSION", "FIXED", "BUSY_TIMEOUT", "r
            "is_run_id", "set_wal", "transaction", "insert_rows", "row_values",
            "finite_or_none", "metric_values", "RUN_ID", "set_aside", "metric_column",
            "axis_column", "encode_detail", "decode_detail", "dictionary_key", "json_table",
-           "STATUS", "scenario_columns", "MAX_COLUMNS"]
+           "STATUS", "scenario_columns", "MAX_COLUMNS", "open_read_only"]
 
 INDEX_NAME = "index.sqlite"
 SCHEMA_VERSION = 2
@@ -230,6 +230,27 @@ def set_wal(db: sqlite3.Connection) -> None:
             if exc.sqlite_errorname != "SQLITE_BUSY" or time.monotonic() > deadline:
                 raise
             time.sleep(0.005)
+
+
+def open_read_only(index: Path) -> sqlite3.Connection:
+    """The index of a folder SQLite cannot write its shared-memory file into
+    (read-only, or on a full disk).  With no WAL journal (or an empty one) every
+    committed run is in the index itself, which no writer can change there: opened
+    as immutable (SQLite needs no shared-memory file then)."""
+    wal = Path(f"{index}-wal")
+    if wal.exists() and wal.stat().st_size > 0:
+        raise sqlite3.OperationalError("read-only folder whose journal (-wal) holds "
+                                       "runs not yet in the index")
+    uri = f"{index.resolve().as_uri()}?immutable=1"
+    db = sqlite3.connect(uri, uri=True, isolation_level=None)
+    try:
+        tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master")}
+        if "runs" not in tables:
+            raise sqlite3.DatabaseError("the index holds no table of runs")
+    except BaseException:
+        db.close()
+        raise
+    return db
 
 
 @contextmanager

@@ -190,15 +190,19 @@ def metric_matrix(rows, names) -> "np.ndarray":
     import numpy as np
     names = list(names)
     out = np.full((len(rows), len(names)), np.nan)
-    pickers: dict = {}
+    groups: dict = {}  # rows of one layout share its tuple
     for i, row in enumerate(rows):
-        layout = row.metric_names
-        if id(layout) not in pickers:  # rows of one layout share its tuple
-            found = [(j, layout.index(n)) for j, n in enumerate(names) if n in layout]
-            pickers[id(layout)] = ([j for j, _ in found], _picker([k for _, k in found]),
-                                   layout)
-        columns, pick, _ = pickers[id(layout)]
-        if columns:
-            out[i, columns] = [v if isinstance(v, float) else np.nan
-                               for v in pick(row.metric_values)]
+        groups.setdefault(id(row.metric_names), (row.metric_names, []))[1].append(i)
+    for layout, index in groups.values():
+        found = [(j, layout.index(n)) for j, n in enumerate(names) if n in layout]
+        if not found:
+            continue
+        pick = _picker([k for _, k in found])
+        values = [pick(rows[i].metric_values) for i in index]
+        try:  # None (a NaN stored) becomes NaN
+            block = np.array(values, dtype=float).reshape(len(index), len(found))
+        except (TypeError, ValueError):  # a text metric among them: not a number
+            block = np.array([[v if isinstance(v, float) else np.nan for v in vs]
+                              for vs in values]).reshape(len(index), len(found))
+        out[np.ix_(index, [j for j, _ in found])] = block
     return out

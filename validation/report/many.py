@@ -16,7 +16,7 @@ import numpy as np
 from ..batch.records import metric_matrix
 from .render import fmt_number
 
-__all__ = ["MANY", "is_many", "distributions", "histograms"]
+__all__ = ["MANY", "is_many", "distributions", "histograms", "read_metrics"]
 
 #: More reported runs than this are summarised (a table row per run is no longer read).
 MANY = 2000
@@ -37,6 +37,17 @@ _QUANTILES = (0.0, 0.05, 0.5, 0.95, 1.0)
 def is_many(runs) -> bool:
     """Whether ``runs`` are summarised rather than listed."""
     return len(runs) > MANY
+
+
+def read_metrics(store) -> tuple[str, ...] | None:
+    """The metrics a report of ``store`` reads of every run: all of them (None) for a
+    few runs; for many, those this summary shows, the requirements' ρ and the windows
+    (transient, end time) — reading every metric is most of reading 10^5 rows."""
+    if len(store.columns(["run_id"])) <= MANY:
+        return None
+    names = [c[2:] for c in store.column_names() if c.startswith("m:")]
+    return ("status", "end_time", "transient_s", *(m[0] for m in _HEADLINE),
+            *(n for n in names if n.startswith("rho_")))
 
 
 def _metrics(runs) -> list[tuple]:

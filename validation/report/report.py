@@ -43,7 +43,7 @@ from ..batch.resimulate import every_signal
 from .render import fmt_number, folded, folded_text, render
 from .calibration import calibration_section
 from .robust import robust_section
-from .many import distributions, histograms, is_many
+from .many import distributions, histograms, is_many, read_metrics
 from ..batch.records import metric_matrix
 from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
@@ -318,7 +318,7 @@ def _included(store: ResultStore):
     simulations, `calibration_section`)."""
     from ..verdicts.calibration import FIT_SWEEP
     from ..verdicts.verify import ROBUST_SWEEPS
-    all_rows = store.rows()
+    all_rows = store.rows(metrics=read_metrics(store))
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
@@ -340,8 +340,8 @@ def _included(store: ResultStore):
 def _scope(runs) -> list[str]:
     arms = sorted({r.arm for r in runs})
     scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in arms]
-    scope.append("plants: " + ", ".join(sorted({(r.plant, r.role): r.plant_label
-                                                 for r in runs}.values())))
+    kinds = {(r.plant, r.role): r for r in runs}  # a label per kind, not per run
+    scope.append("plants: " + ", ".join(sorted({r.plant_label for r in kinds.values()})))
     scope.append("control periods Ts: " + ", ".join(f"{1e3 * t:g} ms" for t in
                                                      sorted({r.Ts for r in runs})))
     scope.append("initial conditions: " + ", ".join(sorted(
