@@ -127,8 +127,7 @@ def forget_plugins() -> None:
     """Forget which files each plug-in imports and which distributions are installed
     (found once per process): for a caller that edits or installs plug-ins while it
     runs, such as a test."""
-    for cached in (_plugin_walk, _top_levels, _distributions, _distribution_record,
-                   _plugins_fingerprint, fingerprint_of):
+    for cached in (_plugin_walk, _top_levels, _distributions, _distribution_record):
         cached.cache_clear()
 
 
@@ -154,11 +153,6 @@ def run_fingerprint(scenario: dict) -> str:
     kinds = plugin_kinds(scenario)
     if not kinds:
         return code_fingerprint()
-    return _plugins_fingerprint(tuple(kinds))
-
-
-@functools.lru_cache(maxsize=64)
-def _plugins_fingerprint(kinds: tuple[str, ...]) -> str:
     h = hashlib.sha256(code_fingerprint().encode())
     for kind in kinds:
         files = plugin_sources(kind)
@@ -178,7 +172,6 @@ def is_fresh(row) -> bool:
     return row.fingerprint == fingerprint_of(row.controller, row.observer, row.plant)
 
 
-@functools.lru_cache(maxsize=256)
 def fingerprint_of(controller: str, observer: str, plant: str) -> str:
     """`run_fingerprint` of a run of these kinds of laws and plant (all that it reads of
     a scenario)."""

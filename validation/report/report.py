@@ -322,7 +322,9 @@ def _included(store: ResultStore):
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
-    stale = [r for r in all_rows if not is_fresh(r)]
+    now = {k: fingerprint_of(*k) for k in {(r.controller, r.observer, r.plant)
+                                           for r in all_rows}}  # once per kind of run
+    stale = [r for r in all_rows if r.fingerprint != now[r.controller, r.observer, r.plant]]
     left_out = set(damaged) | {r.run_id for r in stale}  # a set: a list was quadratic
     fresh = [r for r in all_rows if r.run_id not in left_out]
     runs = [r for r in fresh if r.sweep != "stability" and not is_check(r)
