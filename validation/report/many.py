@@ -16,7 +16,7 @@ import numpy as np
 from ..batch.records import metric_matrix
 from .render import fmt_number
 
-__all__ = ["MANY", "is_many", "distributions", "histograms", "read_metrics"]
+__all__ = ["MANY", "is_many", "distributions", "histograms", "read_metrics", "windows_of"]
 
 #: More reported runs than this are summarised (a table row per run is no longer read).
 MANY = 2000
@@ -37,6 +37,18 @@ _QUANTILES = (0.0, 0.05, 0.5, 0.95, 1.0)
 def is_many(runs) -> bool:
     """Whether ``runs`` are summarised rather than listed."""
     return len(runs) > MANY
+
+
+def windows_of(runs) -> set:
+    """(transient, duration) of ``runs``: from each run's scenario, or for many runs from
+    the metrics that say them (the transient applied; the end time of a run that
+    completed) and the scenarios of the others."""
+    if not is_many(runs):
+        return {(r.config["transient"], r.config["duration"]) for r in runs}
+    ok = [r for r in runs if r.status == "ok"]
+    pairs = {tuple(p) for p in metric_matrix(ok, ["transient_s", "end_time"]).tolist()}
+    return pairs | {(r.config["transient"], r.config["duration"])
+                    for r in runs if r.status != "ok"}
 
 
 def read_metrics(store) -> tuple[str, ...] | None:

@@ -43,8 +43,7 @@ from ..batch.resimulate import every_signal
 from .render import fmt_number, folded, folded_text, render
 from .calibration import calibration_section
 from .robust import robust_section
-from .many import distributions, histograms, is_many, read_metrics
-from ..batch.records import metric_matrix
+from .many import distributions, histograms, is_many, read_metrics, windows_of
 from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
@@ -349,23 +348,11 @@ def _scope(runs) -> list[str]:
     scope.append("initial conditions: " + ", ".join(sorted(
         {"at rest" if r.initial_state == "rest" else "moving with the reference"
          for r in runs})))
-    windows = sorted(_windows(runs))
+    windows = sorted(windows_of(runs))
     scope.append("metrics after the transient: " + ", ".join(
         f"{t:g} s of {d:g} s runs" for t, d in windows[:6]) + (", …" if len(windows) > 6 else "")
         + " (maxima of deflection and torque, torque variation: the whole run)")
     return scope
-
-
-def _windows(runs) -> set:
-    """(transient, duration) of ``runs``: from each run's scenario, or for many runs from
-    the metrics that say them (the transient applied; the end time of a run that
-    completed) and the scenarios of the others."""
-    if not is_many(runs):
-        return {(r.config["transient"], r.config["duration"]) for r in runs}
-    ok = [r for r in runs if r.status == "ok"]
-    pairs = {tuple(p) for p in metric_matrix(ok, ["transient_s", "end_time"]).tolist()}
-    return pairs | {(r.config["transient"], r.config["duration"])
-                    for r in runs if r.status != "ok"}
 
 
 def report_data(results_dir, *, animate: bool = True, progress: bool = True,

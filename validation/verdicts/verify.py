@@ -47,7 +47,6 @@ from pathlib import Path
 import numpy as np
 
 from ..batch.campaign import PlannedRun
-from ..batch.base import BaseStore
 from ..batch.queue import Batch, answer_all
 from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore, run_id
@@ -90,11 +89,10 @@ def effective_rho(row, requirement: Requirement) -> float | None:
 
 @dataclass
 class Evaluations:
-    """Scenarios run on the campaign runner into ``out`` (a results folder, or a store
-    such as an in-memory one: `validation.batch.memory.MemoryStore`) and read back;
-    simulations counted per plant role (distinct scenarios asked for).  A search asks
-    with `run`; a question answered beside others (`validation.batch.queue`) yields
-    `batch` and hands the rows it is sent to `record`."""
+    """Scenarios run on the campaign runner into ``out`` (a folder, or a `BaseStore`: an
+    in-memory one) and read back; simulations counted per plant role (distinct scenarios
+    asked for).  A search asks with `run`; a question answered beside others (`queue`)
+    yields `batch` and hands the rows it is sent to `record`."""
 
     out: object
     runner: object
@@ -104,7 +102,7 @@ class Evaluations:
     failed: list = field(default_factory=list)
 
     def __post_init__(self):
-        self.store = self.out if isinstance(self.out, BaseStore) else ResultStore(self.out)
+        self.store = ResultStore(self.out) if isinstance(self.out, (str, Path)) else self.out
 
     def batch(self, items: list[tuple]) -> Batch:
         """The batch of ``items`` = [(scenario, sweep, axes)]."""
