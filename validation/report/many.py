@@ -141,12 +141,13 @@ def histograms(runs) -> bytes | None:
     for ax, (j, (key, label, scale, unit, _)) in zip(axes.flat, enumerate(wanted)):
         column = values[:, j]
         column = column[np.isfinite(column)] * scale
-        if column.size:
-            ax.hist(column, bins=50, color="#4477aa")
+        if column.size:  # stairs of np.histogram: a third of hist's time (50 patches)
+            ax.stairs(*np.histogram(column, bins=50), fill=True, color="#4477aa")
         if key.startswith("rho_"):
             ax.axvline(0.0, color="#cc3311", lw=1)
         ax.set_title(f"{label} [{unit}]" if unit else label, fontsize=9)
         ax.tick_params(labelsize=7)
+        ax.locator_params(axis="x", nbins=4)
     for ax in list(axes.flat)[len(wanted):]:
         ax.set_visible(False)
     return fig.png(figure)
