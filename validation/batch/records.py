@@ -183,7 +183,7 @@ def records(cursor, sets: dict, dictionary):
         yield values[0], row
 
 
-def metric_matrix(rows, names) -> "np.ndarray":
+def metric_matrix(rows, names):
     """The metrics ``names`` of ``rows`` as a float array (len(rows), len(names)): NaN
     where a run lacks a metric or its value is not a number (no dict built per row: runs
     of one metric layout share the positions of the names)."""

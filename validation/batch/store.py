@@ -48,7 +48,7 @@ from pathlib import Path
 from ..run.results import STATUSES, LinkedFolder, RunResult, own_folder
 from . import export, repair
 from .base import BaseStore
-from .errors import IndexBusy, IndexDamaged, NotARunFile, ReadOnlyFolder, StoreError
+from .errors import IndexBusy, IndexDamaged, ReadOnlyFolder, StoreError
 from .index import (BUSY_TIMEOUT, FIXED, INDEX_NAME, SCHEMA, SCHEMA_VERSION, dictionary_key,
                     insert_rows, is_run_id, json_table, metric_column, open_read_only,
                     row_values, run_id, set_wal, transaction)
