@@ -7,7 +7,7 @@ import numpy as np
 
 from . import _kernels as kern
 from ._linear import reduced_linear_model
-from ._model import ArmModel, cached_model, validate_modes_per_link
+from ._model import ArmModel, cached_model, validate_kinematics, validate_modes_per_link
 from ._modes import projection
 from ._parameters import ArmParameters, FieldError
 from ._plant_base import Plant, PlantSettings
@@ -43,6 +43,9 @@ class ReducedPlant(Plant):
         Internal RK4 step [s], default 1 ms.  At 1 ms RK4 resolves the default arm's
         highest mode with 2+2 modes (34 Hz, ω h = 0.21) to ~1e-5 amplitude error
         per period; use 0.25 ms or less with 4 modes per link (up to ~250 Hz).
+    kinematics : {"linear", "exact"}
+        The paper's linear kinematics (default) or exact inextensible kinematics
+        (`ArmModel`).
     """
 
     role = "reduced"
@@ -61,11 +64,16 @@ class ReducedPlant(Plant):
             The plant's own model order, assumed modes of link 1 and link 2 (1..4 each).
         step : float
             Internal RK4 step [s]; ``Ts`` must be a whole multiple of it.
+        kinematics : {"linear", "exact"}
+            How a link's points follow its modal deflection: the paper's linear
+            kinematics, or the exact inextensible centreline (foreshortening included;
+            the geometrically exact FE arm's, `reduced_model.ArmModel`).
         """
 
         kind: str = "reduced"
         modes_per_link: tuple[int, int] = (2, 2)
         step: float = 1e-3
+        kinematics: str = "linear"
 
         def __post_init__(self):
             if self.kind != "reduced":
@@ -76,6 +84,11 @@ class ReducedPlant(Plant):
                 raise FieldError("plant", "modes_per_link", "must be two integers in 1..4, "
                                  f"got {list(self.modes_per_link)!r}") from None
             positive_step(self.step)
+            try:
+                validate_kinematics(self.kinematics)
+            except ValueError as exc:
+                raise FieldError("plant", "kinematics", str(exc).removeprefix(
+                    "kinematics ")) from None
 
         def step_cost(self) -> float:
             return 1e-4  # RK4 of 2n states, pessimistic
@@ -83,16 +96,18 @@ class ReducedPlant(Plant):
         def linear_model(self, params, *, theta, model):
             """The plant's own model linearised at ``theta``, its q outputs in ``model``'s
             mode shapes (as the plant reports them)."""
-            own = cached_model(params, tuple(self.modes_per_link))
+            own = cached_model(params, tuple(self.modes_per_link), self.kinematics)
             same = model.params == params and model.modes_per_link == own.modes_per_link
             return reduced_linear_model(own, theta=theta,
                                         modal_basis=None if same else model.mode_shapes)
 
     def __init__(self, params: ArmParameters | None = None, *, model: ArmModel | None = None,
                  sensors: SensorConfig = SensorConfig(),
-                 modes_per_link: tuple[int, int] = (2, 2), step: float = 1e-3) -> None:
+                 modes_per_link: tuple[int, int] = (2, 2), step: float = 1e-3,
+                 kinematics: str = "linear") -> None:
         params = params if params is not None else ArmParameters()
-        self.model = cached_model(params, validate_modes_per_link(modes_per_link))
+        self.model = cached_model(params, validate_modes_per_link(modes_per_link),
+                                  validate_kinematics(kinematics))
         n = self.model.n
         self._x = np.zeros(2 * n)
         self._f = np.zeros(n)  # generalised forces when a tip force acts
@@ -118,10 +133,18 @@ class ReducedPlant(Plant):
         return self._basis_map @ q, self._basis_map @ qd
 
     def field_sampler(self, link: int, x, derivative: int):
-        """Callable giving w_link^(derivative)(x) = Σ φ^(derivative)(x) q (modal field)."""
-        basis = self.model.mode_shapes[link].evaluate(x, derivative).T
+        """Callable giving w_link^(derivative)(x) = Σ φ^(derivative)(x) q (modal field);
+        with exact kinematics the centreline's transverse position (derivative 0) or its
+        curvature (2)."""
         n1 = self.model.modes_per_link[0]
         coords = slice(2, 2 + n1) if link == 0 else slice(2 + n1, self.model.n)
+        if self.model.kinematics == "exact":
+            if derivative not in (0, 2):
+                raise ValueError(f"derivative must be 0 or 2, got {derivative}")
+            curve = self.model.links[link]
+            field = curve.transverse if derivative == 0 else curve.curvature
+            return lambda: field(x, self._x[coords])
+        basis = self.model.mode_shapes[link].evaluate(x, derivative).T
         return lambda: basis @ self._x[coords]
 
     def tip_positions(self) -> np.ndarray:
@@ -185,7 +208,7 @@ class ReducedPlant(Plant):
             out[2:m] = self._basis_map @ x[2:n]
             out[m + 2:2 * m] = self._basis_map @ x[n + 2:]
         kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-8:-2])
-        out[-2:] = 0.0  # a modal field is represented exactly by its own modes
+        out[-2:] = 0.0  # its coordinates describe its whole deflection (both kinematics)
 
 
 def positive_step(step) -> None:
