@@ -11,7 +11,7 @@ from ._cache_guard import invalidate_stale_kernel_caches
 invalidate_stale_kernel_caches()  # before any kernel is loaded from numba's cache
 
 # The imports below load the kernels, so they must follow the cache check.
-from ._model import ArmModel, cached_model, validate_modes_per_link  # noqa: E402
+from ._model import KINEMATICS, ArmModel, cached_model, validate_modes_per_link  # noqa: E402
 from ._modes import LinkModes  # noqa: E402
 from ._parameters import ArmParameters, FieldError  # noqa: E402
 from ._linear import reduced_linear_model  # noqa: E402
@@ -24,6 +24,6 @@ from ._sensors import STRAIN_QUANTITIES, SensorConfig, SensorModel  # noqa: E402
 __all__ = [
     "ArmParameters", "FieldError", "ArmModel", "cached_model", "LinkModes", "ReducedPlant", "Measurement",
     "TrueState", "Plant", "PlantFailure", "SensorConfig", "SensorModel", "STRAIN_QUANTITIES",
-    "check_sample_time", "validate_modes_per_link", "PlantSettings", "Refinement", "ROLES",
+    "check_sample_time", "validate_modes_per_link", "KINEMATICS", "PlantSettings", "Refinement", "ROLES",
     "LEVELS", "coordinate_names", "output_names", "reduced_linear_model",
 ]

@@ -47,9 +47,10 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ._exact_data import (exact_reals, exact_workspace_sizes, unpack_exact,
+                          unpack_exact_workspace)
 from ._exact_kernels import (exact_coriolis_matrix_into, exact_elastic_into,
-                             exact_mass_bias_into, exact_reals, exact_tips_into,
-                             exact_workspace_sizes, unpack_exact, unpack_exact_workspace)
+                             exact_mass_bias_into, exact_tips_into)
 from ._views import matrix_view
 
 __all__ = [

@@ -98,7 +98,8 @@ class ArmModel:
     tan β = w', which keeps its arc length (foreshortening included) and turns the next
     frame by atan w_i'(L_i) — the FE plant's placement of its nodes; its bending energy
     is ½ EI ∫ κ² of the exact curvature κ = β' (`reduced_model._inextensible`).  Both
-    agree to first order in q; the exact model is derived on the docs' theory page.
+    have the same mass matrix at q = 0, hence the same linearisation about rest; the
+    exact model is derived on the docs' theory page.
 
     All configuration-independent integrals are computed once here; the hot functions
     run as numba kernels (`reduced_model._kernels`) on `data` and can be called from

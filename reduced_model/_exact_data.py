@@ -1,0 +1,146 @@
+"""The constants and scratch of the exact inextensible kinematics, packed for compiled
+code (the dynamics: `reduced_model._exact_kernels`).
+
+`ModelData.exact` (`reduced_model._kernels`) is an `ExactData` of views into the model's
+packed buffers, after the paper's model's own constants, and `Workspace.exact` an
+`ExactWork` of views into its scratch buffers; both are empty (N = 0) for the paper's
+linear kinematics, so one compiled form serves both.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ._views import matrix_view
+
+__all__ = ["ExactData", "ExactWork", "exact_reals", "unpack_exact", "exact_workspace_sizes",
+           "unpack_exact_workspace"]
+
+
+class ExactData(NamedTuple):
+    """Constants of the exact kinematics (read-only; arrays empty when N = 0)."""
+
+    N: int  # interpolation nodes per link (0: the paper's linear kinematics)
+    G1: np.ndarray  # (1+n1+N)² Gram of link 1's basis [s, φ_1*, r_*] (hub 2, stator at the tip)
+    G2: np.ndarray  # (2+n2+N)² Gram of link 2's basis [1, s, φ_2*, r_*] (payload at the tip)
+    dphi1: np.ndarray  # (n1, N) φ_1k' at the nodes
+    ddphi1: np.ndarray  # (n1, N) φ_1k''
+    dphi2: np.ndarray  # (n2, N)
+    ddphi2: np.ndarray  # (n2, N)
+    w1: np.ndarray  # (N,) Gauss weights on [0, L1] = r_h(L1)
+    w2: np.ndarray  # (N,)
+    dphi2_tip: np.ndarray  # (n2,) φ_2k'(L2)
+    inertia: np.ndarray  # (4,) hub 1, stator, hub 2, payload [kg m²]
+    EI: np.ndarray  # (2,) bending stiffness of each link
+    damping: np.ndarray  # (2,) Kelvin–Voigt bending damping of each link
+
+
+class ExactWork(NamedTuple):
+    """Scratch of the exact kernels (one per user; empty when N = 0)."""
+
+    A1: np.ndarray  # complex (1+n1, nb1) link 1's rows [θ1, q_1*], local frame
+    GA1: np.ndarray  # G1 A1ᵀ, row by row
+    Ad1: np.ndarray  # Ȧ1
+    A2: np.ndarray  # complex (n, nb2) link 2's rows, all coordinates, link 2's frame
+    GA2: np.ndarray
+    Ad2: np.ndarray
+    v1: np.ndarray  # complex (nb1,) velocity-product acceleration of link 1's coefficients
+    v2: np.ndarray  # complex (nb2,)
+    a2: np.ndarray  # complex (nb2,) i × link 2's position coefficients
+    t: np.ndarray  # complex (1+n1,) link-1 tip Jacobian rows (link 1's frame)
+    td: np.ndarray  # complex (1+n1,) their rates
+    g: np.ndarray  # complex (N,) g, g', g'' at the nodes of the link being filled
+    g1: np.ndarray
+    g2: np.ndarray
+    pd: np.ndarray  # (N,) ṗ at the nodes
+    ax: np.ndarray  # (4, n) rotor angular-velocity rows
+    axd: np.ndarray  # (4, n) their rates
+    vp: np.ndarray  # (4,) rotor velocity-product angular accelerations
+
+
+def exact_reals(parts: dict | None, n1: int, n2: int) -> tuple[list[int], list[np.ndarray]]:
+    """(ints, reals) to append to a packed model: [N] and the `ExactData` arrays in
+    their field order (``parts`` None: the linear kinematics, N = 0)."""
+    if parts is None:
+        return [0], []
+    N = parts["w1"].shape[0]
+    shapes = {"G1": (1 + n1 + N,) * 2, "G2": (2 + n2 + N,) * 2, "dphi1": (n1, N),
+              "ddphi1": (n1, N), "dphi2": (n2, N), "ddphi2": (n2, N), "w1": (N,), "w2": (N,),
+              "dphi2_tip": (n2,), "inertia": (4,), "EI": (2,), "damping": (2,)}
+    out = []
+    for name, shape in shapes.items():
+        if np.shape(parts[name]) != shape:
+            raise ValueError(f"exact part {name} has shape {np.shape(parts[name])}, "
+                             f"expected {shape}")
+        out.append(np.ravel(np.asarray(parts[name], dtype=float)))
+    return [N], out
+
+
+@njit(cache=True, inline="always")
+def unpack_exact(N, n1, n2, reals, o):
+    """`ExactData` of views into ``reals`` from offset ``o`` (N = 0: empty views)."""
+    on = 1 if N > 0 else 0
+    nb1, nb2 = on * (1 + n1 + N), on * (2 + n2 + N)
+    G1 = matrix_view(reals, o, nb1, nb1)
+    o += nb1 * nb1
+    G2 = matrix_view(reals, o, nb2, nb2)
+    o += nb2 * nb2
+    dphi1 = matrix_view(reals, o, n1, N)
+    o += n1 * N
+    ddphi1 = matrix_view(reals, o, n1, N)
+    o += n1 * N
+    dphi2 = matrix_view(reals, o, n2, N)
+    o += n2 * N
+    ddphi2 = matrix_view(reals, o, n2, N)
+    o += n2 * N
+    w1 = reals[o:o + N]
+    w2 = reals[o + N:o + 2 * N]
+    o += 2 * N
+    dphi2_tip = reals[o:o + on * n2]
+    o += on * n2
+    inertia = reals[o:o + 4 * on]
+    EI = reals[o + 4 * on:o + 6 * on]
+    damping = reals[o + 6 * on:o + 8 * on]
+    return ExactData(N, G1, G2, dphi1, ddphi1, dphi2, ddphi2, w1, w2, dphi2_tip, inertia, EI,
+                     damping)
+
+
+def exact_workspace_sizes(n1: int, n2: int, N: int) -> tuple[int, int]:
+    """(complex, real) scratch lengths of `ExactWork` (0, 0 when N = 0)."""
+    if N == 0:
+        return 0, 0
+    n, nb1, nb2 = 2 + n1 + n2, 1 + n1 + N, 2 + n2 + N
+    return 3 * (1 + n1) * nb1 + 3 * n * nb2 + nb1 + 2 * nb2 + 2 * (1 + n1) + 3 * N, \
+        N + 8 * n + 4
+
+
+@njit(cache=True, inline="always")
+def unpack_exact_workspace(N, n1, n2, wc, oc, wr, orr):
+    """`ExactWork` of views into the buffers from offsets ``oc`` (complex), ``orr`` (real)."""
+    on = 1 if N > 0 else 0
+    n = on * (2 + n1 + n2)
+    r1, nb1, nb2 = on * (1 + n1), on * (1 + n1 + N), on * (2 + n2 + N)
+    A1 = matrix_view(wc, oc, r1, nb1)
+    GA1 = matrix_view(wc, oc + r1 * nb1, r1, nb1)
+    Ad1 = matrix_view(wc, oc + 2 * r1 * nb1, r1, nb1)
+    oc += 3 * r1 * nb1
+    A2 = matrix_view(wc, oc, n, nb2)
+    GA2 = matrix_view(wc, oc + n * nb2, n, nb2)
+    Ad2 = matrix_view(wc, oc + 2 * n * nb2, n, nb2)
+    oc += 3 * n * nb2
+    v1 = wc[oc:oc + nb1]
+    oc += nb1
+    v2 = wc[oc:oc + nb2]
+    a2 = wc[oc + nb2:oc + 2 * nb2]
+    oc += 2 * nb2
+    t = wc[oc:oc + r1]
+    td = wc[oc + r1:oc + 2 * r1]
+    oc += 2 * r1
+    g, g1, g2 = wc[oc:oc + N], wc[oc + N:oc + 2 * N], wc[oc + 2 * N:oc + 3 * N]
+    pd = wr[orr:orr + N]
+    ax = matrix_view(wr, orr + N, 4 * on, n)
+    axd = matrix_view(wr, orr + N + 4 * n, 4 * on, n)
+    vp = wr[orr + N + 8 * n:orr + N + 8 * n + 4 * on]
+    return ExactWork(A1, GA1, Ad1, A2, GA2, Ad2, v1, v2, a2, t, td, g, g1, g2, pd, ax, axd, vp)
