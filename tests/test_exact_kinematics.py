@@ -272,7 +272,6 @@ def test_the_rigid_limit_is_the_rigid_two_link_arm(kinematics):
 
 
 # --- the FE arm ---------------------------------------------------------------------------------
-@pytest.mark.slow
 def test_large_motion_follows_the_geometrically_exact_fe_arm():
     """The issue's pulses (link-1 tip deflection 100 mm): with 4+4 modes the exact
     kinematics follow the converged FE arm (ANCF 16 el/link, step 125 µs: within 6e-7 and
