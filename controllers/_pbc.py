@@ -161,7 +161,7 @@ def _pbc_torque(ints, reals, wc, wr, M, C, scratch, x_hat, theta_d, dtheta_d, dd
                 acc += d.D[i, j] * Qd[j]
         tau[i] = acc - kv[i] * (de[i] + lam[i] * e[i])  # eq. (20), s from eq. (5)
     if d.exact.N > 0:  # exact kinematics: the bending forces beyond K Q (and D Q̇)
-        exact_elastic_into(d, Q, Qd, tau, with_damping)
+        exact_elastic_into(d.exact, Q, Qd, tau, with_damping)
 
 
 @njit(cache=True)

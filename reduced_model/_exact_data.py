@@ -1,10 +1,12 @@
 """The constants and scratch of the exact inextensible kinematics, packed for compiled
 code (the dynamics: `reduced_model._exact_kernels`).
 
-`ModelData.exact` (`reduced_model._kernels`) is an `ExactData` of views into the model's
-packed buffers, after the paper's model's own constants, and `Workspace.exact` an
-`ExactWork` of views into its scratch buffers; both are empty (N = 0) for the paper's
-linear kinematics, so one compiled form serves both.
+The exact constants follow the paper's model's own in its packed buffers, and the exact
+scratch follows its scratch.  `ModelData.exact` (`reduced_model._kernels`) is only an
+`ExactRef` to them (N = 0: the paper's linear kinematics) and `Workspace.exact` an
+`ExactScratch`: the exact kernels take these two small tuples and unpack the views
+themselves, because a call that is not inlined passes every array of a namedtuple one by
+one (with ~60 arrays, 1 µs of a 4 µs mass matrix).
 """
 from __future__ import annotations
 
@@ -15,14 +17,40 @@ from numba import njit
 
 from ._views import matrix_view
 
-__all__ = ["ExactData", "ExactWork", "exact_reals", "unpack_exact", "exact_workspace_sizes",
-           "unpack_exact_workspace"]
+__all__ = ["ExactRef", "ExactScratch", "ExactData", "ExactWork", "exact_reals",
+           "unpack_exact", "exact_workspace_sizes", "unpack_exact_workspace"]
+
+
+class ExactRef(NamedTuple):
+    """Where a packed model keeps its exact constants (`ModelData.exact`)."""
+
+    N: int  # interpolation nodes per link (0: the paper's linear kinematics)
+    n1: int
+    n2: int
+    reals: np.ndarray  # the model's packed reals
+    offset: int  # where the exact constants start in them
+
+
+class ExactScratch(NamedTuple):
+    """Where a workspace keeps the exact scratch (`Workspace.exact`)."""
+
+    wc: np.ndarray  # the workspace's complex buffer
+    oc: int  # where the exact scratch starts in it
+    wr: np.ndarray  # its real buffer
+    orr: int
 
 
 class ExactData(NamedTuple):
-    """Constants of the exact kinematics (read-only; arrays empty when N = 0)."""
+    """Constants of the exact kinematics (read-only views; built when N > 0)."""
 
-    N: int  # interpolation nodes per link (0: the paper's linear kinematics)
+    N: int  # interpolation nodes per link
+    n1: int
+    n2: int
+    L1: float
+    L2: float
+    phi1_tip: np.ndarray  # (n1,) φ_1k(L1)
+    dphi1_tip: np.ndarray  # (n1,) φ_1k'(L1)
+    phi2_tip: np.ndarray  # (n2,) φ_2k(L2)
     G1: np.ndarray  # (1+n1+N)² Gram of link 1's basis [s, φ_1*, r_*] (hub 2, stator at the tip)
     G2: np.ndarray  # (2+n2+N)² Gram of link 2's basis [1, s, φ_2*, r_*] (payload at the tip)
     dphi1: np.ndarray  # (n1, N) φ_1k' at the nodes
@@ -66,7 +94,8 @@ def exact_reals(parts: dict | None, n1: int, n2: int) -> tuple[list[int], list[n
     if parts is None:
         return [0], []
     N = parts["w1"].shape[0]
-    shapes = {"G1": (1 + n1 + N,) * 2, "G2": (2 + n2 + N,) * 2, "dphi1": (n1, N),
+    shapes = {"L": (2,), "phi1_tip": (n1,), "dphi1_tip": (n1,), "phi2_tip": (n2,),
+              "G1": (1 + n1 + N,) * 2, "G2": (2 + n2 + N,) * 2, "dphi1": (n1, N),
               "ddphi1": (n1, N), "dphi2": (n2, N), "ddphi2": (n2, N), "w1": (N,), "w2": (N,),
               "dphi2_tip": (n2,), "inertia": (4,), "EI": (2,), "damping": (2,)}
     out = []
@@ -79,10 +108,17 @@ def exact_reals(parts: dict | None, n1: int, n2: int) -> tuple[list[int], list[n
 
 
 @njit(cache=True, inline="always")
-def unpack_exact(N, n1, n2, reals, o):
-    """`ExactData` of views into ``reals`` from offset ``o`` (N = 0: empty views)."""
-    on = 1 if N > 0 else 0
-    nb1, nb2 = on * (1 + n1 + N), on * (2 + n2 + N)
+def unpack_exact(ref):
+    """`ExactData` of views into the packed model ``ref`` points to (N > 0)."""
+    N, n1, n2, reals, o = ref.N, ref.n1, ref.n2, ref.reals, ref.offset
+    nb1, nb2 = 1 + n1 + N, 2 + n2 + N
+    L1, L2 = reals[o], reals[o + 1]
+    o += 2
+    phi1_tip = reals[o:o + n1]
+    dphi1_tip = reals[o + n1:o + 2 * n1]
+    o += 2 * n1
+    phi2_tip = reals[o:o + n2]
+    o += n2
     G1 = matrix_view(reals, o, nb1, nb1)
     o += nb1 * nb1
     G2 = matrix_view(reals, o, nb2, nb2)
@@ -98,13 +134,13 @@ def unpack_exact(N, n1, n2, reals, o):
     w1 = reals[o:o + N]
     w2 = reals[o + N:o + 2 * N]
     o += 2 * N
-    dphi2_tip = reals[o:o + on * n2]
-    o += on * n2
-    inertia = reals[o:o + 4 * on]
-    EI = reals[o + 4 * on:o + 6 * on]
-    damping = reals[o + 6 * on:o + 8 * on]
-    return ExactData(N, G1, G2, dphi1, ddphi1, dphi2, ddphi2, w1, w2, dphi2_tip, inertia, EI,
-                     damping)
+    dphi2_tip = reals[o:o + n2]
+    o += n2
+    inertia = reals[o:o + 4]
+    EI = reals[o + 4:o + 6]
+    damping = reals[o + 6:o + 8]
+    return ExactData(N, n1, n2, L1, L2, phi1_tip, dphi1_tip, phi2_tip, G1, G2, dphi1, ddphi1,
+                     dphi2, ddphi2, w1, w2, dphi2_tip, inertia, EI, damping)
 
 
 def exact_workspace_sizes(n1: int, n2: int, N: int) -> tuple[int, int]:
@@ -117,11 +153,13 @@ def exact_workspace_sizes(n1: int, n2: int, N: int) -> tuple[int, int]:
 
 
 @njit(cache=True, inline="always")
-def unpack_exact_workspace(N, n1, n2, wc, oc, wr, orr):
-    """`ExactWork` of views into the buffers from offsets ``oc`` (complex), ``orr`` (real)."""
-    on = 1 if N > 0 else 0
-    n = on * (2 + n1 + n2)
-    r1, nb1, nb2 = on * (1 + n1), on * (1 + n1 + N), on * (2 + n2 + N)
+def unpack_exact_workspace(ref, scratch):
+    """`ExactWork` of views into the scratch ``scratch`` points to, for the model ``ref``
+    points to (N > 0)."""
+    N, n1, n2 = ref.N, ref.n1, ref.n2
+    wc, oc, wr, orr = scratch.wc, scratch.oc, scratch.wr, scratch.orr
+    n = 2 + n1 + n2
+    r1, nb1, nb2 = 1 + n1, 1 + n1 + N, 2 + n2 + N
     A1 = matrix_view(wc, oc, r1, nb1)
     GA1 = matrix_view(wc, oc + r1 * nb1, r1, nb1)
     Ad1 = matrix_view(wc, oc + 2 * r1 * nb1, r1, nb1)
@@ -140,7 +178,7 @@ def unpack_exact_workspace(N, n1, n2, wc, oc, wr, orr):
     oc += 2 * r1
     g, g1, g2 = wc[oc:oc + N], wc[oc + N:oc + 2 * N], wc[oc + 2 * N:oc + 3 * N]
     pd = wr[orr:orr + N]
-    ax = matrix_view(wr, orr + N, 4 * on, n)
-    axd = matrix_view(wr, orr + N + 4 * n, 4 * on, n)
-    vp = wr[orr + N + 8 * n:orr + N + 8 * n + 4 * on]
+    ax = matrix_view(wr, orr + N, 4, n)
+    axd = matrix_view(wr, orr + N + 4 * n, 4, n)
+    vp = wr[orr + N + 8 * n:orr + N + 8 * n + 4]
     return ExactWork(A1, GA1, Ad1, A2, GA2, Ad2, v1, v2, a2, t, td, g, g1, g2, pd, ax, axd, vp)

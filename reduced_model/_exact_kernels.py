@@ -24,7 +24,7 @@ written as the linear ½ qᵀ K q plus a correction of fourth order in q, and th
 Kelvin–Voigt damping d ∫ κ̇ ∂κ/∂q as D q̇ plus its correction; both integrals by the
 nodes' Gauss quadrature.
 
-`ModelData.exact` holds the constants and `Workspace.exact` the scratch
+`ModelData.exact` and `Workspace.exact` point to the constants and the scratch
 (`reduced_model._exact_data`); `reduced_model._kernels` calls the kernels here where
 N > 0, so every compiled user of the model (plant, laws, loop) gets the model it was
 given.
@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from ._exact_data import unpack_exact, unpack_exact_workspace
 
 __all__ = ["exact_mass_bias_into", "exact_coriolis_matrix_into", "exact_elastic_into",
            "exact_tips_into", "exact_tip_jacobian_into"]
@@ -64,12 +66,11 @@ def _nodes(dphi, Q, Qd, c, x):
         x.pd[k] = pd
 
 
-@njit(cache=True)
-def _fill(d, Q, Qd, x, rates):
+@njit(cache=True, inline="always")
+def _fill(e, Q, Qd, x, rates):
     """A1, A2, v1, v2 and the rotor rows (module docstring) into ``x``; with ``rates``
     also Ȧ1, Ȧ2 and the rotor rows' rates."""
-    e = d.exact
-    n1, n2, N = d.n1, d.n2, e.N
+    n1, n2, N = e.n1, e.n2, e.N
     n = 2 + n1 + n2
     A1, A2, Ad1, Ad2, v1, v2, a2 = x.A1, x.A2, x.Ad1, x.Ad2, x.v1, x.v2, x.a2
     A1[:, :] = 0j
@@ -107,14 +108,14 @@ def _fill(d, Q, Qd, x, rates):
                 Ad1[1 + k, r0 + h] = (1j * th1d * g1 + g2 * pd) * e.dphi1[k, h]
 
     # ---- link-1 tip: rows · b(L1), b(L1) = [L1, φ_1(L1), w_h].
-    u1e = v1[0] * d.L1
+    u1e = v1[0] * e.L1
     for r in range(1 + n1):
-        t = A1[r, 0] * d.L1
-        td = Ad1[r, 0] * d.L1 if rates else 0j
+        t = A1[r, 0] * e.L1
+        td = Ad1[r, 0] * e.L1 if rates else 0j
         for k in range(n1):
-            t += A1[r, 1 + k] * d.phi1_tip[k]
+            t += A1[r, 1 + k] * e.phi1_tip[k]
             if rates:
-                td += Ad1[r, 1 + k] * d.phi1_tip[k]
+                td += Ad1[r, 1 + k] * e.phi1_tip[k]
         for h in range(N):
             t += A1[r, r0 + h] * e.w1[h]
             if rates:
@@ -122,13 +123,13 @@ def _fill(d, Q, Qd, x, rates):
         x.t[r] = t
         x.td[r] = td
     for k in range(n1):
-        u1e += v1[1 + k] * d.phi1_tip[k]
+        u1e += v1[1 + k] * e.phi1_tip[k]
     for h in range(N):
         u1e += v1[r0 + h] * e.w1[h]
     p1e, p1ed = 0.0, 0.0
     for k in range(n1):
-        p1e += d.dphi1_tip[k] * Q[2 + k]
-        p1ed += d.dphi1_tip[k] * Qd[2 + k]
+        p1e += e.dphi1_tip[k] * Q[2 + k]
+        p1ed += e.dphi1_tip[k] * Qd[2 + k]
     b1 = 1.0 / (1.0 + p1e * p1e)  # β1' = d atan p / dp
     b1d = -2.0 * p1e * b1 * b1  # β1''
     gamma = Q[1] + np.arctan(p1e)  # link 2's frame relative to link 1's
@@ -147,7 +148,7 @@ def _fill(d, Q, Qd, x, rates):
     for h in range(N):
         a2[s0 + h] = 1j * x.g[h]
     for j in range(2 + n1):
-        da = 1.0 if j < 2 else b1 * d.dphi1_tip[j - 2]
+        da = 1.0 if j < 2 else b1 * e.dphi1_tip[j - 2]
         for b in range(1, s0 + N):
             A2[j, b] = da * a2[b]
         if j != 1:
@@ -168,8 +169,8 @@ def _fill(d, Q, Qd, x, rates):
             + g2 * pd * pd
     if rates:
         for j in range(2 + n1):
-            da = 1.0 if j < 2 else b1 * d.dphi1_tip[j - 2]
-            dda = 0.0 if j < 2 else b1d * p1ed * d.dphi1_tip[j - 2]
+            da = 1.0 if j < 2 else b1 * e.dphi1_tip[j - 2]
+            dda = 0.0 if j < 2 else b1d * p1ed * e.dphi1_tip[j - 2]
             c = 1j * alphad * da + dda
             Ad2[j, 1] = c * 1j
             for k in range(n2):  # da (i ȧ) on the φ_2 columns: i · i q̇ = −q̇
@@ -198,8 +199,8 @@ def _fill(d, Q, Qd, x, rates):
     ax[2:, 1] = 1.0
     for k in range(n1):
         for r in range(1, 4):
-            ax[r, 2 + k] = b1 * d.dphi1_tip[k]
-            axd[r, 2 + k] = b1d * p1ed * d.dphi1_tip[k]
+            ax[r, 2 + k] = b1 * e.dphi1_tip[k]
+            axd[r, 2 + k] = b1d * p1ed * e.dphi1_tip[k]
     for k in range(n2):
         ax[3, 2 + n1 + k] = b2 * e.dphi2_tip[k]
         axd[3, 2 + n1 + k] = b2d * p2ed * e.dphi2_tip[k]
@@ -212,70 +213,100 @@ def _fill(d, Q, Qd, x, rates):
 
 @njit(cache=True, inline="always")
 def _gram_rows(G, A, GA, first, last):
-    """GA[r] = G A[r] for rows first..last−1, skipping A's zero entries."""
+    """GA[r] = G A[r] for rows first..last−1 (G symmetric: rows of G, contiguous)."""
     nb = G.shape[0]
     for r in range(first, last):
         for b in range(nb):
-            GA[r, b] = 0j
-        for c in range(nb):
-            a = A[r, c]
-            if a != 0j:
-                for b in range(nb):
-                    GA[r, b] += G[b, c] * a
+            acc = 0j
+            for c in range(nb):
+                acc += G[b, c] * A[r, c]
+            GA[r, b] = acc
 
 
-@njit(cache=True)
-def _products(d, x):
-    """G A for both links.  Link 2's rows θ1, θ2, q_1* are da_j (i a) + t_j e_0, so
-    they come from one product G (i a) (row θ2: da = 1, no root term) and G's first
-    column; da_j is hub 2's angular-velocity row (``x.ax[2]``)."""
-    e = d.exact
-    n1, n2 = d.n1, d.n2
+@njit(cache=True, inline="always")
+def _products(e, x, all_rows):
+    """G A, row by row: link 1's rows, link 2's rows θ2 and q_2*, and with ``all_rows``
+    link 2's rows θ1 and q_1* too.  Those are da_j (i a) + t_j e_0, so they come from
+    row θ2 (da = 1, no root term), G (i a), and G's first column; da_j is hub 2's
+    angular-velocity row (``x.ax[2]``)."""
+    n1, n2 = e.n1, e.n2
     G2, GA2 = e.G2, x.GA2
     _gram_rows(e.G1, x.A1, x.GA1, 0, 1 + n1)
     _gram_rows(G2, x.A2, GA2, 1, 2)
     _gram_rows(G2, x.A2, GA2, 2 + n1, 2 + n1 + n2)
-    for j in range(2 + n1):
-        if j != 1:
-            da, root = x.ax[2, j], x.A2[j, 0]
-            for b in range(G2.shape[0]):
-                GA2[j, b] = da * GA2[1, b] + root * G2[b, 0]
+    if all_rows:
+        for j in range(2 + n1):
+            if j != 1:
+                da, root = x.ax[2, j], x.A2[j, 0]
+                for b in range(G2.shape[0]):
+                    GA2[j, b] = da * GA2[1, b] + root * G2[b, 0]
 
 
 @njit(cache=True, inline="always")
-def _re_dot(a, b, nb):
-    """Re(Σ conj(a) b) over the first ``nb`` entries."""
-    s = 0.0
+def _re_dot(A, r, B, s, nb):
+    """Re(Σ_c conj(A[r, c]) B[s, c]) (rows indexed, not sliced: a row view per call
+    costs its reference counting)."""
+    acc = 0.0
     for c in range(nb):
-        s += a[c].real * b[c].real + a[c].imag * b[c].imag
-    return s
+        acc += A[r, c].real * B[s, c].real + A[r, c].imag * B[s, c].imag
+    return acc
+
+
+@njit(cache=True, inline="always")
+def _re_dot_vector(A, r, v, nb):
+    """Re(Σ_c conj(A[r, c]) v[c])."""
+    acc = 0.0
+    for c in range(nb):
+        acc += A[r, c].real * v[c].real + A[r, c].imag * v[c].imag
+    return acc
 
 
 @njit(cache=True)
-def exact_mass_bias_into(d, Q, Qd, M, h, ws, with_bias):
-    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇) Q̇ into ``h``."""
-    x = ws.exact
-    e = d.exact
-    n1 = d.n1
-    n = _fill(d, Q, Qd, x, False)
+def exact_mass_bias_into(ref, scratch, Q, Qd, M, h, with_bias):
+    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇) Q̇ into ``h`` (``ref``,
+    ``scratch``: `ModelData.exact`, `Workspace.exact`)."""
+    e, x = unpack_exact(ref), unpack_exact_workspace(ref, scratch)
+    n1 = e.n1
+    n = _fill(e, Q, Qd, x, False)
     for i in range(n):
         h[i] = 0.0
         for j in range(n):
             M[i, j] = 0.0
-    _products(d, x)
+    _products(e, x, False)
     nb1, nb2 = x.A1.shape[1], x.A2.shape[1]
     for r in range(1 + n1):
         i = 0 if r == 0 else 1 + r
         if with_bias:  # h = Re(conj(A) G v) = Re(conj(G A) v), G real symmetric
-            h[i] += _re_dot(x.GA1[r], x.v1, nb1)
+            h[i] += _re_dot_vector(x.GA1, r, x.v1, nb1)
         for s in range(r, 1 + n1):
             j = 0 if s == 0 else 1 + s
-            M[i, j] += _re_dot(x.A1[r], x.GA1[s], nb1)
-    for i in range(n):
-        for j in range(i, n):
-            M[i, j] += _re_dot(x.A2[i], x.GA2[j], nb2)
+            M[i, j] += _re_dot(x.A1, r, x.GA1, s, nb1)
+    # Link 2.  Rows i, j of θ1, θ2, q_1* are da (i a) + t e_0 with G (i a) = y (row θ2)
+    # and G e_0 = g0: their products are da_i da_j Re(aᴴ y) + da_i Re(t_j aᴴ g0)
+    # + da_j Re(conj(t_i) y_0) + G_00 Re(conj(t_i) t_j), from four sums.
+    G2, A2, GA2, a, y = e.G2, x.A2, x.GA2, x.a2, x.GA2[1]
+    Z, ag0, vy, vg0 = 0.0, 0j, 0.0, 0j
+    for c in range(nb2):
+        Z += a[c].real * y[c].real + a[c].imag * y[c].imag
+        ag0 += a[c].conjugate() * G2[c, 0]
+        vy += y[c].real * x.v2[c].real + y[c].imag * x.v2[c].imag
+        vg0 += G2[c, 0] * x.v2[c]
+    big = 2 + n1
+    for i in range(big):
+        da_i, t_i = x.ax[2, i], A2[i, 0].conjugate()
         if with_bias:
-            h[i] += _re_dot(x.GA2[i], x.v2, nb2)
+            h[i] += da_i * vy + (t_i * vg0).real
+        for j in range(i, big):
+            da_j, t_j = x.ax[2, j], A2[j, 0]
+            M[i, j] += da_i * da_j * Z + da_i * (t_j * ag0).real + da_j * (t_i * y[0]).real \
+                + G2[0, 0] * (t_i * t_j).real
+        for j in range(big, n):  # rows q_2*: da_i Re(aᴴ G A_j) + Re(conj(t_i) (G A_j)_0)
+            M[i, j] += da_i * _re_dot_vector(GA2, j, a, nb2) + (t_i * GA2[j, 0]).real
+    for i in range(big, n):
+        for j in range(i, n):
+            M[i, j] += _re_dot(A2, i, GA2, j, nb2)
+        if with_bias:
+            h[i] += _re_dot_vector(GA2, i, x.v2, nb2)
     for r in range(4):
         J = e.inertia[r]
         for i in range(n):
@@ -291,23 +322,22 @@ def exact_mass_bias_into(d, Q, Qd, M, h, ws, with_bias):
 
 
 @njit(cache=True)
-def exact_coriolis_matrix_into(d, Q, Qd, C, ws):
+def exact_coriolis_matrix_into(ref, scratch, Q, Qd, C):
     """The Christoffel-form C(Q, Q̇) into ``C`` (n, n)."""
-    x = ws.exact
-    e = d.exact
-    n1 = d.n1
-    n = _fill(d, Q, Qd, x, True)
-    _products(d, x)
+    e, x = unpack_exact(ref), unpack_exact_workspace(ref, scratch)
+    n1 = e.n1
+    n = _fill(e, Q, Qd, x, True)
+    _products(e, x, True)
     nb1, nb2 = x.A1.shape[1], x.A2.shape[1]
     C[:, :] = 0.0
     for r in range(1 + n1):
         i = 0 if r == 0 else 1 + r
         for s in range(1 + n1):
             j = 0 if s == 0 else 1 + s
-            C[i, j] += _re_dot(x.GA1[r], x.Ad1[s], nb1)
+            C[i, j] += _re_dot(x.GA1, r, x.Ad1, s, nb1)
     for i in range(n):
         for j in range(n):
-            C[i, j] += _re_dot(x.GA2[i], x.Ad2[j], nb2)
+            C[i, j] += _re_dot(x.GA2, i, x.Ad2, j, nb2)
     for r in range(4):
         for i in range(n):
             a = e.inertia[r] * x.ax[r, i]
@@ -316,15 +346,15 @@ def exact_coriolis_matrix_into(d, Q, Qd, C, ws):
 
 
 @njit(cache=True)
-def exact_elastic_into(d, Q, Qd, f, with_damping):
+def exact_elastic_into(ref, Q, Qd, f, with_damping):
     """Add the exact bending forces beyond K Q (and, ``with_damping``, beyond D Q̇) to
     ``f``: ∂/∂q of ½ EI ∫ (κ² − w''²) and d ∫ (κ̇ ∂κ/∂q − ẇ'' φ'')."""
-    e = d.exact
+    e = unpack_exact(ref)
     for link in range(2):
         dphi = e.dphi1 if link == 0 else e.dphi2
         ddphi = e.ddphi1 if link == 0 else e.ddphi2
         w = e.w1 if link == 0 else e.w2
-        c = 2 if link == 0 else 2 + d.n1
+        c = 2 if link == 0 else 2 + e.n1
         EI, damping = e.EI[link], e.damping[link]
         for h in range(e.N):
             p, pd = _slope(dphi, Q, Qd, c, h)
@@ -354,16 +384,16 @@ def _link_end(dphi, w, phi_tip, L, Q, c):
 
 
 @njit(cache=True)
-def exact_tips_into(d, Q, out):
+def exact_tips_into(ref, Q, out):
     """``out`` = [x1, y1, x2, y2, v1, v2]: the link-1 tip and the payload (base frame)
     and each link's tip displacement across its root frame (its transverse position)."""
-    e = d.exact
-    n1 = d.n1
-    r1 = _link_end(e.dphi1, e.w1, d.phi1_tip, d.L1, Q, 2)
-    r2 = _link_end(e.dphi2, e.w2, d.phi2_tip, d.L2, Q, 2 + n1)
+    e = unpack_exact(ref)
+    n1 = e.n1
+    r1 = _link_end(e.dphi1, e.w1, e.phi1_tip, e.L1, Q, 2)
+    r2 = _link_end(e.dphi2, e.w2, e.phi2_tip, e.L2, Q, 2 + n1)
     p1e = 0.0
     for k in range(n1):
-        p1e += d.dphi1_tip[k] * Q[2 + k]
+        p1e += e.dphi1_tip[k] * Q[2 + k]
     alpha = Q[0] + Q[1] + np.arctan(p1e)
     z1 = (np.cos(Q[0]) + 1j * np.sin(Q[0])) * r1
     z2 = z1 + (np.cos(alpha) + 1j * np.sin(alpha)) * r2
@@ -372,23 +402,22 @@ def exact_tips_into(d, Q, out):
 
 
 @njit(cache=True)
-def exact_tip_jacobian_into(d, Q, ws, J):
+def exact_tip_jacobian_into(ref, scratch, Q, J):
     """∂(payload position)/∂Q into ``J`` (2, n): link 2's rows at s = L2, b(L2) =
     [1, L2, φ_2(L2), w_h], turned into the base frame."""
-    x = ws.exact
-    e = d.exact
-    n1, n2 = d.n1, d.n2
-    n = _fill(d, Q, Q, x, False)
+    e, x = unpack_exact(ref), unpack_exact_workspace(ref, scratch)
+    n1, n2 = e.n1, e.n2
+    n = _fill(e, Q, Q, x, False)
     p1e = 0.0
     for k in range(n1):
-        p1e += d.dphi1_tip[k] * Q[2 + k]
+        p1e += e.dphi1_tip[k] * Q[2 + k]
     alpha = Q[0] + Q[1] + np.arctan(p1e)
     ea = np.cos(alpha) + 1j * np.sin(alpha)
     s0 = 2 + n2
     for j in range(n):
-        z = x.A2[j, 0] + x.A2[j, 1] * d.L2
+        z = x.A2[j, 0] + x.A2[j, 1] * e.L2
         for k in range(n2):
-            z += x.A2[j, 2 + k] * d.phi2_tip[k]
+            z += x.A2[j, 2 + k] * e.phi2_tip[k]
         for h in range(e.N):
             z += x.A2[j, s0 + h] * e.w2[h]
         z *= ea

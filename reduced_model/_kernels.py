@@ -47,8 +47,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ._exact_data import (exact_reals, exact_workspace_sizes, unpack_exact,
-                          unpack_exact_workspace)
+from ._exact_data import ExactRef, ExactScratch, exact_reals, exact_workspace_sizes
 from ._exact_kernels import (exact_coriolis_matrix_into, exact_elastic_into,
                              exact_mass_bias_into, exact_tips_into)
 from ._views import matrix_view
@@ -79,7 +78,7 @@ class ModelData(NamedTuple):
     M_rotors: np.ndarray  # (n, n) Σ J a aᵀ of hub 1, stator, hub 2, payload (constant)
     K: np.ndarray  # (n, n) stiffness
     D: np.ndarray  # (n, n) Kelvin–Voigt damping
-    exact: object  # `ExactData`: the exact inextensible kinematics (N = 0: the paper's)
+    exact: object  # `ExactRef`: the exact inextensible kinematics (N = 0: the paper's)
 
 
 class Workspace(NamedTuple):
@@ -99,7 +98,7 @@ class Workspace(NamedTuple):
     k3: np.ndarray
     k4: np.ndarray
     xt: np.ndarray
-    exact: object  # `ExactWork` (empty for the paper's kinematics)
+    exact: object  # `ExactScratch`: the exact kinematics' scratch
 
 
 # --- packing -------------------------------------------------------------------------
@@ -109,6 +108,9 @@ def pack_model(*, n1, n2, L1, L2, gram1, gram2, phi1_tip, dphi1_tip, phi2_tip, M
     (``exact``: the parts of `ExactData` by name, or None for the paper's kinematics)."""
     n = 2 + n1 + n2
     rows1 = [0, *range(2, 2 + n1)]
+    if exact is not None:
+        exact = {"L": [L1, L2], "phi1_tip": phi1_tip, "dphi1_tip": dphi1_tip,
+                 "phi2_tip": phi2_tip, **exact}
     exact_ints, exact_parts = exact_reals(exact, n1, n2)
     ints = np.array([n1, n2, *rows1, *range(n), *exact_ints], dtype=np.int64)
     parts = [[L1, L2], gram1, gram2, phi1_tip, dphi1_tip, phi2_tip, M_rotors, K, D]
@@ -143,7 +145,7 @@ def unpack_model(ints, reals):
     K = matrix_view(reals, o, n, n)
     o += n * n
     D = matrix_view(reals, o, n, n)
-    exact = unpack_exact(ints[2 + nb1 + n], n1, n2, reals, o + n * n)
+    exact = ExactRef(ints[2 + nb1 + n], n1, n2, reals, o + n * n)
     return ModelData(n1, n2, ints[2:2 + nb1], ints[2 + nb1:2 + nb1 + n], reals[0], gram1, gram2,
                      phi1_tip, dphi1_tip, phi2_tip, reals[1], M_rotors, K, D, exact)
 
@@ -178,8 +180,7 @@ def unpack_workspace(ints, wc, wr):
     v = wc[o:o + nb]
     Gv = wc[o + nb:o + 2 * nb]
     M = matrix_view(wr, 0, n, n)
-    exact = unpack_exact_workspace(ints[2 + nb1 + n], n1, n2, wc, o + 2 * nb, wr,
-                                   n * n + 11 * n)
+    exact = ExactScratch(wc, o + 2 * nb, wr, n * n + 11 * n)
     o = n * n
     f = wr[o:o + n]
     o += n
@@ -279,7 +280,7 @@ def mass_matrix_into(d, Q, M, ws):
 def coriolis_matrix_into(d, Q, Qd, C, ws):
     """Christoffel-form C(Q, Q̇) into ``C`` (n, n)."""
     if d.exact.N > 0:
-        exact_coriolis_matrix_into(d, Q, Qd, C, ws)
+        exact_coriolis_matrix_into(d.exact, ws.exact, Q, Qd, C)
         return
     _fill_coefficients(d, Q, Qd, ws)
     C[:, :] = 0.0
@@ -297,7 +298,7 @@ def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
     accelerations Σ_j Ȧ_j Q̇_j of each link, and h_i = Re(conj(A_i) G v).
     """
     if d.exact.N > 0:
-        exact_mass_bias_into(d, Q, Qd, M, h, ws, with_bias)
+        exact_mass_bias_into(d.exact, ws.exact, Q, Qd, M, h, with_bias)
         return
     n1, n2 = d.n1, d.n2
     n = 2 + n1 + n2
@@ -405,7 +406,7 @@ def bias_forces_into(d, Q, Qd, h, ws):
             s += d.K[i, j] * Q[j] + d.D[i, j] * Qd[j]
         h[i] += s
     if d.exact.N > 0:
-        exact_elastic_into(d, Q, Qd, h, True)
+        exact_elastic_into(d.exact, Q, Qd, h, True)
 
 
 @njit(cache=True, inline="always")
@@ -515,7 +516,7 @@ def tip_kinematics_packed(ints, reals, Q, out):
     the link-1 tip, the payload, and both tip deflections in their root frames."""
     d = unpack_model(ints, reals)
     if d.exact.N > 0:
-        exact_tips_into(d, Q, out)
+        exact_tips_into(d.exact, Q, out)
         return
     n1, n2 = d.n1, d.n2
     w1e = 0.0

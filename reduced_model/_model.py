@@ -290,7 +290,7 @@ class ArmModel:
         Q = self._vec(Q, self.n, "Q")
         if self.kinematics == "exact":
             J = np.empty((2, self.n))
-            exact_kern.exact_tip_jacobian_into(self.data, Q, self._ws, J)
+            exact_kern.exact_tip_jacobian_into(self.data.exact, self._ws.exact, Q, J)
             return J
         p, n1 = self.params, self.modes_per_link[0]
         (phi1, dphi1), (phi2, _) = self.mode_shapes[0].tip_values, self.mode_shapes[1].tip_values
