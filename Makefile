@@ -34,6 +34,7 @@ $(STAMP): pyproject.toml $(PINS)
 # stability limit) are counted in the summary and named in the report.
 demo: $(STAMP)
 	$(BIN)/flexarm reproduce-paper --out results/paper
+	$(BIN)/flexarm reproduce-paper --lab --no-stability --out results/lab
 
 # pytest exits 5 when it collects nothing: say so and fail rather than pass silently.
 test: $(STAMP)

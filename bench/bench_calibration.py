@@ -63,7 +63,7 @@ def truth_fit(data: Path, folder: Path, workers: int) -> dict:
     result = json.loads((out / "calibration.json").read_text())
     params = result["parameters"]
     errors = [abs(params[f"true_params.{k}"]["estimate"] - v) / v for k, v in TRUE.items()]
-    held = sum(p["ci95"][0] <= TRUE[n.split(".")[1]] <= p["ci95"][1]
+    held = sum(p["interval"][0] <= TRUE[n.split(".")[1]] <= p["interval"][1]
                for n, p in params.items() if p["identifiable"])
     return {"case": f"3-parameter truth fit, 10 s, {workers} worker(s)", "workers": workers,
             "wall_s": wall, "iterations": result["iterations"],
@@ -76,8 +76,7 @@ def coverage(folder: Path) -> list[dict]:
     from validation import run_scenario, scenario_from_mapping
     from validation.batch.executor import SerialRunner
     from validation.run.experiments import from_run
-    from validation.verdicts.calibration import (calibrate, calibration_settings,
-                                                 plan_calibration)
+    from validation import calibrate, calibration_settings, plan_calibration
     names = ["true_params.EI1", "true_params.EI2", "true_params.Mp"]
     truth = {"true_params.EI1": 10.0, "true_params.EI2": 10.0, "true_params.Mp": 0.1}
     held = {n: 0 for n in names}
@@ -93,7 +92,7 @@ def coverage(folder: Path) -> list[dict]:
         result = calibrate(plan, folder / f"cov{seed}", runner=SerialRunner(),
                            log=lambda *_: None)
         for n in names:
-            lo, hi = result["parameters"][n]["ci95"]
+            lo, hi = result["parameters"][n]["interval"]
             held[n] += lo <= truth[n] <= hi
     wall = time.perf_counter() - started
     return [{"case": f"95 % intervals holding the truth, 20 seeds, reduced: {n}",

@@ -17,8 +17,8 @@ import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
-from reduced_model._kernels import (cholesky_factor_inplace, cholesky_solve_factored,
-                                    rk4_advance_packed)
+from reduced_model._cholesky import cholesky_factor_inplace, cholesky_solve_factored
+from reduced_model._kernels import rk4_advance_packed
 from reduced_model._views import matrix_view
 
 from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
@@ -81,10 +81,9 @@ class ExtendedKalmanFilter:
     with the prediction at any Ts; central differences would double the cost for
     accuracy the covariance does not need.
 
-    Cost per `update` at Ts = 1 ms, 2+2 modes: ≈ 40 µs (best of 7 on a busy 2-core
-    machine; the Jacobian's 12 RK4 steps are ≈ 33 µs of it, the correction ≈ 7 µs);
-    ≈ 150 µs for 4+4 modes.  No allocation; the RK4 kernel is called, not inlined, so
-    this module compiles in ≈ 8 s instead of minutes.
+    No allocation; the RK4 kernel is called, not inlined, so this module compiles in
+    seconds instead of minutes (bench/bench_closed_loop.py measures the filter's cost in the
+    loop).
     """
 
     name = "ekf"

@@ -3,7 +3,8 @@
 Bodies: hub 1 (revolute to ground, torque τ1), link 1 clamped to hub 1, hub 2 (the motor-2
 rotor, revolute at the link-1 tip, torque τ2 with the reaction −τ2 on the link-1 tip),
 the optional stator rigidly at the link-1 tip, link 2 clamped to hub 2, payload rigidly at
-the link-2 tip.  Horizontal plane, no gravity.
+the link-2 tip, and the joints' friction and drives (`_drives`).  Horizontal plane, no
+gravity.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from exudyn.itemInterface import (
 
 from reduced_model import ArmParameters
 
+from ._drives import Joints, add_joints
 from ._mesh import Mesh
 
 __all__ = ["ArmSystem", "build_arm", "beam_template", "simulation_settings"]
@@ -52,6 +54,7 @@ class ArmSystem:
     load_markers: tuple[int, int, int]
     tip_load: int  # force on the payload (the link-2 tip), base frame
     rigid_nodes: list[int]  # every NodeRigidBody2D, for initial conditions
+    joints: Joints  # friction, drives, and the loads each motor torque sets
 
 
 def _rot3(a: float) -> list[list[float]]:
@@ -79,11 +82,12 @@ def beam_template(mesh: Mesh, *, rho: float, EI: float, damping: float):
 
 
 def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
-              lock_joints: bool = False) -> ArmSystem:
+              lock_joints: bool = False, step: float | None = None) -> ArmSystem:
     """Create and assemble the arm with links laid out straight at joint angles ``theta``.
 
     ``lock_joints`` replaces both revolute joints by clamps (for locked-joint modal
-    analysis at ``theta``).
+    analysis at ``theta``); ``step`` is the integration step, which sets the joint
+    friction's bristles (`_drives`; needed only with dry friction).
     """
     p = params
     th1, th2 = float(theta[0]), float(theta[1])
@@ -188,6 +192,9 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
     tip_node = payload if payload is not None else nodes2[-1]
     tip_load = mbs.AddLoad(LoadForceVector(
         markerNumber=mbs.AddMarker(MarkerNodePosition(nodeNumber=tip_node)), loadVector=[0, 0, 0]))
+    joints = add_joints(mbs, p, hub1=hub1, hub2=hub2, stator=stator, hub1_load=loads[0],
+                        hub2_loads=(loads[1], loads[2]), references=(th1, th1 + th2),
+                        step=step)
     mbs.Assemble()
 
     links = (LinkNodes(list(nodes1), np.linspace(0.0, p.L1, n_el1 + 1)),
@@ -195,7 +202,7 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
     for link in links:
         link.coords = np.array([mbs.systemData.GetNodeLTGODE2(n) for n in link.nodes])
     return ArmSystem(SC, mbs, mesh.element, links, hub1, hub2, stator, payload, loads,
-                     load_markers, tip_load, rigid_nodes)
+                     load_markers, tip_load, rigid_nodes, joints)
 
 
 def simulation_settings(*, step: float, spectral_radius: float = 0.9,

@@ -20,11 +20,13 @@ def natural_frequencies(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.
     ``joints="locked"`` clamps both joints at ``theta``; ``joints="free"`` leaves them free
     and drops the two rigid-body (zero) modes unless ``include_rigid``.  Exudyn linearises
     about the reference configuration and projects onto the nullspace of the constraint
-    Jacobian (dense SVD; the rigid modes come out at ~1e-4 Hz rather than 0).
+    Jacobian (dense SVD; the rigid modes come out at ~1e-4 Hz rather than 0).  Joint
+    friction is left out (a stuck joint would be a stiff bristle); drives are in.
     """
     if joints not in ("locked", "free"):
         raise ValueError(f"joints must be 'locked' or 'free', got {joints!r}")
-    system = build_arm(params, mesh, theta=theta, lock_joints=(joints == "locked"))
+    system = build_arm(params.without("friction"), mesh, theta=theta,
+                       lock_joints=(joints == "locked"))
     freqs, _ = system.mbs.ComputeODE2Eigenvalues(
         exu.SimulationSettings(), useSparseSolver=False, convert2Frequencies=True,
         useAbsoluteValues=True, ignoreAlgebraicEquations=False)

@@ -6,24 +6,20 @@ Euler–Lagrange, clamped-mass assumed modes (De Luca & Siciliano, IEEE Trans. S
 analysis), `ReducedPlant` (the model used as a plant), and the Plant interface and
 sensors shared with the Exudyn plant.
 """
-from ._cache_guard import invalidate_stale_kernel_caches
-
-invalidate_stale_kernel_caches()  # before any kernel is loaded from numba's cache
-
-# The imports below load the kernels, so they must follow the cache check.
-from ._model import KINEMATICS, ArmModel, cached_model, validate_modes_per_link  # noqa: E402
-from ._modes import LinkModes  # noqa: E402
-from ._parameters import ArmParameters, FieldError  # noqa: E402
-from ._linear import reduced_linear_model  # noqa: E402
-from ._plant import ReducedPlant  # noqa: E402
-from ._plant_base import LEVELS, ROLES, Plant, PlantSettings, Refinement  # noqa: E402
-from ._plant_interface import (Measurement, PlantFailure, TrueState,  # noqa: E402
-                               check_sample_time, coordinate_names, output_names)
-from ._sensors import STRAIN_QUANTITIES, SensorConfig, SensorModel  # noqa: E402
+from ._linear import reduced_linear_model
+from ._model import KINEMATICS, ArmModel, cached_model, validate_modes_per_link
+from ._modes import LinkModes
+from ._parameters import ArmParameters, FieldError
+from ._plant import ReducedPlant
+from ._plant_base import LEVELS, ROLES, Plant, PlantSettings, Refinement
+from ._plant_interface import (Measurement, PlantFailure, TrueState, check_sample_time,
+                               coordinate_names, output_names)
+from ._sensors import STRAIN_QUANTITIES, SensorConfig, SensorModel, measured_names
 
 __all__ = [
     "ArmParameters", "FieldError", "ArmModel", "cached_model", "LinkModes", "ReducedPlant", "Measurement",
     "TrueState", "Plant", "PlantFailure", "SensorConfig", "SensorModel", "STRAIN_QUANTITIES",
-    "check_sample_time", "validate_modes_per_link", "KINEMATICS", "PlantSettings", "Refinement", "ROLES",
-    "LEVELS", "coordinate_names", "output_names", "reduced_linear_model",
+    "check_sample_time", "validate_modes_per_link", "PlantSettings", "Refinement", "ROLES",
+    "LEVELS", "coordinate_names", "output_names", "reduced_linear_model", "measured_names",
+    "KINEMATICS",
 ]

@@ -15,7 +15,10 @@ not linked into them, so editing a law recompiles that law alone.
 
 Caches are looked for wherever numba may have written them: the ``__pycache__`` beside
 the source, the folder ``NUMBA_CACHE_DIR`` names, and numba's user-wide cache folder; each
-holds a record of the keys its caches were built with (`KEYS_FILE`).
+holds a record of the keys its caches were built with (`KEYS_FILE`).  The project's
+packages are the folders beside this package's that are packages; the check runs once per
+process, when the first model is built (`fresh_kernel_caches`: every kernel works on a
+model), never when a package is imported.
 """
 from __future__ import annotations
 
@@ -29,11 +32,12 @@ from pathlib import Path
 
 from ._imports import imports, walk
 
-__all__ = ["kernel_keys", "invalidate_stale_kernel_caches", "invalidate_stale_plugin_caches",
+__all__ = ["kernel_keys", "fresh_kernel_caches", "invalidate_stale_plugin_caches",
            "cache_dirs", "KEYS_FILE"]
 
-_PACKAGES = ("reduced_model", "controllers", "plant_exudyn", "validation")
 _ROOT = Path(__file__).resolve().parent.parent
+#: The project's packages: this one and the package folders beside it.
+_PACKAGES = tuple(sorted(p.name for p in _ROOT.iterdir() if (p / "__init__.py").is_file()))
 #: A file that can define compiled code: it imports numba (njit, intrinsic, cfunc …).
 _USES_NUMBA = re.compile(rb"^\s*(from|import)\s+numba\b", re.M)
 #: The record, in a cache folder, of the key each source's caches were built with.
@@ -149,7 +153,8 @@ def _invalidate(keys: dict[Path, str]) -> None:
             continue
 
 
-def invalidate_stale_kernel_caches() -> None:
+@functools.cache  # once per process, before its first kernel runs
+def fresh_kernel_caches() -> None:
     """Delete the cached kernels of every project file whose key changed since its caches
     were built (module docstring)."""
     try:

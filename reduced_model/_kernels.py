@@ -50,14 +50,14 @@ from numba import njit
 from ._exact_data import ExactRef, ExactScratch, exact_reals, exact_workspace_sizes
 from ._exact_kernels import (exact_coriolis_matrix_into, exact_elastic_into,
                              exact_mass_bias_into, exact_tips_into)
+from ._cholesky import cholesky_solve_inplace
 from ._views import matrix_view
 
 __all__ = [
     "ModelData", "Workspace", "pack_model", "unpack_model", "new_workspace", "unpack_workspace",
     "mass_matrix_into", "coriolis_matrix_into", "mass_bias_into", "bias_forces_into",
     "acceleration_into",
-    "rhs_into", "rk4_advance", "rk4_advance_packed", "cholesky_solve_inplace",
-    "tip_kinematics_packed",
+    "rhs_into", "rk4_advance", "rk4_advance_packed", "tip_kinematics_packed",
 ]
 
 
@@ -407,54 +407,6 @@ def bias_forces_into(d, Q, Qd, h, ws):
         h[i] += s
     if d.exact.N > 0:
         exact_elastic_into(d.exact, Q, Qd, h, True)
-
-
-@njit(cache=True, inline="always")
-def cholesky_factor_inplace(M):
-    """Overwrite symmetric positive definite M by its lower Cholesky factor L, with
-    1/L_jj on the diagonal (for `cholesky_solve_factored`).  False if M is not
-    positive definite."""
-    n = M.shape[0]
-    for j in range(n):
-        s = M[j, j]
-        for k in range(j):
-            s -= M[j, k] * M[j, k]
-        if not s > 0.0:
-            return False
-        inv = 1.0 / np.sqrt(s)
-        M[j, j] = inv
-        for i in range(j + 1, n):
-            s = M[i, j]
-            for k in range(j):
-                s -= M[i, k] * M[j, k]
-            M[i, j] = s * inv
-    return True
-
-
-@njit(cache=True, inline="always")
-def cholesky_solve_factored(L, b):
-    """Solve L Lᵀ y = b in place (``b`` becomes y), L from `cholesky_factor_inplace`."""
-    n = L.shape[0]
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * b[k]
-        b[i] = s * L[i, i]
-    for i in range(n - 1, -1, -1):
-        s = b[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * b[k]
-        b[i] = s * L[i, i]
-
-
-@njit(cache=True, inline="always")
-def cholesky_solve_inplace(M, b):
-    """Solve M y = b for symmetric positive definite M; M is overwritten by its factor,
-    b by y.  False if M is not positive definite."""
-    if not cholesky_factor_inplace(M):
-        return False
-    cholesky_solve_factored(M, b)
-    return True
 
 
 @njit(cache=True, inline="always")

@@ -14,6 +14,7 @@ import scipy.linalg
 
 from . import _exact_kernels as exact_kern
 from . import _kernels as kern
+from ._cache_guard import fresh_kernel_caches
 from ._inextensible import InextensibleLink, interpolation_nodes
 from ._modes import LinkModes, gauss_legendre
 from ._parameters import ArmParameters
@@ -118,6 +119,7 @@ class ArmModel:
 
     def __init__(self, params: ArmParameters | None = None,
                  modes_per_link: tuple[int, int] = (2, 2), kinematics: str = "linear") -> None:
+        fresh_kernel_caches()  # before any kernel runs: every kernel works on a model
         self.params = params if params is not None else ArmParameters()
         n1, n2 = validate_modes_per_link(modes_per_link)
         self.modes_per_link = (n1, n2)

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernels as kern
+from ._joints import (advance_joints_packed, joints_active, motor_state_into,
+                      new_joint_buffers, reset_joints)
 from ._linear import reduced_linear_model
 from ._model import ArmModel, cached_model, validate_kinematics, validate_modes_per_link
 from ._modes import projection
@@ -23,7 +25,9 @@ class ReducedPlant(Plant):
 
     Torques are held constant over each call of `step` (zero-order hold).  The
     measurement is set by ``sensors`` (default: encoders θ and the modal coordinates q
-    read directly, as the paper assumes); noise belongs to the closed loop.
+    read directly, as the paper assumes); noise belongs to the closed loop.  The joints
+    of ``params`` (friction, drives, torque lag: `reduced_model._joints`) act as on the
+    truth plant; with all of them off the plant is the paper's model.
 
     Parameters
     ----------
@@ -117,6 +121,9 @@ class ReducedPlant(Plant):
         self._basis_map = None if own else projection(self.model.mode_shapes, basis)
         self._tau = np.zeros(2)
         self._work = self.model.new_workspace()[0]
+        self._joints = new_joint_buffers(params, n)
+        self._joints_on = joints_active(self._joints[0])
+        self.encoder_side = tuple("motor" if params.has_drive(i) else "link" for i in (1, 2))
         Plant.__init__(self, sensors, basis, step)
 
     # --- sensor primitives (see reduced_model._sensors) ---------------------------------
@@ -153,6 +160,7 @@ class ReducedPlant(Plant):
     def _reset(self, x0: np.ndarray) -> None:
         """Start at ``x0`` = [Q, Q̇] in the plant's own coordinates."""
         self._x[:] = x0
+        reset_joints(self._joints[0], self._joints[1], self._x)
 
     def _advance(self, tau: np.ndarray, steps: int, tip_force) -> None:
         """Hold ``tau`` (2 joint torques, or n generalised forces: the paper's idealised,
@@ -164,13 +172,19 @@ class ReducedPlant(Plant):
             tau_in = self._tau
         else:
             tau_in = np.ascontiguousarray(tau)
-        if tip_force is not None and np.any(tip_force):
-            f = self._f
-            f[:] = self.model.tip_jacobian(self._x[:self.model.n]).T @ np.asarray(tip_force, float)
-            f[:tau_in.shape[0]] += tau_in
-            tau_in = f
+        f = self._f
+        force = tip_force is not None and np.any(tip_force)
+        f[:] = (self.model.tip_jacobian(self._x[:self.model.n]).T @ np.asarray(tip_force, float)
+                if force else 0.0)
         ints, reals = self.model.packed
         wc, wr = self._work
+        if self._joints_on:  # the motor torques go through the joints, Jᵀ F to the arm
+            advance_joints_packed(ints, reals, wc, wr, self._x, tau_in, f, self.h, steps,
+                                  *self._joints)
+            return
+        if force:
+            f[:tau_in.shape[0]] += tau_in
+            tau_in = f
         kern.rk4_advance_packed(ints, reals, wc, wr, self._x, tau_in, self.h, steps)
 
     def compiled_stepping(self) -> dict | None:
@@ -183,7 +197,7 @@ class ReducedPlant(Plant):
             return None
         basis = np.zeros((0, 0)) if self._basis_map is None else self._basis_map
         return {"model": (*self.model.packed, *self._work), "x": self._x, "h": self.h,
-                "basis": np.ascontiguousarray(basis, dtype=float),
+                "joints": self._joints, "basis": np.ascontiguousarray(basis, dtype=float),
                 "nsteps": lambda Ts: check_sample_time(Ts, self.h)}
 
     @property
@@ -198,7 +212,7 @@ class ReducedPlant(Plant):
 
     def truth_into(self, out: np.ndarray) -> None:
         """The truth vector [θ, q, θ̇, q̇ (q in the modal basis), tips, tip deflections,
-        0, 0] written into ``out``."""
+        0, 0, motor angles and rates] written into ``out``."""
         n, x = self.model.n, self._x
         if self._basis_map is None:
             out[:2 * n] = x
@@ -207,8 +221,9 @@ class ReducedPlant(Plant):
             out[:2], out[m:m + 2] = x[:2], x[n:n + 2]
             out[2:m] = self._basis_map @ x[2:n]
             out[m + 2:2 * m] = self._basis_map @ x[n + 2:]
-        kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-8:-2])
-        out[-2:] = 0.0  # its coordinates describe its whole deflection (both kinematics)
+        kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-12:-6])
+        out[-6:-4] = 0.0  # its coordinates describe its whole deflection (both kinematics)
+        motor_state_into(self._joints[0], self._joints[1], x, out[-4:])
 
 
 def positive_step(step) -> None:

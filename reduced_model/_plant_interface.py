@@ -6,11 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["Measurement", "TrueState", "PlantFailure", "check_sample_time",
-           "TRUTH_EXTRAS", "true_state_from_vector", "coordinate_names", "output_names"]
+           "TRUTH_EXTRAS", "MOTOR_OUTPUTS", "true_state_from_vector", "coordinate_names",
+           "output_names"]
 
 #: After the state [θ, q, θ̇, q̇], `truth_vector()` holds these, in this order.
 TRUTH_EXTRAS = ("tip1_x", "tip1_y", "tip2_x", "tip2_y", "tip_defl1", "tip_defl2",
-                "proj_res1", "proj_res2")
+                "proj_res1", "proj_res2", "motor1", "motor2", "motor1_dot", "motor2_dot")
+#: What the encoders read (a drive's rotor, else θ) and its rate: the last of both.
+MOTOR_OUTPUTS = TRUTH_EXTRAS[-4:]
 
 
 def coordinate_names(modes_per_link: tuple[int, int]) -> tuple[str, ...]:
@@ -47,10 +50,11 @@ def output_names(modes_per_link: tuple[int, int]) -> tuple[str, ...]:
     -------
     tuple of str
         The coordinates (`coordinate_names`), their rates (``..._dot``), then
-        ``tip_defl1``, ``tip_defl2``.
+        ``tip_defl1``, ``tip_defl2``, then `MOTOR_OUTPUTS` (what the encoders read).
     """
     coords = coordinate_names(modes_per_link)
-    return coords + tuple(f"{c}_dot" for c in coords) + ("tip_defl1", "tip_defl2")
+    return (coords + tuple(f"{c}_dot" for c in coords) + ("tip_defl1", "tip_defl2")
+            + MOTOR_OUTPUTS)
 
 
 class PlantFailure(RuntimeError):
@@ -100,19 +104,25 @@ class TrueState:
     projection_residual : ndarray (2,)
         Per link, the mass-weighted RMS over the link [m] of the deflection the modes
         cannot represent (0 for the reduced plant).
+    motor_angles, motor_rates : ndarray (2,)
+        The motors' angles [rad] and rates [rad/s] reflected to the link side, what the
+        encoders read: the rotors of an arm with drives (`ArmParameters.gear_stiffness1`),
+        θ and θ̇ themselves where a joint has none.
     x : ndarray
         The reduced model's state vector [θ, q, θ̇, q̇].
     """
 
     __slots__ = ("time", "theta", "theta_dot", "q", "q_dot", "tip_positions",
-                 "tip_deflections", "projection_residual", "x")
+                 "tip_deflections", "projection_residual", "motor_angles", "motor_rates", "x")
 
     def __init__(self, *, time, theta, theta_dot, q, q_dot, tip_positions, tip_deflections,
-                 projection_residual, x=None) -> None:
+                 projection_residual, motor_angles=None, motor_rates=None, x=None) -> None:
         self.time, self.theta, self.theta_dot = time, theta, theta_dot
         self.q, self.q_dot = q, q_dot
         self.tip_positions, self.tip_deflections = tip_positions, tip_deflections
         self.projection_residual = projection_residual
+        self.motor_angles = theta if motor_angles is None else motor_angles
+        self.motor_rates = theta_dot if motor_rates is None else motor_rates
         self.x = np.concatenate([theta, q, theta_dot, q_dot]) if x is None else x
 
     def __repr__(self) -> str:
@@ -126,7 +136,8 @@ def true_state_from_vector(time: float, v: np.ndarray) -> TrueState:
     x, extras = v[:2 * m], v[2 * m:]
     return TrueState(time=time, theta=x[:2], theta_dot=x[m:m + 2], q=x[2:m], q_dot=x[m + 2:],
                      tip_positions=extras[:4].reshape(2, 2), tip_deflections=extras[4:6],
-                     projection_residual=extras[6:8], x=x)
+                     projection_residual=extras[6:8], motor_angles=extras[8:10],
+                     motor_rates=extras[10:12], x=x)
 
 
 def check_sample_time(Ts: float, h: float) -> int:

@@ -15,9 +15,9 @@ import numpy as np
 
 from ._modes import LinkModes
 from ._parameters import FieldError
-from ._plant_interface import Measurement, coordinate_names
+from ._plant_interface import TRUTH_EXTRAS, Measurement, coordinate_names
 
-__all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES"]
+__all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES", "measured_names"]
 
 STRAIN_QUANTITIES = {"deflection": 0, "curvature": 2}
 
@@ -70,6 +70,33 @@ class SensorConfig:
                                tuple(tuple(float(x) for x in g) for g in gauges))
 
 
+def measured_names(modes_per_link: tuple[int, int], *, modal: bool, rates: bool,
+                   tip_position: bool) -> tuple[str, ...]:
+    """The names of a measurement, in its order.
+
+    Parameters
+    ----------
+    modes_per_link : (int, int)
+        Modes of link 1 and link 2 of the basis q is expressed in.
+    modal : bool
+        Whether the modal coordinates are measured.
+    rates : bool
+        Whether the rates are.
+    tip_position : bool
+        Whether the payload position is.
+
+    Returns
+    -------
+    tuple of str
+        θ, then q (``modal``), then their rates (``rates``), then ``tip_x``, ``tip_y``.
+    """
+    coords = coordinate_names(modes_per_link)
+    names = coords if modal else coords[:2]
+    if rates:
+        names += tuple(f"{n}_dot" for n in names)
+    return names + (("tip_x", "tip_y") if tip_position else ())
+
+
 class SensorModel:
     """Builds the `Measurement` of a plant from a `SensorConfig`.
 
@@ -79,25 +106,38 @@ class SensorModel:
     modes : (LinkModes, LinkModes)
         The basis the modal coordinates are expressed in (the plant's measurement basis).
     plant
-        Provides the primitives listed in the module docstring.
+        Provides the primitives listed in the module docstring, and its
+        ``encoder_side``: what each encoder reads, "link" (θ) or "motor" (the rotor of a
+        drive, reflected to the link side: its reading still named ``theta1``/``theta2``,
+        what a law is fed as θ).
+
+    Attributes
+    ----------
+    encoder_side : (str, str)
+        "link" or "motor" for each joint's encoder (and its rate).
     """
 
     def __init__(self, config: SensorConfig, modes: tuple[LinkModes, LinkModes], plant) -> None:
         self.config = config
         self._plant = plant
-        states = coordinate_names(tuple(m.n for m in modes))
-        names = states if config.modal else states[:2]
-        if config.rates:
-            names += tuple(f"{n}_dot" for n in names)
-        if config.tip_position:
-            names += ("tip_x", "tip_y")
-        self.names = names
+        self.encoder_side = tuple(plant.encoder_side)
+        modes_per_link = tuple(m.n for m in modes)
+        self.names = names = measured_names(modes_per_link, modal=config.modal,
+                                            rates=config.rates,
+                                            tip_position=config.tip_position)
+        states = coordinate_names(modes_per_link)
         states += tuple(f"{n}_dot" for n in states)
+        layout = list(states + TRUTH_EXTRAS)
+        for i, side in enumerate(self.encoder_side):  # a motor-side encoder reads the rotor
+            if side == "motor":
+                for suffix in ("", "_dot"):
+                    layout[layout.index(f"theta{i + 1}{suffix}")] = None
+                    layout[layout.index(f"motor{i + 1}{suffix}")] = f"theta{i + 1}{suffix}"
         direct = (config.strain_gauges is None or not config.modal) and \
             config.encoder_resolution == 0 and not config.tip_position
         #: Where each measured value sits in the plant's truth vector, when the measurement
         #: is exactly those values (no gauges, no quantisation, no payload position).
-        self.truth_index = (np.array([states.index(m) for m in names], dtype=np.int64)
+        self.truth_index = (np.array([layout.index(m) for m in names], dtype=np.int64)
                             if direct else None)
         self._samplers, self._fits = [], []
         if config.modal and config.strain_gauges is not None:
@@ -126,6 +166,12 @@ class SensorModel:
     def measure(self, time: float) -> Measurement:
         cfg = self.config
         theta, theta_dot = self._plant.joint_state()
+        if "motor" in self.encoder_side:
+            motor = self._plant.truth_vector()[-len(TRUTH_EXTRAS):]
+            for i, side in enumerate(self.encoder_side):
+                if side == "motor":
+                    k = TRUTH_EXTRAS.index(f"motor{i + 1}")
+                    theta[i], theta_dot[i] = motor[k], motor[k + 2]
         res = cfg.encoder_resolution
         parts = [np.round(theta / res) * res if res > 0 else theta]
         if cfg.modal:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml, dask_cluster, metrics_table, stored_count
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 from validation.batch.campaign import campaign_from_mapping, expand, load_campaign
 from validation.batch.queue import run_campaign
 from validation.report.verdict_tables import write_claims

@@ -10,7 +10,7 @@ import pytest
 from controllers import IdealisedPBC
 from reduced_model import ArmModel, ReducedPlant
 from validation.batch.store import ResultStore
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 from validation.run.loop import build, run_scenario
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 from validation.verdicts import attribution as att

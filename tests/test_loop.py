@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from validation.run import loop, metrics
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 from validation.run.loop import build, run_scenario, simulate
 from validation.run.results import RunResult
 from validation.run.scenario import scenario_from_mapping

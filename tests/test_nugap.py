@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from validation import nu_gap, stability_margin
-from validation.verdicts import nugap
+from validation.verdicts import graphs
 from validation.verdicts.nugap import gap_detail, margin_detail
 
 tf = control.tf
@@ -189,7 +189,7 @@ def arm_loop_pair():
 
 
 def _factors(P, discrete):
-    G = nugap._graph_symbol(nugap._prepared(P, discrete), discrete)
+    G = graphs.graph_symbol(graphs.prepared(P, discrete), discrete)
     return control.ss(*G.matrices, P.dt)
 
 

@@ -116,3 +116,23 @@ def test_a_subclass_of_the_reduced_plant_with_no_code_is_the_reduced_plant(plugi
     assert own.status == builtin.status == "ok"
     assert own.config["plant"]["kind"] == "barplant:BarPlant"
     assert all_metrics(own) == all_metrics(builtin)
+
+
+def test_verify_judges_a_reduced_plugin_plant_and_its_truth(plugin_lab):
+    """Known-bad (issue 48, 7): `flexarm verify` on a plug-in plant of role "reduced"
+    failed with "KeyError: 'step'" (the truth plant was made from a step the plug-in's
+    table does not have).  Now the reduced runs are the plug-in's own and the truth
+    confirmation runs on the default truth plant."""
+    lab = plugin_lab({"barplant.py": 'from reduced_model import ReducedPlant\n\n\n'
+                                     'class BarPlant(ReducedPlant):\n    """Mine."""\n',
+                      "study.toml": STUDY.replace(
+                          'plant = { kind = "labplants:FineArm", role = "truth", '
+                          'options = { modes = 3 } }',
+                          'plant = { kind = "barplant:BarPlant", role = "reduced" }')})
+    verify = flexarm(lab, "verify", "study.toml", "--mode", "estimate", "--samples", "3",
+                     "--out", "verify", "--no-progress")
+    assert verify.returncode in (0, 1), verify.stderr  # 1: a verdict is missing
+    verdict = json.loads((lab / "verify" / "verdict.json").read_text())
+    assert verdict["simulations"]["reduced"] >= 3, verdict["simulations"]
+    rows = ResultStore(lab / "verify").rows()
+    assert {r.plant for r in rows if r.role == "reduced"} == {"barplant:BarPlant"}

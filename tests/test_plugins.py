@@ -150,7 +150,7 @@ def test_bad_plugins_are_one_line_errors_and_nothing_is_written(plugin_dir, args
 
 
 def test_the_realisable_pbc_refuses_its_dead_settings_with_the_reason():
-    from validation.run._config import ConfigError
+    from validation.run.config import ConfigError
     with pytest.raises(ConfigError) as exc:
         scenario_from_mapping({"controller": {"kind": "pbc", "options": {"compensate_damping": False}}})
     assert exc.value.path == "controller.options.compensate_damping"

@@ -11,7 +11,7 @@ import pytest
 
 from validation.batch.store import ResultStore
 from validation.batch.worker import execute_run
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 from validation.run.claim_measures import claim_by_key
 from validation.run.loop import run_scenario
 from validation.run.metrics import all_metrics

@@ -17,7 +17,7 @@ from validation.batch.resimulate import full_result
 from validation.batch.store import ResultStore, environment
 from validation.batch.storing import (Destination, StoreTask, landed, leave_token,
                                       run_and_store)
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 
 SMALL = {"name": "small", "scenario": {"duration": 0.3, "transient": 0.1,
                                        "observer": {"kind": "smo-paper"},

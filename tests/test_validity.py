@@ -41,6 +41,7 @@ def synthetic_analysis() -> dict:
     curve = {f"{i}->{o}": [1.0, 0.1, 0.01, 0.001] for i, o in CHANNELS}
     arm = {"arm": "default", "Ts": 1e-3, "modes": [2, 2], "law": "mylab:MyPD",
            "truth": "truth plant (Exudyn), ANCF 4 el/link",
+           "left_out": ["joint 1 dry friction (Coulomb 0.3 N m, breakaway 0.4 N m)"],
            "frequencies_hz": f,
            "responses": [{"theta2": t, "reduced": curve, "fe": curve} for t in (0.0, 1.0, 2.0, 3.0)],
            "gaps": [{"theta2": t, "theta": 0.1, "theta_peak_hz": 3.0, "tip": 0.2,
@@ -70,6 +71,8 @@ def test_written_analysis_reads_back_and_is_reported(tmp_path):
     assert "| pbc | exudyn | default | 2.7 | truth plant (Exudyn), ANCF 4 el/link | 2.71 | 0.7 | 3.5 | 4 | no | yes | 0.2 |" \
         in text
     assert "δν mylab:MyPD loop at Ts" in text  # the scenario's own controller, named
+    assert ("Not in the linear models of the default arm" in text  # said, not dropped
+            and "joint 1 dry friction (Coulomb 0.3 N m" in text)
     back = load_validity(out / "validity")
     assert back["cases"][0]["certified_s"] == 7e-4
     assert math.isnan(back["arms"][0]["gaps"][0]["loop"])  # not computed stays empty

@@ -15,7 +15,7 @@ from scipy.stats import binom
 
 from validation.batch.campaign import campaign_from_mapping, expand
 from validation.batch.worker import execute_run
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 from validation.run.tomlfiles import load_toml
 from validation.verdicts.search import minimise
 from validation.verdicts.statistics import SequentialTest, clopper_pearson, sprt

@@ -21,7 +21,7 @@ import importlib
 #: Public name → the module that defines it.
 _EXPORTS = {
     "Scenario": "run.scenario", "scenario_from_mapping": "run.scenario",
-    "scenario_to_mapping": "run.scenario", "ConfigError": "run._config",
+    "scenario_to_mapping": "run.scenario", "ConfigError": "run.config",
     "load_toml": "run.tomlfiles", "simulate": "run.loop", "run_scenario": "run.loop",
     "build": "run.loop", "RunResult": "run.results", "all_metrics": "run.metrics",
     "Campaign": "batch.campaign", "load_campaign": "batch.campaign",
@@ -31,8 +31,9 @@ _EXPORTS = {
     "nu_gap": "verdicts.nugap", "stability_margin": "verdicts.nugap",
     "reduced_linear_model": "verdicts.linear", "law_gain": "verdicts.linear",
     "read_experiment": "run.experiments", "read_frequency_response": "run.experiments",
-    "base_scenario": "verdicts.calibration", "calibration_settings": "verdicts.calibration",
-    "plan_calibration": "verdicts.calibration", "calibrate": "verdicts.calibration",
+    "base_scenario": "verdicts.calibration_settings",
+    "calibration_settings": "verdicts.calibration_settings",
+    "plan_calibration": "verdicts.calibration_plan", "calibrate": "verdicts.calibration",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -5,8 +5,8 @@ Calibrate the plant to measured data
 A calibration from data through the Python API: an "experiment" is made here by running
 the reduced plant with parameters the calibration does not know (link stiffnesses 9.2
 and 10.6 N m², a 0.23 kg payload, the campaigns' sensor noise), then the catalogue arm
-(EI 10 N m², payload 0.1 kg) is fitted to it — estimates, 95 % intervals, and the
-measured against the fitted joint angle.  ``flexarm calibrate`` does the same from CSV
+(EI 10 N m², payload 0.1 kg) is fitted to it — the residual tests' verdict on the model,
+estimates with their intervals, and the measured against the fitted joint angle.  ``flexarm calibrate`` does the same from CSV
 files (:doc:`../guide/calibrate`); on your arm, the data are your measurements and the
 plant the truth plant.
 """
@@ -33,9 +33,10 @@ plan = plan_calibration(base, settings, [(experiment, None)])
 out = Path(tempfile.mkdtemp()) / "calibration"
 with make_runner("local", 1, scenarios=[base]) as runner:
     result = calibrate(plan, out, runner=runner, log=lambda line: None)
+print(f"the model: {result['adequacy']['verdict']}")  # the residual tests' verdict
 for name, p in result["parameters"].items():
-    lo, hi = p["ci95"]
-    print(f"{name}: {p['estimate']:.4g} (95 %: {lo:.4g} .. {hi:.4g}); "
+    lo, hi = p["interval"]  # a 95 % interval when the model is adequate
+    print(f"{name}: {p['estimate']:.4g} ({lo:.4g} .. {hi:.4g}); "
           f"the experiment's arm: {measured_arm[name.split('.')[1]]}")
 
 # %%

@@ -16,6 +16,8 @@ responses = [read_frequency_response(HERE / "frf.csv")]
 plan = plan_calibration(base, settings, experiments, responses)   # every check, nothing written
 with make_runner("local", 2, scenarios=[base]) as runner:
     result = calibrate(plan, "results/calibrate-example", runner=runner)
+print("model adequate:", result["model_adequate"], "-", result["adequacy"]["verdict"])
+print("intervals:", result["interval_kind"])
 for name, p in result["parameters"].items():
-    print(name, p["estimate"], p["ci95"] if p["identifiable"] else p["reason"])
+    print(name, p["estimate"], p["interval"] if p["identifiable"] else p["reason"])
 print(result["iterations"], "iterations,", result["simulations"], "simulations")

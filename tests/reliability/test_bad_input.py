@@ -295,12 +295,28 @@ def test_an_include_diamond_within_the_caps_is_read(tmp_path):
         "controller": {"kind": "pd"}}
 
 
+def test_calibrate_frf_with_a_plugin_plant_is_one_line_and_leaves_nothing(
+        tmp_path, capsys, monkeypatch):
+    """Issue 48.6: frequency responses fitted on a plug-in plant were an AttributeError
+    traceback (exit 1) that left index.sqlite and runs/ behind.  A plug-in plant has no
+    linearisation: refused before anything is written."""
+    from conftest import FINE_ARM_PLANT
+    (tmp_path / "labplants.py").write_text(FINE_ARM_PLANT)
+    (tmp_path / "fine.toml").write_text('[plant]\nkind = "labplants:FineArm"\nrole = "truth"\n'
+                                        '[calibrate]\nfit = ["true_params.EI1"]\n')
+    (tmp_path / "frf.csv").write_text("f,theta1/tau1.re,theta1/tau1.im\n1.0,-0.1,0.01\n"
+                                      "2.0,-0.02,0.002\n")
+    assert_refused(["calibrate", "--frf", "frf.csv", "--config", "fine.toml", "--out",
+                    "{tmp}/out"], ("--frf: ", "no linearisation", "labplants:FineArm"),
+                   tmp_path, capsys, monkeypatch)
+
+
 def test_a_refused_runner_keeps_a_results_folder_that_was_there(tmp_path, monkeypatch,
                                                                  capsys):
     """Known-good of removing what a refused command created: a folder that held results
     before stays, runs and all."""
     from validation.cli import common
-    from validation.run._config import ConfigError
+    from validation.run.config import ConfigError
     (tmp_path / "ok.toml").write_text(CAMPAIGN_OK)
     out = tmp_path / "out"
     assert main(["campaign", str(tmp_path / "ok.toml"), "--out", str(out),

@@ -67,6 +67,45 @@ def test_nothing_is_written_through_a_link_inside_the_folder(folder, tmp_path, l
     assert sorted(p.name for p in elsewhere.rglob("*")) == before
 
 
+# Issue 48.1: calibrate wrote its torques through a link out of --out (exit 0).
+CALIBRATION_DATA = "t,tau1,tau2,theta1,theta2\n" + "".join(
+    f"{k / 1000:g},0.1,0.0,{5e-5 * k * k / 1000:.9g},0.0\n" for k in range(40))
+
+
+@pytest.mark.parametrize("link", ["experiments", "experiments/exp.npy", "experiments/exp.csv",
+                                  "calibration.json"])
+def test_calibrate_writes_nothing_through_a_link_inside_its_folder(tmp_path, link):
+    """``out/experiments`` as a link to a folder outside, or one of the files calibrate
+    writes (the torques replayed, the experiment as read, its result) as a link to a file
+    outside: refused in one line naming it, exit 2, the outside untouched and nothing
+    written in the folder (no index, no runs).  Known-good (once): the same command into
+    a plain folder fits (exit 0)."""
+    (tmp_path / "exp.csv").write_text(CALIBRATION_DATA)
+    (tmp_path / "m.toml").write_text('[calibrate]\nfit = ["true_params.EI1"]\n')
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "victim").write_bytes(b"outside the folder")
+    out = tmp_path / "out"
+    (out / "experiments").mkdir(parents=True)
+    target = out / link
+    if link == "experiments":
+        target.rmdir()
+        target.symlink_to(elsewhere, target_is_directory=True)
+    else:
+        target.symlink_to(elsewhere / "victim")
+    before = {p: p.read_bytes() for p in elsewhere.rglob("*")}
+    inside = sorted(str(p.relative_to(out)) for p in out.rglob("*"))
+    args = ("calibrate", "exp.csv", "--config", "m.toml", "--workers", "1", "--no-progress")
+    one_line_error(flexarm(tmp_path, *args, "--out", "out"), link, "symbolic link")
+    assert {p: p.read_bytes() for p in elsewhere.rglob("*")} == before
+    assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == inside
+    if link != "experiments":
+        return
+    proc = flexarm(tmp_path, *args, "--out", "plain")
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "plain" / "experiments" / "exp.npy").is_file()
+
+
 def _corrupt_row(folder, sql):
     db = sqlite3.connect(folder / "index.sqlite")
     rid = db.execute("SELECT run_id FROM runs ORDER BY run_id").fetchone()[0]

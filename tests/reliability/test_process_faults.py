@@ -18,7 +18,7 @@ import pytest
 from campaign_testing import wait_gone
 from conftest import write_files
 from validation.batch.store import ResultStore
-from validation.run._config import ConfigError
+from validation.run.config import ConfigError
 
 FAULTS = textwrap.dedent('''
     """Laws that misbehave from t = 0.1 s on, written for the tests."""

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run._config import ConfigError, check, check_label
+from ..run.config import ConfigError, check, check_label
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from .runfiles import KEEP_ALL, Keep, keep_from_mapping
 from .store import run_id

@@ -35,12 +35,12 @@ from contextlib import contextmanager
 from multiprocessing import connection
 from typing import TextIO
 
-from ..run._config import ConfigError, check
+from ..run.config import ConfigError, check
 from ..run.processes import describe_exit, kill_group, signals_held
 from .interrupts import Interrupted, signals_interrupt
 from .limits import (MIN_MEMORY_MIB, RUN_TIMEOUT_BASE, default_memory_limit,
                      default_run_timeout)
-from .threads import ONE_THREAD
+from ..run.threads import ONE_THREAD
 from .storing import Stored, run_and_store, serve, store_failure
 from .worker import describe, keep_freed_memory
 

@@ -21,12 +21,7 @@ from .fingerprint import plugin_kinds
 from .index import StoreError, finite_or_none, metric_values
 from .runfiles import Keep
 
-__all__ = ["full_result", "keeps_all", "resimulable"]
-
-
-def keeps_all(row) -> bool:
-    """Whether the file of stored run ``row`` keeps every signal at every sample."""
-    return "kept" not in row.store.read(row.run_id)[1]
+__all__ = ["full_result", "resimulable"]
 
 
 def resimulable(row) -> bool:

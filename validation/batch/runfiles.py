@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run._config import check
+from ..run.config import check
 from ..run.results import RunResult, write_atomic
 from .fingerprint import run_fingerprint
 from .index import finite_or_none, set_aside

@@ -56,7 +56,7 @@ def failed_result(scenario, exc: BaseException | str) -> tuple[RunResult, dict]:
 
 def describe(exc: BaseException) -> str:
     """One line saying what ``exc`` means for a run."""
-    from ..run._config import short_repr, short_str
+    from ..run.config import short_repr, short_str
     if isinstance(exc, SystemExit):
         return f"the run called sys.exit({short_repr(exc.code)})"
     if isinstance(exc, KeyboardInterrupt):  # workers ignore SIGINT: raised by the code

@@ -40,7 +40,7 @@ if _is_the_program():
     for _signal in (signal.SIGINT, signal.SIGTERM):
         signal.signal(_signal, _stop_while_starting)
 
-from ..batch.threads import prefer_one_thread  # noqa: E402
+from ..run.threads import prefer_one_thread  # noqa: E402
 
 prefer_one_thread()  # before numpy is imported; a user's setting wins
 
@@ -54,7 +54,7 @@ try:
     from ..batch.interrupts import Interrupted, exit_status, signals_interrupt  # noqa: E402
     from ..batch.store import StoreError  # noqa: E402
     from ..run.processes import CHECK_TIMEOUT, contain_checks  # noqa: E402
-    from ..run._config import short_repr  # noqa: E402
+    from ..run.config import short_repr  # noqa: E402
     from .common import EXIT_FAILED, EXIT_USAGE  # noqa: E402
     from .parser import build_parser  # noqa: E402
 except ImportError as _exc:  # a system library missing: one line naming the fix
@@ -74,12 +74,13 @@ def main(argv: list[str] | None = None) -> int:
                 args.tier = "full" if args.campaign else "short"
             # Plug-ins named "package.module:Class" are found like `python -m` finds
             # modules: the current directory first (spawned workers inherit this path).
-            # Commands that only read results never import a plug-in; they locate its
+            # Commands that import no plug-in (those that read a results folder, and
+            # write only into it: show, report, export, repair, baseline add) locate its
             # files for the code fingerprint on the same path, with the current directory
             # last: a module shipped inside a results folder read from there cannot stand
             # in for a library the command imports.
             if os.getcwd() not in sys.path:
-                if getattr(args, "reads_only", False):
+                if getattr(args, "imports_no_plugin", False):
                     sys.path.append(os.getcwd())
                 else:
                     sys.path.insert(0, os.getcwd())

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -10,6 +11,9 @@ from ..run.experiments import from_run, read_experiment, read_frequency_response
 
 from .common import EXIT_FAILED, runner_for
 from .one_run import stored_run
+
+#: Failing residual tests listed on the terminal (all are in calibration.json).
+_FAILING_SHOWN = 8
 
 
 def _experiment(spec: str):
@@ -26,31 +30,30 @@ def _fit_names(text: str | None) -> list[str] | None:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from ..verdicts.calibration import base_scenario, calibrate, calibration_settings, \
-        plan_calibration
+    from ..verdicts.calibration import calibrate
+    from ..verdicts.calibration_comparison import data_fingerprint, read_fits
+    from ..verdicts.calibration_outputs import RESULT_FILES, refuse_links
+    from ..verdicts.calibration_plan import plan_calibration
+    from ..verdicts.calibration_settings import base_scenario, calibration_settings
     base, table = base_scenario(args.config)
     settings = calibration_settings(table, _fit_names(args.fit), base)
     experiments = [_experiment(spec) for spec in args.data]
     responses = [read_frequency_response(f) for f in args.frf or []]
     plan = plan_calibration(base, settings, experiments, responses)
     out = Path(args.out or Path("results") / f"calibrate-{Path(args.config).stem}")
+    others = [f for f in args.compare or [] if Path(f).resolve() != out.resolve()]
+    fits = read_fits(others, data_fingerprint(plan))
+    refuse_links(plan, out)  # before the results folder is opened: nothing written
     scenarios = [base] if plan.targets else []  # its plant's kernels, compiled before the fork
     with runner_for(args, scenarios, out) as runner:
         print(f"calibrating {', '.join(settings.names)} on {len(plan.targets)} experiment(s)"
               f"{f' and {len(responses)} frequency response(s)' if responses else ''} "
               f"({settings.inputs}, {base.plant.kind} plant) into {out}")
-        result = calibrate(plan, out, runner=runner)
+        result = calibrate(plan, out, runner=runner, compare=fits)
     print(f"{result['iterations']} iterations, {result['simulations']} simulations, cost "
           f"{result['cost']:.6g} (residual variance {result['residual_variance']:.3g}, in units "
           "of the noise levels)")
-    width = max(len(n) for n in result["parameters"])
-    for name, p in result["parameters"].items():
-        if p["identifiable"]:
-            lo, hi = p["ci95"]
-            print(f"  {name:<{width}}  {p['estimate']:.7g} ± {p['std']:.2g}  "
-                  f"(95 %: {lo:.7g} .. {hi:.7g})")
-        else:
-            print(f"  {name:<{width}}  {p['estimate']:.7g}  NOT IDENTIFIABLE: {p['reason']}")
+    _print_parameters(result)
     for exp, signals in result["residual_rms"].items():
         if "relative_rms" in signals:  # a frequency response
             print(f"  residual RMS / noise, {exp}: "
@@ -60,14 +63,57 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   if v["noise"]]
         if ratios:
             print(f"  residual RMS / noise, {exp}: {', '.join(ratios)}")
-    written = [f for f in ("calibration.json", "calibrated.toml", "uncertainty.toml")
-               if (out / f).is_file()]
+    _print_adequacy(result["adequacy"])
+    if "comparison" in result:
+        _print_comparison(result["comparison"])
+    written = [f for f in RESULT_FILES if (out / f).is_file()]
     print(f"wrote {', '.join(str(out / f) for f in written)}; report: flexarm report {out}")
     if result["failed_runs"]:
         print(f"flexarm: {len(result['failed_runs'])} simulation(s) failed: "
               f"{', '.join(result['failed_runs'][:8])}", file=sys.stderr)
         return EXIT_FAILED
     return 0
+
+
+def _print_parameters(result: dict) -> None:
+    effective = result["model_adequate"] is not True
+    if effective:
+        print(f"  intervals: {result['interval_kind']}")
+    width = max(len(n) for n in result["parameters"])
+    for name, p in result["parameters"].items():
+        if not p["identifiable"]:
+            print(f"  {name:<{width}}  {p['estimate']:.7g}  NOT IDENTIFIABLE: {p['reason']}")
+            continue
+        lo, hi = p["interval"]
+        if effective:
+            print(f"  {name:<{width}}  {p['estimate']:.7g}  (effective: {lo:.7g} .. {hi:.7g}; "
+                  f"noise ± {p['std']:.2g}, model error ± {p['model_error']:.2g})")
+        else:
+            print(f"  {name:<{width}}  {p['estimate']:.7g} ± {p['std']:.2g}  "
+                  f"(95 %: {lo:.7g} .. {hi:.7g})")
+
+
+def _print_adequacy(adequacy: dict) -> None:
+    print(f'  "model_adequate": {json.dumps(adequacy["model_adequate"])} — '
+          f"{adequacy['verdict']}")
+    failing = adequacy["failing"]
+    for line in failing[:_FAILING_SHOWN]:
+        print(f"    fails: {line}")
+    if len(failing) > _FAILING_SHOWN:
+        print(f"    ... and {len(failing) - _FAILING_SHOWN} more failing tests "
+              "(calibration.json: adequacy)")
+
+
+def _print_comparison(rows: list[dict]) -> None:
+    print("which model explains the data (best AIC first; AIC = chi2 + 2p, BIC = chi2 + "
+          "p ln m):")
+    header = ("model", "fitted", "chi2", "RMS/noise", "adequacy", "AIC", "dAIC", "BIC")
+    table = [(f"{r['plant']} ({r['folder']})", ",".join(r["fitted"]), f"{r['chi2']:.6g}",
+              f"{r['rms']:.3g}", r["adequacy"], f"{r['aic']:.6g}", f"{r['delta_aic']:.4g}",
+              f"{r['bic']:.6g}") for r in rows]
+    widths = [max(len(str(c)) for c in column) for column in zip(header, *table)]
+    for line in (header, *table):
+        print("  " + "  ".join(f"{c:<{w}}" for c, w in zip(line, widths)))
 
 
 def export_signals(args: argparse.Namespace) -> int:

@@ -52,17 +52,18 @@ def campaigns_dir() -> Path:
 
 
 def cmd_reproduce_paper(args: argparse.Namespace) -> int:
-    """The paper's campaign, its mesh checks, the stability map, the claims and the report;
-    a short summary on the terminal.  Exit 1 only if a verdict is missing (a run that
+    """The paper's campaign (with ``--lab`` its claims' runs on the lab arm), its mesh
+    checks, the stability map, the claims and the report; a short summary on the terminal.  Exit 1 only if a verdict is missing (a run that
     decides one failed); failures that decide nothing are counted in the summary."""
     from ..batch.campaign import expand, load_campaign
     from ..batch.queue import run_campaign
     from ..report.verdict_tables import write_claims
     from ..verdicts.claims import claim_columns
     from .summaries import claims_summary
-    campaign = load_campaign(campaigns_dir() / "paper.toml")
+    which = "lab" if args.lab else "paper"
+    campaign = load_campaign(campaigns_dir() / f"{which}.toml")
     runs = expand(campaign)
-    out = Path(args.out or Path("results") / "paper")
+    out = Path(args.out or Path("results") / which)
     scenarios = [r.scenario for r in runs]
     runner = runner_for(args, scenarios, out, *([] if args.no_stability else [out / "stability"]))
     with runner:

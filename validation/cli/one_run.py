@@ -14,7 +14,7 @@ from ..batch.executor import available_cores, check_runner, make_runner
 from ..batch.interrupts import Interrupted
 from ..batch.queue import run_planned
 from ..batch.store import ResultStore, StoreError, run_id
-from ..run._config import ConfigError, check_label
+from ..run.config import ConfigError, check_label
 from ..run.plants import is_truth, plant_settings
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
@@ -255,6 +255,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     obs = "" if s.observer.kind == "none" else f" + {s.observer.kind}"
     print(f"{s.name}: {s.controller.kind}{obs} on the {s.plant.kind} plant, {s.arm} arm, "
           f"{s.duration:g} s at Ts = {s.Ts:g} s, from {s.initial_state}")
+    if s.true_params.joints_text():
+        print(f"  the true arm's joints: {s.true_params.joints_text()}")
     if result.message:
         print(f"  {result.status}: {result.message}")
     units = {r.metric: r for r in s.requirement}

@@ -93,7 +93,8 @@ def _add_cases(p) -> None:
     p.add_argument("--plant", action="append", choices=PLANT_KINDS,
                    help="plant(s) (default: both for a scenario, the campaign's own)")
     p.add_argument("--arm", action="append", choices=tuple(ARMS),
-                   help="arm(s) (default: both for a scenario, the campaign's own)")
+                   help="arm(s) (default: default and table1 for a scenario, the campaign's "
+                        "own)")
 
 
 def _add_execution(p, *, dask: bool = True) -> None:
@@ -149,7 +150,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="rerun a stored run exactly (RUN: its id or name; a name shared "
                           "with mesh/step checks means the nominal run), with the flags and "
                           "--set as changes")
-    run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm or the paper's table1 "
+    run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm, the paper's table1 or "
+                                                        f"the harmonic-drive lab arm "
                                                         f"(default: {d.arm})")
     run.add_argument("--plant", choices=PLANT_KINDS, help=f"reduced model or Exudyn truth plant "
                                                      f"(default: {d.plant.kind})")
@@ -189,7 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
     show.add_argument("--no-open", action="store_true",
                       help="do not open the figures in a browser (never opened without a "
                            "display)")
-    show.set_defaults(func=cmd_show, reads_only=True)
+    show.set_defaults(func=cmd_show, imports_no_plugin=True)
 
     camp = sub.add_parser("campaign", help="run a campaign of scenarios (resumable)")
     camp.add_argument("file", metavar="CAMPAIGN.toml")
@@ -212,12 +214,16 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--no-progress", action="store_true", help="no progress bar")
     rep.add_argument("--force", action="store_true",
                      help="render even if the report is up to date (same runs, same code)")
-    rep.set_defaults(func=cmd_report, reads_only=True)
+    rep.set_defaults(func=cmd_report, imports_no_plugin=True)
 
     paper = sub.add_parser("reproduce-paper",
                            help="run campaigns/paper.toml, the stability map, the claims "
                                 "table and the report")
-    paper.add_argument("--out", metavar="DIR", help="results folder (default results/paper)")
+    paper.add_argument("--lab", action="store_true",
+                       help="the paper's claims on the lab arm (harmonic drives: friction, "
+                            "drives, current loops; campaigns/lab.toml) instead of its two arms")
+    paper.add_argument("--out", metavar="DIR",
+                       help="results folder (default results/paper, with --lab results/lab)")
     _add_execution(paper, dask=False)
     paper.add_argument("--no-stability", action="store_true", help="skip the stability map")
     paper.add_argument("--no-report", action="store_true", help="skip the report")
@@ -253,13 +259,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="write this run's torques and measurements as the CSV flexarm "
                           "calibrate reads (to stdout, or --to FILE)")
     exp.add_argument("--to", metavar="FILE", help="with --signals: the CSV file to write")
-    exp.add_argument("--format", choices=("csv", "json"), default="csv",
-                     help="the file to name in the output (both are written)")
-    exp.set_defaults(func=cmd_export, reads_only=True)
+    exp.set_defaults(func=cmd_export, imports_no_plugin=True)
 
     rep = sub.add_parser("repair", help="rebuild a results folder's index from its run files")
     rep.add_argument("results", metavar="RESULTS_DIR")
-    rep.set_defaults(func=cmd_repair, reads_only=True)
+    rep.set_defaults(func=cmd_repair, imports_no_plugin=True)
 
     att = sub.add_parser("attribute", help="which modelling assumption costs how much "
                                            "(Shapley attribution over 2^k runs)")
@@ -268,8 +272,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "its [attribution] table)")
     att.add_argument("--factors", metavar="F1,F2,...",
                      help="plant, truncation, parameters, sensing, estimation, sampling, "
-                          "actuation, kinematics (default: every factor the scenario has "
-                          "but kinematics)")
+                          "actuation, friction, drive, bandwidth, kinematics (default: every "
+                          "factor the scenario has but the joints' and kinematics)")
     att.add_argument("--out", metavar="DIR", help="results folder")
     att.add_argument("--mesh-check", action="store_true",
                      help="also run every truth-plant world on the check meshes and with a "
@@ -318,6 +322,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "linearised plant")
     cal.add_argument("--out", metavar="DIR",
                      help="results folder (default results/calibrate-<config name>)")
+    cal.add_argument("--compare", nargs="+", metavar="OTHER_DIR",
+                     help="calibrations of other models on the same data: one table of "
+                          "residual, adequacy and information criteria (AIC, BIC)")
     _add_execution(cal)
     cal.set_defaults(func=cmd_calibrate)
 
@@ -359,5 +366,5 @@ def build_parser() -> argparse.ArgumentParser:
     add.add_argument("--name", help="the check's name (default: scenario-metric)")
     add.add_argument("--file", default=str(DEFAULT_FILE), metavar="TOML",
                      help="the checks (default: the repository's baselines.toml)")
-    add.set_defaults(func=cmd_baseline_add, reads_only=True)
+    add.set_defaults(func=cmd_baseline_add, imports_no_plugin=True)
     return parser

@@ -25,7 +25,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_export(args: argparse.Namespace) -> int:
     if args.signals is not None or args.to is not None:
-        from ..run._config import check
+        from ..run.config import check
         check(args.signals is not None and args.results is None, "--signals",
               "give RESULTS/RUN with --signals (and --to FILE), or a RESULTS_DIR alone")
         from .calibrate import export_signals
@@ -34,7 +34,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise StoreError("export: give RESULTS_DIR (or --signals RESULTS/RUN)")
     store = ResultStore(args.results)
     csv_path, json_path = store.export()
-    print(f"exported {len(store.rows())} runs: {csv_path if args.format == 'csv' else json_path}")
+    print(f"exported {len(store.rows())} runs: {csv_path} and {json_path}")
     return 0
 
 

@@ -10,10 +10,10 @@ from pathlib import Path
 
 from ..batch.interrupts import signals_interrupt
 from ..batch.store import ResultStore, StoreError
-from ..run._config import ConfigError
+from ..run.config import ConfigError
 from ..run.plants import ROLES
 from ..run.results import own_folder
-from ..run.scenario import ARMS, PLANT_KINDS, scenario_from_mapping
+from ..run.scenario import PAPER_ARMS, PLANT_KINDS, scenario_from_mapping
 
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
 
@@ -38,11 +38,12 @@ def stability_map_into(runner, scenarios, out: Path, *, progress: bool, plants=N
 
 def _stability_scenarios(args: argparse.Namespace) -> tuple[list, list | None, list | None]:
     """(scenarios, plants, arms) of `flexarm stability`/`validity FILE`: a single scenario
-    on both plants and both arms (unless --plant/--arm), or every run of a campaign."""
+    on both plants and the paper's two arms (unless --plant/--arm), or every run of a
+    campaign."""
     from ..batch.campaign import expand, load_study
     scenarios = [r.scenario for r in expand(load_study(args.file))]
     if len(scenarios) == 1:
-        return scenarios, args.plant or list(PLANT_KINDS), args.arm or list(ARMS)
+        return scenarios, args.plant or list(PLANT_KINDS), args.arm or list(PAPER_ARMS)
     return scenarios, args.plant, args.arm
 
 

@@ -2,9 +2,11 @@
 
 Read from ``OUT/calibration.json``, the experiments as the calibration read them
 (``OUT/experiments/NAME.csv``) and the stored simulation of each at the estimate: the
-parameters with their intervals (or why the data cannot determine them), the residual
-RMS of every signal against its noise level, and for every experiment its measured and
-fitted signals and their residuals.
+verdict on the model and its residual tests, the parameters with their intervals (95 %,
+or effective parameters' of an inadequate model; or why the data cannot determine
+them), the residual RMS of every signal against its noise level, the comparison with
+other models fitted to the same data, and for every experiment its measured and fitted
+signals and their residuals.
 """
 from __future__ import annotations
 
@@ -29,16 +31,18 @@ def calibration_section(store) -> tuple[dict | None, list]:
     if not path.is_file():
         return None, []
     result = json.loads(path.read_text())
+    effective = result.get("model_adequate", True) is not True
     rows = []
     for name, p in result["parameters"].items():
-        if p["identifiable"]:
-            lo, hi = p["ci95"]
-            # as many digits as the interval needs to show its width
-            rows.append([name, f"{p['estimate']:.7g}", f"{p['std']:.2g}",
-                         f"[{lo:.7g}, {hi:.7g}]", "yes"])
-        else:
-            rows.append([name, f"{p['estimate']:.7g}", "—", "—",
+        if not p["identifiable"]:
+            rows.append([name, f"{p['estimate']:.7g}", "—", "—", "—",
                          f"NOT IDENTIFIABLE: {p['reason']}"])
+            continue
+        lo, hi = p.get("interval") or p["ci95"]
+        # as many digits as the interval needs to show its width
+        rows.append([name, f"{p['estimate']:.7g}", f"{p['std']:.2g}", f"[{lo:.7g}, {hi:.7g}]",
+                     f"{p['model_error']:.2g}" if p.get("model_error") is not None else "—",
+                     "yes (effective)" if effective else "yes"])
     residuals = []
     for exp, signals in result["residual_rms"].items():
         if "relative_rms" in signals:
@@ -51,6 +55,10 @@ def calibration_section(store) -> tuple[dict | None, list]:
                               fmt_number(v["noise"]) if v["noise"] else "not declared",
                               fmt_number(v["rms"] / v["noise"]) if v["noise"] else "—"])
     data = {"rows": rows, "residuals": residuals, "inputs": result["inputs"],
+            "interval": "effective interval" if effective else "95 % interval",
+            "interval_kind": result.get("interval_kind", "95 % (the noise)"),
+            "adequacy": _adequacy(result.get("adequacy")),
+            "comparison": [_comparison_row(r) for r in result.get("comparison", [])],
             "summary": f"{result['iterations']} iterations, {result['simulations']} "
                        f"simulations, cost {fmt_number(result['cost'])}, residual variance "
                        f"{fmt_number(result['residual_variance'])} (in units of the noise "
@@ -69,6 +77,39 @@ def calibration_section(store) -> tuple[dict | None, list]:
                                "residuals (bottom)",
                       lambda csv=csv, row=row, name=e["name"]: _fit_figure(csv, row, name)))
     return data, tasks
+
+
+#: The residual tests, in the order of the report's columns.
+_TESTS = ("chi2", "noise", "whiteness", "inputs")
+
+
+def _test_cell(test: dict | None) -> str:
+    if test is None:
+        return "—"
+    limit = test["threshold"]
+    limit = (f"{fmt_number(limit[0])}..{fmt_number(limit[1])}" if isinstance(limit, list)
+             else f"≤ {fmt_number(limit)}")
+    return f"{fmt_number(test['statistic'])} ({limit}){'' if test['passed'] else ' FAILS'}"
+
+
+def _adequacy(verdict: dict | None) -> dict | None:
+    """The verdict on the model and one row per signal: each test's statistic against
+    its threshold, and the diagnosis (None for a calibration made before the tests)."""
+    if verdict is None:
+        return None
+    rows = [[exp, signal, *(_test_cell(tests.get(k)) for k in _TESTS), tests["diagnosis"]]
+            for exp, signals in verdict["signals"].items()
+            for signal, tests in signals.items()]
+    return {"verdict": verdict["verdict"], "rows": rows,
+            "model_adequate": verdict["model_adequate"],
+            "alpha": f"{verdict['family_alpha']:g} for all tests together, "
+                     f"{fmt_number(verdict['test_alpha'])} each"}
+
+
+def _comparison_row(row: dict) -> list[str]:
+    return [row["plant"], row["folder"], ", ".join(row["fitted"]), fmt_number(row["chi2"]),
+            fmt_number(row["rms"]), row["adequacy"], fmt_number(row["aic"]),
+            fmt_number(row["delta_aic"]), fmt_number(row["bic"])]
 
 
 def _fit_figure(csv: Path, row, name: str) -> bytes:

@@ -164,7 +164,7 @@ def _case_figures(v: dict, store) -> list:
     if truth_id is None:
         return []
     from ..batch.store import run_id
-    from ..run._config import to_mapping
+    from ..run.config import to_mapping
     from ..run.vibration import vibration_cutoff
     from ..run.plants import plant_for_role, plant_settings
     from reduced_model import ArmParameters

@@ -17,7 +17,7 @@ from collections import Counter
 
 from .render import display_unit, fmt_number
 
-__all__ = ["verdict_text", "verdict_parts", "value_text", "verdict_counts", "counted",
+__all__ = ["verdict_parts", "value_text", "verdict_counts", "counted",
            "pairs_table", "NOTE_MEANING", "margin", "VERDICT_ORDER"]
 
 #: What the note in brackets after a verdict says, per claim.
@@ -80,12 +80,6 @@ def verdict_parts(claim, v) -> tuple[str, str]:
     if v.verdict in ("holds", "fails") and _margin_text(claim, v.value):
         text += f", {_margin_text(claim, v.value)}"
     return text, v.note
-
-
-def verdict_text(claim, v) -> str:
-    """`verdict_parts` in one line: "9.63 mrad — holds, margin +52 % (link 2)"."""
-    text, note = verdict_parts(claim, v)
-    return text + (f" ({note})" if note else "")
 
 
 #: Verdicts in the order a count lists them.

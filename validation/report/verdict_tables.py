@@ -335,6 +335,8 @@ def write_validity(data: dict, out) -> str:
         write_atomic(out / name, lambda fh, png=png: fh.write(png), binary=True)
         files.append({"caption": caption, "file": name})
     text = render("validity.md.j2", head=head, rows=rows, ghead=ghead, grows=grows,
+                  left_out={arm["arm"]: arm["left_out"] for arm in data["arms"]
+                            if arm["left_out"]},
                   figures=files, timings=data["timings"], points=data["points"],
                   periods=", ".join(f"{1e3 * t:g}" for t in data["certify_periods"]))
     write_atomic(out / "validity.md", lambda fh: fh.write(text))

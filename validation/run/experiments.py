@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._config import ConfigError, check
+from .config import ConfigError, check
 from .results import RunResult
 
 __all__ = ["Experiment", "read_experiment", "from_run", "write_experiment", "check_experiment",

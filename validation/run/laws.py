@@ -20,9 +20,9 @@ import inspect
 import json
 
 from controllers import CONTROLLERS, OBSERVERS, PluginError, accepted_options, resolve
-from reduced_model import ArmModel, ArmParameters, cached_model
+from reduced_model import ArmModel, ArmParameters, cached_model, measured_names
 
-from ._config import ConfigError, check
+from .config import ConfigError, check
 from .processes import checked_apart
 
 __all__ = ["check_laws", "build_controller", "build_observer", "nominal_model",
@@ -44,13 +44,8 @@ def measurement_names(scenario, model: ArmModel) -> tuple[str, ...]:
     """Names the plant will measure with the scenario's sensors (the order of
     `reduced_model.SensorModel`): θ, then q, then rates, then the payload position."""
     s = scenario.sensors
-    coords = model.coordinate_names
-    names = list(coords[:2]) + (list(coords[2:]) if s.modal != "none" else [])
-    if s.rates:
-        names += [f"{c}_dot" for c in names]
-    if s.tip_position:
-        names += ["tip_x", "tip_y"]
-    return tuple(names)
+    return measured_names(model.modes_per_link, modal=s.modal != "none", rates=s.rates,
+                          tip_position=s.tip_position)
 
 
 def _class(role: str, kind: str) -> type:

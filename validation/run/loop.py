@@ -24,7 +24,7 @@ from controllers._compiled import absent
 from reduced_model import ArmModel, PlantFailure, SensorConfig
 from reduced_model._plant_interface import TRUTH_EXTRAS
 
-from ._config import short_repr, short_str
+from .config import short_repr, short_str
 from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
                       check_bounds, context, law_fields, noise_stream, post_sample, pre_sample,
                       run_reduced, sample_laws, signal_layout, status_message)
@@ -267,7 +267,8 @@ def _absent_laws(model: ArmModel):
 def _compiled_loop(plant_form: dict, r: _Run, s: Scenario):
     """The whole loop in one compiled call (`run_reduced`)."""
     k_done, code = run_reduced(r.context, r.rows, plant_form["h"], plant_form["nsteps"](s.Ts),
-                               plant_form["x"], *plant_form["model"], plant_form["basis"])
+                               plant_form["x"], *plant_form["model"], plant_form["basis"],
+                               *plant_form["joints"])
     message = status_message(code, r.info[0], s.divergence, min(k_done, r.N) * s.Ts, r.failure)
     status = "ok" if code == SampleStatus.OK else "diverged"
     return status, message, k_done, {"first": 0.0}  # one call: no split into plant and laws

@@ -22,7 +22,7 @@ from controllers import PluginError, accepted_options, resolve
 from plant_exudyn import ExudynPlant
 from reduced_model import LEVELS, ROLES, Plant, PlantSettings, ReducedPlant, Refinement
 
-from ._config import ConfigError, check
+from .config import ConfigError, check
 from .processes import checked_apart
 
 __all__ = ["PluginSettings", "PlantTable", "PLANTS", "ROLES", "LEVELS", "DEFAULT_TRUTH",
@@ -145,7 +145,7 @@ def plant_settings(table) -> PlantSettings:
     themselves."""
     if isinstance(table, PlantSettings):
         return table
-    from ._config import from_mapping
+    from .config import from_mapping
     return from_mapping(_settings_class(table.get("kind", "reduced")), dict(table), "plant")
 
 

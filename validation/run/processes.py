@@ -27,7 +27,7 @@ import signal
 import sys
 from contextlib import contextmanager
 
-from ._config import ConfigError
+from .config import ConfigError
 
 __all__ = ["die_with_parent", "lead_process_group", "kill_group", "describe_exit",
            "contained", "ContainedFault", "contain_checks", "checked_apart", "CHECK_TIMEOUT"]

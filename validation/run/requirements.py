@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._config import ConfigError, check, check_label, short_repr
+from .config import ConfigError, check, check_label, short_repr
 from .claim_measures import CLAIMS, claim_by_key
 
 __all__ = ["Requirement", "check_requirements", "requirement_metrics", "robustness",

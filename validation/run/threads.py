@@ -1,8 +1,11 @@
-"""A run computes with one thread per numerical library, however its process was started.
+"""One thread per numerical library: the matrices here are small, and idle BLAS or numba
+threads busy-wait on the cores the simulations run on (two workers on two cores would
+otherwise slow each other down).
 
-The environment `validation.batch.threads.ONE_THREAD` asks for one thread only of the
-libraries loaded after it is set: the ``flexarm`` command sets it first, but a run in a
-Python session or notebook, or in a worker forked from one, inherited numpy's OpenBLAS
+Two mechanisms, for two moments.  Before numpy is loaded, the environment `ONE_THREAD`
+asks for one thread only of the libraries loaded after it is set (`prefer_one_thread`:
+this module imports nothing heavy, so that the command line can apply it first).  A run
+in a Python session or notebook, or in a worker forked from one, inherited numpy's OpenBLAS
 with a thread per core — and a multithreaded product sums in another order: the same
 run (ANCF 16 el/link) gave a robustness 2e-12 apart on local workers and on Dask's
 (whose nanny sets the environment), where the runners promise identical values.  So
@@ -13,8 +16,19 @@ started, and two workers no longer share two cores with BLAS threads spinning be
 from __future__ import annotations
 
 import functools
+import os
 
-__all__ = ["one_thread"]
+__all__ = ["one_thread", "ONE_THREAD", "prefer_one_thread"]
+
+#: The environment that keeps each library to one thread.
+ONE_THREAD = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                     "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}
+
+
+def prefer_one_thread() -> None:
+    """Set `ONE_THREAD` in this process's environment where the user has not chosen."""
+    for name, value in ONE_THREAD.items():
+        os.environ.setdefault(name, value)
 
 
 @functools.cache

@@ -15,7 +15,7 @@ import re
 import tomllib
 from pathlib import Path
 
-from ._config import ConfigError
+from .config import ConfigError
 
 __all__ = ["load_toml", "deep_merge", "set_dotted", "get_dotted", "flatten", "parse_value",
            "check_nesting", "MAX_NESTING", "toml_value", "toml_text"]

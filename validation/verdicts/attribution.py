@@ -45,7 +45,9 @@ import itertools
 import math
 from dataclasses import dataclass, field
 
-from ..run._config import ConfigError, check
+from reduced_model._parameters import JOINT_EFFECTS
+
+from ..run.config import ConfigError, check
 from ..batch.campaign import PlannedRun
 from ..batch.queue import run_planned
 from ..run.plants import with_plant
@@ -65,12 +67,19 @@ FACTORS = {
              "link and kinematics as the controller's model)",
     "truncation": "splits 'plant' along reduced (controller's order) → reduced 4+4 modes → "
                   "FE: modes left out vs beyond assumed modes",
-    "parameters": "true parameters → the nominal parameters (no parameter error)",
+    "parameters": "true parameters → the nominal parameters (no parameter error; the "
+                  "joints' fields of friction, drive and bandwidth stay theirs where those "
+                  "are factors too)",
     "sensing": "the scenario's sensors (noise, quantisation, gauges, delay) → exact "
                "measurements of the same quantities",
     "estimation": "the observer's estimate → the true state fed to the controller",
     "sampling": "the scenario's Ts → Ts / 10 (closer to the continuous-time design)",
     "actuation": "torque limits and disturbances → none",
+    "friction": "the arm's joint friction (Coulomb, stiction, Stribeck, viscous) → none, "
+                "in the true and the nominal arm",
+    "drive": "the arm's drives (gear compliance and damping, rotor inertia, backlash) → "
+             "rigid joints, in the true and the nominal arm (the encoders then read θ)",
+    "bandwidth": "the current loops' lag → an ideal torque, in the true and the nominal arm",
     "kinematics": "the reduced plant's exact inextensible kinematics → the paper's linear "
                   "kinematics (on every reduced plant of a world; none on a truth plant)",
 }
@@ -151,15 +160,23 @@ def _step_for(Ts: float, step: float) -> float:
     return Ts / math.ceil(Ts / step - 1e-9)
 
 
-def _idealise(data: dict, factor: str) -> None:
-    """Switch ``factor`` of the resolved scenario mapping ``data`` to its ideal level."""
-    if factor == "plant":
+def _idealise(data: dict, factor: str, players) -> None:
+    """Switch ``factor`` of the resolved scenario mapping ``data`` to its ideal level
+    (``players``: every factor of the attribution)."""
+    if factor in JOINT_EFFECTS:
+        for table in ("true_params", "nominal_params"):
+            data[table].update({f"{name}{i}": 0.0 for name in JOINT_EFFECTS[factor]
+                                for i in (1, 2)})
+    elif factor == "plant":
         data["plant"] = with_plant(data["plant"], "reduced",
                                    modes_per_link=list(data["model"]["modes_per_link"]),
                                    kinematics=data["model"].get("kinematics", "linear"),
                                    step=_step_for(data["Ts"], min(data["plant"]["step"], 1e-3)))
     elif factor == "parameters":
-        data["true_params"] = copy.deepcopy(data["nominal_params"])
+        own = {f"{name}{i}" for effect in JOINT_EFFECTS if effect in players
+               for name in JOINT_EFFECTS[effect] for i in (1, 2)}
+        data["true_params"] = {key: data["true_params"][key] if key in own else value
+                               for key, value in data["nominal_params"].items()}
     elif factor == "sensing":
         s = data["sensors"]
         data["sensors"] = dict(s, modal="direct" if s["modal"] == "gauges" else s["modal"],
@@ -215,7 +232,7 @@ def plan(scenario: Scenario, factors: tuple[str, ...], name: str) -> list[World]
             data = copy.deepcopy(base)
             for f in players:
                 if f not in real:
-                    _idealise(data, f)
+                    _idealise(data, f, players)
             if "kinematics" in real:  # a reduced plant made by idealising 'plant' too
                 _set_kinematics(data, "exact")
             if level == "truncated":

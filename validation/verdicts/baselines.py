@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run._config import ConfigError, check, check_label
+from ..run.config import ConfigError, check, check_label
 from ..batch.campaign import expand, load_campaign
 from ..batch.worker import execute_run
 from ..batch.fingerprint import run_fingerprint

@@ -39,7 +39,7 @@ import numpy as np
 
 from reduced_model import cached_model
 
-from ..run._config import ConfigError
+from ..run.config import ConfigError
 from ..run.laws import build_controller, nominal_model
 from ..run.loop import make_reference
 from ..run.plants import truth_settings

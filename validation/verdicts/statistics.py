@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from scipy.stats import binomtest
 
-from ..run._config import check
+from ..run.config import check
 
 __all__ = ["clopper_pearson", "SequentialTest", "sprt"]
 

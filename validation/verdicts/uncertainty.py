@@ -18,6 +18,8 @@ A scenario or campaign file declares, next to its ``[[requirement]]`` entries::
     sequential = true                               # stop drawing once the test decides
     worst_case = false                              # falsify: stop at the first counterexample
                                                     #   (true: spend the budget on the lowest ρ)
+    calibration = "inadequate"                      # written by flexarm calibrate: the set's
+                                                    #   ranges come from a fit of that verdict
 
 Any scenario field can be uncertain — true parameters, sensor noise, a disturbance's
 amplitude and start, the reference's amplitude and frequency, the initial state and the
@@ -26,6 +28,11 @@ list), with the distributions of a campaign's random sweeps (`RandomAxis`: unifo
 loguniform, choices; ``scale`` for factors of the nominal value; ``also`` for fields
 that share one draw).  Every dimension's ends (and each choice) are checked as scenarios
 before anything runs.
+
+An ``uncertainty.toml`` of ``flexarm calibrate`` says what the fit thought of its model
+(``calibration``): the ranges of a model the residual tests call inadequate (or did not
+judge) are effective parameters of that model, not 95 % intervals of the arm, and every
+verdict over them says so in its description of the set (`UncertaintySet.caveat`).
 
 A *system* is one nominal scenario: a scenario file is one; a campaign file has one per
 run it expands to (``--system NAME`` picks one).  `System.scenario` builds the scenario
@@ -42,23 +49,27 @@ import numpy as np
 
 from ..batch.campaign import (RandomAxis, draw_points, expand, flatten_axes, load_study,
                               random_axis)
-from ..run._config import ConfigError, check
+from ..run.config import ConfigError, check
 from ..run.plants import ROLES, plant_for_role
 from ..run.requirements import Requirement
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from ..run.tomlfiles import set_dotted
+from .calibration_outputs import CALIBRATION_VERDICTS
 from .statistics import SequentialTest
 
 __all__ = ["UncertaintySet", "System", "VerifySettings", "load_systems"]
 
-_SETTINGS = {"level", "p0", "indifference", "alpha", "beta", "sequential", "worst_case"}
+_SETTINGS = {"level", "p0", "indifference", "alpha", "beta", "sequential", "worst_case",
+             "calibration"}
 
 
 @dataclass(frozen=True)
 class UncertaintySet:
-    """Independent dimensions (`RandomAxis`), in the order of their paths."""
+    """Independent dimensions (`RandomAxis`), in the order of their paths; ``caveat``:
+    what the set's ranges are not (from an inadequate calibration), "" if nothing."""
 
     axes: tuple[RandomAxis, ...]
+    caveat: str = ""
 
     @property
     def dim(self) -> int:
@@ -91,7 +102,7 @@ class UncertaintySet:
         return out
 
     def describe(self) -> list[str]:
-        return [axis.describe() for axis in self.axes]
+        return [axis.describe() for axis in self.axes] + ([self.caveat] if self.caveat else [])
 
 
 @dataclass(frozen=True)
@@ -156,6 +167,19 @@ class System:
                               f"{exc.message} (at {label or 'the nominal point'})") from None
 
 
+def _caveat(table: dict) -> str:
+    """What ``[verify] calibration`` says about the set's ranges (module docstring)."""
+    verdict = table.get("calibration", CALIBRATION_VERDICTS[True])
+    check(verdict in CALIBRATION_VERDICTS.values(), "verify.calibration",
+          f"must be one of {', '.join(map(repr, CALIBRATION_VERDICTS.values()))}, "
+          f"got {verdict!r}")
+    if verdict == CALIBRATION_VERDICTS[True]:
+        return ""
+    return (f"CAVEAT: the ranges come from a calibration whose model was {verdict} "
+            "(flexarm calibrate): effective parameters of that model, not 95 % intervals "
+            "of the physical arm")
+
+
 def _settings(table: dict) -> VerifySettings:
     for key in table:
         check(key in _SETTINGS, f"verify.{key}", f"unknown key (allowed: "
@@ -175,7 +199,7 @@ def _settings(table: dict) -> VerifySettings:
                           flags["worst_case"])
 
 
-def _uncertainty(table: dict, nominal: dict) -> UncertaintySet:
+def _uncertainty(table: dict, nominal: dict, caveat: str) -> UncertaintySet:
     check(isinstance(table, dict) and table, "uncertainty",
           "needs at least one uncertain field, e.g. \"true_params.Mp\" = {uniform = [0, 1]}")
     axes = tuple(random_axis(p, spec, nominal, f"uncertainty.{p}")
@@ -183,7 +207,7 @@ def _uncertainty(table: dict, nominal: dict) -> UncertaintySet:
     fields = [p for axis in axes for p in axis.paths]
     twice = sorted({p for p in fields if fields.count(p) > 1})
     check(not twice, "uncertainty", f"{', '.join(twice)} set by more than one dimension")
-    return UncertaintySet(axes)
+    return UncertaintySet(axes, caveat)
 
 
 def load_systems(path: str | Path) -> list[System]:
@@ -191,14 +215,15 @@ def load_systems(path: str | Path) -> list[System]:
     docstring; `load_study` reads either), each checked at its nominal point and at every
     dimension's ends."""
     campaign = load_study(path)
-    settings = _settings(campaign.verify)
+    settings, caveat = _settings(campaign.verify), _caveat(campaign.verify)
     check(bool(campaign.uncertainty), "uncertainty", f"{path} declares no [uncertainty]")
     systems = []
     for run in expand(campaign):
         name, nominal = run.scenario.name.split("/")[-1], scenario_to_mapping(run.scenario)
         check(bool(nominal["requirement"]), "requirement",
               f"{name} has no [[requirement]] to verify")
-        system = System(name, nominal, _uncertainty(campaign.uncertainty, nominal), settings)
+        system = System(name, nominal, _uncertainty(campaign.uncertainty, nominal, caveat),
+                        settings)
         for point in system.uncertainty.corners():
             for role in ROLES:
                 system.scenario(point, plant=role)
