@@ -58,8 +58,8 @@ def in_jit_us(loop, *args, n=200_000, repeat=5):
     return best * 1e6
 
 
-def plant_run_seconds(modes=(2, 2), repeat=5):
-    plant = ReducedPlant(modes_per_link=modes)
+def plant_run_seconds(modes=(2, 2), repeat=5, kinematics="linear"):
+    plant = ReducedPlant(modes_per_link=modes, kinematics=kinematics)
     tau = np.array([0.5, -0.2])
     plant.reset()
     plant.step(tau, 1e-3)  # JIT warm-up

@@ -108,39 +108,35 @@ def exact_reals(parts: dict | None, n1: int, n2: int) -> tuple[list[int], list[n
 
 
 @njit(cache=True, inline="always")
+def _take(buffer, o, rows, cols):
+    """The (rows, cols) view of ``buffer`` at offset ``o``, and the offset after it."""
+    return matrix_view(buffer, o, rows, cols), o + rows * cols
+
+
+@njit(cache=True, inline="always")
 def unpack_exact(ref):
     """`ExactData` of views into the packed model ``ref`` points to (N > 0)."""
     N, n1, n2, reals, o = ref.N, ref.n1, ref.n2, ref.reals, ref.offset
     nb1, nb2 = 1 + n1 + N, 2 + n2 + N
     L1, L2 = reals[o], reals[o + 1]
-    o += 2
-    phi1_tip = reals[o:o + n1]
-    dphi1_tip = reals[o + n1:o + 2 * n1]
-    o += 2 * n1
-    phi2_tip = reals[o:o + n2]
-    o += n2
-    G1 = matrix_view(reals, o, nb1, nb1)
-    o += nb1 * nb1
-    G2 = matrix_view(reals, o, nb2, nb2)
-    o += nb2 * nb2
-    dphi1 = matrix_view(reals, o, n1, N)
-    o += n1 * N
-    ddphi1 = matrix_view(reals, o, n1, N)
-    o += n1 * N
-    dphi2 = matrix_view(reals, o, n2, N)
-    o += n2 * N
-    ddphi2 = matrix_view(reals, o, n2, N)
-    o += n2 * N
-    w1 = reals[o:o + N]
-    w2 = reals[o + N:o + 2 * N]
-    o += 2 * N
-    dphi2_tip = reals[o:o + n2]
-    o += n2
-    inertia = reals[o:o + 4]
-    EI = reals[o + 4:o + 6]
-    damping = reals[o + 6:o + 8]
-    return ExactData(N, n1, n2, L1, L2, phi1_tip, dphi1_tip, phi2_tip, G1, G2, dphi1, ddphi1,
-                     dphi2, ddphi2, w1, w2, dphi2_tip, inertia, EI, damping)
+    phi1_tip, o = _take(reals, o + 2, 1, n1)
+    dphi1_tip, o = _take(reals, o, 1, n1)
+    phi2_tip, o = _take(reals, o, 1, n2)
+    G1, o = _take(reals, o, nb1, nb1)
+    G2, o = _take(reals, o, nb2, nb2)
+    dphi1, o = _take(reals, o, n1, N)
+    ddphi1, o = _take(reals, o, n1, N)
+    dphi2, o = _take(reals, o, n2, N)
+    ddphi2, o = _take(reals, o, n2, N)
+    w1, o = _take(reals, o, 1, N)
+    w2, o = _take(reals, o, 1, N)
+    dphi2_tip, o = _take(reals, o, 1, n2)
+    inertia, o = _take(reals, o, 1, 4)
+    EI, o = _take(reals, o, 1, 2)
+    damping, o = _take(reals, o, 1, 2)
+    return ExactData(N, n1, n2, L1, L2, phi1_tip[0], dphi1_tip[0], phi2_tip[0], G1, G2, dphi1,
+                     ddphi1, dphi2, ddphi2, w1[0], w2[0], dphi2_tip[0], inertia[0], EI[0],
+                     damping[0])
 
 
 def exact_workspace_sizes(n1: int, n2: int, N: int) -> tuple[int, int]:
@@ -160,25 +156,23 @@ def unpack_exact_workspace(ref, scratch):
     wc, oc, wr, orr = scratch.wc, scratch.oc, scratch.wr, scratch.orr
     n = 2 + n1 + n2
     r1, nb1, nb2 = 1 + n1, 1 + n1 + N, 2 + n2 + N
-    A1 = matrix_view(wc, oc, r1, nb1)
-    GA1 = matrix_view(wc, oc + r1 * nb1, r1, nb1)
-    Ad1 = matrix_view(wc, oc + 2 * r1 * nb1, r1, nb1)
-    oc += 3 * r1 * nb1
-    A2 = matrix_view(wc, oc, n, nb2)
-    GA2 = matrix_view(wc, oc + n * nb2, n, nb2)
-    Ad2 = matrix_view(wc, oc + 2 * n * nb2, n, nb2)
-    oc += 3 * n * nb2
-    v1 = wc[oc:oc + nb1]
-    oc += nb1
-    v2 = wc[oc:oc + nb2]
-    a2 = wc[oc + nb2:oc + 2 * nb2]
-    oc += 2 * nb2
-    t = wc[oc:oc + r1]
-    td = wc[oc + r1:oc + 2 * r1]
-    oc += 2 * r1
-    g, g1, g2 = wc[oc:oc + N], wc[oc + N:oc + 2 * N], wc[oc + 2 * N:oc + 3 * N]
-    pd = wr[orr:orr + N]
-    ax = matrix_view(wr, orr + N, 4, n)
-    axd = matrix_view(wr, orr + N + 4 * n, 4, n)
-    vp = wr[orr + N + 8 * n:orr + N + 8 * n + 4]
-    return ExactWork(A1, GA1, Ad1, A2, GA2, Ad2, v1, v2, a2, t, td, g, g1, g2, pd, ax, axd, vp)
+    A1, oc = _take(wc, oc, r1, nb1)
+    GA1, oc = _take(wc, oc, r1, nb1)
+    Ad1, oc = _take(wc, oc, r1, nb1)
+    A2, oc = _take(wc, oc, n, nb2)
+    GA2, oc = _take(wc, oc, n, nb2)
+    Ad2, oc = _take(wc, oc, n, nb2)
+    v1, oc = _take(wc, oc, 1, nb1)
+    v2, oc = _take(wc, oc, 1, nb2)
+    a2, oc = _take(wc, oc, 1, nb2)
+    t, oc = _take(wc, oc, 1, r1)
+    td, oc = _take(wc, oc, 1, r1)
+    g, oc = _take(wc, oc, 1, N)
+    g1, oc = _take(wc, oc, 1, N)
+    g2, oc = _take(wc, oc, 1, N)
+    pd, orr = _take(wr, orr, 1, N)
+    ax, orr = _take(wr, orr, 4, n)
+    axd, orr = _take(wr, orr, 4, n)
+    vp, orr = _take(wr, orr, 1, 4)
+    return ExactWork(A1, GA1, Ad1, A2, GA2, Ad2, v1[0], v2[0], a2[0], t[0], td[0], g[0], g1[0],
+                     g2[0], pd[0], ax, axd, vp[0])

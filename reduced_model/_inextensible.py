@@ -24,9 +24,9 @@ import functools
 import numpy as np
 from numpy.polynomial import legendre
 
-from ._modes import LinkModes, gauss_legendre
+from ._modes import LinkModes, gauss_legendre, weighted_projector
 
-__all__ = ["InextensibleLink", "interpolation_nodes"]
+__all__ = ["InextensibleLink", "interpolation_nodes", "readout_matrix"]
 
 
 def interpolation_nodes(modes_per_link: tuple[int, int]) -> int:
@@ -141,3 +141,30 @@ class InextensibleLink:
         p, pp, u = self._strain(np.asarray(q, dtype=float))
         dk = self.ddphi * u - self.dphi * (2.0 * p * pp * u * u)
         return d * ((dk * self.weights) @ dk.T - (self.ddphi * self.weights) @ self.ddphi.T)
+
+
+def readout_matrix(links: tuple[InextensibleLink, InextensibleLink], basis) -> np.ndarray:
+    """The map from an exact plant's deflection features to q in the mode shapes
+    ``basis`` (`reduced_model._exact_kernels.deflection_features_into`): per link,
+    features [q_own, Im g_h, sin β(L) − p(L)] give the transverse field y = Σ φ q +
+    Σ r_h Im g_h and its tip slope dy/ds = sin β(L), projected on ``basis`` by the FE
+    plant's weighted least squares (`weighted_projector`): the q an FE plant reports for
+    the same centreline.  Block-diagonal by link, (Σ basis modes, Σ features)."""
+    blocks = []
+    for link, b in zip(links, basis):
+        m = link.modes
+        if abs(b.L - m.L) > 1e-12 * m.L:
+            raise ValueError(f"modal basis: L = {b.L}, the plant's link has L = {m.L}")
+        x, w = gauss_legendre(0.0, m.L)
+        end = np.array([m.L])
+        target_quad = np.hstack([m.phi(x).T, link.r(x).T, np.zeros((len(x), 1))])
+        target_tip = np.vstack([np.concatenate([m.phi(end)[:, 0], link.r(end)[:, 0], [0.0]]),
+                                np.concatenate([m.dphi(end)[:, 0], np.zeros(link.nodes), [1.0]])])
+        blocks.append(weighted_projector(b, w_quad=w, basis_quad=b.phi(x).T,
+                                         basis_tip=np.vstack(b.tip_values),
+                                         target_quad=target_quad, target_tip=target_tip))
+    out = np.zeros((sum(p.shape[0] for p in blocks), sum(p.shape[1] for p in blocks)))
+    r, c = blocks[0].shape
+    out[:r, :c] = blocks[0]
+    out[r:, c:] = blocks[1]
+    return out

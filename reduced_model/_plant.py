@@ -10,7 +10,9 @@ from ._joints import (advance_joints_packed, joints_active, motor_state_into,
                       new_joint_buffers, reset_joints)
 from ._linear import reduced_linear_model
 from ._model import ArmModel, cached_model, validate_kinematics, validate_modes_per_link
+from ._inextensible import readout_matrix
 from ._modes import projection
+from ._readout import modal_readout_into
 from ._parameters import ArmParameters, FieldError
 from ._plant_base import Plant, PlantSettings
 from ._plant_interface import check_sample_time
@@ -119,6 +121,10 @@ class ReducedPlant(Plant):
                                 and model.modes_per_link == self.model.modes_per_link)
         basis = self.model.mode_shapes if own else model.mode_shapes
         self._basis_map = None if own else projection(self.model.mode_shapes, basis)
+        #: The map to the measured q (`reduced_model._readout`): the basis map, or the
+        #: exact kinematics' readout of its centreline.
+        self._readout = readout_matrix(self.model.links, basis) if self.model.links else (
+            np.zeros((0, 0)) if own else self._basis_map)
         self._tau = np.zeros(2)
         self._work = self.model.new_workspace()[0]
         self._joints = new_joint_buffers(params, n)
@@ -132,9 +138,15 @@ class ReducedPlant(Plant):
         return self._x[0:2].copy(), self._x[n:n + 2].copy()
 
     def modal_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """(q, q̇) in the modal basis."""
+        """(q, q̇) in the modal basis (exact kinematics: of the centreline, as the FE
+        plant reads its own, `reduced_model._readout`)."""
         n = self.model.n
         q, qd = self._x[2:n], self._x[n + 2:]
+        if self.model.links:
+            m = sum(b.n for b in self.modal_basis)
+            out = np.empty(m), np.empty(m)
+            modal_readout_into(*self.model.packed, self._readout, self._x, *out)
+            return out
         if self._basis_map is None:
             return q.copy(), qd.copy()
         return self._basis_map @ q, self._basis_map @ qd
@@ -195,9 +207,9 @@ class ReducedPlant(Plant):
         cfg = self.sensors.config
         if cfg.strain_gauges is not None or cfg.encoder_resolution != 0 or cfg.tip_position:
             return None
-        basis = np.zeros((0, 0)) if self._basis_map is None else self._basis_map
         return {"model": (*self.model.packed, *self._work), "x": self._x, "h": self.h,
-                "joints": self._joints, "basis": np.ascontiguousarray(basis, dtype=float),
+                "joints": self._joints,
+                "basis": np.ascontiguousarray(self._readout, dtype=float),
                 "nsteps": lambda Ts: check_sample_time(Ts, self.h)}
 
     @property
@@ -214,7 +226,11 @@ class ReducedPlant(Plant):
         """The truth vector [θ, q, θ̇, q̇ (q in the modal basis), tips, tip deflections,
         0, 0, motor angles and rates] written into ``out``."""
         n, x = self.model.n, self._x
-        if self._basis_map is None:
+        if self.model.links:
+            m = 2 + self._readout.shape[0]
+            out[:2], out[m:m + 2] = x[:2], x[n:n + 2]
+            modal_readout_into(*self.model.packed, self._readout, x, out[2:m], out[m + 2:2 * m])
+        elif self._basis_map is None:
             out[:2 * n] = x
         else:
             m = 2 + self._basis_map.shape[0]
@@ -222,7 +238,7 @@ class ReducedPlant(Plant):
             out[2:m] = self._basis_map @ x[2:n]
             out[m + 2:2 * m] = self._basis_map @ x[n + 2:]
         kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-12:-6])
-        out[-6:-4] = 0.0  # its coordinates describe its whole deflection (both kinematics)
+        out[-6:-4] = 0.0  # the projection residual: not computed for the reduced plant
         motor_state_into(self._joints[0], self._joints[1], x, out[-4:])
 
 
