@@ -89,6 +89,7 @@ def _kinematics(root: Path) -> str:
     table = folder / "attribution.csv"
     if not table.is_file():
         return "".join(out) + _HOW_KINEMATICS.format(folder=_shown(folder, root))
+    from validation.verdicts.attribution import METRIC_NAMES, METRICS
     with table.open(newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
     value = {(r["study"], r["metric"], r["factor"]): float(r["contribution"]) for r in rows}
@@ -101,15 +102,16 @@ def _kinematics(root: Path) -> str:
             if gap is None or kin is None:
                 continue
             closed = f"{2 * kin / gap:.0%}" if gap else ""
-            body.append([study, metric, f"{gap:.3g}", f"{kin:.3g}",
-                         f"{value[(study, metric, 'plant')]:.3g}", closed])
+            body.append([study, f"{METRIC_NAMES[metric]} [{METRICS[metric][1]}]", f"{gap:.3g}",
+                         f"{kin:.3g}", f"{value[(study, metric, 'plant')]:.3g}", closed])
     out.append(f"Each of the paper's systems on the truth plant (default arm, 20 s), from "
                f"``{_shown(folder, root)}``: the gap m(truth) − m(reduced model as plant) of "
                "each metric, shared by Shapley values between ``plant`` and ``kinematics`` "
                "(:doc:`theory/exact-kinematics`).  The kinematics act only on the reduced "
                "plant, so their value is half the change exact kinematics make there; "
                "*closed* = 2 × kinematics / gap is the share of the gap the exact "
-               "kinematics close.\n\n")
+               "kinematics close (erratic where the gap is at the level of a sign "
+               "observer's chattering or the sensor noise).\n\n")
     out.append(list_table(["system", "metric", "gap", "kinematics", "plant", "closed"], body,
                           classes="config-table"))
     return "".join(out)
