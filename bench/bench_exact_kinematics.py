@@ -16,7 +16,8 @@ import time
 import numpy as np
 
 from _report import report, target
-from bench_reduced_model import _loop_coriolis, _loop_mass, _loop_rhs, in_jit_us, plant_run_seconds
+from bench_reduced_model import (_loop_coriolis, _loop_mass, _loop_rhs, in_jit_us,
+                                 kernel_inputs, plant_run_seconds)
 from reduced_model import ArmModel, ReducedPlant
 from validation.run.loop import run_scenario
 from validation.run.scenario import scenario_from_mapping
@@ -47,13 +48,7 @@ def main():
         label = f"{modes[0]}+{modes[1]}"
         for kinematics in KINEMATICS:
             model = ArmModel(modes_per_link=modes, kinematics=kinematics)
-            n = model.n
-            rng = np.random.default_rng(0)
-            Q = np.concatenate([[0.3, 0.7], rng.normal(0, 0.01, n - 2)])
-            Qd = rng.normal(0, 1, n)
-            x, tau, xd = np.concatenate([Q, Qd]), np.array([0.1, 0.2]), np.empty(2 * n)
-            M, C = np.empty((n, n)), np.empty((n, n))
-            d, ws = model.data, model.new_workspace()[1]
+            Q, Qd, x, tau, xd, M, C, d, ws = kernel_inputs(model)
             row = {"modes": label, "kinematics": kinematics,
                    "mass_us": in_jit_us(_loop_mass, d, Q, M, ws, n=20_000),
                    "coriolis_us": in_jit_us(_loop_coriolis, d, Q, Qd, C, ws, n=20_000),
