@@ -364,9 +364,10 @@ def test_shipped_campaigns_expand():
     # stator: 8 stator inertias × (PBC, PBC + sign SMO) at 0.2 ms + 4 at 1 ms.
     # robust: the three systems flexarm verify judges (the PBC with smo-paper, smo-bl, EKF).
     # lab: the PBC with the sign SMO on the lab arm, with and without the disturbance, on
-    # both plants, from rest and on the reference (2 × 2 × 2).
+    # both plants, from rest and on the reference (2 × 2 × 2).  kinematics: the PBC with
+    # the true state and each observer, from rest and on the reference (6 × 2).
     assert counts == {"attribution": 3, "mismatch": 29, "paper": 100, "robustness": 26,
-                      "stator": 20, "robust": 3, "lab": 8}
+                      "stator": 20, "robust": 3, "lab": 8, "kinematics": 12}
 
 
 def test_identifiers_stay_text_in_the_index_and_the_export(tmp_path):
