@@ -18,7 +18,7 @@ import numpy as np
 from _report import report, target
 from bench_reduced_model import (_loop_coriolis, _loop_mass, _loop_rhs, in_jit_us,
                                  kernel_inputs, plant_run_seconds)
-from reduced_model import ArmModel, ReducedPlant
+from reduced_model import ArmModel
 from validation.run.loop import run_scenario
 from validation.run.scenario import scenario_from_mapping
 

@@ -44,7 +44,7 @@ def _points(model: ArmModel, Q, fine=4001):
     rotors' angles; returns (masses, complex positions, rotor inertias, rotor angles)."""
     p, n1 = model.params, model.modes_per_link[0]
     q = (Q[2:2 + n1], Q[2 + n1:])
-    masses, points, tips, slopes = [], [], [], []
+    masses, points, tips = [], [], []
     root, angle = 0.0 + 0.0j, Q[0]
     for link, (modes, rho, tip_mass) in enumerate(zip(
             model.mode_shapes, (p.rho1, p.rho2), (p.mh2 + p.stator_mass, p.Mp))):
