@@ -35,6 +35,7 @@ $(STAMP): pyproject.toml $(PINS)
 demo: $(STAMP)
 	$(BIN)/flexarm reproduce-paper --out results/paper
 	$(BIN)/flexarm reproduce-paper --lab --no-stability --out results/lab
+	$(BIN)/flexarm attribute campaigns/kinematics.toml --out results/kinematics
 
 # pytest exits 5 when it collects nothing: say so and fail rather than pass silently.
 test: $(STAMP)

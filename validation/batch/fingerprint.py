@@ -32,7 +32,7 @@ from pathlib import Path
 from reduced_model._imports import walk
 
 __all__ = ["code_fingerprint", "run_fingerprint", "result_sources", "plugin_sources",
-           "plugin_kinds", "forget_plugins"]
+           "plugin_kinds", "forget_plugins", "is_fresh", "fingerprint_of"]
 
 _ROOT = Path(__file__).resolve().parents[2]
 #: Where executing a run starts: everything it can import decides results.
@@ -163,3 +163,17 @@ def run_fingerprint(scenario: dict) -> str:
             h.update(b"unknown")
         _hash_packages(h, _plugin_walk(kind.partition(":")[0]).packages)
     return h.hexdigest()[:16]
+
+
+def is_fresh(row) -> bool:
+    """Whether the stored run ``row`` (`StoredRun`) was made by this installation's code:
+    its fingerprint is the one its laws and plant would get now (their kinds are columns
+    of the row: no scenario decoded)."""
+    return row.fingerprint == fingerprint_of(row.controller, row.observer, row.plant)
+
+
+def fingerprint_of(controller: str, observer: str, plant: str) -> str:
+    """`run_fingerprint` of a run of these kinds of laws and plant (all that it reads of
+    a scenario)."""
+    return run_fingerprint({"controller": {"kind": controller}, "observer": {"kind": observer},
+                            "plant": {"kind": plant}})

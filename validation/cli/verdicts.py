@@ -314,10 +314,10 @@ def cmd_baseline_add(args: argparse.Namespace) -> int:
     from ..verdicts.baselines import check_from_run, load_baselines, parse_margin, write_baselines
     from .one_run import stored_run
     margin = parse_margin(args.margin)
-    row = stored_run(args.run, "RESULTS/RUN")
+    store, row = stored_run(args.run, "RESULTS/RUN")
     baselines = load_baselines(args.file)
     metric = tuple(k.strip() for k in args.metric)
-    updated, added = check_from_run(baselines, row, metric, margin=margin, op=args.op,
+    updated, added = check_from_run(baselines, store, row, metric, margin=margin, op=args.op,
                                     name=args.name)
     write_baselines(updated, updated.checks)
     what = metric[0] if len(metric) == 1 else f"max({', '.join(metric)})"

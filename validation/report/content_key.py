@@ -10,7 +10,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from ..batch.fingerprint import run_fingerprint
+from ..batch.fingerprint import fingerprint_of
 from ..batch.store import ResultStore
 
 __all__ = ["content_key", "report_is_current", "paths"]
@@ -35,11 +35,21 @@ def _drawing_code() -> str:
     return h.hexdigest()
 
 
-def _rows_digest(store: ResultStore) -> list:
+def _rows_digest(store: ResultStore) -> str:
+    """A hash of what the report reads of each stored run (its detail whole: swept values
+    included, never decoded)."""
     if not store.exists():
-        return []
-    return sorted([r.run_id, r.sha256, r.size, r.status, r.name, r.sweep, r.axes,
-                   r.fingerprint == run_fingerprint(r.config)] for r in store.rows())
+        return ""
+    store.rows(where="0")  # refuses an index it cannot read
+    h, now = hashlib.sha256(), {}
+    for *values, controller, observer, plant, detail in store.columns(
+            ["run_id", "sha256", "size", "status", "name", "sweep", "fingerprint",
+             "controller", "observer", "plant", "detail"], where="1 ORDER BY run_id"):
+        kinds = (controller, observer, plant)
+        if kinds not in now:  # the fingerprint each kind of run gets from this code
+            now[kinds] = fingerprint_of(*kinds)
+        h.update(f"{values}{values[-1] == now[kinds]}".encode() + detail)
+    return h.hexdigest()
 
 
 def content_key(results_dir, *, animate: bool) -> str:

@@ -9,6 +9,7 @@ from pathlib import Path
 from reduced_model import ArmParameters
 
 from . import figures as fig
+from ..batch.resimulate import every_signal
 from ..verdicts.mesh import is_check
 from .run_tables import swept
 
@@ -78,10 +79,10 @@ def claim_bounds() -> dict:
 
 
 
-def _loaded(group):
+def _loaded(store, group):
     """(row, every signal) of each run of a figure group (re-simulated where a run's file
-    keeps less: `StoredRun.load`)."""
-    return [(r, r.load()) for r in group]
+    keeps less: `validation.batch.resimulate.every_signal`)."""
+    return [(r, every_signal(store, r)) for r in group]
 
 
 def _title(group) -> str:
@@ -96,7 +97,7 @@ def _title(group) -> str:
         f" — {stopped}" if stopped else "")
 
 
-def paper_figure_tasks(group, bounds: dict | None = None) -> list:
+def paper_figure_tasks(store, group, bounds: dict | None = None) -> list:
     """The paper's figures of one group as (section, caption, draw) tasks; runs that
     diverged or failed are named in the title, not drawn (their last samples before
     leaving the bounds are not data).  ``bounds``: the claims' bounds by claim key."""
@@ -111,7 +112,7 @@ def paper_figure_tasks(group, bounds: dict | None = None) -> list:
 
     def results():
         if "r" not in cache:
-            cache["r"] = _loaded(group)
+            cache["r"] = _loaded(store, group)
         return cache["r"]
     what, _, stopped = title.partition(" — ")
 
@@ -134,14 +135,14 @@ def paper_figure_tasks(group, bounds: dict | None = None) -> list:
     return tasks
 
 
-def animation(group, path: Path) -> tuple[str, bytes] | None:
+def animation(store, group, path: Path) -> tuple[str, bytes] | None:
     """The GIF of a group written to ``path`` and its still for print: (caption, PNG);
     None when no run moves (one sample)."""
     from ..run.laws import nominal_model
     head = group[0]
     params = ArmParameters.from_mapping(head.config["nominal_params"])
     model = nominal_model(params, tuple(head.config["model"]["modes_per_link"]))
-    loaded = _loaded([r for r in group if r.status == "ok"])
+    loaded = _loaded(store, [r for r in group if r.status == "ok"])
     caption = fig.animation(loaded, params, model, _title(group), path)
     if caption is None:
         return None

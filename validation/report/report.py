@@ -20,6 +20,7 @@ A report is rendered again only when what it shows can have changed (`content_ke
 from __future__ import annotations
 
 import base64
+import functools
 import re
 import shutil
 from dataclasses import dataclass, field
@@ -32,15 +33,16 @@ from .sweep_figures import sweep_figures
 from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
 from .drawing import draw_all
-from ..batch.fingerprint import run_fingerprint
+from ..batch.fingerprint import fingerprint_of, is_fresh
+from ..batch.resimulate import every_signal
 from .render import fmt_number, folded_text, render
 from .bottom_line import bottom_line
 from .calibration import calibration_section
 from .content_key import content_key, paths, report_is_current
 from .groups import animation, claim_bounds, figure_groups, paper_figure_tasks
+from .many import distributions, histograms, is_many, read_metrics, windows_of
 from .robust import robust_section
-from .run_tables import (estimation_table, mesh_table, metrics_table, runs_table, start,
-                         table)
+from .run_tables import estimation_table, mesh_table, metrics_table, runs_table, table
 from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
@@ -88,6 +90,7 @@ class ReportData:
     validity: dict | None = None
     robust: dict | None = None
     calibration: dict | None = None
+    many: dict | None = None
 
 
 
@@ -99,12 +102,15 @@ def _included(store: ResultStore):
     simulations, `calibration_section`)."""
     from ..verdicts.calibration import FIT_SWEEP
     from ..verdicts.verify import ROBUST_SWEEPS
-    all_rows = store.rows()
+    all_rows = store.rows(metrics=read_metrics(store))
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
-    stale = [r for r in all_rows if r.fingerprint != run_fingerprint(r.config)]
-    fresh = [r for r in all_rows if r.run_id not in damaged and r not in stale]
+    now = {k: fingerprint_of(*k) for k in {(r.controller, r.observer, r.plant)
+                                           for r in all_rows}}  # once per kind of run
+    stale = [r for r in all_rows if r.fingerprint != now[r.controller, r.observer, r.plant]]
+    left_out = set(damaged) | {r.run_id for r in stale}  # a set: a list was quadratic
+    fresh = [r for r in all_rows if r.run_id not in left_out]
     runs = [r for r in fresh if r.sweep != "stability" and not is_check(r)
             and r.sweep not in (*ROBUST_SWEEPS, FIT_SWEEP)]
     evaluations = [r for r in fresh if r.sweep in ROBUST_SWEEPS]
@@ -118,14 +124,16 @@ def _included(store: ResultStore):
 
 
 def _scope(runs) -> list[str]:
-    arms = sorted({r.config.get("arm", "default") for r in runs})
+    arms = sorted({r.arm for r in runs})
     scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in arms]
-    scope.append("plants: " + ", ".join(sorted({r.plant_label for r in runs})))
+    kinds = {(r.plant, r.role): r for r in runs}  # a label per kind, not per run
+    scope.append("plants: " + ", ".join(sorted({r.plant_label for r in kinds.values()})))
     scope.append("control periods Ts: " + ", ".join(f"{1e3 * t:g} ms" for t in
-                                                     sorted({r.config["Ts"] for r in runs})))
+                                                     sorted({r.Ts for r in runs})))
     scope.append("initial conditions: " + ", ".join(sorted(
-        {"at rest" if start(r.config) == "rest" else "moving with the reference" for r in runs})))
-    windows = sorted({(r.config["transient"], r.config["duration"]) for r in runs})
+        {"at rest" if r.initial_state == "rest" else "moving with the reference"
+         for r in runs})))
+    windows = sorted(windows_of(runs))
     scope.append("metrics after the transient: " + ", ".join(
         f"{t:g} s of {d:g} s runs" for t, d in windows[:6]) + (", …" if len(windows) > 6 else "")
         + " (maxima of deflection and torque, torque variation: the whole run)")
@@ -142,7 +150,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     all_rows, runs, warnings, evaluations = _included(store)
     fresh_ids = {r.run_id for r in runs}
     checks = [r for r in all_rows if is_check(r) and r.run_id not in fresh_ids
-              and r.fingerprint == run_fingerprint(r.config)]
+              and is_fresh(r)]
     damaged_checks = store.verify(checks)
     checks = [r for r in checks if r.run_id not in damaged_checks]
     campaigns = store.campaigns()
@@ -156,8 +164,9 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       scope=_scope(counted) if counted else [], warnings=warnings)
     bounds = claim_bounds()
 
-    columns = claim_columns(runs + checks)
-    data.mesh = mesh_table(runs + checks)
+    signals = functools.partial(every_signal, store)
+    columns = claim_columns(runs + checks, signals)
+    data.mesh = mesh_table(runs + checks, signals)
     if columns:
         data.summary = verdict_counts(columns)
         data.claims = claims_tables(columns)
@@ -166,7 +175,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                                  "rationale": c.rationale} for c in CLAIMS]
         data.claim_notes = [f"{c.text.split(':')[0]} ({c.key.replace('_', ' ')}): "
                             f"{NOTE_MEANING[c.key]}" for c in CLAIMS if c.key in NOTE_MEANING]
-    data.pairs = pairs_table(runs, fig.describe_run)
+    data.pairs = pairs_table(runs, fig.describe_run) if len({r.role for r in runs}) > 1 \
+        else None
     stability_dir = store.out / "stability"
     tasks = []
     if ResultStore(stability_dir).exists():
@@ -201,17 +211,26 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     data.calibration, calibration_tasks = calibration_section(store)
     tasks += calibration_tasks
     data.bottom_line = bottom_line(counted, checks, columns, data.calibration)
-    data.estimation = estimation_table(runs)
-    if runs:  # a folder of `flexarm verify` alone has its section instead
+    many = is_many(runs)
+    if many:  # summarised: no table row and no figure per run
+        data.many = distributions(runs)
+        tasks.append(("Distributions", "distributions over the runs that completed",
+                      lambda: histograms(runs)))
+    else:
+        data.estimation = estimation_table(runs)
+    if runs and not many:  # a folder of `flexarm verify` alone has its section instead
         data.runs, data.metrics = runs_table(runs), metrics_table(runs)
 
-    groups, skipped = figure_groups(runs, wanted)
+    groups, skipped = figure_groups(runs, wanted) if not many else ([], [])
+    if many and data.many:  # a run's figures: `flexarm show`, e.g. of a worst run
+        data.many["stopped"].append(f"no run's figures are drawn here: 'flexarm show "
+                                    f"{store.out}/RUN' draws any run's")
     data.notes["paper_figures"] = [f"{r.name}, {fig.describe_run(r.config)}: not drawn, every "
                                    f"run of it {r.status} ({r.message})" for r in skipped]
     for group in groups:
-        tasks += paper_figure_tasks(group, bounds)
+        tasks += paper_figure_tasks(store, group, bounds)
     by_sweep: dict[str, list] = {}
-    for r in runs:
+    for r in runs if not many else ():  # many runs: their distributions instead
         if r.sweep and r.axes:
             by_sweep.setdefault(r.sweep, []).append(r)
     sweep_bounds = {"track_max": bounds["tracking"], "vib_rms": bounds["vibration"],
@@ -225,8 +244,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                          "gaps": table(*gap_rows(validity))}
         tasks.append(("Validity of the reduced model", None,
                       lambda: linear_figures.validity_figures(validity)))
-    for arm in sorted({r.config.get("arm", "default") for r in runs}):
-        example = next(r for r in runs if r.config.get("arm", "default") == arm)
+    for arm in sorted({r.arm for r in runs}):
+        example = next(r for r in runs if r.arm == arm)
         params = ArmParameters.from_mapping(example.config["true_params"])
         modes = tuple(example.config["model"]["modes_per_link"])
         tasks.append(("Validity of the reduced model",
@@ -235,7 +254,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       lambda p=params, m=modes, a=arm: validity_map(p, m, f"{a} arm")))
     makes = [make for _, _, make in tasks]
     if animate and groups and animation_path is not None:
-        makes.append(lambda: animation(groups[0], animation_path))
+        makes.append(lambda: animation(store, groups[0], animation_path))
     drawn = draw_all(makes, stores=[store], progress=progress)
     for (section, caption, _), made in zip(tasks, drawn):
         items = made if isinstance(made, list) else [(caption, made)]
@@ -250,7 +269,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
 
 # --- the pages ------------------------------------------------------------------------------
 #: The figure sections, in the order the report shows them.
-SECTIONS = ["Stability map", "Attribution", "Paper figures", "Sweeps",
+SECTIONS = ["Stability map", "Attribution", "Distributions", "Paper figures", "Sweeps",
             "Validity of the reduced model"]
 
 
@@ -281,6 +300,7 @@ def contents(data: ReportData) -> list[tuple[str, str]]:
                ("calibration", "Calibration", data.calibration),
                ("estimation", "Estimation against the measurement", data.estimation),
                ("runs", "Runs and metrics", data.runs),
+               ("many", "Distributions and worst cases", data.many),
                ("paper-figures", "Paper figures", has["Paper figures"]),
                ("sweeps", "Sweeps", has["Sweeps"]),
                ("validity", "Validity of the reduced model",

@@ -9,7 +9,7 @@ from . import figures as fig
 from .render import fmt_number, folded
 from .sweep_figures import short_value
 
-__all__ = ["table", "start", "swept", "identity", "runs_table", "metrics_table",
+__all__ = ["table", "swept", "identity", "runs_table", "metrics_table",
            "estimation_table", "mesh_table"]
 
 #: Axes shown in their own columns (not repeated among the swept values); a swept plant
@@ -23,7 +23,7 @@ def table(head: list[str], rows: list[list], classes: list[str] | None = None) -
     return {"head": head, "rows": cells, "classes": classes or [""] * len(rows)}
 
 
-def start(config: dict) -> str:
+def _start(config: dict) -> str:
     return "rest" if config.get("initial_state") == "rest" else "moving"
 
 
@@ -33,7 +33,7 @@ def swept(run) -> str:
 
 def identity(run) -> list:
     c = run.config
-    return [run.name, c.get("arm", "default"), run.plant, f"{1e3 * c['Ts']:g}", start(c)]
+    return [run.name, c.get("arm", "default"), run.plant, f"{1e3 * c['Ts']:g}", _start(c)]
 
 
 def runs_table(runs) -> dict:
@@ -115,14 +115,14 @@ def estimation_table(runs) -> dict | None:
     return {"compact": table(head, rows), "detail": table(detail_head, detail)}
 
 
-def mesh_table(runs) -> dict | None:
+def mesh_table(runs, signals) -> dict | None:
     """Closed-loop mesh convergence of the truth-plant runs that have checks: per run, its
     verdict and the values that moved (compact); each judged value (a claim's measure) on
     every mesh (detail)."""
     from ..verdicts.claims import mesh_rows
     from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
-    rows = sorted(mesh_rows(runs), key=lambda r: (r.run.name, swept(r.run),
-                                                  r.run.config["Ts"]))
+    rows = sorted(mesh_rows(runs, signals), key=lambda r: (r.run.name, swept(r.run),
+                                                           r.run.config["Ts"]))
     if not rows:
         return None
     labels = list(dict.fromkeys(label for r in rows for label, _ in r.values))
