@@ -444,10 +444,8 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
                 memory_limit: int | None = None, scenarios=None,
                 progress: TextIO | None = None) -> Runner:
     """A runner: local worker processes or a Dask cluster, for `run_campaign`, `calibrate`
-    and the verdicts.  Use it as a context manager: leaving it ends its workers.
-
-    Every option is checked first (`check_runner`); then local workers are forked after
-    the kernels the runs of ``scenarios`` use are compiled or loaded.
+    and the verdicts; as a context manager, leaving it ends its workers.  Every option is
+    checked first (`check_runner`).
 
     Parameters
     ----------
@@ -460,11 +458,9 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
     force : bool
         Allow more local workers than cores (they only share the cores).
     run_timeout : float, optional
-        The wall-time limit of every run [s] (default: derived from each run,
-        `limits.default_run_timeout`).
+        Every run's wall-time limit [s] (default `limits.default_run_timeout`, per run).
     memory_limit : int, optional
-        The memory limit of each local worker [MiB] (default
-        `limits.default_memory_limit`).
+        Each local worker's memory limit [MiB] (default `limits.default_memory_limit`).
     scenarios : list of Scenario, optional
         The runs to come: their kernels are compiled or loaded before the workers fork
         (default: the PBC with the paper's SMO on both plants, `worker.warm_up`).
@@ -479,8 +475,7 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
     Raises
     ------
     ConfigError
-        A bad option, naming it (``--workers``, ``--scheduler`` …); an unreachable
-        scheduler or one without workers.
+        A bad option, naming it; an unreachable scheduler or one without workers.
     """
     where = check_runner(kind, workers, scheduler, force=force, run_timeout=run_timeout,
                          memory_limit=memory_limit)
