@@ -199,18 +199,11 @@ class PositionEKF(ExtendedKalmanFilter):
 
     Parameters
     ----------
-    model : ArmModel
-        The nominal model providing F (any modes per link).
-    Ts : float
-        The control period [s]: the prediction's horizon and Q_d's.
-    sigma_theta, sigma_q : float (or one per coordinate)
-        Measurement-noise standard deviations [rad, m], > 0; defaults 1e-4, 1e-5.
-    accel_noise_theta, accel_noise_q : float (or one per coordinate)
-        Process noise, √intensity of white acceleration noise [rad/s²/√Hz, m/s²/√Hz],
-        >= 0; defaults 0.03 and 0.03 (`ExtendedKalmanFilter` says how they were chosen).
-    p0_theta, p0_q, p0_theta_dot, p0_q_dot : float (or one per coordinate)
-        Initial estimate-error standard deviations [rad, m, rad/s, m/s], >= 0; defaults
-        0.1, 5e-3, 0.3, 0.05.
+    model, Ts, sigma_theta, sigma_q, accel_noise_theta, accel_noise_q
+        As `ExtendedKalmanFilter`: the nominal model, the control period [s], the
+        position noise levels and the process noise.
+    p0_theta, p0_q, p0_theta_dot, p0_q_dot
+        As `ExtendedKalmanFilter`: the initial estimate-error standard deviations.
     """
 
     name = "ekf-pos"

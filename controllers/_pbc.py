@@ -110,13 +110,9 @@ class IdealisedPBC(PassivityBasedController):
 
     Parameters
     ----------
-    model : ArmModel
-        The nominal model (its M, Christoffel C, K, D).
-    Ts : float
-        The control period [s] (the law is continuous: it is recorded, not used).
-    lambda_joint, lambda_flex : gains of Λ [1/s] on θ (one or two numbers) and on q (one
-        number, or one per mode), as `PassivityBasedController`.
-    kv_joint : gains of K_v on θ [N m s/rad], as `PassivityBasedController`.
+    model, Ts, lambda_joint, lambda_flex, kv_joint
+        As `PassivityBasedController`: the nominal model, the control period [s], Λ and
+        K_v on θ.
     kv_flex : float or sequence of float
         K_v on q [N s/m], one number or one per mode (default 5).
     compensate_damping : bool

@@ -189,15 +189,8 @@ class BoundaryLayerSMO(_SlidingModeObserver):
 
     Parameters
     ----------
-    model : ArmModel
-        The nominal model the estimate is predicted with.
-    Ts : float
-        The control period [s]: the horizon of each prediction and of the discrete
-        injection's band ±Ts·L.
-    l_position, l_velocity : (float, float) or float
-        L_P [rad/s on θ, m/s on q] and L_V [rad/s², m/s²] as (joint, flexible) gains, or
-        one number for both; defaults (1.0, 0.5) and (5, 2), chosen as the private base
-        class `_SlidingModeObserver` records (conditions (31) and (36) of the paper).
+    model, Ts, l_position, l_velocity
+        As `PaperSMO`: the nominal model, the control period [s], the gains L_P, L_V.
     boundary_layer : float
         ε in units of the band Ts·L, > 0 (default 2: inside the layer half the error is
         removed per step).
@@ -216,15 +209,8 @@ class PositionOnlySMO(_SlidingModeObserver):
 
     Parameters
     ----------
-    model : ArmModel
-        The nominal model the estimate is predicted with.
-    Ts : float
-        The control period [s]: the horizon of each prediction and of the discrete
-        injection's band ±Ts·L.
-    l_position, l_velocity : (float, float) or float
-        L_P [rad/s on θ, m/s on q] and L_V [rad/s², m/s²] as (joint, flexible) gains, or
-        one number for both; defaults (1.0, 0.5) and (5, 2), chosen as the private base
-        class `_SlidingModeObserver` records (conditions (31) and (36) of the paper).
+    model, Ts, l_position, l_velocity
+        As `PaperSMO`: the nominal model, the control period [s], the gains L_P, L_V.
     filter_time : float
         The time constant of the equivalent injection's filter [s], > 0 (default 5 ms:
         averages the sign chatter over 5 samples, fast against the 34 Hz mode's 30 ms

@@ -24,12 +24,8 @@ def natural_frequencies(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.
 
     Parameters
     ----------
-    params : ArmParameters
-        The arm.
-    mesh : Mesh
-        The beam element and elements per link (default ANCF, 4 per link).
-    theta : (float, float)
-        Joint angles [rad].
+    params, mesh, theta
+        The arm, its mesh and joint angles [rad], as `build_arm`'s.
     joints : {"locked", "free"}
         "locked" clamps both joints at ``theta``; "free" leaves them free.
     n : int
