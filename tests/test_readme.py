@@ -37,6 +37,7 @@ COMMANDS = [line for line in LINES if line.startswith("flexarm ")]
 #: What the commands slower than ~20 s took on two shared cores (a fresh folder, numba's
 #: cache warm), and the command that needs one of them first: `make test-all` runs them.
 SLOW = {"flexarm reproduce-paper --lab --no-stability": "460 s",
+        "flexarm attribute campaigns/kinematics.toml": "186 s",
         "flexarm campaign campaigns/mismatch.toml --workers 2": "52 s",
         "flexarm report results/mismatch": "reads the campaign's folder",
         "flexarm stability campaigns/paper.toml": "STABILITY",

@@ -325,7 +325,7 @@ def test_the_report_opens_with_its_bottom_line(report):
 
 def _row(status, arm="table1", Ts=1e-3, plant="truth plant (Exudyn)"):
     from types import SimpleNamespace
-    return SimpleNamespace(status=status, config={"arm": arm, "Ts": Ts}, plant_label=plant)
+    return SimpleNamespace(status=status, arm=arm, Ts=Ts, plant_label=plant)
 
 
 def test_the_bottom_line_says_where_runs_diverged_and_counts_checks_apart():

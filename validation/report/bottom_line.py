@@ -23,18 +23,17 @@ UNDECIDED = {
 }
 
 
-def _plural(n: int, word: str, many: str | None = None) -> str:
-    return f"{n} {word if n == 1 else many or word + 's'}"
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word if n == 1 else word + 's'}"
 
 
 def _places(runs) -> list[tuple[int, str]]:
     """(count, "the table1 arm at Ts = 1 ms, truth plant (Exudyn)") per arm and control
     period, most first."""
-    counts = Counter((r.config.get("arm", "default"), float(r.config["Ts"])) for r in runs)
+    counts = Counter((r.arm, r.Ts) for r in runs)  # the row's columns: no scenario decoded
     out = []
     for (arm, Ts), n in counts.most_common():
-        plants = sorted({r.plant_label for r in runs if r.config.get("arm", "default") == arm
-                         and float(r.config["Ts"]) == Ts})
+        plants = sorted({r.plant_label for r in runs if (r.arm, r.Ts) == (arm, Ts)})
         out.append((n, f"the {arm} arm at Ts = {1e3 * Ts:g} ms, {' and '.join(plants)}"))
     return out
 
@@ -130,7 +129,7 @@ def bottom_line(runs, checks, columns, calibration: dict | None = None) -> list[
     Examples
     --------
     >>> from types import SimpleNamespace as Run
-    >>> runs = [Run(status=s, config={"arm": "table1", "Ts": 1e-3}, plant_label="reduced plant")
+    >>> runs = [Run(status=s, arm="table1", Ts=1e-3, plant_label="reduced plant")
     ...         for s in ("ok", "diverged", "diverged")]
     >>> print("\\n".join(bottom_line(runs, [], [])))
     3 runs: 1 completed, 2 diverged, 0 failed.
