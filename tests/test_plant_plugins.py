@@ -54,6 +54,14 @@ def test_a_plugin_plant_runs_and_is_reported_as_the_truth(lab):
     assert run.returncode == 0, run.stderr
     (row,) = ResultStore(lab / "out").rows()
     assert row.status == "ok" and row.role == "truth" and row.plant == "labplants:FineArm"
+    # Known bad (issue 48, 11): "these are the FE model's numbers on ; --mesh-check ..." and,
+    # with --mesh-check, "checks incomplete (against )".
+    assert "convergence not checked: the truth plant (labplants:FineArm) declares no " \
+           "refinements" in run.stdout
+    checked = flexarm(lab, "run", "--config", "fine.toml", "--mesh-check", "--out", "never")
+    assert checked.returncode == 2 and "--mesh-check: the truth plant (labplants:FineArm) " \
+                                       "declares no refinements" in checked.stderr
+    assert not (lab / "never").exists()
     report = flexarm(lab, "report", "out")
     assert report.returncode == 0, report.stderr
     html = (lab / "out" / "report" / "report.html").read_text()

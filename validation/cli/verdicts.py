@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import shlex
 import sys
 from pathlib import Path
 
@@ -298,7 +299,8 @@ def cmd_baseline_update(args: argparse.Namespace) -> int:
 
 
 def cmd_baseline_add(args: argparse.Namespace) -> int:
-    from ..verdicts.baselines import check_from_run, load_baselines, parse_margin, write_baselines
+    from ..verdicts.baselines import (DEFAULT_FILE, check_from_run, load_baselines, parse_margin,
+                                      write_baselines)
     from .one_run import stored_run
     margin = parse_margin(args.margin)
     store, row = stored_run(args.run, "RESULTS/RUN")
@@ -315,5 +317,6 @@ def cmd_baseline_add(args: argparse.Namespace) -> int:
     if duration > 5:
         print(f"  note: a {duration:g} s scenario: `make test` measures every short check; "
               "a scenario of 5 s or less keeps it short")
-    print(f"  flexarm baseline check --only {added.name}   # measures it again")
+    where = "" if Path(args.file) == Path(DEFAULT_FILE) else f" --file {shlex.quote(args.file)}"
+    print(f"  flexarm baseline check --only {added.name}{where}   # measures it again")
     return 0
