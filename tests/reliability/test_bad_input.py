@@ -331,6 +331,25 @@ def test_a_refused_runner_keeps_a_results_folder_that_was_there(tmp_path, monkey
     assert sorted(p.name for p in (out / "runs").iterdir()) == stored
 
 
+@pytest.mark.parametrize("command", [["campaign"], ["verify", "--mode", "estimate"]])
+def test_a_refused_runner_removes_the_parents_it_made(tmp_path, monkeypatch, capsys, command):
+    """Known bad (issue 48, 9): refused with ``--out deep/new/out``, the command removed
+    out/ but left deep/ and deep/new/ behind (campaign and verify share the code)."""
+    from validation.cli import common
+    from validation.run.config import ConfigError
+    (tmp_path / "ok.toml").write_text(CAMPAIGN_OK + '[[requirement]]\nname = "t"\n'
+                                      'claim = "tracking"\n[uncertainty]\n'
+                                      '"true_params.Mp" = { uniform = [0.0, 0.2] }\n')
+
+    def unreachable(*args, **kwargs):
+        raise ConfigError("--scheduler", "cannot reach tcp://127.0.0.1:1 within 10 s")
+    monkeypatch.setattr(common, "make_runner", unreachable)
+    assert main([*command, str(tmp_path / "ok.toml"), "--out",
+                 str(tmp_path / "deep" / "new" / "out")]) == 2
+    assert "cannot reach" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.toml"]
+
+
 def test_enough_cases():
     assert len(CASES) >= 25
 
