@@ -364,3 +364,18 @@ def test_bad_input_as_a_real_process(argv, text, tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and text in proc.stderr
     assert "Traceback" not in proc.stderr and not (tmp_path / "out").exists()
+
+
+def test_a_time_bound_beyond_the_run_is_refused(tmp_path, capsys):
+    """Known bad (issue 48, 16): ``always[0,30]`` on a 1 s run was accepted and judged on
+    the run's 1 s without a word.  Within the run it is accepted."""
+    requirement = 'requirement=[{{name = "t", formula = "always[0,{}](abs(theta1 - ' \
+                  'theta1_ref) <= 0.5)"}}]'
+    assert main(["run", "--duration", "1", "--set", requirement.format(30), "--out",
+                 str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "requirement[0].formula" in err[0] and \
+        "time bound [0, 30] s reaches beyond the 1 s run" in err[0]
+    assert not (tmp_path / "never").exists()
+    assert main(["run", "--duration", "1", "--set", requirement.format(1), "--out",
+                 str(tmp_path / "ok")]) == 0
