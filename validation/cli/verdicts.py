@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..batch.interrupts import signals_interrupt
 from ..batch.store import ResultStore, StoreError
-from ..run.config import ConfigError
+from ..run.config import ConfigError, check
 from ..run.plants import ROLES
 from ..run.results import own_folder
 from ..run.scenario import PAPER_ARMS, PLANT_KINDS, scenario_from_mapping
@@ -81,6 +81,11 @@ def cmd_validity(args: argparse.Namespace) -> int:
     from ..verdicts.validity import validity_analysis
     from .summaries import validity_summary
     scenarios, plants, arms = _stability_scenarios(args)
+    plugins = sorted({s.plant.kind for s in scenarios if s.plant.kind not in PLANT_KINDS})
+    check(not plugins or args.plant, "plant.kind", f"{', '.join(plugins)} is a plug-in plant, which declares "
+                                     "no linear model: validity compares the reduced model's "
+                                     "and the FE arm's (give --plant reduced --plant exudyn to "
+                                     "judge the built-in arms for this law)")
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     out = Path(args.out or Path("results") / f"validity-{Path(args.file).stem}")
     stability = _stability_folder(args, out)
