@@ -191,6 +191,12 @@ def compiled_form(law, role: str) -> CompiledLaw | None:
     CompiledLaw or None
         ``law.compiled()``, or None when the law runs as a Python object.
 
+    Raises
+    ------
+    TypeError
+        Naming the law, when what ``compiled`` returns is not a `CompiledLaw` of the
+        role's signature (the run then fails saying so).
+
     Examples
     --------
     >>> from controllers import JointPD, compiled_form
@@ -208,7 +214,15 @@ def compiled_form(law, role: str) -> CompiledLaw | None:
     defining = next((c for c in cls.__mro__ if method in c.__dict__), None)
     if defining is None or "compiled" not in defining.__dict__:
         return None
-    return law.compiled()
+    form = law.compiled()
+    signature = CONTROLLER_SIGNATURE if role == "controller" else OBSERVER_SIGNATURE
+    if not (isinstance(form, CompiledLaw) and isinstance(form.pointer, LawPointer)
+            and form.pointer.signature() == signature):
+        text = " ".join(repr(form).split())
+        raise TypeError(f"{cls.__module__}:{cls.__qualname__}.compiled() returned {text[:60]}{'...' if len(text) > 60 else ''}"
+                        f": a compiled {role} is a controllers.CompiledLaw made by "
+                        f"CompiledLaw.of(kernel, {role.upper()}_SIGNATURE, model, ...)")
+    return form
 
 
 @njit(cache=True)

@@ -16,8 +16,10 @@ enters with its version and its installed files' record (``RECORD``: a hash per 
 A plug-in law adds its own module and every module that one imports that is not part of
 the Python installation (its helpers, wherever they live: a folder on ``PYTHONPATH``,
 inside one of the project's packages, a sourceless ``.pyc``, an extension module, a zip
-archive on ``sys.path`` — hashed whole, what it imports not followed), found the same way, and every installed package it imports, the same way as the project's: a
-plug-in installed with ``pip`` and upgraded is new code.  Files are located without
+archive on ``sys.path`` — hashed whole, what it imports not followed), found the same
+way, and every installed package it imports, the same way as the project's: a plug-in
+installed with ``pip`` and upgraded is new code; a module in site-packages that no
+distribution declares is hashed by its files, as the user's own.  Files are located without
 importing anything, so reading a results folder never runs a plug-in's code.  Numba's
 compiled artefacts are kept consistent with these sources by `reduced_model._cache_guard`.
 """
@@ -120,7 +122,9 @@ def code_fingerprint() -> str:
 
 @functools.lru_cache(maxsize=64)
 def _plugin_walk(module: str):
-    return walk([module], None)
+    # An installed module no distribution declares (copied into site-packages by hand)
+    # has no version or record to stand for it: its files are hashed as the user's own.
+    return walk([module], None, declared=lambda top: bool(_distributions(top)))
 
 
 def forget_plugins() -> None:

@@ -17,7 +17,7 @@ from ..batch.queue import run_planned
 from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore, StoreError, run_id
 from ..run.config import ConfigError, check_label
-from ..run.plants import is_truth, plant_settings
+from ..run.plants import is_truth
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
 from ..verdicts.mesh import is_check
@@ -232,9 +232,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     rid = run_id(data)
     check_runner(run_timeout=args.run_timeout, memory_limit=args.memory_limit)
     truth = is_truth(data)
+    refinable = bool(scenario.plant.refinements())
     if args.mesh_check and not truth:
         raise ConfigError("--mesh-check", f"the {scenario.plant.kind} plant is not a "
                                           "discretisation: only a truth plant has mesh checks")
+    if args.mesh_check and not refinable:
+        raise ConfigError("--mesh-check", f"the {scenario.plant.label} declares no refinements "
+                                          "(a plug-in plant is described without importing "
+                                          "it): check its convergence yourself")
     store = open_output(args.out or Path("results") / f"run-{rid}")  # bad --out: nothing ran
     workers = min(available_cores(), 3) if args.mesh_check else 1  # the 3 checks side by side
     with make_runner("local", workers, run_timeout=args.run_timeout,
@@ -271,11 +276,14 @@ def cmd_run(args: argparse.Namespace) -> int:
                              units))
     if getattr(args, "like_row", None) is not None and result.status == "ok":
         print(_compare_with_stored(args.like_row, metrics))
-    if truth:
+    if truth and refinable:
         print("  " + (convergence_line(store, rid) if args.mesh_check else
                       f"convergence not checked: these are the FE model's numbers on "
-                      f"{plant_settings(data['plant']).discretisation()}; --mesh-check runs the "
-                      "same loop on refined meshes and steps"))
+                      f"{scenario.plant.discretisation()}; --mesh-check runs the same loop on "
+                      "refined meshes and steps"))
+    elif truth:
+        print(f"  convergence not checked: the {scenario.plant.label} declares no refinements "
+              "(check its convergence yourself)")
     print(f"results: {path} (index and metrics.csv in {store.out})" + (
         f"; figures: flexarm show {store.out}/{rid}" if result.status == "ok" else ""))
     if args.mesh_check and checked:

@@ -7,7 +7,7 @@ Never a number typed here.
 
 The folders are ``$FLEXARM_FINDINGS`` or ``results/paper``, ``$FLEXARM_FINDINGS_LAB`` or
 ``results/lab`` and ``$FLEXARM_FINDINGS_KINEMATICS`` or ``results/kinematics`` (where
-``make demo`` writes).
+``make findings`` writes).
 """
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ def _csv_table(path: Path) -> str:
 
 _HOW_LAB = """\
 No stored results of the lab arm were found at ``{folder}`` when this site was built.  To
-produce them (``make demo`` does)::
+produce them (``make findings`` does)::
 
     flexarm reproduce-paper --lab --no-stability --out results/lab
 
@@ -72,7 +72,7 @@ def _lab(root: Path) -> str:
 
 _HOW_KINEMATICS = """\
 No stored attribution of the kinematics was found at ``{folder}`` when this site was
-built.  To produce it (``make demo`` does)::
+built.  To produce it (``make findings`` does)::
 
     flexarm attribute campaigns/kinematics.toml --out results/kinematics
 
