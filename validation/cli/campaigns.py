@@ -60,7 +60,9 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     from ..report.verdict_tables import write_claims
     from ..verdicts.claims import claim_columns
     from .summaries import claims_summary
+    from ..verdicts.bisection import tolerance_from
     campaign = load_campaign(campaigns_dir() / "paper.toml")
+    tolerance = tolerance_from(campaign.stability, args.tolerance)
     runs = expand(campaign)
     out = Path(args.out or Path("results") / "paper")
     scenarios = [r.scenario for r in runs]
@@ -79,7 +81,7 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
         if not args.no_stability:
             stability = stability_map_into(runner, [r.scenario for r in runs if not
                                             r.scenario.disturbances], out / "stability",
-                                           progress=not args.no_progress)
+                                           progress=not args.no_progress, tolerance=tolerance)
             if stability not in (0, EXIT_FAILED):  # interrupted
                 return stability
     columns = claim_columns(ResultStore(out).rows())

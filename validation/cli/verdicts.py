@@ -18,20 +18,22 @@ from ..run.scenario import ARMS, PLANT_KINDS, scenario_from_mapping
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
 
 
-def stability_map_into(runner, scenarios, out: Path, *, progress: bool, plants=None,
-                       arms=None) -> int:
-    """Run the stability map into ``out`` (opened by the caller) and print its summary;
-    the exit status: 130/143 if it was interrupted, 1 if a limit is missing because a run
-    failed where it lies (a failure above a limit found decides nothing: counted only)."""
+def stability_map_into(runner, scenarios, out: Path, *, progress: bool, tolerance: float,
+                       plants=None, arms=None) -> int:
+    """Run the stability map into ``out`` (opened by the caller), each limit bisected to
+    ``tolerance``, and print its summary; the exit status: 130/143 if it was interrupted,
+    1 if a limit is missing because a run failed where it lies (a failure above a limit
+    found decides nothing: counted only)."""
     from ..report.verdict_tables import write_stability
     from ..verdicts.stability import cases_from_scenarios, stability_map
     from .summaries import stability_summary
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
-    results, summary = stability_map(cases, out, runner=runner, progress=progress)
+    results, summary = stability_map(cases, out, runner=runner, progress=progress,
+                                     tolerance=tolerance)
     if summary.interrupted:
         return finish(summary, "stability", out)
-    write_stability(results, out)
-    lines, missing = stability_summary(results, out / "stability.md")
+    write_stability(results, out, tolerance=tolerance)
+    lines, missing = stability_summary(results, out / "stability.md", tolerance=tolerance)
     print("\n".join(lines))
     return EXIT_FAILED if missing else 0
 
@@ -47,14 +49,17 @@ def _stability_scenarios(args: argparse.Namespace) -> tuple[list, list | None, l
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
+    from ..batch.campaign import load_study
+    from ..verdicts.bisection import tolerance_from
     from ..verdicts.stability import cases_from_scenarios
+    tolerance = tolerance_from(load_study(args.file).stability, args.tolerance)
     scenarios, plants, arms = _stability_scenarios(args)
     out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)  # what will run
     runner = runner_for(args, [scenario_from_mapping(c.base) for c in cases], out)
     with runner:
         return stability_map_into(runner, scenarios, out, progress=not args.no_progress,
-                          plants=plants, arms=arms)
+                                  tolerance=tolerance, plants=plants, arms=arms)
 
 
 def _stability_folder(args, out: Path) -> Path | None:
