@@ -289,3 +289,21 @@ def test_a_growing_run_is_diverging_before_it_leaves_the_bounds():
         outcomes[Ts] = stability.outcome(_row("ok", metrics=all_metrics(result)))
     assert outcomes[2.6e-3][0] == "stable", outcomes
     assert outcomes[2.76e-3][0] == "diverged" and "growing" in outcomes[2.76e-3][1], outcomes
+
+
+@pytest.mark.parametrize("text, flag, where", [
+    ("", ["--tolerance", "0"], "--tolerance"),
+    ("[stability]\ntolerance = 0.9\n", [], "stability.tolerance"),
+    ('[stability]\ntolerance = "1 %"\n', [], "stability.tolerance"),
+    ("[stability]\ntol = 0.01\n", [], "stability.tol: unknown key"),
+])
+def test_a_bad_tolerance_is_refused_in_one_line_writing_nothing(tmp_path, capsys, text,
+                                                                 flag, where):
+    from validation.cli import main
+    cfg = tmp_path / "s.toml"
+    cfg.write_text('[controller]\nkind = "pd"\n' + text)
+    status = main(["stability", str(cfg), "--plant", "reduced", "--arm", "default",
+                   "--out", str(tmp_path / "out"), "--no-progress", *flag])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and where in err, err
+    assert not (tmp_path / "out").exists()

@@ -197,7 +197,9 @@ def cmd_verify(args: argparse.Namespace) -> int:
                       f"{r['sequential']['draws']} draws")
         elif args.mode == "falsify":
             print(f"{system.name}:")
-            what = "counterexample" if v["found"] else "no counterexample; worst case"
+            what = "counterexample" if v["found"] else \
+                f"{v['verdict']}; worst case" if v["undecided"] else \
+                "no counterexample; worst case"
             truth = (requirement.rho_text(v["rho_truth"]) if v["rho_truth"] is not None
                      else f"−inf ({v.get('truth_status', 'no run')})")
             reduced = requirement.rho_text(v["rho_reduced"] if v["rho_reduced"] is not None
@@ -217,12 +219,16 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _checks_line(convergence: dict, requirement) -> str:
-    """"converged (ANCF 8 el/link: -0.0123 rad; ...)": a verdict's checks and their ρ (or
-    the status of a check whose run did not complete)."""
-    checks = "; ".join(f"{label}: " + (c["status"] if c["rho"] is None
-                                       else requirement.rho_text(c["rho"]))
-                       for label, c in convergence["checks"].items())
-    return f"{convergence['verdict']} ({checks})"
+    """"converged: ρ = −0.261 ± 0.005 rad (order 1.4; ANCF 4 el/link: -0.223 rad; ...)": a
+    verdict's ρ on the refined sequence and its other checks (or the status of a check
+    whose run did not complete)."""
+    rho = lambda v, status="": status if v is None else requirement.rho_text(v)  # noqa: E731
+    checks = convergence["levels"] | convergence["checks"]
+    every = [f"{label}: {rho(c['rho'], c['status'])}" for label, c in checks.items()]
+    estimate = "" if convergence["rho"] is None else \
+        f": ρ = {rho(convergence['rho'])} ± {convergence['error']:.2g}" + (
+            f" (order {convergence['order']:.2g})" if convergence["order"] is not None else "")
+    return f"{convergence['verdict']}{estimate} [{'; '.join(every)}]"
 
 
 # --- flexarm baseline -----------------------------------------------------------------------

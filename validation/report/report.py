@@ -313,7 +313,7 @@ def _included(store: ResultStore):
     have their own section, `robust_section`, not a row each; so do a calibration's
     simulations, `calibration_section`)."""
     from ..verdicts.calibration import FIT_SWEEP
-    from ..verdicts.verify import ROBUST_SWEEPS
+    from ..verdicts.evaluations import ROBUST_SWEEPS
     all_rows = store.rows()
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
