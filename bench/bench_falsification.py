@@ -43,8 +43,8 @@ sys.path.insert(0, str(ROOT))
 from bench._report import report, target  # noqa: E402
 from validation.batch.executor import make_runner  # noqa: E402
 from validation.verdicts.uncertainty import load_systems  # noqa: E402
-from validation.verdicts.verify import (Evaluations, effective_rho, estimate,  # noqa: E402
-                                        falsify)
+from validation.verdicts.evaluations import Evaluations, effective_rho  # noqa: E402
+from validation.verdicts.verify import estimate, falsify  # noqa: E402
 from validation.verdicts.search import CMASearch  # noqa: E402
 
 PLANTED = ROOT / "bench" / "planted.toml"

@@ -24,7 +24,7 @@ from validation.verdicts.claims import CLAIMS, SYSTEM, claim_columns, evaluate
 from validation.run.loop import run_scenario
 from validation.run.metrics import all_metrics
 from validation.run.results import RunResult
-from validation.run.scenario import scenario_from_mapping
+from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 
 CLAIM = {c.key: c for c in CLAIMS}
 ESTIMATION = ("estimation", "flexible_rates", "noise_rejection", "beats_zero", "convergence")
@@ -313,3 +313,30 @@ def test_richardson_gives_the_order_and_the_error_of_a_refined_sequence():
     assert math.isnan(order) and error == pytest.approx(0.2)
     assert richardson(1.0, 1.0, 1.0)[1] == 0.0
     assert math.isnan(richardson(1.0, 1.1)[0]) and richardson(1.0, 1.1)[1] == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("values, expected", [
+    # ANCF 4, 8, 16, GE 32 [rad]: order 1.3, error of the ANCF 4 value 0.8 mrad
+    ((0.0190, 0.0185, 0.0183, 0.0184), "holds"),  # margin 1 mrad > 0.8 mrad
+    ((0.0199, 0.0194, 0.0192, 0.0193), "undecided at this resolution"),  # 0.1 < 0.8 mrad
+    ((0.0210, 0.0205, 0.0203, 0.0204), "fails"),  # margin 1 mrad
+])
+def test_a_margin_inside_the_values_error_is_undecided(values, expected):
+    """The one rule (`validation.verdicts.resolution`) on a claim's value on the truth
+    plant: the Richardson error of the refined sequence against the margin to the bound
+    (0.02 rad).  Known good: 1 mrad either side of the bound holds or fails; known bad:
+    0.1 mrad below it, with 0.8 mrad of discretisation error, is neither."""
+    from validation.verdicts import mesh as mesh_check
+    claim = dataclasses.replace(CLAIM["tracking"], windowed=False)  # no signals to load
+    config = scenario_to_mapping(scenario_from_mapping({"plant": {"kind": "exudyn"}}))
+
+    def run(config, value, rid):
+        return SimpleNamespace(name=f"paper/{SYSTEM}", config=config, status="ok", message="",
+                               end_time=20.0, metrics={"track_max_1": value,
+                                                       "track_max_2": value / 2},
+                               run_id=rid, load=lambda: None)  # the measure reads metrics
+    checks = {r.label: run(mesh_check.refined_config(config, r), v, r.label)
+              for r, v in zip(mesh_check.refinements(config), values[1:])}
+    v = evaluate(claim, run(config, values[0], "nominal"), checks)
+    assert v.verdict == expected, v
+    assert v.error == pytest.approx(0.0005 / (1 - 2 ** -math.log2(0.0005 / 0.0002)))

@@ -72,7 +72,7 @@ def test_the_stability_map_names_its_round(tmp_path, capsys):
     assert main(["stability", str(tmp_path / "s.toml"), "--plant", "reduced", "--arm",
                  "default", "--workers", "1", "--out", str(tmp_path / "o")]) == 0
     err = capsys.readouterr().err
-    assert "stability: grid" in err and "stability: bisection 1/3" in err
+    assert "stability: grid" in err and "stability: bisection 1 (to 0.01)" in err
 
 
 def test_the_compile_never_repeats_an_estimate():

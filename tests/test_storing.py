@@ -228,7 +228,7 @@ def test_an_in_memory_store_keeps_float64_signals_and_writes_nothing(tmp_path, m
     from validation.batch.memory import MemoryStore
     from validation.run.loop import run_scenario
     from validation.run.scenario import scenario_from_mapping
-    from validation.verdicts.verify import Evaluations
+    from validation.verdicts.evaluations import Evaluations
     monkeypatch.chdir(tmp_path)
     scenario = scenario_from_mapping(SMALL["scenario"] | {"seed": 5})
     memory = Evaluations(MemoryStore(), SerialRunner(), "inner")

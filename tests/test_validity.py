@@ -54,7 +54,8 @@ def synthetic_analysis() -> dict:
             "mesh_fine": "truth plant (Exudyn), ANCF 8 el/link", "truth": True,
             "certified_s": 7e-4, "certificate": [{"Ts": 7e-4, "nu_gap": 0.47, "margin": 0.51,
                                                   "certified": True}],
-            "largest_stable_s": 3.5e-3, "first_unstable_s": 4e-3, "in_bracket": "no",
+            "largest_stable_s": 3.5e-3, "first_unstable_s": 4e-3, "limit_low_s": 3.4e-3,
+            "limit_high_s": 4e-3, "limit_verdict": "converged", "in_bracket": "no",
             "sound": "yes", "conservatism": 0.2, "evidence": "truth plant with step Ts/200: "
                                                                "0.97×: ok, 1.05×: diverged",
             "seconds": 1.0}
@@ -69,7 +70,7 @@ def test_written_analysis_reads_back_and_is_reported(tmp_path):
     data = synthetic_analysis()
     (out / "validity").mkdir()  # as `flexarm validity` makes it (own_folder)
     text = write_validity(data, out / "validity")
-    assert "| pbc | exudyn | default | 2.7 | truth plant (Exudyn), ANCF 4 el/link | 2.71 | 0.7 | 3.5 | 4 | no | yes | 0.2 |" \
+    assert "| pbc | exudyn | default | 2.7 | truth plant (Exudyn), ANCF 4 el/link | 2.71 | 0.7 | 3.5 | 4 | (3.4, 4] converged | no | yes | 0.2 |" \
         in text
     assert "δν mylab:MyPD loop at Ts" in text  # the scenario's own controller, named
     assert ("Not in the linear models of the default arm" in text  # said, not dropped

@@ -53,13 +53,13 @@ __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "own_name", 
 MAX_RUNS = 100_000
 
 _TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution",
-             "requirement", "uncertainty", "verify", "calibrate", "keep"}
+             "requirement", "uncertainty", "verify", "calibrate", "keep", "stability"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
 _SPEC_KEYS = {"scale", "uniform", "loguniform", "choices", "also"}
 #: Sections a scenario file may have too (``flexarm verify`` reads a scenario file's
-#: ``[uncertainty]`` and ``[verify]``, ``flexarm calibrate`` its ``[calibrate]``;
-#: ``[[requirement]]`` is a scenario key).
-_VERIFY_KEYS = ("uncertainty", "verify", "calibrate")
+#: ``[uncertainty]`` and ``[verify]``, ``flexarm calibrate`` its ``[calibrate]``,
+#: ``flexarm stability`` its ``[stability]``; ``[[requirement]]`` is a scenario key).
+_VERIFY_KEYS = ("uncertainty", "verify", "calibrate", "stability")
 
 
 @dataclass(frozen=True)
@@ -117,6 +117,7 @@ class Campaign:
     verify: dict = field(default_factory=dict)
     calibrate: dict = field(default_factory=dict)
     keep: dict = field(default_factory=dict)
+    stability: dict = field(default_factory=dict)
 
 
 # --- loading ------------------------------------------------------------------------------
@@ -230,7 +231,8 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
                     description=str(data.get("description", "")), attribution=attribution,
                     uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}),
-                    calibrate=data.get("calibrate", {}), keep=data.get("keep", {}))
+                    calibrate=data.get("calibrate", {}), keep=data.get("keep", {}),
+                    stability=data.get("stability", {}))
 
 
 # --- expansion --------------------------------------------------------------------------------

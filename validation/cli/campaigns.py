@@ -62,8 +62,10 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     from ..report.verdict_tables import write_claims
     from ..verdicts.claims import claim_columns
     from .summaries import claims_summary
+    from ..verdicts.bisection import tolerance_from
     which = "lab" if args.lab else "paper"
     campaign = load_campaign(campaigns_dir() / f"{which}.toml")
+    tolerance = tolerance_from(campaign.stability, args.tolerance)
     runs = expand(campaign)
     out = Path(args.out or Path("results") / which)
     scenarios = [r.scenario for r in runs]
@@ -82,7 +84,7 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
         if not args.no_stability:
             stability = stability_map_into(runner, [r.scenario for r in runs if not
                                             r.scenario.disturbances], out / "stability",
-                                           progress=not args.no_progress)
+                                           progress=not args.no_progress, tolerance=tolerance)
             if stability not in (0, EXIT_FAILED):  # interrupted
                 return stability
     store = ResultStore(out)

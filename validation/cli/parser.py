@@ -97,6 +97,13 @@ def _add_cases(p) -> None:
                         "own)")
 
 
+def _add_tolerance(p) -> None:
+    """--tolerance of the commands that map stability limits."""
+    p.add_argument("--tolerance", type=float, metavar="REL",
+                   help="relative width each stability limit is bisected to (default: the "
+                        "file's [stability] tolerance, else 0.01 = 1 %%)")
+
+
 def _add_execution(p, *, dask: bool = True) -> None:
     p.add_argument("--workers", type=_int_in(1, 4096), default=None, metavar="N",
                    help=f"parallel runs (default: the {available_cores()} cores; 1 = one "
@@ -226,6 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="results folder (default results/paper, with --lab results/lab)")
     _add_execution(paper, dask=False)
     paper.add_argument("--no-stability", action="store_true", help="skip the stability map")
+    _add_tolerance(paper)
     paper.add_argument("--no-report", action="store_true", help="skip the report")
     paper.add_argument("--no-animation", action="store_true", help="skip the GIF")
     paper.set_defaults(func=cmd_reproduce_paper)
@@ -236,6 +244,7 @@ def build_parser() -> argparse.ArgumentParser:
     stab.add_argument("--out", metavar="DIR",
                       help="results folder (default results/stability-<file name>)")
     _add_cases(stab)
+    _add_tolerance(stab)
     _add_execution(stab)
     stab.set_defaults(func=cmd_stability)
 

@@ -44,11 +44,16 @@ def _ms(seconds: float) -> str:
     return f"{1e3 * seconds:.3g} ms"
 
 
-def stability_summary(results, path: Path) -> tuple[list[str], int]:
-    """The range of each limit over the cases, what is not converged or not monotone,
-    and the failed runs: a limit that ends at one is missing; one above a limit already
-    found decides nothing and is counted."""
-    lines = [f"stability map: {len(results)} cases -> {path}"]
+def stability_summary(results, path: Path, *, tolerance: float) -> tuple[list[str], int]:
+    """The range of each limit over the cases, the runs it took and the widest bracket,
+    what is not converged (or extrapolated) or not monotone, and the failed runs: a limit
+    that ends at one is missing; one above a limit already found decides nothing and is
+    counted."""
+    widths = [w for r in results for w in (r.divergence.width, r.tracking.width)
+              if not math.isnan(w)]
+    lines = [f"stability map: {len(results)} cases, {sum(r.runs for r in results)} runs, "
+             f"bisected to {tolerance:.2%}"
+             + (f" (widest bracket {max(widths):.2%})" if widths else "") + f" -> {path}"]
     for name, attr in (("no divergence up to", "divergence"), ("keeps tracking up to",
                                                                  "tracking")):
         values = [getattr(r, attr).largest for r in results]
@@ -57,10 +62,13 @@ def stability_summary(results, path: Path) -> tuple[list[str], int]:
         below = len(values) - len(found)
         lines.append(f"  {name}: {text}" + (f"; below the smallest tested Ts in {below} "
                                             "case(s)" if below else ""))
-    moved = [r for r in results if r.mesh_converged is False]
-    if moved:
-        lines.append(f"  not converged under mesh refinement: {len(moved)} case(s) "
-                     "(their limits describe the FE mesh)")
+    for verdict, meaning in (("extrapolated", "a Richardson estimate of the converged limit "
+                                              "stated with its error"),
+                             ("not converged", "their limits describe the FE mesh")):
+        moved = [r for r in results if any(v.verdict == verdict for v in r.resolved.values())]
+        if moved:
+            lines.append(f"  {verdict} on the refined sequence: {len(moved)} case(s) "
+                         f"({meaning})")
     bends = sum(bool(r.non_monotone) for r in results)
     if bends:
         lines.append(f"  not monotone: {bends} case(s)")

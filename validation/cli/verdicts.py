@@ -19,20 +19,22 @@ from ..run.scenario import PAPER_ARMS, PLANT_KINDS, scenario_from_mapping
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
 
 
-def stability_map_into(runner, scenarios, out: Path, *, progress: bool, plants=None,
-                       arms=None) -> int:
-    """Run the stability map into ``out`` (opened by the caller) and print its summary;
-    the exit status: 130/143 if it was interrupted, 1 if a limit is missing because a run
-    failed where it lies (a failure above a limit found decides nothing: counted only)."""
+def stability_map_into(runner, scenarios, out: Path, *, progress: bool, tolerance: float,
+                       plants=None, arms=None) -> int:
+    """Run the stability map into ``out`` (opened by the caller), each limit bisected to
+    ``tolerance``, and print its summary; the exit status: 130/143 if it was interrupted,
+    1 if a limit is missing because a run failed where it lies (a failure above a limit
+    found decides nothing: counted only)."""
     from ..report.verdict_tables import write_stability
     from ..verdicts.stability import cases_from_scenarios, stability_map
     from .summaries import stability_summary
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
-    results, summary = stability_map(cases, out, runner=runner, progress=progress)
+    results, summary = stability_map(cases, out, runner=runner, progress=progress,
+                                     tolerance=tolerance)
     if summary.interrupted:
         return finish(summary, "stability", out)
-    write_stability(results, out)
-    lines, missing = stability_summary(results, out / "stability.md")
+    write_stability(results, out, tolerance=tolerance)
+    lines, missing = stability_summary(results, out / "stability.md", tolerance=tolerance)
     print("\n".join(lines))
     return EXIT_FAILED if missing else 0
 
@@ -49,14 +51,17 @@ def _stability_scenarios(args: argparse.Namespace) -> tuple[list, list | None, l
 
 
 def cmd_stability(args: argparse.Namespace) -> int:
+    from ..batch.campaign import load_study
+    from ..verdicts.bisection import tolerance_from
     from ..verdicts.stability import cases_from_scenarios
+    tolerance = tolerance_from(load_study(args.file).stability, args.tolerance)
     scenarios, plants, arms = _stability_scenarios(args)
     out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)  # what will run
     runner = runner_for(args, [scenario_from_mapping(c.base) for c in cases], out)
     with runner:
         return stability_map_into(runner, scenarios, out, progress=not args.no_progress,
-                          plants=plants, arms=arms)
+                                  tolerance=tolerance, plants=plants, arms=arms)
 
 
 def _default_maps(file: str) -> list[Path]:
@@ -212,7 +217,9 @@ def cmd_verify(args: argparse.Namespace) -> int:
                       f"{r['sequential']['draws']} draws")
         elif args.mode == "falsify":
             print(f"{system.name}:")
-            what = "counterexample" if v["found"] else "no counterexample; worst case"
+            what = "counterexample" if v["found"] else \
+                f"{v['verdict']}; worst case" if v["undecided"] else \
+                "no counterexample; worst case"
             truth = (requirement.rho_text(v["rho_truth"]) if v["rho_truth"] is not None
                      else f"−inf ({v.get('truth_status', 'no run')})")
             reduced = requirement.rho_text(v["rho_reduced"] if v["rho_reduced"] is not None
@@ -232,12 +239,16 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
 
 def _checks_line(convergence: dict, requirement) -> str:
-    """"converged (ANCF 8 el/link: -0.0123 rad; ...)": a verdict's checks and their ρ (or
-    the status of a check whose run did not complete)."""
-    checks = "; ".join(f"{label}: " + (c["status"] if c["rho"] is None
-                                       else requirement.rho_text(c["rho"]))
-                       for label, c in convergence["checks"].items())
-    return f"{convergence['verdict']} ({checks})"
+    """"converged: ρ = −0.261 ± 0.005 rad (order 1.4; ANCF 4 el/link: -0.223 rad; ...)": a
+    verdict's ρ on the refined sequence and its other checks (or the status of a check
+    whose run did not complete)."""
+    rho = lambda v, status="": status if v is None else requirement.rho_text(v)  # noqa: E731
+    checks = convergence["levels"] | convergence["checks"]
+    every = [f"{label}: {rho(c['rho'], c['status'])}" for label, c in checks.items()]
+    estimate = "" if convergence["rho"] is None else \
+        f": ρ = {rho(convergence['rho'])} ± {convergence['error']:.2g}" + (
+            f" (order {convergence['order']:.2g})" if convergence["order"] is not None else "")
+    return f"{convergence['verdict']}{estimate} [{'; '.join(every)}]"
 
 
 # --- flexarm baseline -----------------------------------------------------------------------

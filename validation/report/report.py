@@ -101,7 +101,7 @@ def _included(store: ResultStore):
     have their own section, `robust_section`, not a row each; so do a calibration's
     simulations, `calibration_section`)."""
     from ..verdicts.calibration import FIT_SWEEP
-    from ..verdicts.verify import ROBUST_SWEEPS
+    from ..verdicts.evaluations import ROBUST_SWEEPS
     all_rows = store.rows(metrics=read_metrics(store))
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
@@ -186,11 +186,13 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
             rows = stability_rows(results)
             data.stability = {"table": table(
                 ["case", "plant", "arm", "no divergence up to [ms]", "first divergence [ms]",
-                 "keeps tracking up to [ms]", "first loss [ms]", "predicted [ms]",
-                 "monotone?", "mesh and step", "why the first bad one is"],
+                 "width", "keeps tracking up to [ms]", "first loss [ms]", "predicted [ms]",
+                 "runs", "monotone?", "refined sequence", "why the first bad one is"],
                 [[r["case"], r["plant"], r["arm"], r["no_divergence"], r["first_divergence"],
-                  r["tracking"], r["first_loss"], r["predicted"], folded_text(r["notes"]),
-                  folded_text(r["mesh"]), folded_text(r["reason"])] for r in rows],
+                  r["width_text"], r["tracking"], r["first_loss"], r["predicted"],
+                  str(r["runs"]), folded_text(r["notes"]),
+                  folded_text(f"at {r['discretisation']}: {r['mesh']}"),
+                  folded_text(r["reason"])] for r in rows],
                 ["failed" if "FAILED" in r["notes"] else "" for r in rows])}
             tasks.append(("Stability map", "sampled-data stability map: tested control periods "
                           "per case, plant and arm", lambda: stability_chart(results)))

@@ -91,7 +91,10 @@ def _rows(v: dict) -> list[list[str]]:
         return rows
     sims = v["simulations"]
     if v["mode"] == "falsify":
-        found = "counterexample" if v["found"] else "none found; worst case"
+        found = "counterexample" if v["found"] else \
+            f"{v['verdict']}; worst case" if v.get("undecided") else "none found; worst case"
+        if v.get("convergence"):
+            found += f" ({v['convergence']['verdict']} on the refined sequence)"
         # null in verdict.json: −∞, a run that diverged (its status says so), or no case
         truth = fmt_number(v["rho_truth"]) if v["rho_truth"] is not None else (
             f"−∞ ({v['truth_status']})" if v.get("truth_status") else "—")

@@ -16,6 +16,7 @@ import math
 from collections import Counter
 
 from .render import display_unit, fmt_number
+from ..verdicts.resolution import UNDECIDED
 
 __all__ = ["verdict_parts", "value_text", "verdict_counts", "counted",
            "pairs_table", "NOTE_MEANING", "margin", "VERDICT_ORDER"]
@@ -83,7 +84,8 @@ def verdict_parts(claim, v) -> tuple[str, str]:
 
 
 #: Verdicts in the order a count lists them.
-VERDICT_ORDER = ("holds", "fails", "window-sensitive", "not converged", "mesh not checked",
+VERDICT_ORDER = ("holds", "fails", UNDECIDED, "window-sensitive", "not converged",
+                 "mesh not checked",
                  "diverged", "failed", "not run", "n/a")
 
 

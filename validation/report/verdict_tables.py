@@ -23,9 +23,8 @@ from ..verdicts.attribution import (DIVERGED_RULE, FACTORS, METRIC_NAMES, METRIC
                                     Attribution, records)
 from ..verdicts.claims import (CLAIMS, SYSTEM, WINDOWS, Column, claim_columns,
                                claims_records)
-from ..verdicts.stability import (BISECTIONS, DURATION, GRID, GROWTH_LIMIT, MAX_LEVEL,
-                                  TRACKING_LIMIT, Limit,
-                                  StabilityResult)
+from ..verdicts.stability import (DURATION, GRID, GROWTH_LIMIT, MAX_LEVEL, TRACKING_LIMIT,
+                                  Limit, StabilityResult)
 from ..verdicts.validity import _GAP_VIEWS
 from .linear_figures import validity_figures
 from .render import display_unit, fmt_number, folded, folded_text, render
@@ -193,7 +192,9 @@ def write_claims(results_dir, columns: list[Column] | None = None) -> str:
 
 # --- from stability --------------------------------------------------------------------------------
 def stability_rows(results: list[StabilityResult]) -> list[dict]:
-    """Table rows (values in ms as text) for the templates and stability.csv."""
+    """Table rows (values in ms as text) for the templates and stability.csv: each limit's
+    bracket at the finest level mapped, its width and its verdict on the refined sequence
+    (with the error it states), the runs the case took."""
 
     def ms(v):
         return "—" if math.isnan(v) else fmt_number(1e3 * v)
@@ -206,42 +207,59 @@ def stability_rows(results: list[StabilityResult]) -> list[dict]:
         if math.isnan(limit.first_bad):
             return f"> {fmt_number(1e3 * GRID[-1])}"
         return f"{ms(limit.first_bad)} ({limit.outcome})"
+
+    def width(limit: Limit) -> str:
+        return "—" if math.isnan(limit.width) else f"{100 * limit.width:.2g} %"
     rows = []
     for r in results:
         notes = r.non_monotone + [f"FAILED at {1e3 * Ts:.3g} ms: {r.tested[Ts][1]}"
                                   for Ts in r.failed]
-        # a truth-plant limit that moved under refinement is the FE model's, not the arm's
-        moved = " (not converged)" if r.mesh_converged is False else ""
-        rows.append({"case": r.case.label, "plant": r.case.plant, "arm": r.case.arm,
-                     "no_divergence": largest(r.divergence) + moved,
-                     "first_divergence": first(r.divergence),
-                     "tracking": largest(r.tracking) + moved, "first_loss": first(r.tracking),
-                     "predicted": ms(r.predicted),
-                     "reason": r.divergence.reason if r.divergence.reason == r.tracking.reason
-                     else "; ".join(x for x in (r.tracking.reason, r.divergence.reason) if x),
-                     "mesh": (f"at {r.discretisation}: {r.mesh}" if r.discretisation
-                              else r.mesh) or "— (reduced plant)",
-                     "notes": "; ".join(notes) or "monotone",
-                     "no_divergence_s": r.divergence.largest,
-                     "first_divergence_s": r.divergence.first_bad,
-                     "tracking_s": r.tracking.largest, "first_loss_s": r.tracking.first_bad,
-                     "predicted_s": r.predicted, "failed_s": " ".join(f"{Ts:g}" for Ts in r.failed)})
+        row = {"case": r.case.label, "plant": r.case.plant, "arm": r.case.arm,
+               "no_divergence": largest(r.divergence), "first_divergence": first(r.divergence),
+               "tracking": largest(r.tracking), "first_loss": first(r.tracking),
+               "width_text": width(r.divergence), "tracking_width_text": width(r.tracking),
+               "predicted": ms(r.predicted), "runs": r.runs,
+               "reason": r.divergence.reason if r.divergence.reason == r.tracking.reason
+               else "; ".join(x for x in (r.tracking.reason, r.divergence.reason) if x),
+               "mesh": "; ".join(f"{name}: {v.text()}" for name, v in r.resolved.items()
+                                 if v.text()) or "— (reduced plant)",
+               "discretisation": r.discretisation or "— (reduced plant)",
+               "notes": "; ".join(notes) or "monotone",
+               "no_divergence_s": r.divergence.largest,
+               "first_divergence_s": r.divergence.first_bad,
+               "tracking_s": r.tracking.largest, "first_loss_s": r.tracking.first_bad,
+               "predicted_s": r.predicted, "failed_s": " ".join(f"{Ts:g}" for Ts in r.failed)}
+        for name, limit in (("divergence", r.divergence), ("tracking", r.tracking)):
+            v = r.resolved[name]
+            row |= {f"{name}_width": limit.width, f"{name}_convergence": v.verdict or "n/a",
+                    f"{name}_error_s": v.error, f"{name}_estimate_s": v.estimate}
+        row["divergence_band_s"] = r.resolved["divergence"].band
+        rows.append(row)
     return rows
 
 
-def write_stability(results: list[StabilityResult], out) -> str:
-    """Write stability.md and stability.csv into ``out``; return the markdown."""
+#: The columns of stability.csv.
+_STABILITY_COLUMNS = ("case", "plant", "arm", "no_divergence_s", "first_divergence_s",
+                     "divergence_width", "divergence_convergence", "divergence_error_s",
+                     "divergence_estimate_s", "divergence_band_s", "tracking_s",
+                     "first_loss_s", "tracking_width", "tracking_convergence",
+                     "tracking_error_s", "tracking_estimate_s", "predicted_s", "runs",
+                     "discretisation", "failed_s", "mesh", "notes", "reason")
+
+
+def write_stability(results: list[StabilityResult], out, *, tolerance: float) -> str:
+    """Write stability.md and stability.csv into ``out`` (a map bisected to
+    ``tolerance``); return the markdown."""
     rows = stability_rows(results)
     text = render("stability.md.j2", rows=rows, duration=f"{DURATION:g}",
-                  grid=", ".join(f"{1e3 * t:g}" for t in GRID), bisections=BISECTIONS,
+                  grid=", ".join(f"{1e3 * t:g}" for t in GRID), tolerance=f"{tolerance:.2%}",
                   limit=f"{TRACKING_LIMIT:g}", growth=f"{GROWTH_LIMIT:g}",
-                  max_level=MAX_LEVEL)
+                  max_level=MAX_LEVEL, runs=sum(r.runs for r in results))
     out = Path(out)
     write_atomic(out / "stability.md", lambda fh: fh.write(text))
-    keys = ["case", "plant", "arm", "no_divergence_s", "first_divergence_s", "tracking_s",
-            "first_loss_s", "predicted_s", "failed_s", "mesh", "notes", "reason"]
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=keys, extrasaction="ignore", lineterminator="\n")
+    writer = csv.DictWriter(buf, fieldnames=_STABILITY_COLUMNS, extrasaction="ignore",
+                            lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
     write_atomic(out / "stability.csv", lambda fh: fh.write(buf.getvalue()))
@@ -298,14 +316,17 @@ def table_rows(data: dict) -> tuple[list[str], list[list[str]]]:
     """(header, rows) of the case table (values as text, periods in ms)."""
     head = ["case", "plant", "arm", "predicted [ms]", "FE mesh", "predicted, mesh ×2 [ms]",
             "certified [ms]", "measured: no divergence up to [ms]", "first divergence [ms]",
-            "in bracket", "certificate sound", "certified / measured", "notes"]
+            "measured limit lies in [ms]", "prediction in it", "certificate sound",
+            "certified / measured", "notes"]
     rows = []
     for r in data["cases"]:
         notes = "; ".join(n for n in (r["note"], r["evidence"]) if n)
         rows.append([r["case"], r["plant"], r["arm"], _ms(r["predicted_s"]), r["mesh"],
                      _ms(r["predicted_fine_s"]) if r["mesh_fine"] else "",
                      _ms(r["certified_s"]) if r["certificate"] else "n/a",
-                     _ms(r["largest_stable_s"]), _ms(r["first_unstable_s"]), r["in_bracket"],
+                     _ms(r["largest_stable_s"]), _ms(r["first_unstable_s"]),
+                     f"({_ms(r['limit_low_s'])}, {_ms(r['limit_high_s'])}] {r['limit_verdict']}",
+                     r["in_bracket"],
                      r["sound"], fmt_number(r["conservatism"]), notes])
     return head, rows
 

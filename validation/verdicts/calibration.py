@@ -83,7 +83,7 @@ from .calibration_intervals import parameter_uncertainty
 from .calibration_outputs import write_inputs, write_results
 from .calibration_plan import Plan, linear_response
 from ..batch.resimulate import every_signal
-from .verify import Evaluations
+from .evaluations import Evaluations
 
 __all__ = ["calibrate", "FIT_SWEEP"]
 

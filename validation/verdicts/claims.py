@@ -17,7 +17,8 @@ A verdict is given only after two checks, in this order (README, *Verdicts*):
    formulation (`validation.verdicts.mesh`) — must agree within the stated tolerance;
    otherwise the cell is "not converged" with every check's value.  The value carries
    the estimated error of the sequence (Richardson).  A truth-plant run without stored
-   checks is "mesh not checked".
+   checks is "mesh not checked".  A value whose margin to the bound is not larger than
+   that error is "undecided at this resolution" (`validation.verdicts.resolution`).
 2. **Window family** (claims measured after a transient): the value is measured with the
    transient at each of `WINDOWS` (1–4 s); if the verdict differs within the family the
    cell is "window-sensitive" and says at which transient it flips.
@@ -37,6 +38,7 @@ from ..run.claim_measures import CLAIMS, DISTURBED, SYSTEM, Claim
 from ..run.plants import is_truth, label_of, plant_settings
 from ..run.metrics import all_metrics
 from . import mesh as mesh_check
+from .resolution import UNDECIDED, judged
 
 __all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "SYSTEM",
            "DISTURBED", "WINDOWS", "column_key", "claims_records", "mesh_rows", "MeshRow"]
@@ -48,7 +50,7 @@ WINDOWS = (1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0)
 @dataclass(frozen=True)
 class Verdict:
     """A claim on one run.  ``verdict``: "holds" | "fails" | "window-sensitive" |
-    "not converged" | "mesh not checked" | "diverged" | "failed" | "not run" | "n/a";
+    "undecided at this resolution" | "not converged" | "mesh not checked" | "diverged" | "failed" | "not run" | "n/a";
     ``value`` at the scenario's transient on the run's own mesh; ``windows``: (transient,
     value, holds/fails) over `WINDOWS`; ``meshes``: (mesh label, value or status)."""
 
@@ -218,6 +220,10 @@ def evaluate(claim: Claim, stored, checks: dict | None = None, *,
         if not converged:
             return Verdict(value, "not converged", _mesh_text(claim, meshes), meshes=meshes,
                            **estimate)
+        if judged(verdict, value - claim.bound, estimate["error"]) == UNDECIDED:
+            return Verdict(value, UNDECIDED, f"the margin to the bound is inside the value's "
+                           f"estimated error, ±{estimate['error']:.2g} {claim.unit}".strip(),
+                           meshes=meshes, **estimate)
     windows = _window_family(claim, run) if claim.windowed else ()
     if len({v for _, _, v in windows} | {verdict}) > 1:
         note = f"{_flip_note(windows)}; {note}" if note else _flip_note(windows)

@@ -4,9 +4,11 @@ it keeps tracking.
 
 A design made in continuous time (the paper's) meets the real arm through a sampler and
 a zero-order hold.  For each case this module runs short closed loops on a grid of Ts
-(`GRID`, 0.1–10 ms) and refines each limit by bisection on a log scale between its last
-good and first bad grid value.  Runs start moving with the reference (no start-up kick)
-and last `DURATION` seconds.  Each run has one *outcome*:
+(`GRID`, 0.1–10 ms) and bisects each limit on a log scale between its last good and first
+bad value until the bracket is within a relative tolerance (default 1 %,
+`validation.verdicts.bisection`; each result counts the runs it took).  Runs start moving
+with the reference (no start-up kick) and last `DURATION` seconds.  Each run has one
+*outcome*:
 
 - ``stable``: completed, max |θ − θ_d| over its second half ≤ `TRACKING_LIMIT` (0.1 rad,
   five times the paper's 0.02 rad yardstick: a loop that rings up slowly is caught even if
@@ -22,10 +24,13 @@ Two limits, each a claim about every tested Ts at or below it: the largest Ts wi
 divergence** and the largest Ts that **keeps tracking**.  A failed run ends a limit's
 scan (nothing is known there).  Each limit is monotone in what it claims; a tested Ts
 above a limit that nevertheless did not diverge (or kept tracking) is reported as a
-*non-monotone* case, never smoothed over.  On the truth plant the runs that define the
-limits are repeated on the check meshes and with a finer integration step
-(`validation.verdicts.mesh`); a limit whose outcomes differ between them is "not
-converged".
+*non-monotone* case, never smoothed over.  On the truth plant each limit is then judged
+on the refined sequence at that resolution: the case is bisected again one level finer
+(twice the elements per link, half the step), starting from the brackets of the level
+before, until every limit's bracket moved by less than its width ("converged") or up to
+`MAX_LEVEL`, where a limit still moving carries a Richardson estimate of the converged
+limit and its error, or reads "not converged" with the levels' brackets side by side
+(`validation.verdicts.resolution.resolve_limit`).
 
 The *predicted* limit is the exact zero-order-hold eigenvalue analysis of the case's own
 linearised sampled loop (`validation.verdicts.sampled`): the law linearised from its
@@ -34,10 +39,10 @@ the reduced model, or the FE arm with the case's mesh.
 """
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
-from dataclasses import dataclass
-
-import numpy as np
+from dataclasses import dataclass, field
 
 from ..batch.campaign import PlannedRun
 
@@ -47,12 +52,13 @@ from ..run.laws import applies_generalised_forces
 from ..run.plants import is_truth, plant_settings, with_plant
 from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import ResultStore, run_id
+from .bisection import GOOD, TOLERANCE, Lattice, Limit, limit_of, next_points
+from .resolution import ResolvedLimit, resolve_limit
 from .sampled import predicted_period
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "GROWTH_LIMIT", "MAX_LEVEL", "OUTCOMES",
-           "StabilityCase",
-           "StabilityResult", "cases_from_scenarios", "stability_map", "load_stability",
-           "outcome"]
+           "StabilityCase", "Limit", "StabilityResult", "cases_from_scenarios",
+           "stability_map", "load_stability", "outcome"]
 
 GRID = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
 DURATION = 2.0
@@ -65,14 +71,13 @@ TRACKING_LIMIT = 0.1
 #: 2.6-2.7 ms (stable), +4 to +5.5 at 2.76 ms (diverging, at 1.3-3.3 s).  1.5 sits 2× above
 #: the stable ones; slower growth is beyond what a 2 s run resolves.
 GROWTH_LIMIT = 1.5
-BISECTIONS = 3
 OUTCOMES = ("stable", "lost tracking", "diverged", "failed")
 _MAX_PLANT_STEP = 1e-3
 
 
-#: The finest discretisation a truth-plant case is re-bisected at when its limits move
+#: The finest discretisation a truth-plant case is bisected at when its limits move
 #: under refinement: level k has 2^k times the elements per link and 1/2^k of the step
-#: (`validation.verdicts.mesh`); level 2's own checks reach ANCF 16 × 4 = 64 el/link.
+#: (the default ANCF 4 el/link reaches 16 at level 2).
 MAX_LEVEL = 2
 
 
@@ -95,19 +100,6 @@ class StabilityCase:
         return is_truth(self.base)
 
 
-@dataclass(frozen=True)
-class Limit:
-    """One limit of a case: the largest Ts at or below which every tested run was good
-    (NaN if the smallest was not), the first Ts that was not (NaN if none), its outcome
-    and why, and the tested Ts above ``first_bad`` that were good again."""
-
-    largest: float
-    first_bad: float
-    outcome: str
-    reason: str
-    non_monotone: tuple[float, ...] = ()
-
-
 @dataclass
 class StabilityResult:
     case: StabilityCase
@@ -115,9 +107,10 @@ class StabilityResult:
     divergence: Limit  # good = did not diverge (stable or lost tracking)
     tracking: Limit  # good = stable
     predicted: float  # NaN when no prediction exists for the law
-    mesh: str = ""  # truth plant: the mesh check of the runs defining the limits
-    mesh_converged: bool | None = None  # None: reduced plant, or not checked
-    discretisation: str = ""  # truth plant: "ANCF 8 el/link, step Ts/2" of its runs
+    discretisation: str = ""  # truth plant: "ANCF 8 el/link, step ≤ 0.5 ms" of its runs
+    #: Each limit ("divergence", "tracking") judged on the refined sequence.
+    resolved: dict = field(default_factory=dict)
+    runs: int = 0  # the runs the case took, every level together
 
     @property
     def controller(self) -> str:
@@ -176,7 +169,6 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
 
 
 def _options_key(config: dict) -> str:
-    import json
     return json.dumps([config["controller"], config["observer"]], sort_keys=True)
 
 
@@ -201,26 +193,6 @@ def outcome(row) -> tuple[str, str]:
     return "stable", f"max |θ − θd| = {worst:.3g} rad over the second half"
 
 
-_GOOD = {"divergence": ("stable", "lost tracking"), "tracking": ("stable",)}
-
-
-def _limit(tested: dict, good: tuple[str, ...]) -> Limit:
-    """Scan the tested Ts upwards: the last good one before the first that is not
-    (module docstring), and the good ones above it."""
-    largest = first_bad = math.nan
-    outcome_, reason = "", ""
-    for Ts in sorted(tested):
-        o, detail = tested[Ts]
-        if o in good:
-            largest = Ts
-        else:
-            first_bad, outcome_, reason = Ts, o, detail
-            break
-    above = () if math.isnan(first_bad) else tuple(
-        Ts for Ts in sorted(tested) if Ts > first_bad and tested[Ts][0] in good)
-    return Limit(largest, first_bad, outcome_, reason, above)
-
-
 def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
     scenario = scenario_from_mapping(_scenario_at(case, Ts))
     rid = run_id(scenario_to_mapping(scenario))
@@ -228,175 +200,146 @@ def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
                                                    "arm": case.arm, "level": case.level})
 
 
-def _bisection_points(tested: dict) -> set[float]:
-    """The next Ts to test: the geometric middle of each limit's bracket whose upper end
-    is a real outcome of the loop (a failure says nothing about where the limit is)."""
-    points = set()
-    for good in _GOOD.values():
-        limit = _limit(tested, good)
-        if not (math.isnan(limit.largest) or math.isnan(limit.first_bad)) \
-                and limit.outcome != "failed":
-            points.add(float(np.sqrt(limit.largest * limit.first_bad)))
-    return points
+class _Search:
+    """One case's bracket search, level by level: {Ts: (outcome, detail)} per level."""
+
+    def __init__(self, case: StabilityCase) -> None:
+        self.case, self.levels = case, [{}]
+
+    @property
+    def at(self) -> StabilityCase:
+        """The case at the level being searched."""
+        return StabilityCase(self.case.label, self.case.plant, self.case.arm, self.case.base,
+                             len(self.levels) - 1)
+
+    def next_points(self, lattice: Lattice, refine: bool) -> set[float]:
+        """The periods to test next at this level; when it is resolved, the hints of the
+        next level if a limit has not converged (and ``refine``), else nothing."""
+        hints = self.hints() if len(self.levels) > 1 else lattice.grid
+        points = next_points(self.levels[-1], lattice, hints)
+        if points or not (refine and self.case.truth and len(self.levels) <= MAX_LEVEL):
+            return points
+        limits = _limits(self.levels)
+        if any(lim[-1].outcome == "failed" for lim in limits.values()):
+            return set()  # a failure is no bracket to refine
+        if not any(_resolve(self.case, lim, final=False).verdict in ("not checked",
+                                                                      "not converged")
+                   for lim in limits.values()):
+            return set()  # converged, or beyond the grid: nothing to refine
+        self.levels.append({})
+        return next_points({}, lattice, self.hints())
+
+    def hints(self) -> set[float]:
+        """The ends of the brackets of the level before the current one."""
+        return {Ts for lim in _limits(self.levels[:-1]).values()
+                for Ts in (lim[-1].largest, lim[-1].first_bad) if not math.isnan(Ts)}
+
+
+def _limits(levels: list[dict]) -> dict[str, list[Limit]]:
+    """Each limit's `Limit` per level."""
+    return {name: [limit_of(tested, good) for tested in levels] for name, good in GOOD.items()}
+
+
+def _resolve(case: StabilityCase, limits: list[Limit], *, final: bool) -> ResolvedLimit:
+    levels = [(_discretisation(case.base, level), lim.largest, lim.first_bad)
+              for level, lim in enumerate(limits)]
+    return resolve_limit(levels, final=final, refined=case.truth)
 
 
 def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = None,
-                  progress: bool = True, mesh_check: bool = True
-                  ) -> tuple[list[StabilityResult], object]:
-    """Run the grid and the bisections for every case into the results folder ``out``
-    (resumable like any campaign; the progress bar names the round: grid, bisection k/3,
-    mesh check), then, with ``mesh_check``, the truth-plant runs that define the limits on
-    the refined sequence (`validation.verdicts.mesh`).  A truth-plant case whose limits
-    move under refinement is mapped again one level finer (mesh and step refined
-    together), up to `MAX_LEVEL`: its result is the first level whose limits are
-    converged, or the finest tried.  Returns the results and the summary of every round
-    together."""
-    results, summary = _map_level(cases, out, runner=runner, progress=progress,
-                                  mesh_check=mesh_check)
-    while mesh_check and not summary.interrupted:
-        moved = [r.case.refined() for r in results if r.mesh_converged is False
-                 and r.case.level < MAX_LEVEL]
-        if not moved:
+                  progress: bool = True, mesh_check: bool = True,
+                  tolerance: float = TOLERANCE) -> tuple[list[StabilityResult], object]:
+    """Map every case into the results folder ``out`` (resumable like any campaign): the
+    grid, the bisections to ``tolerance`` and, with ``mesh_check``, the truth-plant cases
+    again on the refined sequence until their limits converge (module docstring).  Every
+    round asks every case's next periods at once (the progress bar names the round).
+    Returns the results and the summary of every round together."""
+    lattice = Lattice(GRID, tolerance)
+    searches = [_Search(case) for case in cases]
+    store = ResultStore(out)
+    summary, round_ = None, 0
+    while summary is None or not summary.interrupted:
+        planned = {(i, s.at.level, Ts): _planned(s.at, Ts) for i, s in enumerate(searches)
+                   for Ts in sorted(s.next_points(lattice, mesh_check))}
+        if not planned and summary is not None:
             break
-        finer, more = _map_level(moved, out, runner=runner, progress=progress,
-                                 mesh_check=True)
-        summary = summary + more
-        by_key = {_case_key(r.case): r for r in finer}
-        results = [by_key.get(_case_key(r.case), r) for r in results]
-    return results, summary
+        round_ += 1
+        label = "stability: grid" if round_ == 1 else \
+            f"stability: bisection {round_ - 1} (to {tolerance:.2g})"
+        more = run_planned(planned.values(), out, name="stability", export=False,
+                           description="sampled-data stability map", runner=runner,
+                           progress=progress, label=label)
+        summary = more if summary is None else summary + more
+        if more.interrupted:
+            break
+        rows = {r.run_id: r for r in store.rows()}
+        for (i, level, Ts), p in planned.items():
+            searches[i].levels[level][Ts] = outcome(rows[p.run_id])
+    if summary.interrupted:
+        return [], summary
+    store.export()
+    return load_stability(out, cases=cases), summary
 
 
 def _case_key(case: StabilityCase) -> tuple:
     return case.label, _options_key(case.base), case.plant, case.arm
 
 
-def _map_level(cases: list[StabilityCase], out, *, runner, progress, mesh_check):
-    """The grid, the bisections and (with ``mesh_check``) the checks of ``cases``, each at
-    its own level."""
-    tested: dict[int, dict[float, tuple[str, str]]] = {i: {} for i in range(len(cases))}
-    store = ResultStore(out)
-
-    def run(points: list[tuple[int, float]], label: str):
-        planned = {(i, Ts): _planned(cases[i], Ts) for i, Ts in points}
-        summary = run_planned(planned.values(), out, name="stability",
-                              description="sampled-data stability map", runner=runner,
-                              progress=progress, label=label)
-        if summary.interrupted:
-            return summary
-        rows = {r.run_id: r for r in store.rows()}
-        for (i, Ts), p in planned.items():
-            tested[i][Ts] = outcome(rows[p.run_id])
-        return summary
-
-    summary = run([(i, Ts) for i in range(len(cases)) for Ts in GRID], "stability: grid")
-    for round_ in range(1, BISECTIONS + 1):
-        if summary.interrupted:
-            break
-        points = [(i, Ts) for i in range(len(cases)) for Ts in sorted(_bisection_points(tested[i]))]
-        if not points:
-            break
-        summary = summary + run(points, f"stability: bisection {round_}/{BISECTIONS}")
-    if mesh_check and not summary.interrupted:
-        rows = {r.run_id: r for r in store.rows()}
-        defining = [rows[_planned(case, Ts).run_id] for i, case in enumerate(cases)
-                    if case.truth for Ts in _defining(tested[i])]
-        if defining:
-            from .mesh import run_checks
-            summary = summary + run_checks(defining, out, runner=runner, progress=progress,
-                                           of_checks=True)
-    if summary.interrupted:
-        return [], summary
-    return load_stability(out, cases=cases), summary
-
-
-def _defining(tested: dict) -> list[float]:
-    """The tested Ts that define a case's limits (each limit's last good and first bad;
-    a failed run defines nothing: it has no outcome to compare)."""
-    out = set()
-    for good in _GOOD.values():
-        limit = _limit(tested, good)
-        out |= {Ts for Ts in (limit.largest, limit.first_bad)
-                if not math.isnan(Ts) and tested[Ts][0] != "failed"}
-    return sorted(out)
-
-
-def _mesh_check(tested: dict, rows_at: dict, by_id: dict) -> tuple[str, bool | None]:
-    """(text, converged?) of the mesh check of a truth-plant case: the outcome of every
-    run defining a limit must be the same in every check (refined meshes, finer step)."""
-    from .mesh import checks_of
-    moved, missing, labels = [], False, {}
-    for Ts in _defining(tested):
-        row = rows_at.get(Ts)
-        if row is None:
-            continue
-        for label, other in checks_of(row, by_id).items():
-            labels[label] = None
-            if other is None:
-                missing = True
-            elif outcome(other)[0] != tested[Ts][0]:
-                moved.append(f"at {1e3 * Ts:.3g} ms {tested[Ts][0]}, {label} "
-                             f"{outcome(other)[0]}")
-    if moved:
-        return "not converged: " + "; ".join(moved), False
-    if missing or not labels:
-        return "not checked", None
-    return "converged against " + ", ".join(labels), True
-
-
 def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[StabilityResult]:
     """The stability map of a results folder, rebuilt from its stored runs (with
-    ``fresh_only``, from the runs made by this code only; with ``cases``, those cases at
-    their own level only).  A refined level's run can be stored as another run's check
-    (the sequence's level-1 check *is* the next level's run): runs are found by what they
-    are, not by the sweep that stored them first."""
+    ``fresh_only``, from the runs made by this code only; with ``cases``, those cases
+    only), each case at every level it was mapped at and judged there.  Runs are found by
+    what they are, not by the sweep that stored them first."""
     from ..batch.fingerprint import run_fingerprint
     all_rows = [r for r in ResultStore(out).rows()
                 if not fresh_only or r.fingerprint == run_fingerprint(r.config)]
-    by_id = {r.run_id: r for r in all_rows}
-    if cases is None:  # every case mapped in the folder, at each level it may have
+    if cases is None:  # every case mapped in the folder
         found: dict[tuple, StabilityCase] = {}
         for row in all_rows:
             if row.sweep == "stability" and not row.axes.get("level", 0):
                 case = StabilityCase(_label(row.config), row.config["plant"]["kind"],
                                      row.config["arm"], row.config)
                 found.setdefault(_case_key(case), case)
-        cases = [StabilityCase(c.label, c.plant, c.arm, c.base, level)
-                 for c in found.values()
-                 for level in range(MAX_LEVEL + 1 if c.truth else 1)]
+        cases = list(found.values())
     cases = sorted(cases, key=lambda c: (c.label, c.truth, c.plant, c.arm != "default",
-                                         c.arm, c.level))
-    results: dict[tuple, StabilityResult] = {}
+                                         c.arm))
+    results = []
     for case in cases:
-        tested, rows_at = {}, {}
-        plant = plant_settings(case.base["plant"]).refined(case.level)
-        for row in all_rows:
-            c = row.config
-            if (c.get("name") != case.base.get("name") or c["arm"] != case.arm
-                    or c["plant"]["kind"] != case.plant
-                    or c["plant"].get("mesh") != _plain(plant.get("mesh"))
-                    or _options_key(c) != _options_key(case.base)):
-                continue  # cheap tests first: the run id below builds a scenario
-            Ts = float(c["Ts"])
-            if row.run_id == _planned(case, Ts).run_id:
-                tested[Ts], rows_at[Ts] = outcome(row), row
-        if not tested:
-            continue
-        result = _result(case, tested, next(iter(rows_at.values())).config)
-        if case.truth:
-            result.mesh, result.mesh_converged = _mesh_check(tested, rows_at, by_id)
-            result.discretisation = _discretisation(next(iter(rows_at.values())).config,
-                                                    case.level)
-        # Per case, the first level whose limits converged, or the finest mapped.
-        best = results.get(_case_key(case))
-        if best is None or best.mesh_converged is not True:
-            results[_case_key(case)] = result
-    return list(results.values())
+        levels, growth = [], {}
+        for level in range(MAX_LEVEL + 1 if case.truth else 1):
+            rows = _rows_at(StabilityCase(case.label, case.plant, case.arm, case.base, level),
+                            all_rows)
+            if not rows:
+                break
+            levels.append({Ts: outcome(row) for Ts, row in rows.items()})
+            growth = {Ts: row.metrics.get("growth_rate", math.nan) for Ts, row in rows.items()}
+        if levels:
+            results.append(_result(case, levels, growth))
+    return results
+
+
+def _rows_at(case: StabilityCase, rows) -> dict:
+    """{Ts: stored run} of ``case`` at its level."""
+    out = {}
+    plant = plant_settings(case.base["plant"]).refined(case.level)
+    for row in rows:
+        c = row.config
+        if (c.get("name") != case.base.get("name") or c["arm"] != case.arm
+                or c["plant"]["kind"] != case.plant
+                or c["plant"].get("mesh") != _plain(plant.get("mesh"))
+                or _options_key(c) != _options_key(case.base)):
+            continue  # cheap tests first: the run id below builds a scenario
+        Ts = float(c["Ts"])
+        if row.run_id == _planned(case, Ts).run_id:
+            out[Ts] = row
+    return out
 
 
 def _discretisation(config: dict, level: int) -> str:
-    """"ANCF 8 el/link, step ≤ 0.5 ms" of a stored truth-plant run at ``level``."""
-    return (f"{plant_settings(config['plant']).discretisation()}, step ≤ "
-            f"{1e3 * _MAX_PLANT_STEP / 2 ** level:g} ms")
+    """"ANCF 8 el/link, step ≤ 0.5 ms" of a case's plant at ``level``."""
+    plant = plant_settings(plant_settings(config["plant"]).refined(level))
+    step = f"step ≤ {1e3 * _MAX_PLANT_STEP / 2 ** level:g} ms"
+    return f"{plant.discretisation()}, {step}" if plant.discretisation() else step
 
 
 def _plain(value):
@@ -406,12 +349,37 @@ def _plain(value):
     return [_plain(v) for v in value] if isinstance(value, (list, tuple)) else value
 
 
-def _result(case: StabilityCase, tested: dict, config: dict | None = None) -> StabilityResult:
-    """The limits of ``tested``; the prediction on the plant of ``config`` (one of the
-    case's runs: a refined level's own mesh), else of the case's base."""
-    tested = dict(sorted(tested.items()))
-    return StabilityResult(case, tested, _limit(tested, _GOOD["divergence"]),
-                           _limit(tested, _GOOD["tracking"]),
-                           predicted_period(config if config is not None else case.base))
+def _result(case: StabilityCase, levels: list[dict], growth: dict | None = None
+            ) -> StabilityResult:
+    """The limits of the finest of ``levels`` ({Ts: outcome} per level, coarsest first),
+    each judged on the sequence, the divergence limit with the band of its outcome test
+    (`_band`, from ``growth``: {Ts: growth rate} of the finest level's runs); the
+    prediction on the case's own plant (its base mesh: the FE prediction has converged at
+    ANCF 4 el/link, and on a mesh 4× finer it costs minutes)."""
+    finest = len(levels) - 1
+    tested = dict(sorted(levels[-1].items()))
+    limits = _limits(levels)
+    resolved = {name: _resolve(case, lims, final=finest == MAX_LEVEL)
+                for name, lims in limits.items()}
+    resolved["divergence"] = dataclasses.replace(
+        resolved["divergence"], band=_band(limits["divergence"][-1], growth or {}))
+    at = StabilityCase(case.label, case.plant, case.arm, case.base, finest)
+    return StabilityResult(
+        at, tested, limits["divergence"][-1], limits["tracking"][-1],
+        predicted_period(case.base),
+        discretisation=_discretisation(case.base, finest) if case.truth else "",
+        resolved=resolved, runs=sum(map(len, levels)))
 
 
+def _band(limit: Limit, growth: dict) -> float:
+    """The outcome test's resolution below a divergence limit [s]: a run growing slower
+    than `GROWTH_LIMIT` reads "stable", so the period at which the loop turns unstable
+    (growth 0) lies up to GROWTH_LIMIT / (dg/dTs) below the bracket — the slope from the
+    growth rates of the bracket's two runs (NaN where one has none, or it does not rise).
+    Measured on the reduced plant's PBC: growth −1.15, +0.15, +1.43, +2.50 1/s at 3.056,
+    3.062, 3.068, 3.073 ms; the band at 1 % is 0.013 ms."""
+    low, high = limit.largest, limit.first_bad
+    if limit.outcome != "diverged" or math.isnan(low) or math.isnan(high):
+        return math.nan
+    rise = growth.get(high, math.nan) - growth.get(low, math.nan)
+    return GROWTH_LIMIT * (high - low) / rise if rise > 0 else math.nan

@@ -42,6 +42,7 @@ from ..run.results import read_json
 from ..run.scenario import scenario_from_mapping
 from .linear import law_gain, reduced_linear_model
 from .nugap import as_statespace, gap_detail
+from .resolution import UNDECIDED
 from .sampled import POINTS, certificate, certified_period, prediction
 from .stability import _label, _options_key, load_stability
 
@@ -168,9 +169,12 @@ def case_rows(cases, stability=(), *, progress=None) -> list[dict]:
 
 
 def _against_measured(row: dict, result, base: dict) -> dict:
-    """The measured bracket, whether the prediction lies in it, the soundness and the
-    conservatism of the certificate, and the fine-step check of the truth plant."""
+    """The measured bracket and where the limit lies (the bracket with its error and the
+    outcome test's band: `ResolvedLimit.interval`), whether the prediction lies there, the
+    soundness and the conservatism of the certificate, and the fine-step check of the
+    truth plant."""
     out = {"largest_stable_s": math.nan, "first_unstable_s": math.nan, "in_bracket": "",
+           "limit_low_s": math.nan, "limit_high_s": math.nan, "limit_verdict": "",
            "sound": "", "conservatism": math.nan, "evidence": ""}  # why a prediction
     # misses its bracket, as measured
     if result is None:
@@ -178,11 +182,14 @@ def _against_measured(row: dict, result, base: dict) -> dict:
     # A linear stability prediction is about divergence: it is set against the map's
     # no-divergence limit (a loss of tracking is not an instability).
     lo, hi = result.divergence.largest, result.divergence.first_bad
-    out["largest_stable_s"], out["first_unstable_s"] = lo, hi
+    resolved = result.resolved["divergence"]
+    low, high = resolved.interval()
+    out |= {"largest_stable_s": lo, "first_unstable_s": hi, "limit_low_s": low,
+            "limit_high_s": high, "limit_verdict": resolved.verdict or "n/a"}
     p = row["predicted_s"]
     if not math.isnan(p):
-        out["in_bracket"] = "yes" if ((math.isnan(lo) or p >= lo) and
-                                      (math.isnan(hi) or p < hi)) else "no"
+        out["in_bracket"] = "not converged" if math.isnan(low) else \
+            "yes" if low <= p < high else "no"
         if out["in_bracket"] == "no" and result.divergence.outcome == "failed":
             out["evidence"] = ("the measured bracket ends at a solver failure, not a "
                                "divergence: it says nothing about the limit")
@@ -191,7 +198,10 @@ def _against_measured(row: dict, result, base: dict) -> dict:
         out["sound"], out["conservatism"] = "nothing certified", 0.0
     elif row["truth"] and not math.isnan(c):
         unstable = [Ts for Ts, (o, _) in result.tested.items() if Ts <= c and o == "diverged"]
-        out["sound"] = "yes" if not unstable else f"NO: unstable at {min(unstable):g} s"
+        # Sound: the limit lies above the certified period; where the certified period
+        # is inside the limit's resolution, neither (the one rule of `resolution`).
+        out["sound"] = f"NO: unstable at {min(unstable):g} s" if unstable else \
+            "yes" if c <= low or math.isnan(low) and c < lo else UNDECIDED
         if lo > 0:
             out["conservatism"] = c / lo
     if (row["truth"] and base["observer"]["kind"] == "none"
@@ -234,7 +244,8 @@ _SCHEMA = {
     "cases": [{"case": str, "plant": str, "arm": str, "predicted_s": _NUMBER, "mesh": str,
                "predicted_fine_s": _NUMBER, "mesh_fine": str, "certified_s": _NUMBER,
                "certificate": [dict], "largest_stable_s": _NUMBER,
-               "first_unstable_s": _NUMBER, "in_bracket": str, "sound": str,
+               "first_unstable_s": _NUMBER, "limit_low_s": _NUMBER,
+               "limit_high_s": _NUMBER, "limit_verdict": str, "in_bracket": str, "sound": str,
                "conservatism": _NUMBER, "note": str, "evidence": str}],
 }
 
