@@ -131,19 +131,19 @@ def test_the_model_error_interval_is_its_bound_by_hand():
     """An inadequate model's interval: the noise's t·s·sqrt((JᵀJ)⁻¹_ii) plus κ·‖e‖ times
     the same factor (the largest change of parameter i whose output change, after the
     other parameters' best compensation, is no larger than κ‖e‖: Cauchy–Schwarz); no 95 %
-    interval is given."""
+    interval is given (‖e‖ = 4: both directions stay determined to ±100 %)."""
     rng = np.random.default_rng(5)
     J = rng.standard_normal((300, 2))
     r = rng.standard_normal(300)
     out = parameter_uncertainty(J, r, ["p.a", "p.b"], np.array([2.0, 3.0]),
-                                np.array([2.0, 3.0]), model_error=7.0, noise_variance=1.5)
+                                np.array([2.0, 3.0]), model_error=4.0, noise_variance=1.5)
     factor = np.sqrt(np.diag(np.linalg.inv(J.T @ J))) * [2.0, 3.0]
     t = scipy.stats.t.ppf(0.975, 298)
     for i, name in enumerate(["p.a", "p.b"]):
         p = out["parameters"][name]
         assert p["ci95"] is None and p["model_error"] == pytest.approx(
-            MODEL_ERROR_FACTOR * 7.0 * factor[i], rel=1e-12)
-        half = t * np.sqrt(1.5) * factor[i] + MODEL_ERROR_FACTOR * 7.0 * factor[i]
+            MODEL_ERROR_FACTOR * 4.0 * factor[i], rel=1e-12)
+        half = t * np.sqrt(1.5) * factor[i] + MODEL_ERROR_FACTOR * 4.0 * factor[i]
         assert p["interval"] == pytest.approx([p["estimate"] - half, p["estimate"] + half],
                                               rel=1e-12)
     assert out["interval_kind"].startswith("effective parameters")
