@@ -49,11 +49,13 @@ def lab_data(plant="reduced", *, seed=1, duration=2.0, mesh=None, ekf=False, par
     return from_run(result, "e1", "<e1>")
 
 
-def start_model(plant="reduced", mesh=None, **extra):
-    """The fit's start: the arm 10-25 % off, its sensors' modal basis the data's."""
+def start_model(plant="reduced", mesh=None, fitted=tuple(HIDDEN), **extra):
+    """The fit's start: the ``fitted`` fields 10-25 % off (the others at the hidden
+    values), its sensors' modal basis the data's."""
+    start = {**HIDDEN, **{name: START[name] for name in fitted}}
     return scenario_from_mapping({
         "plant": {"kind": plant, **({"mesh": mesh} if mesh else {})}, "sensors": NOISE,
-        "true_params": START, "nominal_params": HIDDEN, "reference": REVERSALS, **extra})
+        "true_params": start, "nominal_params": HIDDEN, "reference": REVERSALS, **extra})
 
 
 def within(result, fraction):
@@ -207,10 +209,27 @@ def test_the_reduced_plant_with_friction_fitted_to_its_own_data(tmp_path):
                for p in result["parameters"].values())
 
 
+def test_the_truth_plant_with_friction_fitted_to_its_own_data(tmp_path):
+    """Known-good on the truth plant (the cheap version of the slow test below): 1 s of
+    its default mesh with friction and reversals, EI1, coulomb1 and viscous1 from 10-25 %
+    off (the rest known): adequate, within 5 %, every 95 % interval covers (measured:
+    standardised errors -1.64, +1.38, -1.27)."""
+    fitted = ("EI1", "coulomb1", "viscous1")
+    result = fit(tmp_path, start_model("exudyn", fitted=fitted),
+                 [f"true_params.{n}" for n in fitted], [lab_data("exudyn", duration=1.0)])
+    assert result["model_adequate"] is True, result["adequacy"]["verdict"]
+    truth = {n: HIDDEN[n] for n in fitted}
+    for name, value in truth.items():
+        p = result["parameters"][f"true_params.{name}"]
+        assert abs(p["estimate"] - value) <= 0.05 * value, (name, p)
+    assert all(covers(result, truth).values()), result["parameters"]
+
+
 def test_the_reduced_model_on_fe_data_with_friction_is_flagged_and_never_misses(tmp_path):
     """Known-bad: 1 s of the truth plant (its default mesh) with friction and reversals,
     fitted by the paper's reduced model: inadequate, and every interval it reports holds
-    the hidden value."""
+    the hidden value (with κ = 3 EI1's missed by 1 % of its half-width: one of the two
+    cases that moved `MODEL_ERROR_FACTOR` to 5)."""
     data = lab_data("exudyn", duration=1.0)
     result = fit(tmp_path, start_model(), FITTED, [data])
     assert result["model_adequate"] is False
