@@ -124,13 +124,22 @@ def compiled_form(law, role: str) -> CompiledLaw | None:
     """The compiled form of ``law`` (``role`` "controller" or "observer"), or None: the
     law has no ``compiled`` method, or it comes from another class than the law's Python
     form (a subclass that changes ``__call__``/``update`` but not ``compiled`` must not
-    run the parent's kernel)."""
+    run the parent's kernel).  TypeError naming the law when what ``compiled`` returns is
+    not a `CompiledLaw` of the role's signature (the run then fails saying so)."""
     method = "__call__" if role == "controller" else "update"
     cls = type(law)
     defining = next((c for c in cls.__mro__ if method in c.__dict__), None)
     if defining is None or "compiled" not in defining.__dict__:
         return None
-    return law.compiled()
+    form = law.compiled()
+    signature = CONTROLLER_SIGNATURE if role == "controller" else OBSERVER_SIGNATURE
+    if not (isinstance(form, CompiledLaw) and isinstance(form.pointer, LawPointer)
+            and form.pointer.signature() == signature):
+        text = " ".join(repr(form).split())
+        raise TypeError(f"{cls.__module__}:{cls.__qualname__}.compiled() returned {text[:60]}{'...' if len(text) > 60 else ''}"
+                        f": a compiled {role} is a controllers.CompiledLaw made by "
+                        f"CompiledLaw.of(kernel, {role.upper()}_SIGNATURE, model, ...)")
+    return form
 
 
 @njit(cache=True)

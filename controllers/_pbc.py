@@ -4,7 +4,8 @@
     τ = M(Q) v̇ + C(Q, Q̇) v + K Q + D Q̇ − K_v s                    (20)
 
 with Q_d = [θ_d, 0] (the paper's q_d = 0), K Q in place of the paper's g(Q) (horizontal
-plane) and the model's Kelvin–Voigt D Q̇.  Eq. (20) asks for n generalised forces; the
+plane) and the model's Kelvin–Voigt D Q̇ — on a model with exact kinematics, its exact
+bending and damping forces.  Eq. (20) asks for n generalised forces; the
 arm has two actuators.  Two laws, two names:
 
 - `PassivityBasedController` (``"pbc"``) applies rows 0–1 of eq. (20) — what two motors
@@ -22,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
+from reduced_model._exact_kernels import exact_elastic_into
 from reduced_model._kernels import (coriolis_matrix_into, mass_matrix_into, unpack_model,
                                     unpack_workspace)
 from reduced_model._views import matrix_view
@@ -158,6 +160,8 @@ def _pbc_torque(ints, reals, wc, wr, M, C, scratch, x_hat, theta_d, dtheta_d, dd
             if with_damping:
                 acc += d.D[i, j] * Qd[j]
         tau[i] = acc - kv[i] * (de[i] + lam[i] * e[i])  # eq. (20), s from eq. (5)
+    if d.exact.N > 0:  # exact kinematics: the bending forces beyond K Q (and D Q̇)
+        exact_elastic_into(d.exact, Q, Qd, tau, with_damping)
 
 
 @njit(cache=True)

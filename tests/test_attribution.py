@@ -118,6 +118,7 @@ def test_a_real_attribution_on_the_reduced_plant(tmp_path):
     (["--factors", ""], "needs at least one factor"),
     (["--factors", "estimation"], "'estimation' cannot be idealised"),
     (["--factors", "truncation"], "'truncation' splits the 'plant' factor"),
+    (["--factors", "kinematics"], "does not have the exact kinematics"),
 ])
 def test_bad_factors_are_one_line_errors_and_nothing_is_written(tmp_path, args, text):
     cfg = tmp_path / "s.toml"

@@ -21,11 +21,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..run.requirements import signal_names
+from ..run.scenario import scenario_to_mapping
+
 from .campaign import Campaign, PlannedRun, campaign_keep, expand
 from .executor import Runner, SerialRunner
-from .fingerprint import run_fingerprint
+from .fingerprint import is_fresh
 from .committing import Committer
+from .errors import NotARunFile
+from .index import dictionary_for
 from .interrupts import Interrupted
+from .memory import MemoryStore
 from .progress import progress as progress_counter
 from .store import ResultStore, environment
 from .storing import Destination, StoreTask, landed, leave_token
@@ -105,11 +111,11 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
     # Every row is read (not only the wanted ones): a damaged index shows on any page.
     rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
     for run in planned:  # a file whose row was lost: its metadata rebuilds the row
-        path = store.runs_dir / f"{run.run_id}.npz"
-        if run.run_id not in rows and path.exists():
+        path = store.out / "runs" / f"{run.run_id}.npz" if store.out else None
+        if run.run_id not in rows and path is not None and path.exists():
             try:
                 rows[run.run_id] = store.adopt(path)
-            except ValueError:
+            except NotARunFile:
                 pass  # unreadable: the run is redone and the file replaced
     damaged = store.verify(list(rows.values()))
     todo = []
@@ -120,7 +126,7 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
         elif run.run_id in damaged:
             summary.damaged[run.run_id] = damaged[run.run_id]
             todo.append(run)
-        elif row.fingerprint != run_fingerprint(row.config) and not reuse_stale:
+        elif not is_fresh(row) and not reuse_stale:
             summary.stale.append(run.run_id)
             todo.append(run)
         elif row.status == "failed" and retry_failed:
@@ -145,8 +151,12 @@ class Job:
 
 def open_job(campaign: Campaign, out, planned: list[PlannedRun], *, retry_failed: bool = False,
              reuse_stale: bool = False, rerun: bool = False) -> Job:
-    """Prepare ``out`` for ``campaign``'s runs ``planned`` and find those it does not hold
-    yet (`classify`)."""
+    """Prepare ``out`` (a results folder, or a `MemoryStore`) for ``campaign``'s runs
+    ``planned`` and find those it does not hold yet (`classify`)."""
+    if isinstance(out, MemoryStore):
+        todo, summary = classify(planned, out, retry_failed=retry_failed,
+                                 reuse_stale=reuse_stale, rerun=rerun)
+        return Job(out, Destination(None, campaign.name, environment()), todo, summary)
     store = ResultStore(out)
     store.prepare()
     store.set_campaign(campaign.name, {"description": campaign.description,
@@ -154,8 +164,15 @@ def open_job(campaign: Campaign, out, planned: list[PlannedRun], *, retry_failed
     store.remove_stale_temporaries()
     todo, summary = classify(planned, store, retry_failed=retry_failed,
                              reuse_stale=reuse_stale, rerun=rerun)
+    dictionary = b""
+    if todo:  # the details of a campaign's runs compressed against its first one
+        first = todo[0].scenario
+        dictionary = dictionary_for(scenario_to_mapping(first), environment(),
+                                    signal_names(first))
+        store.add_dictionary(dictionary)
     destination = Destination(str(store.out), campaign.name, environment(),
-                              campaign_keep(campaign), leave_token(store.out) if todo else None)
+                              campaign_keep(campaign), leave_token(store.out) if todo else None,
+                              dictionary)
     return Job(store, destination, todo, summary)
 
 
@@ -182,7 +199,10 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
     try:
         for key, stored in results:
             job = jobs[key[0]]
-            stored = landed(job.store.out, stored)
+            if stored.result is not None:  # an in-memory store: the result itself
+                job.store.keep(stored.rid, *stored.result)
+            else:
+                stored = landed(job.store.out, stored)
             if stored.values is None:
                 job.summary.unstored.append(stored.error)  # this run's place only
             else:
@@ -198,7 +218,7 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
         for job, committer in zip(jobs, committers):
             job.summary.interrupted = exc.signum
             committer.flush()
-            for row in _landed_uncommitted(job.store, job.todo):
+            for row in _landed_uncommitted(job, job.todo):
                 _count(job.summary, row.status)
     finally:
         try:
@@ -207,7 +227,8 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
         finally:
             bar.close()
             for job in jobs:
-                (job.store.runs_dir / job.destination.reach).unlink(missing_ok=True)
+                if job.destination.reach:
+                    (job.store.runs_dir / job.destination.reach).unlink(missing_ok=True)
 
 
 @dataclass
@@ -300,10 +321,13 @@ def _count(summary: CampaignSummary, status: str) -> None:
     setattr(summary, status, getattr(summary, status) + 1)
 
 
-def _landed_uncommitted(store: ResultStore, runs: list[PlannedRun]) -> list:
+def _landed_uncommitted(job: Job, runs: list[PlannedRun]) -> list:
     """Adopt the files of ``runs`` that their workers put in place before they were
     stopped, where the index holds no row of them (a result that never came back, or
     whose row the signal stopped from being committed): finished runs, kept."""
+    store = job.store
+    if job.destination.out is None:  # in memory: nothing was put in place
+        return []
     landed_ids = [r.run_id for r in runs if (store.runs_dir / f"{r.run_id}.npz").is_file()]
     known = {row.run_id for row in store.rows_of(landed_ids)}
     adopted = []
@@ -311,7 +335,7 @@ def _landed_uncommitted(store: ResultStore, runs: list[PlannedRun]) -> list:
         if rid not in known:
             try:
                 adopted.append(store.adopt(store.runs_dir / f"{rid}.npz"))
-            except ValueError:
+            except NotARunFile:
                 pass  # not an intact run file: the run is redone on resume
     return adopted
 

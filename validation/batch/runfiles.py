@@ -1,6 +1,7 @@
-"""Run files: one per run, ``runs/<run id>.npz``, holding its signals — all of them, or
-what its campaign keeps (`Keep`) — and everything its index row holds (so that a file
-alone rebuilds its row).  `run_file` makes a run's bytes and its row (checksum and size
+"""Run files: one per run that keeps signals, ``runs/<run id>.npz``, holding them — all,
+or what its campaign keeps (`Keep`) — and everything its index row holds (so that a file
+alone rebuilds its row).  A run that keeps metrics only has no file: its row holds all
+of it (a file would cost 9 KB on disk for ~1 KB of metrics).  `run_file` makes a run's bytes and its row (checksum and size
 computed where the bytes are); `write_file` puts them in place under a temporary name,
 then renamed; `run_row` is the one place a row is made, for a new run and for an
 adopted file."""
@@ -18,7 +19,7 @@ from ..run.results import RunResult, write_atomic
 from .fingerprint import run_fingerprint
 from .index import finite_or_none, set_aside
 
-__all__ = ["write_run", "run_file", "write_file", "run_row", "META_KEYS", "Keep", "KEEP_ALL",
+__all__ = ["write_run", "run_file", "write_file", "run_row", "META_KEYS", "Keep", "KEEP_ALL", "KEEP_NONE",
            "keep_from_mapping", "KEEP_KEYS"]
 
 #: What a run file's metadata holds beside the result (`RunResult.to_bytes`); ``kept``
@@ -47,6 +48,11 @@ class Keep:
     def everything(self) -> bool:
         return self.signals is None and self.every == 1
 
+    @property
+    def metrics_only(self) -> bool:
+        """Whether no signal is kept (the run then has no file)."""
+        return self.signals == ()
+
     def apply(self, result: RunResult) -> RunResult:
         """``result`` reduced to what is kept (itself if everything is)."""
         if self.everything:
@@ -72,6 +78,8 @@ class Keep:
 
 
 KEEP_ALL = Keep()
+#: Metrics only.
+KEEP_NONE = Keep(())
 
 
 def keep_from_mapping(table: dict, known: tuple[str, ...]) -> Keep:
@@ -101,30 +109,34 @@ def keep_from_mapping(table: dict, known: tuple[str, ...]) -> Keep:
     return Keep(names, every, compress)
 
 
-def run_row(rid: str, result: RunResult, meta: dict, data: bytes) -> dict:
+def run_row(rid: str, result: RunResult, meta: dict, data: bytes | None) -> dict:
     """The index row of run ``rid``: its result, the file's metadata ``meta`` (`META_KEYS`)
-    and the file's bytes ``data`` (checksum and size)."""
+    and the file's bytes ``data`` (checksum and size; None: the run has no file)."""
     return {"run_id": rid, "name": result.config.get("name", ""),
             "campaign": meta.get("campaign", ""), "sweep": meta.get("sweep", ""),
             "axes": meta.get("axes", {}), "status": result.status, "message": result.message,
             "end_time": result.end_time, "fingerprint": meta.get("fingerprint", ""),
             "scenario": result.config, "metrics": meta.get("metrics", {}),
             "timings": finite_or_none(result.timings),
-            "environment": meta.get("environment", {}), "file": f"runs/{rid}.npz",
-            "sha256": hashlib.sha256(data).hexdigest(), "size": len(data),
-            "finished": meta.get("finished", "")}
+            "environment": meta.get("environment", {}), "kept": meta.get("kept"),
+            "file": f"runs/{rid}.npz" if data is not None else "",
+            "sha256": hashlib.sha256(data).hexdigest() if data is not None else "",
+            "size": len(data) if data is not None else 0, "finished": meta.get("finished", "")}
 
 
 def run_file(rid: str, result: RunResult, metrics: dict, *, campaign: str = "",
              sweep: str = "", axes: dict | None = None, env: dict,
-             keep: Keep = KEEP_ALL) -> tuple[bytes, dict]:
-    """The bytes of run ``rid``'s file and its index row.  Signals are stored as float32
-    (7 digits, for plots; metrics come from the float64 signals), those ``keep`` keeps."""
+             keep: Keep = KEEP_ALL) -> tuple[bytes | None, dict]:
+    """The bytes of run ``rid``'s file (None if it keeps metrics only: no file) and its
+    index row.  Signals are stored as float32 (7 digits, for plots; metrics come from the
+    float64 signals), those ``keep`` keeps."""
     meta = {"campaign": campaign, "sweep": sweep, "axes": axes or {},
             "fingerprint": run_fingerprint(result.config),
             "metrics": finite_or_none(metrics), "environment": env,
             "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             **keep.meta(result)}
+    if keep.metrics_only:
+        return None, run_row(rid, result, meta, None)
     result.signals = result.signals.astype("float32", copy=False)
     data = keep.apply(result).to_bytes(meta, packed=keep.compress)
     return data, run_row(rid, result, meta, data)
@@ -141,8 +153,10 @@ def write_file(out: Path, rid: str, data: bytes) -> None:
 def write_run(out: Path, rid: str, result: RunResult, metrics: dict, *, campaign: str = "",
               sweep: str = "", axes: dict | None = None, env: dict,
               keep: Keep = KEEP_ALL) -> dict:
-    """Write run ``rid``'s file into the results folder ``out`` and return its index row."""
+    """Write run ``rid``'s file (if it has one) into the results folder ``out`` and return
+    its index row."""
     data, row = run_file(rid, result, metrics, campaign=campaign, sweep=sweep, axes=axes,
                          env=env, keep=keep)
-    write_file(out, rid, data)
+    if data is not None:
+        write_file(out, rid, data)
     return row

@@ -75,9 +75,10 @@ def _over_memory(message: str) -> str:
     return f"{OVER_MEMORY} {_memory_limit} MiB ({message})"
 
 
-def execute_run(scenario) -> tuple[RunResult, dict]:
+def execute_run(scenario, *, float32: bool = True) -> tuple[RunResult, dict]:
     """Run one scenario (in a worker; a checked `Scenario`, or a mapping to check): the
-    result, with signals as float32 (what the store keeps; half the bytes to send back),
+    result, with signals as float32 (what the store keeps; half the bytes to send back;
+    float64 if not ``float32``: for an in-memory store),
     and its metrics — with each requirement's robustness ``rho_<name>`` — computed
     from the float64 signals.  Whatever the run raises —
     including `SystemExit` and `KeyboardInterrupt` from a law — becomes a "failed"
@@ -98,7 +99,8 @@ def execute_run(scenario) -> tuple[RunResult, dict]:
         with np.errstate(over="ignore", invalid="ignore"):
             metrics = all_metrics(result)
             metrics |= requirement_metrics(result, metrics)
-            result.signals = result.signals.astype(np.float32)
+            if float32:
+                result.signals = result.signals.astype(np.float32)
     except Interrupted:  # a Ctrl-C to this process (a serial runner): not the run's
         raise
     except (Exception, SystemExit, KeyboardInterrupt) as exc:  # noqa: BLE001 - the run's failure
@@ -173,7 +175,8 @@ def _short_run(scenario) -> None:
     from ..run.loop import run_scenario
     from ..run.scenario import scenario_from_mapping, scenario_to_mapping
     data = scenario_to_mapping(scenario)
-    data.update(duration=(scenario.sensors.delay + 2) * scenario.Ts, transient=0.0)
+    data.update(duration=(scenario.sensors.delay + 2) * scenario.Ts, transient=0.0,
+                requirement=[])  # what is compiled needs no requirement (nor fits them)
     run_scenario(scenario_from_mapping(data))
 
 

@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import functools
 from pathlib import Path
 
+from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore
 
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
@@ -83,7 +85,8 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
                                            progress=not args.no_progress)
             if stability not in (0, EXIT_FAILED):  # interrupted
                 return stability
-    columns = claim_columns(ResultStore(out).rows())
+    store = ResultStore(out)
+    columns = claim_columns(store.rows(), functools.partial(every_signal, store))
     write_claims(out, columns)
     lines, missing = claims_summary(columns, out / "claims.md")
     print("\n".join(lines))

@@ -272,8 +272,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "its [attribution] table)")
     att.add_argument("--factors", metavar="F1,F2,...",
                      help="plant, truncation, parameters, sensing, estimation, sampling, "
-                          "actuation, friction, drive, bandwidth (default: every factor the "
-                          "scenario has but the joints')")
+                          "actuation, friction, drive, bandwidth, kinematics (default: every "
+                          "factor the scenario has but the joints' and kinematics)")
     att.add_argument("--out", metavar="DIR", help="results folder")
     att.add_argument("--mesh-check", action="store_true",
                      help="also run every truth-plant world on the check meshes and with a "

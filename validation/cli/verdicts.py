@@ -5,12 +5,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import shlex
 import sys
 from pathlib import Path
 
 from ..batch.interrupts import signals_interrupt
 from ..batch.store import ResultStore, StoreError
-from ..run.config import ConfigError
+from ..run.config import ConfigError, check
 from ..run.plants import ROLES
 from ..run.results import own_folder
 from ..run.scenario import PAPER_ARMS, PLANT_KINDS, scenario_from_mapping
@@ -80,6 +81,11 @@ def cmd_validity(args: argparse.Namespace) -> int:
     from ..verdicts.validity import validity_analysis
     from .summaries import validity_summary
     scenarios, plants, arms = _stability_scenarios(args)
+    plugins = sorted({s.plant.kind for s in scenarios if s.plant.kind not in PLANT_KINDS})
+    check(not plugins or args.plant, "plant.kind", f"{', '.join(plugins)} is a plug-in plant, which declares "
+                                     "no linear model: validity compares the reduced model's "
+                                     "and the FE arm's (give --plant reduced --plant exudyn to "
+                                     "judge the built-in arms for this law)")
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     out = Path(args.out or Path("results") / f"validity-{Path(args.file).stem}")
     stability = _stability_folder(args, out)
@@ -298,13 +304,14 @@ def cmd_baseline_update(args: argparse.Namespace) -> int:
 
 
 def cmd_baseline_add(args: argparse.Namespace) -> int:
-    from ..verdicts.baselines import check_from_run, load_baselines, parse_margin, write_baselines
+    from ..verdicts.baselines import (DEFAULT_FILE, check_from_run, load_baselines, parse_margin,
+                                      write_baselines)
     from .one_run import stored_run
     margin = parse_margin(args.margin)
-    row = stored_run(args.run, "RESULTS/RUN")
+    store, row = stored_run(args.run, "RESULTS/RUN")
     baselines = load_baselines(args.file)
     metric = tuple(k.strip() for k in args.metric)
-    updated, added = check_from_run(baselines, row, metric, margin=margin, op=args.op,
+    updated, added = check_from_run(baselines, store, row, metric, margin=margin, op=args.op,
                                     name=args.name)
     write_baselines(updated, updated.checks)
     what = metric[0] if len(metric) == 1 else f"max({', '.join(metric)})"
@@ -315,5 +322,6 @@ def cmd_baseline_add(args: argparse.Namespace) -> int:
     if duration > 5:
         print(f"  note: a {duration:g} s scenario: `make test` measures every short check; "
               "a scenario of 5 s or less keeps it short")
-    print(f"  flexarm baseline check --only {added.name}   # measures it again")
+    where = "" if Path(args.file) == Path(DEFAULT_FILE) else f" --file {shlex.quote(args.file)}"
+    print(f"  flexarm baseline check --only {added.name}{where}   # measures it again")
     return 0

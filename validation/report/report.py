@@ -38,10 +38,12 @@ from .sweep_figures import short_value, sweep_figures
 from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
 from .drawing import draw_all
-from ..batch.fingerprint import run_fingerprint
+from ..batch.fingerprint import fingerprint_of, is_fresh
+from ..batch.resimulate import every_signal
 from .render import fmt_number, folded, folded_text, render
 from .calibration import calibration_section
 from .robust import robust_section
+from .many import distributions, histograms, is_many, read_metrics, windows_of
 from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
@@ -97,6 +99,7 @@ class ReportData:
     validity: dict | None = None
     robust: dict | None = None
     calibration: dict | None = None
+    many: dict | None = None
 
 
 def _table(head: list[str], rows: list[list], classes: list[str] | None = None) -> dict:
@@ -196,13 +199,13 @@ def _estimation_table(runs) -> dict | None:
     return {"compact": _table(head, rows), "detail": _table(detail_head, detail)}
 
 
-def _mesh_table(runs) -> dict | None:
+def _mesh_table(runs, signals) -> dict | None:
     """Closed-loop mesh convergence of the truth-plant runs that have checks: per run, its
     verdict and the values that moved (compact); each judged value (a claim's measure) on
     every mesh (detail)."""
     from ..verdicts.claims import mesh_rows
     from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
-    rows = sorted(mesh_rows(runs), key=lambda r: (r.run.name, _swept(r.run),
+    rows = sorted(mesh_rows(runs, signals), key=lambda r: (r.run.name, _swept(r.run),
                                                   r.run.config["Ts"]))
     if not rows:
         return None
@@ -314,12 +317,15 @@ def _included(store: ResultStore):
     simulations, `calibration_section`)."""
     from ..verdicts.calibration import FIT_SWEEP
     from ..verdicts.verify import ROBUST_SWEEPS
-    all_rows = store.rows()
+    all_rows = store.rows(metrics=read_metrics(store))
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
-    stale = [r for r in all_rows if r.fingerprint != run_fingerprint(r.config)]
-    fresh = [r for r in all_rows if r.run_id not in damaged and r not in stale]
+    now = {k: fingerprint_of(*k) for k in {(r.controller, r.observer, r.plant)
+                                           for r in all_rows}}  # once per kind of run
+    stale = [r for r in all_rows if r.fingerprint != now[r.controller, r.observer, r.plant]]
+    left_out = set(damaged) | {r.run_id for r in stale}  # a set: a list was quadratic
+    fresh = [r for r in all_rows if r.run_id not in left_out]
     runs = [r for r in fresh if r.sweep != "stability" and not is_check(r)
             and r.sweep not in (*ROBUST_SWEEPS, FIT_SWEEP)]
     evaluations = [r for r in fresh if r.sweep in ROBUST_SWEEPS]
@@ -333,14 +339,16 @@ def _included(store: ResultStore):
 
 
 def _scope(runs) -> list[str]:
-    arms = sorted({r.config.get("arm", "default") for r in runs})
+    arms = sorted({r.arm for r in runs})
     scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in arms]
-    scope.append("plants: " + ", ".join(sorted({r.plant_label for r in runs})))
+    kinds = {(r.plant, r.role): r for r in runs}  # a label per kind, not per run
+    scope.append("plants: " + ", ".join(sorted({r.plant_label for r in kinds.values()})))
     scope.append("control periods Ts: " + ", ".join(f"{1e3 * t:g} ms" for t in
-                                                     sorted({r.config["Ts"] for r in runs})))
+                                                     sorted({r.Ts for r in runs})))
     scope.append("initial conditions: " + ", ".join(sorted(
-        {"at rest" if _start(r.config) == "rest" else "moving with the reference" for r in runs})))
-    windows = sorted({(r.config["transient"], r.config["duration"]) for r in runs})
+        {"at rest" if r.initial_state == "rest" else "moving with the reference"
+         for r in runs})))
+    windows = sorted(windows_of(runs))
     scope.append("metrics after the transient: " + ", ".join(
         f"{t:g} s of {d:g} s runs" for t, d in windows[:6]) + (", …" if len(windows) > 6 else "")
         + " (maxima of deflection and torque, torque variation: the whole run)")
@@ -357,7 +365,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     all_rows, runs, warnings, evaluations = _included(store)
     fresh_ids = {r.run_id for r in runs}
     checks = [r for r in all_rows if is_check(r) and r.run_id not in fresh_ids
-              and r.fingerprint == run_fingerprint(r.config)]
+              and is_fresh(r)]
     damaged_checks = store.verify(checks)
     checks = [r for r in checks if r.run_id not in damaged_checks]
     campaigns = store.campaigns()
@@ -372,8 +380,9 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       counts=counts, scope=_scope(counted), warnings=warnings)
     bounds = claim_bounds()
 
-    columns = claim_columns(runs + checks)
-    data.mesh = _mesh_table(runs + checks)
+    signals = functools.partial(every_signal, store)
+    columns = claim_columns(runs + checks, signals)
+    data.mesh = _mesh_table(runs + checks, signals)
     if columns:
         data.summary = verdict_counts(columns)
         data.claims = claims_tables(columns)
@@ -382,7 +391,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                                  "rationale": c.rationale} for c in CLAIMS]
         data.claim_notes = [f"{c.text.split(':')[0]} ({c.key.replace('_', ' ')}): "
                             f"{NOTE_MEANING[c.key]}" for c in CLAIMS if c.key in NOTE_MEANING]
-    data.pairs = pairs_table(runs, fig.describe_run)
+    data.pairs = pairs_table(runs, fig.describe_run) if len({r.role for r in runs}) > 1 \
+        else None
     stability_dir = store.out / "stability"
     tasks = []
     if ResultStore(stability_dir).exists():
@@ -416,17 +426,26 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     tasks += robust_tasks
     data.calibration, calibration_tasks = calibration_section(store)
     tasks += calibration_tasks
-    data.estimation = _estimation_table(runs)
-    if runs:  # a folder of `flexarm verify` alone has its section instead
+    many = is_many(runs)
+    if many:  # summarised: no table row and no figure per run
+        data.many = distributions(runs)
+        tasks.append(("Distributions", "distributions over the runs that completed",
+                      lambda: histograms(runs)))
+    else:
+        data.estimation = _estimation_table(runs)
+    if runs and not many:  # a folder of `flexarm verify` alone has its section instead
         data.runs, data.metrics = _runs_table(runs), _metrics_table(runs)
 
-    groups, skipped = _figure_groups(runs, wanted)
+    groups, skipped = _figure_groups(runs, wanted) if not many else ([], [])
+    if many and data.many:  # a run's figures: `flexarm show`, e.g. of a worst run
+        data.many["stopped"].append(f"no run's figures are drawn here: 'flexarm show "
+                                    f"{store.out}/RUN' draws any run's")
     data.notes["paper_figures"] = [f"{r.name}, {fig.describe_run(r.config)}: not drawn, every "
                                    f"run of it {r.status} ({r.message})" for r in skipped]
     for group in groups:
-        tasks += paper_figure_tasks(group, bounds)
+        tasks += paper_figure_tasks(store, group, bounds)
     by_sweep: dict[str, list] = {}
-    for r in runs:
+    for r in runs if not many else ():  # many runs: their distributions instead
         if r.sweep and r.axes:
             by_sweep.setdefault(r.sweep, []).append(r)
     sweep_bounds = {"track_max": bounds["tracking"], "vib_rms": bounds["vibration"],
@@ -440,8 +459,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                          "gaps": _table(*gap_rows(validity))}
         tasks.append(("Validity of the reduced model", None,
                       lambda: linear_figures.validity_figures(validity)))
-    for arm in sorted({r.config.get("arm", "default") for r in runs}):
-        example = next(r for r in runs if r.config.get("arm", "default") == arm)
+    for arm in sorted({r.arm for r in runs}):
+        example = next(r for r in runs if r.arm == arm)
         params = ArmParameters.from_mapping(example.config["true_params"])
         modes = tuple(example.config["model"]["modes_per_link"])
         tasks.append(("Validity of the reduced model",
@@ -450,7 +469,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       lambda p=params, m=modes, a=arm: validity_map(p, m, f"{a} arm")))
     makes = [make for _, _, make in tasks]
     if animate and groups and animation_path is not None:
-        makes.append(lambda: _animation(groups[0], animation_path))
+        makes.append(lambda: _animation(store, groups[0], animation_path))
     drawn = draw_all(makes, stores=[store], progress=progress)
     for (section, caption, _), made in zip(tasks, drawn):
         items = made if isinstance(made, list) else [(caption, made)]
@@ -462,10 +481,10 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     return data
 
 
-def _loaded(group):
+def _loaded(store, group):
     """(row, every signal) of each run of a figure group (re-simulated where a run's file
-    keeps less: `StoredRun.load`)."""
-    return [(r, r.load()) for r in group]
+    keeps less: `validation.batch.resimulate.every_signal`)."""
+    return [(r, every_signal(store, r)) for r in group]
 
 
 def _title(group) -> str:
@@ -480,7 +499,7 @@ def _title(group) -> str:
         f" — {stopped}" if stopped else "")
 
 
-def paper_figure_tasks(group, bounds: dict | None = None) -> list:
+def paper_figure_tasks(store, group, bounds: dict | None = None) -> list:
     """The paper's figures of one group as (section, caption, draw) tasks; runs that
     diverged or failed are named in the title, not drawn (their last samples before
     leaving the bounds are not data).  ``bounds``: the claims' bounds by claim key."""
@@ -495,7 +514,7 @@ def paper_figure_tasks(group, bounds: dict | None = None) -> list:
 
     def results():
         if "r" not in cache:
-            cache["r"] = _loaded(group)
+            cache["r"] = _loaded(store, group)
         return cache["r"]
     what, _, stopped = title.partition(" — ")
 
@@ -518,14 +537,14 @@ def paper_figure_tasks(group, bounds: dict | None = None) -> list:
     return tasks
 
 
-def _animation(group, path: Path) -> tuple[str, bytes] | None:
+def _animation(store, group, path: Path) -> tuple[str, bytes] | None:
     """The GIF of a group written to ``path`` and its still for print: (caption, PNG);
     None when no run moves (one sample)."""
     from ..run.laws import nominal_model
     head = group[0]
     params = ArmParameters.from_mapping(head.config["nominal_params"])
     model = nominal_model(params, tuple(head.config["model"]["modes_per_link"]))
-    loaded = _loaded([r for r in group if r.status == "ok"])
+    loaded = _loaded(store, [r for r in group if r.status == "ok"])
     caption = fig.animation(loaded, params, model, _title(group), path)
     if caption is None:
         return None
@@ -534,7 +553,7 @@ def _animation(group, path: Path) -> tuple[str, bytes] | None:
 
 # --- the pages ------------------------------------------------------------------------------
 #: The figure sections, in the order the report shows them.
-SECTIONS = ["Stability map", "Attribution", "Paper figures", "Sweeps",
+SECTIONS = ["Stability map", "Attribution", "Distributions", "Paper figures", "Sweeps",
             "Validity of the reduced model"]
 
 
@@ -565,6 +584,7 @@ def contents(data: ReportData) -> list[tuple[str, str]]:
                ("calibration", "Calibration", data.calibration),
                ("estimation", "Estimation against the measurement", data.estimation),
                ("runs", "Runs and metrics", data.runs),
+               ("many", "Distributions and worst cases", data.many),
                ("paper-figures", "Paper figures", has["Paper figures"]),
                ("sweeps", "Sweeps", has["Sweeps"]),
                ("validity", "Validity of the reduced model",
@@ -591,11 +611,21 @@ def _drawing_code() -> str:
     return h.hexdigest()
 
 
-def _rows_digest(store: ResultStore) -> list:
+def _rows_digest(store: ResultStore) -> str:
+    """A hash of what the report reads of each stored run (its detail whole: swept values
+    included, never decoded)."""
     if not store.exists():
-        return []
-    return sorted([r.run_id, r.sha256, r.size, r.status, r.name, r.sweep, r.axes,
-                   r.fingerprint == run_fingerprint(r.config)] for r in store.rows())
+        return ""
+    store.rows(where="0")  # refuses an index it cannot read
+    h, now = hashlib.sha256(), {}
+    for *values, controller, observer, plant, detail in store.columns(
+            ["run_id", "sha256", "size", "status", "name", "sweep", "fingerprint",
+             "controller", "observer", "plant", "detail"], where="1 ORDER BY run_id"):
+        kinds = (controller, observer, plant)
+        if kinds not in now:  # the fingerprint each kind of run gets from this code
+            now[kinds] = fingerprint_of(*kinds)
+        h.update(f"{values}{values[-1] == now[kinds]}".encode() + detail)
+    return h.hexdigest()
 
 
 def content_key(results_dir, *, animate: bool) -> str:

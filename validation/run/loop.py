@@ -89,7 +89,7 @@ def build(scenario: Scenario) -> Setup:
     """
     check_scenario(scenario)
     s = scenario
-    model = nominal_model(s.nominal_params, s.model.modes_per_link)
+    model = nominal_model(s.nominal_params, s.model.modes_per_link, s.model.kinematics)
     sens = s.sensors
     sensor_config = SensorConfig(
         encoder_resolution=sens.encoder_resolution,
@@ -193,7 +193,8 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
         the observer was fed.
     """
     s = scenario
-    model = model or nominal_model(s.nominal_params, s.model.modes_per_link)
+    model = model or nominal_model(s.nominal_params, s.model.modes_per_link,
+                                   s.model.kinematics)
     if reference is not None and reference != make_reference(s.reference):
         raise ValueError("reference must be the scenario's own (see scenario.reference)")
     n, Ts = model.n, s.Ts

@@ -162,13 +162,20 @@ class RunResult:
                 text = npz["meta"]
                 meta = json.loads(text.tobytes().decode() if text.dtype == np.uint8
                                   else str(text))
-                signals = npz["signals"]
+                signals, times, names = npz["signals"], npz["time"], npz["names"]
                 if "packed" in meta:
                     from .packing import CODEC, unpack
                     if meta["packed"]["codec"] != CODEC:
                         raise ValueError(f"signals packed as {meta['packed']['codec']!r}")
-                    signals = unpack(signals.tobytes(), meta["packed"]["shape"])
-                result = cls(time=npz["time"], names=tuple(str(n) for n in npz["names"]),
+                    # The shape the file declares must be the run's own (its names and
+                    # samples, held uncompressed) before anything is inflated: a crafted
+                    # shape would otherwise be inflated up to the packer's 4 GiB cap.
+                    shape = meta["packed"]["shape"]
+                    if list(shape) != [names.size, times.size]:
+                        raise ValueError(f"packed signals of shape {shape}, the run has "
+                                         f"{names.size} signals at {times.size} samples")
+                    signals = unpack(signals.tobytes(), shape)
+                result = cls(time=times, names=tuple(str(n) for n in names),
                              signals=signals, status=meta["status"],
                              message=meta["message"], end_time=meta["end_time"],
                              config=meta["config"], timings=meta["timings"])

@@ -85,6 +85,7 @@ from .calibration_differences import STENCILS, settled_jacobian
 from .calibration_intervals import parameter_uncertainty
 from .calibration_outputs import write_inputs, write_results
 from .calibration_plan import Plan, linear_response
+from ..batch.resimulate import every_signal
 from .verify import Evaluations
 
 __all__ = ["calibrate", "FIT_SWEEP"]
@@ -135,7 +136,7 @@ class _Problem:
     """The residuals of a plan at points u (the parameters over their scales), each
     simulation a stored run on the campaign runner."""
 
-    def __init__(self, plan: Plan, out: Path, runner, inputs: list[dict]) -> None:
+    def __init__(self, plan: Plan, out, runner, inputs: list[dict]) -> None:
         self.plan, self.settings = plan, plan.settings
         self.scale = np.array([p.scale for p in plan.settings.parameters])
         self.inputs = inputs  # per target: the scenario keys that reproduce its input
@@ -193,7 +194,7 @@ class _Problem:
         measured = exp.signals[:, :k]
         r = np.full(measured.shape, _PENALTY)
         if row is not None and row.status != "failed":
-            result = row.load()
+            result = every_signal(self.evals.store, row)
             done = min(k, len(result.time))
             sim = result.select([f"y_{n}" for n in exp.names])[:, :done].astype(np.float64)
             r[:, :done] = (sim - measured[:, :done]) / target.sigma[:, None]
@@ -241,7 +242,7 @@ class _Problem:
         return math.sqrt(total * stencil / 12.0) / self.settings.fd_step
 
 
-def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
+def calibrate(plan: Plan, out, *, runner, log=print, compare=(), store=None) -> dict:
     """Fit the plan's parameters with scipy's ``least_squares`` (module docstring).
 
     Parameters
@@ -259,6 +260,11 @@ def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
     compare : list of (str, dict)
         Other fits of the same data (`calibration_comparison.read_fits`): the result gets
         a ``comparison`` of them and this one.
+    store : BaseStore, optional
+        Where the simulations are kept (default: the folder ``out``, which a calibration
+        stopped and started again resumes from); an in-memory store
+        (`validation.batch.memory.MemoryStore`) keeps them in this process, every signal
+        in float64, nothing written to ``runs/``.
 
     Returns
     -------
@@ -269,7 +275,7 @@ def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
     out = Path(out)
     settings = plan.settings
     inputs = write_inputs(plan, out)
-    problem = _Problem(plan, out, runner, inputs)
+    problem = _Problem(plan, store or out, runner, inputs)
     lower = np.array([q.lower for q in settings.parameters]) / problem.scale
     upper = np.array([q.upper for q in settings.parameters]) / problem.scale
     u = np.array([q.start for q in settings.parameters]) / problem.scale

@@ -157,7 +157,7 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
         for plant in plants or (data["plant"]["kind"],):
             for arm in arms or (data["arm"],):
                 base = dict(data, disturbances=[], initial_state="reference",
-                            duration=DURATION, transient=DURATION / 2)
+                            duration=DURATION, transient=DURATION / 2, requirement=[])
                 base["plant"] = with_plant(base["plant"], plant)
                 base["arm"] = arm
                 params = scenario_to_mapping(arm_parameters(arm))

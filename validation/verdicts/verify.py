@@ -48,6 +48,7 @@ import numpy as np
 
 from ..batch.campaign import PlannedRun
 from ..batch.queue import Batch, answer_all
+from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore, run_id
 from ..run.config import ConfigError
 from ..run.requirements import Requirement
@@ -88,12 +89,12 @@ def effective_rho(row, requirement: Requirement) -> float | None:
 
 @dataclass
 class Evaluations:
-    """Scenarios run on the campaign runner into ``out`` and read back from the store;
-    simulations counted per plant role (distinct scenarios asked for).  A search asks
-    with `run`; a question answered beside others (`validation.batch.queue`) yields
-    `batch` and hands the rows it is sent to `record`."""
+    """Scenarios run on the campaign runner into ``out`` (a folder, or a `BaseStore`: an
+    in-memory one) and read back; simulations counted per plant role (distinct scenarios
+    asked for).  A search asks with `run`; a question answered beside others (`queue`)
+    yields `batch` and hands the rows it is sent to `record`."""
 
-    out: Path
+    out: object
     runner: object
     name: str
     seen: set = field(default_factory=set)
@@ -101,7 +102,7 @@ class Evaluations:
     failed: list = field(default_factory=list)
 
     def __post_init__(self):
-        self.store = ResultStore(self.out)
+        self.store = ResultStore(self.out) if isinstance(self.out, (str, Path)) else self.out
 
     def batch(self, items: list[tuple]) -> Batch:
         """The batch of ``items`` = [(scenario, sweep, axes)]."""
@@ -459,7 +460,7 @@ def conform_question(system: System, out, *, budget: int, seed: int, log=print):
         distances = []
         for k, p in enumerate(points):
             reduced, truth = rows[2 * k], rows[2 * k + 1]
-            d = _distance(reduced, truth)
+            d = _distance(ev.store, reduced, truth)
             distances.append(d)
             if d is not None and (best is None or d > best[0]):
                 best = (d, p, reduced, truth)
@@ -491,14 +492,14 @@ def conform_question(system: System, out, *, budget: int, seed: int, log=print):
     return verdict
 
 
-def _distance(reduced, truth) -> float | None:
+def _distance(store, reduced, truth) -> float | None:
     """max over time and joints of |θ_truth − θ_reduced| (stored signals, common span);
     +∞ when exactly one plant diverged, None when a run failed."""
     if "failed" in (reduced.status, truth.status):
         return None
     if (reduced.status == "diverged") != (truth.status == "diverged"):
         return math.inf
-    a, b = reduced.load(), truth.load()
+    a, b = every_signal(store, reduced), every_signal(store, truth)
     n = min(a.time.size, b.time.size)
     diff = a.select(["theta1", "theta2"])[:, :n].astype(float) - \
         b.select(["theta1", "theta2"])[:, :n].astype(float)
