@@ -104,11 +104,19 @@ class PassivityBasedController:
 class IdealisedPBC(PassivityBasedController):
     """Eq. (20) with all n rows applied: the paper's idealisation (reduced plant only).
 
-    Parameters as `PassivityBasedController`, plus ``kv_flex`` (K_v on q [N s/m], one
-    number or one per mode; default 5) and ``compensate_damping`` (include D Q̇; default
-    true).  K_v,f > 0 is needed: the law cancels the elastic force K q with a sampled (ZOH)
-    force, which destabilises the 34 Hz mode without damping.  Nothing is unrealisable
-    here, so there is no ``residual``.
+    K_v,f > 0 is needed: the law cancels the elastic force K q with a sampled (ZOH) force,
+    which destabilises the 34 Hz mode without damping.  Nothing is unrealisable here, so
+    there is no ``residual``.
+
+    Parameters
+    ----------
+    model, Ts, lambda_joint, lambda_flex, kv_joint
+        As `PassivityBasedController`: the nominal model, the control period [s], Λ and
+        K_v on θ.
+    kv_flex : float or sequence of float
+        K_v on q [N s/m], one number or one per mode (default 5).
+    compensate_damping : bool
+        Include D Q̇ in the law (default true).
     """
 
     name = "pbc-idealised"

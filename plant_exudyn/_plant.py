@@ -114,11 +114,7 @@ class ExudynPlant(Plant):
             the other formulation at a resolution at least as fine with half the step (GE
             8× the ANCF elements; ANCF 1/8 of GE's); meshes beyond 64 el/link are left
             out."""
-            out = []
-            for level in LEVELS:
-                table = self.refined(level)
-                out.append(Refinement(f"{mesh_label(Mesh(**table['mesh']))}, "
-                                      f"step/{2 ** level}", table, level))
+            tables = [(self.refined(level), f"step/{2 ** level}", level) for level in LEVELS]
             n = self.mesh.elements_per_link
             table = self.refined(1)
             if self.mesh.element == "ancf":
@@ -127,9 +123,11 @@ class ExudynPlant(Plant):
             else:
                 table["mesh"].update(element="ancf",
                                      elements_per_link=[max(1, k // _GE_PER_ANCF) for k in n])
-            out.append(Refinement(f"{mesh_label(Mesh(**table['mesh']))}, step/2", table, None))
-            return [r for r in out
-                    if max(r.plant["mesh"]["elements_per_link"]) <= _MAX_ELEMENTS]
+            tables.append((table, "step/2", None))
+            # left out before a Mesh is made of them: Mesh refuses more than 64 el/link
+            return [Refinement(f"{mesh_label(Mesh(**t['mesh']))}, {step}", t, level)
+                    for t, step, level in tables
+                    if max(t["mesh"]["elements_per_link"]) <= _MAX_ELEMENTS]
 
         def step_cost(self) -> float:
             return 2.5e-4 + 3e-5 * sum(self.mesh.elements_per_link)  # pessimistic, measured

@@ -30,7 +30,30 @@ KINEMATICS = ("linear", "exact")
 
 
 def validate_modes_per_link(modes_per_link, *, where: str = "modes_per_link") -> tuple[int, int]:
-    """Return ``modes_per_link`` as a tuple of two ints in 1..4, or raise ValueError."""
+    """``modes_per_link`` checked: two whole numbers of assumed modes, each 1..4.
+
+    Parameters
+    ----------
+    modes_per_link : sequence
+        The modes of link 1 and link 2.
+    where : str
+        The key named in the error.
+
+    Returns
+    -------
+    (int, int)
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` and the value, for anything else.
+
+    Examples
+    --------
+    >>> from reduced_model import validate_modes_per_link
+    >>> validate_modes_per_link([2, 3])
+    (2, 3)
+    """
     if (
         not isinstance(modes_per_link, Sequence)
         or isinstance(modes_per_link, str)

@@ -14,7 +14,26 @@ __all__ = ["ArmParameters", "FieldError", "JOINT_EFFECTS"]
 
 class FieldError(ValueError):
     """A bad value of one field of a parameter object; ``field`` names it, ``reason`` says
-    what is wrong (configuration loaders prefix the field with its full path)."""
+    what is wrong (configuration loaders prefix the field with its full path).
+
+    Parameters
+    ----------
+    owner : str
+        The object the field belongs to (``"ArmParameters"``), the message's prefix.
+    field : str
+        The field's name (``"EI1"``).
+    reason : str
+        What is wrong with its value (``"must be > 0, got -1.0"``).
+
+    Examples
+    --------
+    >>> from reduced_model import ArmParameters, FieldError
+    >>> try:
+    ...     ArmParameters(EI1=-1.0)
+    ... except FieldError as exc:
+    ...     print(exc.field, "—", exc)
+    EI1 — ArmParameters.EI1 must be > 0, got -1.0
+    """
 
     def __init__(self, owner: str, field: str, reason: str) -> None:
         self.field, self.reason = field, reason

@@ -31,6 +31,7 @@ def coordinate_names(modes_per_link: tuple[int, int]) -> tuple[str, ...]:
 
     Examples
     --------
+    >>> from reduced_model import coordinate_names
     >>> coordinate_names((2, 1))
     ('theta1', 'theta2', 'q11', 'q12', 'q21')
     """
@@ -66,6 +67,15 @@ class Measurement:
 
     A plain slotted class rather than a frozen dataclass: plants create one per control
     period, and this is ~3× cheaper to construct.  Treat it as read-only.
+
+    Parameters
+    ----------
+    time : float
+        When it was measured [s].
+    names : tuple of str
+        The signal names (`measured_names`: ``theta1``, ``q11``, ``theta1_dot`` …).
+    values : ndarray
+        One value per name, SI units.
     """
 
     __slots__ = ("time", "names", "values")
@@ -90,9 +100,10 @@ class TrueState:
     """What the plant really does, in the reduced model's coordinates (read-only by
     convention; a slotted class because the closed loop reads one per sample).
 
-    Attributes
+    Parameters
     ----------
     time : float
+        When [s].
     theta, theta_dot : ndarray (2,)
         Joint angles [rad] and rates [rad/s]; θ2 relative to the link-1 tip tangent.
     q, q_dot : ndarray (n1 + n2,)
@@ -104,12 +115,12 @@ class TrueState:
     projection_residual : ndarray (2,)
         Per link, the mass-weighted RMS over the link [m] of the deflection the modes
         cannot represent (0 for the reduced plant).
-    motor_angles, motor_rates : ndarray (2,)
+    motor_angles, motor_rates : ndarray (2,), optional
         The motors' angles [rad] and rates [rad/s] reflected to the link side, what the
         encoders read: the rotors of an arm with drives (`ArmParameters.gear_stiffness1`),
-        θ and θ̇ themselves where a joint has none.
-    x : ndarray
-        The reduced model's state vector [θ, q, θ̇, q̇].
+        θ and θ̇ themselves where a joint has none (the default).
+    x : ndarray, optional
+        The reduced model's state vector [θ, q, θ̇, q̇] (default: made from the others).
     """
 
     __slots__ = ("time", "theta", "theta_dot", "q", "q_dot", "tip_positions",
@@ -141,8 +152,31 @@ def true_state_from_vector(time: float, v: np.ndarray) -> TrueState:
 
 
 def check_sample_time(Ts: float, h: float) -> int:
-    """Number of internal steps h in one control period Ts; ValueError unless Ts is a
-    positive whole multiple of h (to 1e-9 relative)."""
+    """Number of internal steps h in one control period Ts.
+
+    Parameters
+    ----------
+    Ts : float
+        The control period [s].
+    h : float
+        The plant's internal step [s].
+
+    Returns
+    -------
+    int
+        Ts / h.
+
+    Raises
+    ------
+    ValueError
+        Unless Ts is a positive whole multiple of h (to 1e-9 relative).
+
+    Examples
+    --------
+    >>> from reduced_model import check_sample_time
+    >>> check_sample_time(1e-3, 2.5e-4)
+    4
+    """
     if not (np.isfinite(Ts) and Ts > 0.0):
         raise ValueError(f"Ts must be a positive number of seconds, got {Ts!r}")
     n = int(round(Ts / h))

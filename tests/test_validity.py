@@ -2,6 +2,7 @@
 and figures; the report's validity section drawn from what was stored."""
 import json
 import math
+from pathlib import Path
 
 import pytest
 
@@ -105,3 +106,27 @@ def test_validity_of_a_scenario_end_to_end(tmp_path, capsys):
     assert "|" not in printed and "![" not in printed
     assert "pbc · reduced · default: predicted 3.05 ms" in printed
     assert len(printed.splitlines()) == 4
+
+
+def test_validity_finds_the_stability_map_its_file_was_measured_into(tmp_path, monkeypatch):
+    """Issue 47: `flexarm validity campaigns/paper.toml` showed "measured —" for every
+    case although `make demo` had just stored results/paper/stability.  Without
+    --stability it now takes the map `flexarm stability FILE` (results/stability-STEM)
+    or `reproduce-paper`/`campaign` (results/NAME/stability) stored; with none, none."""
+    import argparse
+    from validation.cli.verdicts import _stability_folder
+    from validation.verdicts import stability
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(stability, "GRID", (1e-3,))
+    monkeypatch.setattr(stability, "BISECTIONS", 0)
+    monkeypatch.setattr(stability, "DURATION", 0.2)
+    (tmp_path / "s.toml").write_text('[controller]\nkind = "pd"\n')
+    args = argparse.Namespace(file="s.toml", stability=None)
+    out = Path("results") / "validity-s"
+    assert _stability_folder(args, out) is None  # known-bad: nothing measured yet
+    assert main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
+                 "--workers", "1", "--no-progress"]) == 0
+    assert _stability_folder(args, out) == Path("results") / "stability-s"
+    assert main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
+                 "--workers", "1", "--no-progress", "--out", "results/s/stability"]) == 0
+    assert _stability_folder(args, out) == Path("results") / "s" / "stability"

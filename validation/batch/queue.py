@@ -296,11 +296,50 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
                  label: str | None = None, export: bool = True,
                  rerun: bool = False) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
-    stored as soon as it finishes (`validation.batch.queue`); the progress bar is labelled
-    ``label`` (default: the campaign's name).  On SIGINT/SIGTERM, what finished is kept
-    and ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json
-    are exported at the end (unless ``export`` is false: a search calling this for every
-    batch exports once, when it is done)."""
+    stored as soon as it finishes.  On SIGINT/SIGTERM, what finished is kept and
+    ``summary.interrupted`` holds the signal number.
+
+    Parameters
+    ----------
+    campaign : Campaign
+        What to run (`load_campaign`, `campaign_from_mapping`).
+    out : str or pathlib.Path
+        The results folder (created if needed).
+    runner : Runner, optional
+        Where the runs execute (`make_runner`; default: one after the other in this
+        process).
+    retry_failed : bool
+        Run again the runs stored as failed.
+    reuse_stale : bool
+        Keep runs stored by other code instead of running them again.
+    progress : bool
+        A progress bar on stderr.
+    only : list of PlannedRun, optional
+        These of the campaign's runs instead of all (`expand`).
+    label : str, optional
+        The progress bar's label (default: the campaign's name).
+    export : bool
+        Write metrics.csv and manifest.json at the end (a search calling this for every
+        batch exports once, when it is done).
+    rerun : bool
+        Run every run again, stored or not.
+
+    Returns
+    -------
+    CampaignSummary
+        What was run, skipped, stored, failed (``line()``: one line to print).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from validation import campaign_from_mapping, run_campaign
+    >>> campaign = campaign_from_mapping({
+    ...     "name": "short", "scenario": {"duration": 0.02, "transient": 0.0},
+    ...     "sweep": [{"name": "seeds", "grid": {"seed": [1, 2]}}]})
+    >>> summary = run_campaign(campaign, tempfile.mkdtemp(), progress=False)
+    >>> summary.planned, summary.ok
+    (2, 2)
+    """
     planned = only if only is not None else expand(campaign)
     job = open_job(campaign, out, planned, retry_failed=retry_failed, reuse_stale=reuse_stale,
                    rerun=rerun)

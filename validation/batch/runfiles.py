@@ -8,6 +8,7 @@ adopted file."""
 from __future__ import annotations
 
 import hashlib
+import dataclasses
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -61,12 +62,9 @@ class Keep:
             tuple(n for n in result.names if n in self.signals)
         rows = [result.names.index(n) for n in names]
         time = result.time[::self.every] if names else result.time[:0]  # metrics only
-        return RunResult(time=time, names=names,
-                         signals=np.ascontiguousarray(result.signals[rows, ::self.every]
-                                                      [:, :time.size]),
-                         status=result.status, message=result.message,
-                         end_time=result.end_time, config=result.config,
-                         timings=result.timings)
+        return dataclasses.replace(
+            result, time=time, names=names,
+            signals=np.ascontiguousarray(result.signals[rows, ::self.every][:, :time.size]))
 
     def meta(self, result: RunResult) -> dict:
         """The file's note of what it keeps of ``result`` (nothing if everything): the

@@ -125,9 +125,11 @@ class ResultStore(BaseStore):
         """StoreError unless this is a results folder that can be read (its own index and
         runs/, no links in their place)."""
         self._check_layout()
-        if not self.exists():
-            raise StoreError(f"{self.out}: not a results folder (no {INDEX_NAME}; "
-                             f"'flexarm repair {self.out}' rebuilds it from runs/)")
+        if not self.exists():  # the repair suggested only where it has run files to read
+            why = (f"no {INDEX_NAME}; 'flexarm repair {self.out}' rebuilds it from runs/"
+                   if self.runs_dir.is_dir() else
+                   f"no {INDEX_NAME}, no runs/" if self.out.is_dir() else "no such folder")
+            raise StoreError(f"{self.out}: not a results folder ({why})")
 
     def _check_layout(self) -> None:
         """The folder's own files are its own: the index and runs/ are no symbolic links

@@ -92,7 +92,7 @@ def auto_name(s: Scenario) -> str:
 
 def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     """The scenario of ``flexarm run`` and what to tell the user about where it came from."""
-    from ..batch.campaign import load_study
+    from ..batch.campaign import load_study, own_name
     notes, like = [], getattr(args, "like", None)
     if like and args.config:
         raise ConfigError("--like", "--like and --config exclude each other")
@@ -112,10 +112,8 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
         data = copy.deepcopy(row.config)
     elif args.config:
         study = load_study(args.config, name=given)
-        data = deep_merge({}, study.base)
-        if len(study.sweeps) == 1 and set(study.sweeps[0]) == {"name"}:
-            data["name"] = study.sweeps[0]["name"]  # a scenario file's own name
-        elif study.sweeps:
+        data = deep_merge({}, study.base) | own_name(study)
+        if study.sweeps and not own_name(study):
             notes.append(f"{args.config} is a campaign: running its [scenario] base (its "
                          f"{len(study.sweeps)} sweep(s) are not run: flexarm campaign "
                          f"{args.config})")
@@ -267,9 +265,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"  the true arm's joints: {s.true_params.joints_text()}")
     if result.message:
         print(f"  {result.status}: {result.message}")
-    units = {r.metric: r for r in s.requirement}
-    print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS},
-                         units))
+    if result.status == "failed":
+        if frames := failure_frames(store, rid):
+            print(frames)
+        print(f"  no metrics: the run failed after {result.end_time or 0:g} of {s.duration:g} s "
+              "(a run that failed measures nothing)")
+    else:
+        units = {r.metric: r for r in s.requirement}
+        print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS},
+                             units))
     if getattr(args, "like_row", None) is not None and result.status == "ok":
         print(_compare_with_stored(args.like_row, metrics))
     if truth and refinable:
@@ -308,12 +312,24 @@ def convergence_line(store, rid: str) -> str:
             f"+ {MESH_ATOL:.0%} of its bound")
 
 
+def failure_frames(store: ResultStore, rid: str) -> str:
+    """The stored frames of the code that raised in run ``rid`` (`RunResult.traceback`),
+    indented under a heading, or ""."""
+    frames = store.read(rid)[0].traceback
+    if not frames:
+        return ""
+    return "  where it raised (its own code; innermost last):\n" + "\n".join(
+        "  " + line for line in frames.splitlines())
+
+
 def cmd_show(args: argparse.Namespace) -> int:
     from ..report.show import open_in_browser, show_run
     store, row = stored_run(args.run, "RESULTS/RUN")
     if row.status != "ok":
         print(f"{row.run_id} ({row.name}) {row.status}: {row.message}; a run that did not "
               "complete is not drawn", file=sys.stderr)
+        if frames := failure_frames(store, row.run_id):
+            print(frames, file=sys.stderr)
         return EXIT_FAILED
     page, files, note = show_run(store, row)
     if note:

@@ -247,7 +247,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="results folder; writes DIR/validity (default "
                           "results/validity-<file name>)")
     val.add_argument("--stability", metavar="DIR",
-                     help="stability map to compare with (default: DIR/stability or DIR)")
+                     help="stability map to compare with (default: OUT/stability or OUT, "
+                          "else results/NAME/stability as reproduce-paper and campaign store "
+                          "it, else results/stability-STEM as flexarm stability does)")
     _add_cases(val)
     val.add_argument("--no-progress", action="store_true", help="no progress bar")
     val.set_defaults(func=cmd_validity)

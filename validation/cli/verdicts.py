@@ -59,16 +59,26 @@ def cmd_stability(args: argparse.Namespace) -> int:
                           plants=plants, arms=arms)
 
 
+def _default_maps(file: str) -> list[Path]:
+    """Where the commands that measure a stability map put it by default for ``file``:
+    ``reproduce-paper``/``campaign`` into results/NAME/stability (NAME: the campaign's),
+    ``stability`` into results/stability-STEM."""
+    from ..batch.campaign import load_study
+    return [Path("results") / load_study(file).name / "stability",
+            Path("results") / f"stability-{Path(file).stem}"]
+
+
 def _stability_folder(args, out: Path) -> Path | None:
     """The stability map whose measurements `flexarm validity` joins: --stability, else
-    OUT/stability, else OUT itself if it holds one, else none."""
+    OUT/stability, else OUT itself if it holds one, else the first of `_default_maps`
+    that holds one, else none."""
     if args.stability:
         store = ResultStore(args.stability)
         if not store.exists():
             raise StoreError(f"--stability {args.stability}: not a results folder "
                              "(no index.sqlite)")
         return store.out
-    for folder in (out / "stability", out):
+    for folder in (out / "stability", out, *_default_maps(args.file)):
         if ResultStore(folder).exists() and ResultStore(folder).rows(where="sweep = 'stability'"):
             return folder
     return None
@@ -95,8 +105,11 @@ def cmd_validity(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise StoreError(f"--out {out}: cannot write ({exc.strerror or exc})") from None
 
-    print(f"linear validity of {len(cases)} cases"
-          + (f", measured map: {stability}" if stability else ", no measured stability map"))
+    where = " or ".join(str(f) for f in _default_maps(args.file))
+    print(f"linear validity of {len(cases)} cases" + (
+        f", measured map: {stability}" if stability else
+        f", no measured stability map (none in {where}: 'flexarm stability {args.file}' or "
+        "'flexarm reproduce-paper' measures one, --stability DIR names another)"))
     bar = progress_bar(len(cases), "validity", unit="case", enabled=not args.no_progress)
     try:
         data = validity_analysis(cases, stability_dir=stability,

@@ -26,7 +26,7 @@ def show_run(store, row) -> tuple[Path, list[Path], str]:
     returns the page, the PNG files and a note naming the run drawn with it (or "")."""
     from ..batch.fingerprint import is_fresh
     from ..batch.resimulate import STALE
-    from .report import claim_bounds, figure_group, paper_figure_tasks
+    from .groups import claim_bounds, figure_group, paper_figure_tasks
     group = [r for r in figure_group(row, store.rows()) if r.status == "ok"]
     others = [r for r in group if r.run_id != row.run_id]
     note = "".join(f"with {r.run_id}, the same scenario on the {r.plant} plant, overlaid\n"

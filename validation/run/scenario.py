@@ -276,6 +276,22 @@ def scenario_from_mapping(data: dict) -> Scenario:
     -------
     Scenario
         The scenario, every default filled in, checked (`check_scenario`).
+
+    Raises
+    ------
+    ConfigError
+        Naming the dotted key of an unknown key or a bad value.
+
+    Examples
+    --------
+    >>> from validation import scenario_from_mapping
+    >>> s = scenario_from_mapping({"duration": 2.0, "true_params": {"Mp": 0.5}})
+    >>> s.duration, s.true_params.Mp, s.nominal_params.Mp, s.controller.kind
+    (2.0, 0.5, 0.1, 'pbc')
+    >>> scenario_from_mapping({"plant": {"kind": "exudyn", "stepp": 1e-3}})
+    Traceback (most recent call last):
+        ...
+    validation.run.config.ConfigError: plant.stepp: unknown key for kind 'exudyn' (...)
     """
     base = to_mapping(arm_parameters(data.get("arm", "default")))
     data = dict(data)

@@ -140,7 +140,8 @@ class _Problem:
         self.plan, self.settings = plan, plan.settings
         self.scale = np.array([p.scale for p in plan.settings.parameters])
         self.inputs = inputs  # per target: the scenario keys that reproduce its input
-        self.evals = Evaluations(out, runner, f"{FIT_SWEEP}")
+        self.evals = Evaluations(out, runner, FIT_SWEEP, description=(
+            "the plant's parameters fitted to measured experiments (flexarm calibrate)"))
         self.horizon = self.band = math.inf
 
     # scenarios

@@ -188,8 +188,10 @@ def base_scenario(path) -> tuple[Scenario, dict]:
     Returns
     -------
     (Scenario, dict)
-        The scenario and the ``[calibrate]`` table (empty when there is none).
+        The scenario, named as the file names it (else after the file or campaign), and
+        the ``[calibrate]`` table (empty when there is none).
     """
-    from ..batch.campaign import load_study
+    from ..batch.campaign import load_study, own_name
     study = load_study(path)
-    return scenario_from_mapping(study.base), study.calibrate
+    return (scenario_from_mapping({"name": study.name} | study.base | own_name(study)),
+            study.calibrate)

@@ -100,6 +100,7 @@ class Evaluations:
     seen: set = field(default_factory=set)
     count: dict = field(default_factory=lambda: {"reduced": 0, "truth": 0})
     failed: list = field(default_factory=list)
+    description: str = "verdicts over uncertainty (flexarm verify)"  # the campaign's
 
     def __post_init__(self):
         self.store = ResultStore(self.out) if isinstance(self.out, (str, Path)) else self.out
@@ -108,8 +109,7 @@ class Evaluations:
         """The batch of ``items`` = [(scenario, sweep, axes)]."""
         planned = [PlannedRun(run_id(scenario_to_mapping(scenario)), scenario, sweep, axes)
                    for scenario, sweep, axes in items]
-        return Batch(self.out, self.name, planned,
-                     description="verdicts over uncertainty (flexarm verify)")
+        return Batch(self.out, self.name, planned, description=self.description)
 
     def record(self, batch: Batch, rows: list) -> list:
         """``rows`` (a batch's, in order), counted: simulations per plant, failed runs."""
