@@ -166,7 +166,7 @@ def test_the_reduced_model_on_fe_data_is_inadequate_and_no_interval_misses(tmp_p
     values, fitted by the paper's reduced model: inadequate (its residual 2-470× the
     noise, correlated, following the torques), the estimates labelled effective, and
     every interval it reports holds the hidden value (measured: EI1 +3.3 % in an interval
-    of −2.5..+9.1 %; EI2 +11 % and Mp +26 % reported not identifiable against the model
+    of −6.3..+13.0 %, −2.5..+9.1 % with κ = 3; EI2 +11 % and Mp +26 % reported not identifiable against the model
     error, with no interval).  uncertainty.toml says so, and verify carries it onto its
     verdicts."""
     data = experiment("exudyn", duration=1.0, seed=1, noise=NOISE, params=HIDDEN)
