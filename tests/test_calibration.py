@@ -431,12 +431,14 @@ EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "calibration"
 
 def test_the_shipped_example_is_labelled_small_and_plans():
     """Every data file says it is synthetic, the set stays small (issue: a few hundred
-    KB), and its files pass every check of a calibration."""
+    KB; four files of 5-142 KB), and its files pass every check of a calibration, the
+    friction experiment with its own arm (friction.toml)."""
     from validation.run.experiments import read_frequency_response
     from validation.verdicts.calibration_settings import base_scenario
     files = sorted(EXAMPLE.glob("*.csv"))
-    assert {f.name for f in files} == {"tracking.csv", "moving.csv", "frf.csv"}
-    assert sum(f.stat().st_size for f in files) < 400_000
+    assert {f.name for f in files} == {"tracking.csv", "moving.csv", "frf.csv",
+                                       "reversals.csv"}
+    assert sum(f.stat().st_size for f in files) < 500_000
     for f in files:
         assert f.read_text().startswith("# SYNTHETIC")
     base, table = base_scenario(EXAMPLE / "arm.toml")
@@ -446,6 +448,10 @@ def test_the_shipped_example_is_labelled_small_and_plans():
                             [read_frequency_response(EXAMPLE / "frf.csv")])
     moving = next(t for t in plan.targets if t.experiment.name == "moving")
     assert moving.scenario["initial_state"] == "reference"  # its own setting
+    base, table = base_scenario(EXAMPLE / "friction.toml")
+    settings = calibration_settings(table, None, base)
+    assert "true_params.coulomb1" in settings.names
+    plan_calibration(base, settings, [(read_experiment(EXAMPLE / "reversals.csv"), None)])
 
 
 @pytest.mark.slow

@@ -46,6 +46,8 @@ SLOW = {"flexarm reproduce-paper --lab --no-stability": "460 s",
         "flexarm verify campaigns/robust.toml --mode falsify --requirement tracking": "FALSIFY",
         "flexarm calibrate examples/calibration/tracking.csv examples/calibration/moving.csv "
         "--config examples/calibration/arm.toml": "75 s",
+        "flexarm calibrate examples/calibration/reversals.csv "
+        "--config examples/calibration/friction.toml": "64 s",
         "flexarm baseline check": "BASELINE"}
 
 

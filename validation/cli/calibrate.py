@@ -93,6 +93,14 @@ def _print_parameters(result: dict) -> None:
         else:
             print(f"  {name:<{width}}  {p['estimate']:.7g} ± {p['std']:.2g}  "
                   f"(95 %: {lo:.7g} .. {hi:.7g})")
+    rough = [(n, p["jacobian"]) for n, p in result["parameters"].items()
+             if not p["jacobian"]["settled"]]
+    if rough:
+        print("  the outputs jump as " + ", ".join(
+            f"{n.rsplit('.', 1)[-1]} ({100 * j['halves']:.3g} %)" for n, j in rough)
+            + " change (stick-slip or backlash events moving across integration steps: its "
+              "forward and backward differences disagree by that much); the slope its "
+              "interval rests on is uncertain (docs: Calibrate, friction and drives)")
 
 
 def _print_adequacy(adequacy: dict) -> None:
