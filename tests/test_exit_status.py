@@ -61,7 +61,6 @@ def law(tmp_path, monkeypatch):
     (tmp_path / "s.toml").write_text('[controller]\nkind = "sampled_law:Sampled"\n'
                                      '[observer]\nkind = "none"\n')
     monkeypatch.chdir(tmp_path)  # plug-ins are found from the working directory
-    monkeypatch.setattr(stability, "BISECTIONS", 0)
     monkeypatch.setattr(stability, "DURATION", 0.2)
     return tmp_path
 
@@ -70,8 +69,10 @@ def test_a_verdict_command_whose_failed_run_decides_nothing_exits_0(law, monkeyp
     """Known-good: the failure at 8 ms lies above the divergence at 4 ms; both limits
     are found, the failure is named, the status is 0."""
     monkeypatch.setattr(stability, "GRID", (1e-3, 4e-3, 8e-3))
+    # The coarsest tolerance (50 %): the bracket (1, 4] ms is bisected twice, not seven times.
     status = main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
-                   "--workers", "1", "--no-progress", "--out", str(law / "o")])
+                   "--workers", "1", "--no-progress", "--tolerance", "0.5",
+                   "--out", str(law / "o")])
     out = capsys.readouterr().out
     assert status == 0, out
     assert "FAILED at 8 ms" in (law / "o" / "stability.md").read_text()

@@ -119,7 +119,6 @@ def test_validity_finds_the_stability_map_its_file_was_measured_into(tmp_path, m
     from validation.verdicts import stability
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(stability, "GRID", (1e-3,))
-    monkeypatch.setattr(stability, "BISECTIONS", 0)
     monkeypatch.setattr(stability, "DURATION", 0.2)
     (tmp_path / "s.toml").write_text('[controller]\nkind = "pd"\n')
     args = argparse.Namespace(file="s.toml", stability=None)

@@ -92,9 +92,9 @@ class Campaign:
         The ``[report]`` table (which runs' figures the report draws).
     description : str
         What the campaign asks, for the report.
-    attribution, uncertainty, verify, calibrate, keep : dict
-        The ``[attribution]``, ``[uncertainty]``, ``[verify]``, ``[calibrate]`` and
-        ``[keep]`` tables (empty when the file has none).
+    attribution, uncertainty, verify, calibrate, keep, stability : dict
+        The ``[attribution]``, ``[uncertainty]``, ``[verify]``, ``[calibrate]``, ``[keep]``
+        and ``[stability]`` tables (empty when the file has none).
 
     Examples
     --------
