@@ -161,6 +161,9 @@ def test_runners_give_identical_metrics(tmp_path):
             np.testing.assert_array_equal(stores[other].load(rid).signals, a.signals)
 
 
+# slow (13 s: tests/reliability/test_runs_and_campaigns.py kills and resumes campaigns in make
+# test).
+@pytest.mark.slow
 def test_resume_after_a_kill(tmp_path):
     # 20 runs of ~50 ms: killed after the 3rd result, 17 runs remain to land the kill in.
     spec = {"name": "resume", "scenario": {"duration": 2.0, "transient": 1.0},

@@ -157,6 +157,9 @@ def test_mass_matrix_matches_point_mass_kinetic_energy(modes):
 
 
 # --- energy --------------------------------------------------------------------------------
+# slow (16 s: test_work_energy_balance_with_torque_and_damping checks the energy balance in
+# make test).
+@pytest.mark.slow
 def test_free_undamped_motion_conserves_energy():
     params = GENERAL.replace(bending_damping1=0.0, bending_damping2=0.0)
     model = ArmModel(params)

@@ -49,6 +49,9 @@ def lab(tmp_path_factory):
                         "study.toml": STUDY})
 
 
+# slow (15 s: test_a_plugin_plant_runs_in_a_campaign_and_in_verify runs a plug-in plant in make
+# test).
+@pytest.mark.slow
 def test_a_plugin_plant_runs_and_is_reported_as_the_truth(lab):
     run = flexarm(lab, "run", "--config", "fine.toml", "--out", "out")
     assert run.returncode == 0, run.stderr

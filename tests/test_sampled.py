@@ -74,6 +74,9 @@ def test_what_a_prediction_leaves_out_is_said():
     assert math.isnan(fe.period) and "two actuators" in fe.note
 
 
+# slow (11 s: the truth plant's prediction is certified in make test by
+# test_certified_period_is_sound_on_the_truth_plant).
+@pytest.mark.slow
 def test_table1_truth_prediction_depends_on_the_mesh():
     """Table 1 (no stator inertia): the FE linearisation's limit for the PBC is µs and
     shrinks ~8× per mesh doubling (the FE joint-2 mobility grows as elements³:

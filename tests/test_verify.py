@@ -258,6 +258,9 @@ HOLDS = SYSTEM.replace('{ uniform = [0.0, 4.0] }', '{ uniform = [0.0, 0.2] }').r
     '"true_params.Mp" = { uniform = [0.0, 1.0] }', '"true_params.Mp" = { uniform = [0.0, 0.2] }')
 
 
+# slow (23 s: the interrupted-resume contract of a campaign is kept in make test by
+# tests/reliability/test_runs_and_campaigns.py).
+@pytest.mark.slow
 def test_an_interrupted_search_resumes_to_the_same_answer(tmp_path):
     """SIGTERM during a search that finds nothing (it spends its whole reduced budget, 40
     simulations, and confirms its worst cases on the truth plant): exit 143, the finished runs kept; the same command then

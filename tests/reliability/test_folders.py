@@ -142,7 +142,8 @@ def test_a_folder_in_a_runs_place_is_set_aside_and_every_run_stored(tmp_path):
     assert (tmp_path / "out" / "runs" / f"{rids[0]}.npz.damaged").is_dir()
 
 
-@pytest.mark.parametrize("what", ["fifo", "sparse"])
+# The sparse giant is slow (10 s; the FIFO keeps the rule in make test).
+@pytest.mark.parametrize("what", ["fifo", pytest.param("sparse", marks=pytest.mark.slow)])
 def test_a_fifo_or_a_giant_in_a_run_files_place_is_damaged_not_read(folder, tmp_path, what):
     rid = sorted(p.stem for p in (folder / "runs").glob("*.npz"))[0]
     path = folder / "runs" / f"{rid}.npz"
@@ -198,7 +199,8 @@ def test_a_one_sample_run_is_reported(tmp_path):
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
 
 
-@pytest.mark.parametrize("observer", ["smo-bl", "ekf"])
+# smo-bl is slow (12 s; the EKF keeps the rule in make test).
+@pytest.mark.parametrize("observer", [pytest.param("smo-bl", marks=pytest.mark.slow), "ekf"])
 def test_a_one_sample_run_with_an_observer_is_shown_and_reported_without_warnings(
         tmp_path, observer):
     """Known bad (issue 48, 17): a run that ends before its transient drew its estimation

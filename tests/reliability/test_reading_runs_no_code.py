@@ -7,6 +7,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 from conftest import write_files
 from validation.batch.store import ResultStore
 
@@ -40,6 +42,9 @@ def flexarm(cwd, *args):
                           timeout=600)
 
 
+# slow (15 s: test_store.py's test_reading_a_results_folder_never_imports_a_plugin keeps the
+# rule in make test).
+@pytest.mark.slow
 def test_reading_a_folder_never_imports_the_plugins_it_names(tmp_path):
     lab = write_files(tmp_path, {**LAWS, "s.toml": SCENARIO})
     made = flexarm(lab, "run", "--config", "s.toml", "--out", "out")

@@ -160,6 +160,9 @@ def flexarm(cwd, *args):
                           capture_output=True, text=True, timeout=600)
 
 
+# slow (16 s: test_verify.py's test_a_counterexample_replays_to_the_same_robustness replays one
+# in make test).
+@pytest.mark.slow
 def test_the_counterexample_replays_with_flexarm_run(tmp_path):
     """Known-bad (issue 32): the file named its run "robust/robust" (the search's campaign
     and the system), which `flexarm run --config` refused.  Now it names it "robust" and
