@@ -64,12 +64,15 @@ _VERIFY_KEYS = ("uncertainty", "verify", "calibrate", "stability")
 
 @dataclass(frozen=True)
 class PlannedRun:
-    """One expanded run: its id, resolved scenario and the axis values that made it."""
+    """One expanded run: its id, resolved scenario and the axis values that made it;
+    ``keep``: what its file keeps, where a verdict decides it for the run (None: its
+    campaign's ``[keep]``)."""
 
     run_id: str
     scenario: Scenario
     sweep: str
     axes: dict = field(default_factory=dict)
+    keep: Keep | None = None
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ from .fingerprint import run_fingerprint
 from .index import finite_or_none, set_aside
 
 __all__ = ["write_run", "run_file", "write_file", "run_row", "META_KEYS", "Keep", "KEEP_ALL",
+           "KEEP_METRICS",
            "keep_from_mapping", "KEEP_KEYS"]
 
 #: What a run file's metadata holds beside the result (`RunResult.to_bytes`); ``kept``
@@ -72,6 +73,8 @@ class Keep:
 
 
 KEEP_ALL = Keep()
+#: A file that keeps the metrics and the scenario alone.
+KEEP_METRICS = Keep(signals=())
 
 
 def keep_from_mapping(table: dict, known: tuple[str, ...]) -> Keep:

@@ -40,7 +40,8 @@ from ..run.metrics import all_metrics
 from . import mesh as mesh_check
 from .resolution import UNDECIDED, judged
 
-__all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "SYSTEM",
+__all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "finer_runs",
+           "SYSTEM",
            "DISTURBED", "WINDOWS", "column_key", "claims_records", "mesh_rows", "MeshRow"]
 
 #: The family of transients [s] every windowed claim is measured over.
@@ -93,8 +94,10 @@ class Column:
 
 
 class _Measured:
-    """One stored run, its signals loaded once, its metrics at each transient computed
-    once (`_measured` keeps one per run)."""
+    """One stored run, its signals loaded once when a measure needs them, its metrics at
+    each transient computed once (`_measured` keeps one per run).  A mesh-check run's
+    signals are those its file keeps (`mesh.CHECK_KEEP`: what the claims' measures read;
+    its window family is never measured), never re-simulated."""
 
     def __init__(self, stored) -> None:
         self.stored, self._result, self._metrics = stored, None, {}
@@ -102,7 +105,8 @@ class _Measured:
     @property
     def result(self):
         if self._result is None:
-            self._result = self.stored.load()
+            self._result = self.stored.store.read(self.stored.run_id)[0] \
+                if mesh_check.is_check(self.stored) else self.stored.load()
         return self._result
 
     def metrics(self, transient: float | None = None) -> dict:
@@ -116,7 +120,7 @@ class _Measured:
         return self._metrics[transient]
 
     def value(self, claim: Claim, transient: float | None = None):
-        return claim.measure(self.metrics(transient), self.result)
+        return claim.measure(self.metrics(transient), self.result if claim.signals else None)
 
 
 def _measured(stored, cache: dict) -> _Measured:
@@ -153,15 +157,22 @@ def _flip_note(family: tuple) -> str:
 def _mesh_values(claim: Claim, run: _Measured, checks: dict,
                  cache: dict) -> tuple[bool | None, tuple]:
     """(converged?, ((mesh label, value or status text), ...)) of ``claim`` on the run's
-    mesh and its check meshes; converged is None when a check has not been run."""
+    mesh and its check meshes; converged is None when a check that could change the
+    verdict has not been run (a second level the first decides is "not needed":
+    `mesh.second_level_needed`)."""
     own = plant_settings(run.stored.config["plant"]).discretisation()
     value = run.value(claim)[0]
     values = [(own, value)]
     converged: bool | None = True
+    levels = {r.label: r.level for r in mesh_check.refinements(run.stored.config)}
+    first = None  # the value on level 1, where it completed
     for label, other in checks.items():
         if other is None:
-            values.append((label, "not run"))
-            converged = None
+            needed = levels.get(label) != 2 or (
+                first is not None and mesh_check.second_level_needed(value, first, claim.bound))
+            values.append((label, "not run" if needed else "not needed"))
+            if needed and converged:
+                converged = None
             continue
         if other.status != "ok":
             values.append((label, f"{other.status} at {other.end_time:g} s"))
@@ -169,10 +180,36 @@ def _mesh_values(claim: Claim, run: _Measured, checks: dict,
                 converged = False
             continue
         other_value = _measured(other, cache).value(claim)[0]
+        if levels.get(label) == 1:
+            first = other_value
         values.append((label, other_value))
         if converged and not mesh_check.agrees(value, other_value, claim.bound):
             converged = False
     return converged, tuple(values)
+
+
+def finer_runs(rows) -> list:
+    """The truth-plant runs among stored ``rows`` whose level-1 check leaves a judged
+    value's verdict open (`mesh.second_level_needed`, for any claim that applies to the
+    run): their level 2 is worth running."""
+    rows = list(rows)
+    by_id = {r.run_id: r for r in rows}
+    out, cache = [], {}
+    for r in rows:
+        if not is_truth(r.config) or mesh_check.is_check(r) or r.status != "ok":
+            continue
+        label = next((c.label for c in mesh_check.refinements(r.config) if c.level == 1), None)
+        first = mesh_check.checks_of(r, by_id).get(label)
+        if first is None or first.status != "ok":
+            continue
+        run = _measured(r, cache)
+        for claim in CLAIMS:
+            value = run.value(claim)[0]
+            if not math.isnan(value) and mesh_check.second_level_needed(
+                    value, _measured(first, cache).value(claim)[0], claim.bound):
+                out.append(r)
+                break
+    return out
 
 
 def _mesh_text(claim: Claim, values: tuple) -> str:
