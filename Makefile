@@ -18,7 +18,7 @@ DOCS_EXTRAS := $(EXTRAS),docs
 DOCS_STAMP  := $(VENV)/.installed-docs
 PINS   := constraints.txt
 
-.PHONY: demo test test-all test-latest lock bench docs clean
+.PHONY: demo findings test test-all test-latest lock bench docs clean
 
 # pip and setuptools first (pinned), then the project against the venv's own setuptools
 # (no build isolation: the build backend is pinned too).
@@ -34,6 +34,13 @@ $(STAMP): pyproject.toml $(PINS)
 # stability limit) are counted in the summary and named in the report.
 demo: $(STAMP)
 	$(BIN)/flexarm reproduce-paper --out results/paper
+
+# The findings beyond the paper's own arm, for the docs' findings page: the paper's claims
+# on the lab arm (friction, drives) and how much of the reduced-vs-truth gap the paper's
+# linear kinematics explain.  Not part of the main job: each takes minutes.
+findings: $(STAMP)
+	$(BIN)/flexarm reproduce-paper --lab --no-stability --out results/lab
+	$(BIN)/flexarm attribute campaigns/kinematics.toml --out results/kinematics
 
 # pytest exits 5 when it collects nothing: say so and fail rather than pass silently.
 test: $(STAMP)

@@ -1,4 +1,9 @@
-"""Workloads several benches measure, defined once so that their numbers compare."""
+"""Workloads several benches measure, defined once so that their numbers compare, and
+how a bench gets the tree of another revision to measure against."""
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
 
 #: The command line of the tree in the current directory, in a fresh interpreter:
 #: ``python -c CLI ARGS`` (works for revisions whose CLI predates the console script).
@@ -43,3 +48,31 @@ ONE_RUN = """name = "bench-one"
 duration = 5.0
 observer.kind = "smo-paper"
 """
+
+
+#: Short reduced runs keeping metrics only, one noise seed each (PBC + sign SMO, noisy
+#: encoders): ``METRICS_ONLY.format(duration=…, transient=…, requirement=…, seeds=[…])``.
+#: One arm for every run: expanding a run costs ~0.3 ms; a random arm per run (e.g. a
+#: random payload) costs ~3.6 ms each, the scenario check of every distinct arm.
+METRICS_ONLY = """name = "large"
+[scenario]
+duration = {duration}
+transient = {transient}
+observer.kind = "smo-paper"
+sensors.encoder_noise = 1e-4
+[keep]
+signals = "none"
+{requirement}[[sweep]]
+name = "seeds"
+grid.seed = {seeds}
+"""
+
+
+def extract(rev: str, folder: Path) -> Path:
+    """The tree of revision ``rev`` extracted into ``folder`` (``git archive``: no
+    worktree, no checkout)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    archive = subprocess.run(["git", "archive", rev], cwd=ROOT, capture_output=True,
+                             check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True)
+    return folder

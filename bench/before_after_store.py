@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 from _report import report, target
-from _workloads import CLI
+from _workloads import CLI, extract
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
@@ -60,11 +60,7 @@ def main(rev: str) -> None:
     rows = []
     with tempfile.TemporaryDirectory(prefix="flexarm-store-ab-") as tmp:
         tmp = Path(tmp)
-        before = tmp / "before"
-        before.mkdir()
-        archive = subprocess.run(["git", "archive", rev], cwd=ROOT, capture_output=True,
-                                 check=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(before)], input=archive, check=True)
+        before = extract(rev, tmp / "before")
         run(before, CAMPAIGN, tmp / "reference")
         old = ResultStore(tmp / "reference")
         for label, keep in CHOICES.items():

@@ -38,7 +38,7 @@ SWEEPS = {  # label: (campaign, speed-up target of 2 workers, orchestration targ
 
 
 def _metrics_seconds(store: ResultStore) -> float:
-    results = [run.load() for run in store.rows()]
+    results = [store.load(run.run_id) for run in store.rows()]
     t0 = time.perf_counter()
     for result in results:
         all_metrics(result)

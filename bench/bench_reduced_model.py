@@ -58,8 +58,8 @@ def in_jit_us(loop, *args, n=200_000, repeat=5):
     return best * 1e6
 
 
-def plant_run_seconds(modes=(2, 2), repeat=5):
-    plant = ReducedPlant(modes_per_link=modes)
+def plant_run_seconds(modes=(2, 2), repeat=5, kinematics="linear"):
+    plant = ReducedPlant(modes_per_link=modes, kinematics=kinematics)
     tau = np.array([0.5, -0.2])
     plant.reset()
     plant.step(tau, 1e-3)  # JIT warm-up
@@ -85,17 +85,23 @@ def cold_start_seconds(repeat=3):
                for _ in range(repeat))
 
 
+def kernel_inputs(model):
+    """A state of ``model`` (slightly bent, moving) and the buffers its kernels fill:
+    (Q, Qd, x, tau, xd, M, C, data, workspace)."""
+    n = model.n
+    rng = np.random.default_rng(0)
+    Q = np.concatenate([[0.3, 0.7], rng.normal(0, 0.01, n - 2)])
+    Qd = rng.normal(0, 1, n)
+    x, tau, xd = np.concatenate([Q, Qd]), np.array([0.1, 0.2]), np.empty(2 * n)
+    return Q, Qd, x, tau, xd, np.empty((n, n)), np.empty((n, n)), model.data, \
+        model.new_workspace()[1]
+
+
 def main():
     rows = []
     for modes in [(2, 2), (4, 4)]:
         model = ArmModel(modes_per_link=modes)
-        n = model.n
-        rng = np.random.default_rng(0)
-        Q = np.concatenate([[0.3, 0.7], rng.normal(0, 0.01, n - 2)])
-        Qd = rng.normal(0, 1, n)
-        x, tau, xd = np.concatenate([Q, Qd]), np.array([0.1, 0.2]), np.empty(2 * n)
-        M, C = np.empty((n, n)), np.empty((n, n))
-        d, ws = model.data, model.new_workspace()[1]
+        Q, Qd, x, tau, xd, M, C, d, ws = kernel_inputs(model)
         label = f"{modes[0]}+{modes[1]}"
         rows += [
             {"what": "mass_matrix", "modes": label,

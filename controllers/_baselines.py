@@ -33,7 +33,19 @@ class RigidArm:
     four constants are read off the model's own M at θ2 = 0 and π/2 and checked against
     its M and C at random states (to 1e-9 relative, else RuntimeError), so this is the
     model's rigid part, evaluated in ~1 µs by `rigid_torque` instead of ~30 µs through
-    the general M and C."""
+    the general M and C.
+
+    Parameters
+    ----------
+    model : ArmModel
+        The model whose rigid part is taken (any modes per link).
+
+    Raises
+    ------
+    RuntimeError
+        If the model's M and C are not those of a rigid planar two-link arm at q = 0
+        (to 1e-9 relative).
+    """
 
     def __init__(self, model: ArmModel) -> None:
         Q = np.zeros(model.n)
@@ -135,8 +147,17 @@ class RigidComputedTorque:
     """Rigid-body computed torque: flexibility ignored.
 
     τ = M_θθ(θ) (θ̈_d + K_d (θ̇_d − θ̇) + K_p (θ_d − θ)) + C_θθ(θ, θ̇) θ̇, with M and C of the
-    model at q = q̇ = 0 (the rigid arm with the same masses).  Defaults K_p = (11.1, 14.1),
-    K_d = (6.7, 7.7) [1/s², 1/s]: the PBC's joint error poles (module docstring).
+    model at q = q̇ = 0 (the rigid arm with the same masses).
+
+    Parameters
+    ----------
+    model : ArmModel
+        The nominal model (its rigid part: `RigidArm`).
+    Ts : float
+        The control period [s] (the law is continuous: it is recorded, not used).
+    kp, kd : (float, float) or float
+        K_p [1/s²] and K_d [1/s] per joint, or one number for both; defaults (11.1, 14.1)
+        and (6.7, 7.7): the PBC's joint error poles (module docstring).
     """
 
     name = "ct"

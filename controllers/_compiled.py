@@ -90,28 +90,78 @@ def law_pointer(kernel, signature) -> LawPointer:
 
 
 class CompiledLaw(NamedTuple):
-    """A law's kernel and the buffers it works on (module docstring)."""
+    """A law's kernel and the buffers it works on: what a law's ``compiled()`` returns
+    (the kernels' signatures are in this module's docstring).
 
-    #: The kernel as a function pointer of its role's signature.
+    A plug-in builds it with `CompiledLaw.of` from a numba kernel of its role's signature
+    (`CONTROLLER_SIGNATURE`, `OBSERVER_SIGNATURE`), its options, gains and state; the
+    compiled loop passes the buffers to the kernel at every sample.
+
+    Parameters
+    ----------
+    pointer : LawPointer
+        The kernel as a function pointer of its role's signature.
+    ints : ndarray of int64
+        Integer options and flags (the kernel's ``ints``).
+    reals : ndarray of float64
+        Gains and constants (``reals``).
+    state : ndarray of float64
+        State and scratch, a copy of the law's own: the run changes it, never the object.
+    model_ints, model_reals : ndarray
+        The law's model, packed (`reduced_model.ArmModel.packed`).
+    work_complex, work_real : ndarray
+        The model's scratch space (`reduced_model.ArmModel.new_workspace`).
+    failure : str
+        What a non-zero status of an observer kernel means ("" for a controller).
+
+    Examples
+    --------
+    A controller that returns zero torques, compiled:
+
+    >>> from numba import njit
+    >>> from controllers import CONTROLLER_SIGNATURE, CompiledLaw
+    >>> from reduced_model import ArmModel
+    >>> @njit(cache=False)
+    ... def idle(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
+    ...     tau[0] = tau[1] = 0.0
+    ...     return 2
+    >>> law = CompiledLaw.of(idle, CONTROLLER_SIGNATURE, ArmModel(), reals=[30.0, 15.0])
+    >>> law.reals, law.state.size, law.failure
+    (array([30., 15.]), 0, '')
+    """
+
     pointer: LawPointer
-    #: Integer options and flags.
     ints: np.ndarray
-    #: Gains and constants.
     reals: np.ndarray
-    #: State and scratch (a copy of the law's own: the run changes it).
     state: np.ndarray
-    #: The law's model, packed (`reduced_model.ArmModel.packed`), and its scratch space.
     model_ints: np.ndarray
     model_reals: np.ndarray
     work_complex: np.ndarray
     work_real: np.ndarray
-    #: What a non-zero status of an observer kernel means ("" for a controller).
     failure: str = ""
 
     @classmethod
     def of(cls, kernel, signature, model, *, ints=(), reals=(), state=(), failure: str = ""):
-        """The compiled form of a law on ``model`` (an `ArmModel`): buffers converted to
-        the kernel's types, the model packed with fresh scratch space."""
+        """The compiled form of a law on ``model``: buffers converted to the kernel's
+        types, the model packed with fresh scratch space.
+
+        Parameters
+        ----------
+        kernel : numba dispatcher
+            The law's kernel (``@njit``), of the role's signature.
+        signature : numba signature
+            `CONTROLLER_SIGNATURE` or `OBSERVER_SIGNATURE`.
+        model : ArmModel
+            The law's model.
+        ints, reals, state : sequence of numbers
+            The law's integer options, its gains, and its state (copied).
+        failure : str
+            What a non-zero status of an observer kernel means.
+
+        Returns
+        -------
+        CompiledLaw
+        """
         work_complex, work_real = model.new_workspace()[0]
         return cls(law_pointer(kernel, signature),
                    np.ascontiguousarray(ints, dtype=np.int64),
@@ -121,16 +171,58 @@ class CompiledLaw(NamedTuple):
 
 
 def compiled_form(law, role: str) -> CompiledLaw | None:
-    """The compiled form of ``law`` (``role`` "controller" or "observer"), or None: the
-    law has no ``compiled`` method, or it comes from another class than the law's Python
-    form (a subclass that changes ``__call__``/``update`` but not ``compiled`` must not
-    run the parent's kernel)."""
+    """The compiled form of ``law``, if it has one that computes what its Python form
+    does.
+
+    A law runs compiled only when the class that defines its Python form (``__call__``
+    for a controller, ``update`` for an observer) also defines ``compiled``: a subclass
+    that changes ``__call__`` but not ``compiled`` must not run its parent's kernel, so
+    it runs as the Python object it is.
+
+    Parameters
+    ----------
+    law : object
+        A controller or observer (built-in or plug-in).
+    role : str
+        ``"controller"`` or ``"observer"``.
+
+    Returns
+    -------
+    CompiledLaw or None
+        ``law.compiled()``, or None when the law runs as a Python object.
+
+    Raises
+    ------
+    TypeError
+        Naming the law, when what ``compiled`` returns is not a `CompiledLaw` of the
+        role's signature (the run then fails saying so).
+
+    Examples
+    --------
+    >>> from controllers import JointPD, compiled_form
+    >>> from reduced_model import ArmModel
+    >>> class Softer(JointPD):  # a plug-in changing the law, not its kernel
+    ...     def __call__(self, t, x, ref):
+    ...         return 0.5 * super().__call__(t, x, ref)
+    >>> compiled_form(Softer(ArmModel(), Ts=1e-3), "controller") is None
+    True
+    >>> compiled_form(JointPD(ArmModel(), Ts=1e-3), "controller").reals.size > 0
+    True
+    """
     method = "__call__" if role == "controller" else "update"
     cls = type(law)
     defining = next((c for c in cls.__mro__ if method in c.__dict__), None)
     if defining is None or "compiled" not in defining.__dict__:
         return None
-    return law.compiled()
+    form = law.compiled()
+    signature = CONTROLLER_SIGNATURE if role == "controller" else OBSERVER_SIGNATURE
+    if not (isinstance(form, CompiledLaw) and isinstance(form.pointer, LawPointer)
+            and form.pointer.signature() == signature):
+        text = " ".join(repr(form).split())
+        raise TypeError(f"{cls.__module__}:{cls.__qualname__}.compiled() returned {text[:60]}{'...' if len(text) > 60 else ''}"
+                        f": a compiled {role} is a controllers.CompiledLaw made by "
+                        f"CompiledLaw.of(kernel, {role.upper()}_SIGNATURE, model, ...)")
+    return form
 
 
 @njit(cache=True)

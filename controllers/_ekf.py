@@ -195,7 +195,16 @@ class ExtendedKalmanFilter:
 class PositionEKF(ExtendedKalmanFilter):
     """``"ekf-pos"``: the EKF measuring the positions Q only (encoders and modal
     positions, like ``smo-pos``); options as `ExtendedKalmanFilter` without the rate
-    sigmas."""
+    sigmas.
+
+    Parameters
+    ----------
+    model, Ts, sigma_theta, sigma_q, accel_noise_theta, accel_noise_q
+        As `ExtendedKalmanFilter`: the nominal model, the control period [s], the
+        position noise levels and the process noise.
+    p0_theta, p0_q, p0_theta_dot, p0_q_dot
+        As `ExtendedKalmanFilter`: the initial estimate-error standard deviations.
+    """
 
     name = "ekf-pos"
 

@@ -4,7 +4,8 @@
     τ = M(Q) v̇ + C(Q, Q̇) v + K Q + D Q̇ − K_v s                    (20)
 
 with Q_d = [θ_d, 0] (the paper's q_d = 0), K Q in place of the paper's g(Q) (horizontal
-plane) and the model's Kelvin–Voigt D Q̇.  Eq. (20) asks for n generalised forces; the
+plane) and the model's Kelvin–Voigt D Q̇ — on a model with exact kinematics, its exact
+bending and damping forces.  Eq. (20) asks for n generalised forces; the
 arm has two actuators.  Two laws, two names:
 
 - `PassivityBasedController` (``"pbc"``) applies rows 0–1 of eq. (20) — what two motors
@@ -22,6 +23,7 @@ import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
+from reduced_model._exact_kernels import exact_elastic_into
 from reduced_model._kernels import (coriolis_matrix_into, mass_matrix_into, unpack_model,
                                     unpack_workspace)
 from reduced_model._views import matrix_view
@@ -102,11 +104,19 @@ class PassivityBasedController:
 class IdealisedPBC(PassivityBasedController):
     """Eq. (20) with all n rows applied: the paper's idealisation (reduced plant only).
 
-    Parameters as `PassivityBasedController`, plus ``kv_flex`` (K_v on q [N s/m], one
-    number or one per mode; default 5) and ``compensate_damping`` (include D Q̇; default
-    true).  K_v,f > 0 is needed: the law cancels the elastic force K q with a sampled (ZOH)
-    force, which destabilises the 34 Hz mode without damping.  Nothing is unrealisable
-    here, so there is no ``residual``.
+    K_v,f > 0 is needed: the law cancels the elastic force K q with a sampled (ZOH) force,
+    which destabilises the 34 Hz mode without damping.  Nothing is unrealisable here, so
+    there is no ``residual``.
+
+    Parameters
+    ----------
+    model, Ts, lambda_joint, lambda_flex, kv_joint
+        As `PassivityBasedController`: the nominal model, the control period [s], Λ and
+        K_v on θ.
+    kv_flex : float or sequence of float
+        K_v on q [N s/m], one number or one per mode (default 5).
+    compensate_damping : bool
+        Include D Q̇ in the law (default true).
     """
 
     name = "pbc-idealised"
@@ -158,6 +168,8 @@ def _pbc_torque(ints, reals, wc, wr, M, C, scratch, x_hat, theta_d, dtheta_d, dd
             if with_damping:
                 acc += d.D[i, j] * Qd[j]
         tau[i] = acc - kv[i] * (de[i] + lam[i] * e[i])  # eq. (20), s from eq. (5)
+    if d.exact.N > 0:  # exact kinematics: the bending forces beyond K Q (and D Q̇)
+        exact_elastic_into(d.exact, Q, Qd, tau, with_damping)
 
 
 @njit(cache=True)

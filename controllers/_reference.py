@@ -63,7 +63,22 @@ class _Reference:
 
 @dataclass(frozen=True)
 class PaperReference(_Reference):
-    """θ1d = a1 sin(ω1 t), θ2d = a2 sin(ω2 t): eq. (37) with a = 2 rad, ω = (0.1π, 0.2π) rad/s."""
+    """θ1d = a1 sin(ω1 t), θ2d = a2 sin(ω2 t): eq. (37) with a = 2 rad, ω = (0.1π, 0.2π) rad/s.
+
+    Parameters
+    ----------
+    amplitude : (float, float)
+        a1, a2 [rad] (default 2, 2).
+    omega : (float, float)
+        ω1, ω2 [rad/s] (default 0.1π, 0.2π).
+
+    Examples
+    --------
+    >>> from controllers import PaperReference
+    >>> theta_d, dtheta_d, ddtheta_d = PaperReference()(2.5)
+    >>> theta_d.round(4), dtheta_d.round(4)  # 2 sin(π/4), 2 sin(π/2); 0.2π·2 cos(π/4), 0
+    (array([1.4142, 2.    ]), array([0.4443, 0.    ]))
+    """
 
     amplitude: tuple[float, float] = (2.0, 2.0)
     omega: tuple[float, float] = (0.1 * np.pi, 0.2 * np.pi)
@@ -77,7 +92,24 @@ class PaperReference(_Reference):
 @dataclass(frozen=True)
 class QuinticMove(_Reference):
     """Rest-to-rest move from ``start`` to ``goal`` [rad] in ``duration`` [s] with zero
-    velocity and acceleration at both ends (quintic blend 10τ³ − 15τ⁴ + 6τ⁵), then hold."""
+    velocity and acceleration at both ends (quintic blend 10τ³ − 15τ⁴ + 6τ⁵), then hold.
+
+    Parameters
+    ----------
+    start, goal : (float, float)
+        Joint angles [rad] at the start and the end (defaults (0, 0) and (1, −1)).
+    duration : float
+        Time of the move [s] (default 4); the reference holds ``goal`` after it.
+
+    Examples
+    --------
+    >>> from controllers import QuinticMove
+    >>> move = QuinticMove(goal=(1.0, -1.0), duration=4.0)
+    >>> move(2.0)[0], move(2.0)[1]  # half-way, at the largest speed 15/8 · 1 rad / 4 s
+    (array([ 0.5, -0.5]), array([ 0.46875, -0.46875]))
+    >>> move(9.0)[0]
+    array([ 1., -1.])
+    """
 
     start: tuple[float, float] = (0.0, 0.0)
     goal: tuple[float, float] = (1.0, -1.0)

@@ -38,7 +38,46 @@ class PluginError(ValueError):
 
 
 def resolve(kind: str, builtins: dict[str, type], role: str) -> type:
-    """The class named by ``kind``: a built-in short name, or ``"package.module:Class"``."""
+    """The class named by ``kind``: a built-in short name, or ``"package.module:Class"``.
+
+    What a scenario's ``controller.kind`` or ``observer.kind`` names is found here: the
+    module is imported (from the current directory first, as ``python -m`` finds
+    modules), the class looked up, its constructor's signature read.  Nothing is built.
+
+    Parameters
+    ----------
+    kind : str
+        A key of ``builtins`` (``"pbc"``), or an import path ``"package.module:Class"``
+        (``Class`` may be dotted: a class nested in another).
+    builtins : dict of str to type
+        The built-in laws of the role (`CONTROLLERS` or `OBSERVERS`).
+    role : str
+        ``"controller"`` or ``"observer"``: named in the errors.
+
+    Returns
+    -------
+    type
+        The class (not an instance).
+
+    Raises
+    ------
+    PluginError
+        One line saying why: an unknown short name (with the built-in ones), a module
+        that does not import (with its exception, and where modules are looked for), no
+        such attribute, not a class, a constructor whose signature cannot be read.
+
+    Examples
+    --------
+    >>> from controllers import CONTROLLERS, resolve
+    >>> resolve("pbc", CONTROLLERS, "controller").__name__
+    'PassivityBasedController'
+    >>> resolve("controllers:JointPD", CONTROLLERS, "controller") is CONTROLLERS["pd"]
+    True
+    >>> resolve("pdd", CONTROLLERS, "controller")
+    Traceback (most recent call last):
+        ...
+    controllers._registry.PluginError: unknown controller 'pdd' (built-in: pbc, ...; or a plug-in as "package.module:Class")
+    """
     if ":" not in kind:
         if kind not in builtins:
             raise PluginError(f"unknown {role} {kind!r} (built-in: {', '.join(builtins)}; "

@@ -146,7 +146,35 @@ class _SlidingModeObserver:
 
 class PaperSMO(_SlidingModeObserver):
     """``"smo-paper"``: the paper's observer, sign injection on the full measured state
-    (y = x).  Options ``l_position``, ``l_velocity`` (see the module docstring)."""
+    (y = x).
+
+    Parameters
+    ----------
+    model : ArmModel
+        The nominal model the estimate is predicted with.
+    Ts : float
+        The control period [s]: the horizon of each prediction and of the discrete
+        injection's band ±Ts·L.
+    l_position, l_velocity : (float, float) or float
+        L_P [rad/s on θ, m/s on q] and L_V [rad/s², m/s²] as (joint, flexible) gains, or
+        one number for both; defaults (1.0, 0.5) and (5, 2), chosen as the private base
+        class `_SlidingModeObserver` records (conditions (31) and (36) of the paper).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from controllers import PaperSMO
+    >>> from reduced_model import ArmModel
+    >>> smo = PaperSMO(ArmModel(), Ts=1e-3)
+    >>> smo.measured[:3]
+    ('theta1', 'theta2', 'q11')
+    >>> x0 = np.zeros(12)
+    >>> smo.reset(x0 + 0.01).round(3)[:2]
+    array([0.01, 0.01])
+    >>> x_hat = smo.update(0.0, x0, np.zeros(2))  # the first update only corrects
+    >>> bool(np.all(np.abs(x_hat[:2] - 0.01) <= 1e-3 + 1e-12))  # by at most Ts·L_P
+    True
+    """
 
     name = "smo-paper"
 
@@ -157,7 +185,16 @@ class PaperSMO(_SlidingModeObserver):
 
 class BoundaryLayerSMO(_SlidingModeObserver):
     """``"smo-bl"``: sat((y − ŷ)/ε) instead of sign, ε = ``boundary_layer``·Ts·L per
-    component (default 2: inside the layer half the error is removed per step)."""
+    component (inside the layer the estimate follows y without chattering).
+
+    Parameters
+    ----------
+    model, Ts, l_position, l_velocity
+        As `PaperSMO`: the nominal model, the control period [s], the gains L_P, L_V.
+    boundary_layer : float
+        ε in units of the band Ts·L, > 0 (default 2: inside the layer half the error is
+        removed per step).
+    """
 
     name = "smo-bl"
     _variant = 1
@@ -170,10 +207,18 @@ class BoundaryLayerSMO(_SlidingModeObserver):
 class PositionOnlySMO(_SlidingModeObserver):
     """``"smo-pos"``: positions measured only; Barbot's step-by-step equivalent injection.
 
-    ``filter_time`` [s] (default 5 ms: averages the sign chatter over 5 samples, fast
-    against the 34 Hz mode's 30 ms period); ``gate`` (default 2): the velocity injection
-    of a coordinate acts while its position error is within ``gate``·Ts·L_P (twice the
-    discrete sliding band, so the chatter and a 1e-4 rad / 1e-5 m noise keep it on).
+    Parameters
+    ----------
+    model, Ts, l_position, l_velocity
+        As `PaperSMO`: the nominal model, the control period [s], the gains L_P, L_V.
+    filter_time : float
+        The time constant of the equivalent injection's filter [s], > 0 (default 5 ms:
+        averages the sign chatter over 5 samples, fast against the 34 Hz mode's 30 ms
+        period).
+    gate : float
+        The velocity injection of a coordinate acts while its position error is within
+        ``gate``·Ts·L_P, > 0 (default 2: twice the discrete sliding band, so the chatter
+        and a 1e-4 rad / 1e-5 m noise keep it on).
     """
 
     name = "smo-pos"

@@ -70,6 +70,18 @@ sphinx_gallery_conf = {
     "capture_repr": (),
     "show_memory": False,
     "min_reported_time": 1,
+    # Its pages of computation times load jQuery and DataTables from CDNs: the site
+    # works offline without them (the build's log states the times).
+    "write_computation_times": False,
 }
 
 pygments_style = "sphinx"
+
+# The site works offline: MathJax is shipped with it (flexarm_docs.mathjax copies the
+# pinned release into _static), never loaded from a CDN.
+from flexarm_docs.mathjax import COMPONENT  # noqa: E402
+
+mathjax_path = COMPONENT
+# Docutils' "smart quotes" turn "--" into an en dash, and so "--set" in prose or in a help
+# text into "–set", which a reader copies and the shell refuses: quotes and ellipses only.
+smartquotes_action = "qe"

@@ -3,7 +3,8 @@
 Bodies: hub 1 (revolute to ground, torque τ1), link 1 clamped to hub 1, hub 2 (the motor-2
 rotor, revolute at the link-1 tip, torque τ2 with the reaction −τ2 on the link-1 tip),
 the optional stator rigidly at the link-1 tip, link 2 clamped to hub 2, payload rigidly at
-the link-2 tip.  Horizontal plane, no gravity.
+the link-2 tip, and the joints' friction and drives (`_drives`).  Horizontal plane, no
+gravity.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from exudyn.itemInterface import (
 
 from reduced_model import ArmParameters
 
+from ._drives import Joints, add_joints
 from ._mesh import Mesh
 
 __all__ = ["ArmSystem", "build_arm", "beam_template", "simulation_settings"]
@@ -38,20 +40,48 @@ class LinkNodes:
 
 @dataclass
 class ArmSystem:
-    """An assembled Exudyn system of the arm and the handles the plant needs."""
+    """An assembled Exudyn system of the arm and the handles the plant needs
+    (`build_arm` makes it).
+
+    Parameters
+    ----------
+    SC, mbs : exudyn SystemContainer and MainSystem
+        The system, assembled.
+    element : str
+        The beam element ("ancf" or "geometrically_exact").
+    links : (LinkNodes, LinkNodes)
+        Each link's nodes, root to tip, with their arc length.
+    hub1, hub2 : int
+        The hubs' node numbers.
+    stator : int or None
+        The rigid body at the link-1 tip (only with stator inertia).
+    payload : int or None
+        The rigid body at the link-2 tip (the last beam node for GE beams).
+    loads : (int, int, int)
+        The loads τ1 on hub 1, τ2 on hub 2 and −τ2 on the link-1 tip.
+    load_markers : (int, int, int)
+        Their markers.
+    tip_load : int
+        The force on the payload (the link-2 tip), base frame.
+    rigid_nodes : list of int
+        Every NodeRigidBody2D, for initial conditions.
+    joints : Joints
+        Friction, drives, and the loads each motor torque sets.
+    """
 
     SC: exu.SystemContainer
     mbs: exu.MainSystem
     element: str
     links: tuple[LinkNodes, LinkNodes]
-    hub1: int  # node numbers
+    hub1: int
     hub2: int
-    stator: int | None  # rigid body at the link-1 tip (only with stator inertia)
-    payload: int | None  # rigid body at the link-2 tip (the last beam node for GE beams)
-    loads: tuple[int, int, int]  # τ1 on hub 1, τ2 on hub 2, −τ2 on the link-1 tip
+    stator: int | None
+    payload: int | None
+    loads: tuple[int, int, int]
     load_markers: tuple[int, int, int]
-    tip_load: int  # force on the payload (the link-2 tip), base frame
-    rigid_nodes: list[int]  # every NodeRigidBody2D, for initial conditions
+    tip_load: int
+    rigid_nodes: list[int]
+    joints: Joints
 
 
 def _rot3(a: float) -> list[list[float]]:
@@ -79,11 +109,28 @@ def beam_template(mesh: Mesh, *, rho: float, EI: float, damping: float):
 
 
 def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
-              lock_joints: bool = False) -> ArmSystem:
+              lock_joints: bool = False, step: float | None = None) -> ArmSystem:
     """Create and assemble the arm with links laid out straight at joint angles ``theta``.
 
-    ``lock_joints`` replaces both revolute joints by clamps (for locked-joint modal
-    analysis at ``theta``).
+    Parameters
+    ----------
+    params : ArmParameters
+        The arm.
+    mesh : Mesh
+        The beam element and elements per link (default ANCF, 4 per link).
+    theta : (float, float)
+        Joint angles [rad] of the straight reference configuration.
+    lock_joints : bool
+        Replace both revolute joints by clamps (for locked-joint modal analysis at
+        ``theta``).
+    step : float, optional
+        The integration step [s], which sets the joint friction's bristles (`_drives`;
+        needed only with dry friction).
+
+    Returns
+    -------
+    ArmSystem
+        The assembled system and its handles.
     """
     p = params
     th1, th2 = float(theta[0]), float(theta[1])
@@ -188,6 +235,9 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
     tip_node = payload if payload is not None else nodes2[-1]
     tip_load = mbs.AddLoad(LoadForceVector(
         markerNumber=mbs.AddMarker(MarkerNodePosition(nodeNumber=tip_node)), loadVector=[0, 0, 0]))
+    joints = add_joints(mbs, p, hub1=hub1, hub2=hub2, stator=stator, hub1_load=loads[0],
+                        hub2_loads=(loads[1], loads[2]), references=(th1, th1 + th2),
+                        step=step)
     mbs.Assemble()
 
     links = (LinkNodes(list(nodes1), np.linspace(0.0, p.L1, n_el1 + 1)),
@@ -195,16 +245,32 @@ def build_arm(params: ArmParameters, mesh: Mesh = Mesh(), *, theta=(0.0, 0.0),
     for link in links:
         link.coords = np.array([mbs.systemData.GetNodeLTGODE2(n) for n in link.nodes])
     return ArmSystem(SC, mbs, mesh.element, links, hub1, hub2, stator, payload, loads,
-                     load_markers, tip_load, rigid_nodes)
+                     load_markers, tip_load, rigid_nodes, joints)
 
 
 def simulation_settings(*, step: float, spectral_radius: float = 0.9,
                         newton_tolerance: float = 1e-6) -> exu.SimulationSettings:
-    """Generalised-α settings measured on this model (README, *The truth plant*): Newton tolerances
-    1e-6 (the default absolute 1e-10 is below ANCF round-off), sparse linear solver
-    reusing its analysed pattern, no solution file, no console output, fixed step ``step``, halved on Newton failure
-    down to step/1000 (ten halvings; Exudyn's default 1e-8 s makes a hopeless step take
-    seconds to be declared failed)."""
+    """Generalised-α settings measured on this model (docs, *The truth plant*).
+
+    Newton tolerances 1e-6 (the default absolute 1e-10 is below ANCF round-off), sparse
+    linear solver reusing its analysed pattern, no solution file, no console output,
+    fixed step ``step``, halved on Newton failure down to step/1000 (ten halvings;
+    Exudyn's default 1e-8 s makes a hopeless step take seconds to be declared failed).
+
+    Parameters
+    ----------
+    step : float
+        The integration step [s].
+    spectral_radius : float
+        Generalised-α's spectral radius at infinity, in [0, 1] (default 0.9: a little
+        numerical damping of the mesh's highest modes).
+    newton_tolerance : float
+        Relative and absolute Newton tolerance (default 1e-6).
+
+    Returns
+    -------
+    exudyn.SimulationSettings
+    """
     ss = exu.SimulationSettings()
     ti = ss.timeIntegration
     ti.endTime = step

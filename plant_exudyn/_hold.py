@@ -33,9 +33,15 @@ import numpy as np
 from numba import njit, types
 from numba.experimental import structref
 
-__all__ = ["ExactHold", "HoldData", "slope_gradient_entries"]
+__all__ = ["ExactHold", "HoldData", "slope_gradient_entries", "scaled"]
 
 _TOL = 1e-9  # relative: what counts as a non-zero entry of C or of a load vector
+
+
+def scaled(value, x: float):
+    """A load parameter's value per unit input (a vector or a number) times ``x``, as
+    Exudyn takes it."""
+    return x * value if isinstance(value, float) else [x * v for v in value]
 
 
 def slope_gradient_entries(matrix: np.ndarray, slopes: np.ndarray, s0: np.ndarray):
@@ -71,9 +77,10 @@ class ExactHold:
         The generalised-α settings the system is stepped with.
     step : float
         Its fixed integration step [s].
-    loads : list of list of (load, vector)
-        One input per entry: the loads it sets and their load vector per unit input
-        (e.g. τ2 = [(hub-2 torque, [0, 0, 1]), (link-1 tip torque, [0, 0, -1])]).
+    loads : list of list of (load, parameter, value)
+        One input per entry: the loads it sets, the load parameter and its value per unit
+        input (e.g. τ2 = [(hub-2 torque, "loadVector", (0, 0, 1)), (link-1 tip torque,
+        "loadVector", (0, 0, -1))]; a coordinate load: (load, "load", 1.0)).
     slope_nodes : list of int
         The ANCF nodes (``NodePoint2DSlope1``) that carry rigid markers (clamps, torques).
     """
@@ -101,11 +108,11 @@ class ExactHold:
         base = rhs()
         B = np.zeros((n, len(loads)))
         for j, parts in enumerate(loads):
-            for load, vector in parts:
-                mbs.SetLoadParameter(load, "loadVector", list(vector))
+            for load, parameter, value in parts:
+                mbs.SetLoadParameter(load, parameter, scaled(value, 1.0))
             B[:, j] = rhs() - base
-            for load, _ in parts:
-                mbs.SetLoadParameter(load, "loadVector", [0.0, 0.0, 0.0])
+            for load, parameter, value in parts:
+                mbs.SetLoadParameter(load, parameter, scaled(value, 0.0))
 
         sd, cfg = mbs.systemData, exu.ConfigurationType
         slopes = np.array([sd.GetNodeLTGODE2(k)[2:4] for k in slope_nodes],

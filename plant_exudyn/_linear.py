@@ -36,7 +36,7 @@ import numpy as np
 import scipy.linalg
 
 from reduced_model import output_names
-from reduced_model._plant_interface import TRUTH_EXTRAS
+from reduced_model._plant_interface import MOTOR_OUTPUTS, TRUTH_EXTRAS
 
 from ._build import simulation_settings
 from ._readout import readout_into
@@ -47,9 +47,10 @@ _FD_STEP = 1e-6  # m, rad or slope: central differences of a smooth readout, err
 _RIGID_RATIO = 1e-4  # a "rigid" mode's ω² must be below this × the first flexible one's
 
 
-def linearise(plant, *, theta=(0.0, 0.0), Ts: float | None = None) -> control.StateSpace:
-    """The FE arm of ``plant`` (an `ExudynPlant`, reset here) linearised about rest at
-    joint angles ``theta`` (module docstring; `plant_exudyn.linear_model`)."""
+def linearise(plant, *, theta=(0.0, 0.0)) -> control.StateSpace:
+    """The FE arm of ``plant`` (an `ExudynPlant` whose arm has ideal joints, reset here)
+    linearised about rest at joint angles ``theta`` (module docstring;
+    `plant_exudyn.linear_model` adds the joints)."""
     n = plant.state_size // 2
     x0 = np.zeros(2 * n)
     x0[:2] = np.asarray(theta, dtype=float)
@@ -75,13 +76,11 @@ def linearise(plant, *, theta=(0.0, 0.0), Ts: float | None = None) -> control.St
     C = np.hstack([Cu @ N.T @ Phi, Cv @ N.T @ Phi])
     states = [f"eta{i + 1}" for i in range(k)]
     mesh = plant.mesh
-    sys_ = control.ss(A, B, C, np.zeros((C.shape[0], 2)), inputs=["tau1", "tau2"],
-                      outputs=list(output_names(tuple(m.n for m in plant.modal_basis))),
-                      states=states + [f"{s}_dot" for s in states],
+    outputs = output_names(tuple(m.n for m in plant.modal_basis))[:-len(MOTOR_OUTPUTS)]
+    return control.ss(A, B, C, np.zeros((C.shape[0], 2)), inputs=["tau1", "tau2"],
+                      outputs=list(outputs), states=states + [f"{s}_dot" for s in states],
                       name=f"fe_{mesh.element}_{mesh.elements_per_link[0]}_"
                            f"{mesh.elements_per_link[1]}")
-    return sys_ if Ts is None else control.sample_system(sys_, Ts, method="zoh",
-                                                         name=sys_.name + "_zoh")
 
 
 def _rigid_motions(plant, Q0: np.ndarray) -> np.ndarray:
@@ -127,10 +126,7 @@ def _input_forces(plant, settings) -> np.ndarray:
     size = mbs.systemData.ODE2Size()
 
     def rhs(t1: float, t2: float) -> np.ndarray:
-        l1, l2, l2r = plant.system.loads
-        mbs.SetLoadParameter(l1, "loadVector", [0.0, 0.0, t1])
-        mbs.SetLoadParameter(l2, "loadVector", [0.0, 0.0, t2])
-        mbs.SetLoadParameter(l2r, "loadVector", [0.0, 0.0, -t2])
+        plant.set_loads((t1, t2, 0.0, 0.0))
         solver.ComputeODE2RHS(mbs)
         return np.array(solver.GetSystemResidual())[:size]
 

@@ -70,6 +70,7 @@ def mesh_label(mesh: Mesh) -> str:
 
     Examples
     --------
+    >>> from plant_exudyn import Mesh, mesh_label
     >>> mesh_label(Mesh("geometrically_exact", (16, 8)))
     'GE 16+8 el/link'
     """

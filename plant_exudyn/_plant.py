@@ -8,6 +8,9 @@ from scipy.integrate import cumulative_trapezoid
 
 from reduced_model import (ArmModel, ArmParameters, FieldError, LinkModes, Measurement,
                            Plant, PlantFailure, SensorConfig, cached_model)
+from reduced_model._joint_linear import with_joints
+from reduced_model._joints import lag_step
+from reduced_model._parameters import JOINT_EFFECTS
 from reduced_model._plant import positive_step
 from reduced_model._plant_base import LEVELS, PlantSettings, Refinement
 
@@ -111,11 +114,7 @@ class ExudynPlant(Plant):
             the other formulation at a resolution at least as fine with half the step (GE
             8× the ANCF elements; ANCF 1/8 of GE's); meshes beyond 64 el/link are left
             out."""
-            out = []
-            for level in LEVELS:
-                table = self.refined(level)
-                out.append(Refinement(f"{mesh_label(Mesh(**table['mesh']))}, "
-                                      f"step/{2 ** level}", table, level))
+            tables = [(self.refined(level), f"step/{2 ** level}", level) for level in LEVELS]
             n = self.mesh.elements_per_link
             table = self.refined(1)
             if self.mesh.element == "ancf":
@@ -124,9 +123,11 @@ class ExudynPlant(Plant):
             else:
                 table["mesh"].update(element="ancf",
                                      elements_per_link=[max(1, k // _GE_PER_ANCF) for k in n])
-            out.append(Refinement(f"{mesh_label(Mesh(**table['mesh']))}, step/2", table, None))
-            return [r for r in out
-                    if max(r.plant["mesh"]["elements_per_link"]) <= _MAX_ELEMENTS]
+            tables.append((table, "step/2", None))
+            # left out before a Mesh is made of them: Mesh refuses more than 64 el/link
+            return [Refinement(f"{mesh_label(Mesh(**t['mesh']))}, {step}", t, level)
+                    for t, step, level in tables
+                    if max(t["mesh"]["elements_per_link"]) <= _MAX_ELEMENTS]
 
         def step_cost(self) -> float:
             return 2.5e-4 + 3e-5 * sum(self.mesh.elements_per_link)  # pessimistic, measured
@@ -142,7 +143,7 @@ class ExudynPlant(Plant):
 
         from ._build import build_arm, simulation_settings
         from ._fields import LinkField
-        from ._hold import ExactHold
+        from ._hold import ExactHold, scaled
         from ._readout import new_readout, readout_into
         if not 0.0 < spectral_radius <= 1.0:
             raise ValueError(f"spectral_radius must be in (0, 1], got {spectral_radius!r}")
@@ -152,21 +153,28 @@ class ExudynPlant(Plant):
         self.mesh = mesh
         basis = (model or cached_model(self.params, (2, 2))).mode_shapes
         self.modal_basis = basis
-        self.system = build_arm(self.params, mesh)
+        self.system = build_arm(self.params, mesh, step=step)
         self.fields = (LinkField(self.system, 0, basis[0]), LinkField(self.system, 1, basis[1]))
+        p = self.params
+        self.encoder_side = tuple("motor" if p.has_drive(i) else "link" for i in (1, 2))
         Plant.__init__(self, sensors, basis, step)
         self.settings = simulation_settings(step=self.h, spectral_radius=spectral_radius,
                                             newton_tolerance=newton_tolerance)
         self.solver = exu.MainSolverImplicitSecondOrder()
-        l1, l2, l2r = self.system.loads
         tip = self.system.tip_load
+        self._inputs = self.system.joints.inputs  # the loads τ1 and τ2 set (`_drives`)
+        self._scaled = scaled
         self.hold = ExactHold(
             self.system.mbs, self.settings, self.h,
-            [[(l1, (0, 0, 1))], [(l2, (0, 0, 1)), (l2r, (0, 0, -1))], [(tip, (1, 0, 0))],
-             [(tip, (0, 1, 0))]],
+            [*self._inputs, [(tip, "loadVector", (1.0, 0.0, 0.0))],
+             [(tip, "loadVector", (0.0, 1.0, 0.0))]],
             [n for link in self.system.links for n in link.nodes]
             if self.system.element == "ancf" else []) if exact_hold else None
         self._applied = np.zeros(4)  # the loads held now: τ1, τ2, Fx, Fy
+        #: The current loops' time constants and outputs (`reduced_model._joints.lag_step`).
+        self._lag = np.array([p.torque_time_constant1, p.torque_time_constant2])
+        self._lagged = np.zeros(2)
+        self._read_motors = self.system.joints.motor_reader(self.system.mbs)
         self._index_state()
         self._readout = new_readout(self.system.element == "ancf", *self._joint_arrays(),
                                     *self.fields[0].compiled(), *self.fields[1].compiled())
@@ -212,9 +220,14 @@ class ExudynPlant(Plant):
         sd = self.system.mbs.systemData
         sd.SetODE2Coordinates(u, configuration=self._initial)
         sd.SetODE2Coordinates_t(v, configuration=self._initial)
-        for load in (*self.system.loads, self.system.tip_load):
-            self.system.mbs.SetLoadParameter(load, "loadVector", [0.0, 0.0, 0.0])
+        if sd.DataSize():
+            sd.SetDataCoordinates(self.system.joints.initial_data(self.system.mbs, u, v),
+                                  configuration=self._initial)
+        for load, parameter, value in (*(part for parts in self._inputs for part in parts),
+                                       (self.system.tip_load, "loadVector", (0.0, 0.0, 0.0))):
+            self.system.mbs.SetLoadParameter(load, parameter, self._scaled(value, 0.0))
         self._applied[:] = 0.0
+        self._lagged[:] = 0.0
         self.settings.timeIntegration.startTime = 0.0
         if not self.solver.InitializeSolver(self.system.mbs, self.settings):
             raise PlantFailure(f"Exudyn could not initialise the solver: "
@@ -227,9 +240,21 @@ class ExudynPlant(Plant):
         message if the solver fails."""
         fx, fy = (0.0, 0.0) if tip_force is None else (float(tip_force[0]),
                                                        float(tip_force[1]))
-        self.hold_loads(float(tau[0]), float(tau[1]), fx, fy)
         self._cache = self._truth = None
-        self._iteration.endTime = (self._steps + steps) * self.h
+        if not self._lag.any():
+            self.hold_loads(float(tau[0]), float(tau[1]), fx, fy)
+            self._solve_to(self._steps + steps)
+            return
+        lagged = self._lagged
+        for k in range(steps):  # the current loops' mean torque step by step
+            (u1, lagged[0]), (u2, lagged[1]) = (lag_step(float(tau[i]), lagged[i], self._lag[i],
+                                                         self.h) for i in (0, 1))
+            self.hold_loads(u1, u2, fx, fy)
+            self._solve_to(self._steps + k + 1)
+
+    def _solve_to(self, step: int) -> None:
+        """Advance Exudyn's solver to the end of internal step ``step``."""
+        self._iteration.endTime = step * self.h
         if not self.solver.SolveSteps(self.system.mbs, self.settings):
             msg = self.solver.GetErrorString() or "Newton iteration did not converge"
             raise PlantFailure(f"Exudyn solver failed at t = {self._iteration.currentTime:.6g} "
@@ -245,14 +270,18 @@ class ExudynPlant(Plant):
                                       or new[2] != applied[2] or new[3] != applied[3]):
             self.hold.apply((new[0] - applied[0], new[1] - applied[1],
                              new[2] - applied[2], new[3] - applied[3]))
-        set_load, (l1, l2, l2r) = self._set_load, self.system.loads
-        if t1 != applied[0]:
-            set_load(l1, "loadVector", [0.0, 0.0, t1])
-        if t2 != applied[1]:
-            set_load(l2, "loadVector", [0.0, 0.0, t2])
-            set_load(l2r, "loadVector", [0.0, 0.0, -t2])
-        if fx != applied[2] or fy != applied[3]:
-            set_load(self.system.tip_load, "loadVector", [fx, fy, 0.0])
+        self.set_loads(new)
+
+    def set_loads(self, new) -> None:
+        """Set the loads of the inputs (τ1, τ2, Fx, Fy) ``new`` that changed (no hold)."""
+        applied = self._applied
+        set_load, scaled = self._set_load, self._scaled
+        for j in (0, 1):
+            if new[j] != applied[j]:
+                for load, parameter, value in self._inputs[j]:
+                    set_load(load, parameter, scaled(value, new[j]))
+        if new[2] != applied[2] or new[3] != applied[3]:
+            set_load(self.system.tip_load, "loadVector", [new[2], new[3], 0.0])
         applied[:] = new
 
     def measure(self) -> Measurement:
@@ -267,9 +296,12 @@ class ExudynPlant(Plant):
         return self._truth_now().copy()
 
     def truth_into(self, out: np.ndarray) -> None:
-        """`truth_vector` written into ``out`` (one compiled call on Exudyn's coordinates)."""
+        """`truth_vector` written into ``out`` (one compiled call on Exudyn's coordinates,
+        then the motors)."""
         sd = self._system_data
-        self._readout_into(self._readout, sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t(), out)
+        u, v = sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t()
+        self._readout_into(self._readout, u, v, out)
+        self._read_motors(u, v, out, self.state_size // 2)
 
     def _truth_now(self) -> np.ndarray:
         """The truth vector of the current step, read once (treat as read-only)."""
@@ -387,6 +419,10 @@ class ExudynPlant(Plant):
             place(sys_.stator, tip1, tangent1)
         if sys_.payload is not None:
             place(sys_.payload, tip2, tangent2)
+        for rotor, hub_angle in zip(sys_.joints.rotors, (th1, alpha)):
+            if rotor is not None:  # on its hub: the gear unloaded
+                u[mbs.systemData.GetNodeLTGODE2(rotor)[0]] = hub_angle - mbs.GetNodeParameter(
+                    rotor, "referenceCoordinates")[0]
         return u
 
     # --- modal analysis ---------------------------------------------------------------------------
@@ -422,7 +458,16 @@ def linear_model(params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
     control.StateSpace
         Inputs ``tau1``, ``tau2`` [N m]; outputs `reduced_model.output_names` (deviations
         from the configuration: rad, m, rad/s, m/s); states ``eta1…`` (FE modes, the first
-        two rigid) and their rates.  Continuous, or discrete with ``dt = Ts``.
+        two rigid) and their rates, then the drives' and current loops' (the linear part
+        of the arm's joints, `reduced_model._joint_linear.with_joints`; dry friction and
+        backlash are left out).  Continuous, or discrete with ``dt = Ts``.
     """
+    import control
+
     from ._linear import linearise
-    return linearise(ExudynPlant(params, model=model, mesh=mesh), theta=theta, Ts=Ts)
+    params = params if params is not None else ArmParameters()
+    arm = linearise(ExudynPlant(params.without(*JOINT_EFFECTS), model=model, mesh=mesh),
+                    theta=theta)
+    sys_ = with_joints(arm, params)
+    return sys_ if Ts is None else control.sample_system(sys_, Ts, method="zoh",
+                                                         name=sys_.name + "_zoh")

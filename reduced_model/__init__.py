@@ -7,7 +7,7 @@ analysis), `ReducedPlant` (the model used as a plant), and the Plant interface a
 sensors shared with the Exudyn plant.
 """
 from ._linear import reduced_linear_model
-from ._model import ArmModel, cached_model, validate_modes_per_link
+from ._model import KINEMATICS, ArmModel, cached_model, validate_modes_per_link
 from ._modes import LinkModes
 from ._parameters import ArmParameters, FieldError
 from ._plant import ReducedPlant
@@ -21,4 +21,5 @@ __all__ = [
     "TrueState", "Plant", "PlantFailure", "SensorConfig", "SensorModel", "STRAIN_QUANTITIES",
     "check_sample_time", "validate_modes_per_link", "PlantSettings", "Refinement", "ROLES",
     "LEVELS", "coordinate_names", "output_names", "reduced_linear_model", "measured_names",
+    "KINEMATICS",
 ]

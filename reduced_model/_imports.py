@@ -118,14 +118,17 @@ class Walk:
     packages: set[str] = field(default_factory=set)
 
 
-def walk(start: list[str], inside: tuple[Path, ...] | None, *, skip: tuple[str, ...] = ()) -> Walk:
+def walk(start: list[str], inside: tuple[Path, ...] | None, *, skip: tuple[str, ...] = (),
+         declared=lambda top: True) -> Walk:
     """Every module ``start`` can import, transitively, at module level or in a function.
 
     ``inside``: only modules whose top-level package is one of these folders are walked
     (a project's own code); any other non-standard name reached is an installed package.
     None: every module that is not part of the Python installation is walked (a plug-in
     and its helpers, wherever they live); an installed one reached is recorded as a
-    package.  The standard library is skipped by name, and so are the modules ``skip``
+    package if ``declared(top)`` (a distribution installed it, so its version and record
+    stand for it), else walked like the user's own files (a module copied into
+    site-packages by hand has nothing else to stand for it).  The standard library is skipped by name, and so are the modules ``skip``
     (what they import is not followed).  A package's ``__init__`` is walked before its
     modules, as ``import`` runs it."""
     out = Walk()
@@ -148,7 +151,7 @@ def walk(start: list[str], inside: tuple[Path, ...] | None, *, skip: tuple[str, 
             continue
         if local is not None and not path.is_relative_to(local[top]):
             continue
-        if local is None and installed(path):
+        if local is None and installed(path) and declared(top):
             out.packages.add(top)
             continue
         out.files[name] = path

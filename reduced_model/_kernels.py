@@ -47,6 +47,9 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ._exact_data import ExactRef, ExactScratch, exact_reals, exact_workspace_sizes
+from ._exact_kernels import (exact_coriolis_matrix_into, exact_elastic_into,
+                             exact_mass_bias_into, exact_tips_into)
 from ._cholesky import cholesky_solve_inplace
 from ._views import matrix_view
 
@@ -75,6 +78,7 @@ class ModelData(NamedTuple):
     M_rotors: np.ndarray  # (n, n) Σ J a aᵀ of hub 1, stator, hub 2, payload (constant)
     K: np.ndarray  # (n, n) stiffness
     D: np.ndarray  # (n, n) Kelvin–Voigt damping
+    exact: object  # `ExactRef`: the exact inextensible kinematics (N = 0: the paper's)
 
 
 class Workspace(NamedTuple):
@@ -94,22 +98,29 @@ class Workspace(NamedTuple):
     k3: np.ndarray
     k4: np.ndarray
     xt: np.ndarray
+    exact: object  # `ExactScratch`: the exact kinematics' scratch
 
 
 # --- packing -------------------------------------------------------------------------
 def pack_model(*, n1, n2, L1, L2, gram1, gram2, phi1_tip, dphi1_tip, phi2_tip, M_rotors,
-               K, D) -> tuple[np.ndarray, np.ndarray]:
-    """(ints, reals) buffers holding a model, in the order `unpack_model` reads them."""
+               K, D, exact=None) -> tuple[np.ndarray, np.ndarray]:
+    """(ints, reals) buffers holding a model, in the order `unpack_model` reads them
+    (``exact``: the parts of `ExactData` by name, or None for the paper's kinematics)."""
     n = 2 + n1 + n2
     rows1 = [0, *range(2, 2 + n1)]
-    ints = np.array([n1, n2, *rows1, *range(n)], dtype=np.int64)
+    if exact is not None:
+        exact = {"L": [L1, L2], "phi1_tip": phi1_tip, "dphi1_tip": dphi1_tip,
+                 "phi2_tip": phi2_tip, **exact}
+    exact_ints, exact_parts = exact_reals(exact, n1, n2)
+    ints = np.array([n1, n2, *rows1, *range(n), *exact_ints], dtype=np.int64)
     parts = [[L1, L2], gram1, gram2, phi1_tip, dphi1_tip, phi2_tip, M_rotors, K, D]
     shapes = [(2,), (1 + n1, 1 + n1), (2 + n2, 2 + n2), (n1,), (n1,), (n2,), (n, n), (n, n),
               (n, n)]
     for part, shape in zip(parts, shapes):
         if np.shape(part) != shape:
             raise ValueError(f"model part has shape {np.shape(part)}, expected {shape}")
-    reals = np.concatenate([np.ravel(np.asarray(p, dtype=float)) for p in parts])
+    reals = np.concatenate([np.ravel(np.asarray(p, dtype=float)) for p in parts]
+                           + exact_parts)
     return ints, reals
 
 
@@ -134,8 +145,9 @@ def unpack_model(ints, reals):
     K = matrix_view(reals, o, n, n)
     o += n * n
     D = matrix_view(reals, o, n, n)
+    exact = ExactRef(ints[2 + nb1 + n], n1, n2, reals, o + n * n)
     return ModelData(n1, n2, ints[2:2 + nb1], ints[2 + nb1:2 + nb1 + n], reals[0], gram1, gram2,
-                     phi1_tip, dphi1_tip, phi2_tip, reals[1], M_rotors, K, D)
+                     phi1_tip, dphi1_tip, phi2_tip, reals[1], M_rotors, K, D, exact)
 
 
 def new_workspace(ints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -143,8 +155,9 @@ def new_workspace(ints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n1, n2 = int(ints[0]), int(ints[1])
     n, nb1, nb2 = 2 + n1 + n2, 1 + n1, 2 + n2
     nb = max(nb1, nb2)
-    return (np.zeros(2 * nb1 * nb1 + 2 * n * nb2 + n + 2 * nb, np.complex128),
-            np.zeros(n * n + n + 5 * 2 * n))
+    exact_complex, exact_real = exact_workspace_sizes(n1, n2, int(ints[2 + nb1 + n]))
+    return (np.zeros(2 * nb1 * nb1 + 2 * n * nb2 + n + 2 * nb + exact_complex, np.complex128),
+            np.zeros(n * n + n + 5 * 2 * n + exact_real))
 
 
 @njit(cache=True, inline="always")
@@ -167,12 +180,14 @@ def unpack_workspace(ints, wc, wr):
     v = wc[o:o + nb]
     Gv = wc[o + nb:o + 2 * nb]
     M = matrix_view(wr, 0, n, n)
+    exact = ExactScratch(wc, o + 2 * nb, wr, n * n + 11 * n)
     o = n * n
     f = wr[o:o + n]
     o += n
     m = 2 * n
     return Workspace(A1, Ad1, A2, Ad2, c_hat, v, Gv, M, f, wr[o:o + m], wr[o + m:o + 2 * m],
-                     wr[o + 2 * m:o + 3 * m], wr[o + 3 * m:o + 4 * m], wr[o + 4 * m:o + 5 * m])
+                     wr[o + 2 * m:o + 3 * m], wr[o + 3 * m:o + 4 * m], wr[o + 4 * m:o + 5 * m],
+                     exact)
 
 
 # --- kinematic coefficients ------------------------------------------------------------
@@ -264,6 +279,9 @@ def mass_matrix_into(d, Q, M, ws):
 @njit(cache=True, inline="always")
 def coriolis_matrix_into(d, Q, Qd, C, ws):
     """Christoffel-form C(Q, Q̇) into ``C`` (n, n)."""
+    if d.exact.N > 0:
+        exact_coriolis_matrix_into(d.exact, ws.exact, Q, Qd, C)
+        return
     _fill_coefficients(d, Q, Qd, ws)
     C[:, :] = 0.0
     _add_gram(ws.A1, d.gram1, ws.Ad1, d.rows1, C, ws.Gv)
@@ -279,6 +297,9 @@ def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
     e^{iθ1}, e^{iα} drop out.  v is the basis-coefficient vector of the velocity-product
     accelerations Σ_j Ȧ_j Q̇_j of each link, and h_i = Re(conj(A_i) G v).
     """
+    if d.exact.N > 0:
+        exact_mass_bias_into(d.exact, ws.exact, Q, Qd, M, h, with_bias)
+        return
     n1, n2 = d.n1, d.n2
     n = 2 + n1 + n2
     G1, G2, v, Gv, c_hat = d.gram1, d.gram2, ws.v, ws.Gv, ws.c_hat
@@ -384,6 +405,8 @@ def bias_forces_into(d, Q, Qd, h, ws):
         for j in range(2, n):
             s += d.K[i, j] * Q[j] + d.D[i, j] * Qd[j]
         h[i] += s
+    if d.exact.N > 0:
+        exact_elastic_into(d.exact, Q, Qd, h, True)
 
 
 @njit(cache=True, inline="always")
@@ -444,6 +467,9 @@ def tip_kinematics_packed(ints, reals, Q, out):
     """Planar kinematics with deflection: ``out`` = [x1, y1, x2, y2, w1(L1), w2(L2)],
     the link-1 tip, the payload, and both tip deflections in their root frames."""
     d = unpack_model(ints, reals)
+    if d.exact.N > 0:
+        exact_tips_into(d.exact, Q, out)
+        return
     n1, n2 = d.n1, d.n2
     w1e = 0.0
     s1e = 0.0

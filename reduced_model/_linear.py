@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._joint_linear import with_joints
 from ._model import ArmModel
 from ._modes import LinkModes, projection
-from ._plant_interface import output_names
+from ._plant_interface import MOTOR_OUTPUTS, output_names
 
 __all__ = ["reduced_linear_model"]
 
@@ -16,7 +17,9 @@ def reduced_linear_model(model: ArmModel, *, theta=(0.0, 0.0), Ts: float | None 
                          generalised_forces: bool = False):
     """The reduced model linearised about rest at joint angles ``theta``
     (`ArmModel.linearize`, exact), with the outputs of `plant_exudyn.linear_model`
-    (`output_names`).
+    (`output_names`) and the linear part of its arm's joints (`with_joints`: drives,
+    viscous friction, current loops; dry friction and backlash are nonlinear and left
+    out, `nonlinear_joint_effects`).
 
     Parameters
     ----------
@@ -36,8 +39,9 @@ def reduced_linear_model(model: ArmModel, *, theta=(0.0, 0.0), Ts: float | None 
     Returns
     -------
     control.StateSpace
-        Inputs ``tau1``, ``tau2`` [N m] (and the modal forces); outputs θ, q, θ̇, q̇ and ``tip_defl1``,
-        ``tip_defl2`` (deviations: rad, m, rad/s, m/s); states ``model.state_names``.
+        Inputs ``tau1``, ``tau2`` [N m] (and the modal forces); outputs θ, q, θ̇, q̇,
+        ``tip_defl1``, ``tip_defl2`` and the motors (deviations: rad, m, rad/s, m/s);
+        states ``model.state_names`` (then the drives' and lags', `with_joints`).
     """
     import control  # loaded by the linear verdicts that use it
     n = model.n
@@ -59,8 +63,10 @@ def reduced_linear_model(model: ArmModel, *, theta=(0.0, 0.0), Ts: float | None 
     tips[0, 2:2 + n1] = model.mode_shapes[0].tip_values[0]
     tips[1, 2 + n1:] = model.mode_shapes[1].tip_values[0]
     C = np.block([[Cq, np.zeros((m, n))], [np.zeros((m, n)), Cq], [tips, np.zeros((2, n))]])
-    sys_ = control.ss(A, B, C, np.zeros((C.shape[0], len(inputs))), inputs=inputs,
-                      outputs=list(output_names(tuple(m.n for m in basis))), states=list(model.state_names),
-                      name=f"reduced_{model.modes_per_link[0]}_{model.modes_per_link[1]}")
+    arm = control.ss(A, B, C, np.zeros((C.shape[0], len(inputs))), inputs=inputs,
+                     outputs=list(output_names(tuple(m.n for m in basis))[:-len(MOTOR_OUTPUTS)]),
+                     states=list(model.state_names),
+                     name=f"reduced_{model.modes_per_link[0]}_{model.modes_per_link[1]}")
+    sys_ = with_joints(arm, model.params)
     return sys_ if Ts is None else control.sample_system(sys_, Ts, method="zoh",
                                                          name=sys_.name + "_zoh")

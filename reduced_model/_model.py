@@ -12,19 +12,48 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.linalg
 
+from . import _exact_kernels as exact_kern
 from . import _kernels as kern
 from ._cache_guard import fresh_kernel_caches
+from ._inextensible import InextensibleLink, interpolation_nodes
 from ._modes import LinkModes, gauss_legendre
 from ._parameters import ArmParameters
 from ._plant_interface import coordinate_names
 
-__all__ = ["ArmModel", "validate_modes_per_link", "cached_model"]
+__all__ = ["ArmModel", "validate_modes_per_link", "validate_kinematics", "cached_model",
+           "KINEMATICS"]
 
 MAX_MODES = 4
+#: The kinematics of a link's points: the paper's x + i w (linear in the modal
+#: coordinates), or the exact inextensible centreline (`reduced_model._inextensible`).
+KINEMATICS = ("linear", "exact")
 
 
 def validate_modes_per_link(modes_per_link, *, where: str = "modes_per_link") -> tuple[int, int]:
-    """Return ``modes_per_link`` as a tuple of two ints in 1..4, or raise ValueError."""
+    """``modes_per_link`` checked: two whole numbers of assumed modes, each 1..4.
+
+    Parameters
+    ----------
+    modes_per_link : sequence
+        The modes of link 1 and link 2.
+    where : str
+        The key named in the error.
+
+    Returns
+    -------
+    (int, int)
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` and the value, for anything else.
+
+    Examples
+    --------
+    >>> from reduced_model import validate_modes_per_link
+    >>> validate_modes_per_link([2, 3])
+    (2, 3)
+    """
     if (
         not isinstance(modes_per_link, Sequence)
         or isinstance(modes_per_link, str)
@@ -40,12 +69,21 @@ def validate_modes_per_link(modes_per_link, *, where: str = "modes_per_link") ->
     return int(modes_per_link[0]), int(modes_per_link[1])
 
 
+def validate_kinematics(kinematics, *, where: str = "kinematics") -> str:
+    """Return ``kinematics`` if it is one of `KINEMATICS`, or raise ValueError."""
+    if not isinstance(kinematics, str) or kinematics not in KINEMATICS:
+        raise ValueError(f"{where} must be one of {', '.join(map(repr, KINEMATICS))}, "
+                         f"got {kinematics!r}")
+    return kinematics
+
+
 @functools.lru_cache(maxsize=32)
-def cached_model(params: ArmParameters, modes_per_link: tuple[int, int]) -> "ArmModel":
-    """The `ArmModel` of ``params`` and ``modes_per_link``, built once per process
-    (~20 ms each; the runs of a sweep share most).  Users must not mutate it; its own
-    methods' scratch space is shared, so use it from one thread."""
-    return ArmModel(params, modes_per_link)
+def cached_model(params: ArmParameters, modes_per_link: tuple[int, int],
+                 kinematics: str = "linear") -> "ArmModel":
+    """The `ArmModel` of ``params``, ``modes_per_link`` and ``kinematics``, built once per
+    process (~20 ms each; the runs of a sweep share most).  Users must not mutate it; its
+    own methods' scratch space is shared, so use it from one thread."""
+    return ArmModel(params, modes_per_link, kinematics)
 
 
 def _gram(modes: LinkModes, tip_point_mass: float, *, with_constant: bool) -> np.ndarray:
@@ -78,6 +116,15 @@ class ArmModel:
     deflection w_i(x) = Σ_j φ_ij(x) q_ij in link i's root frame.  The state is
     ``x = [Q, Q̇]``.
 
+    Kinematics.  ``"linear"`` (the paper's): a point of link i at x is at x + i w_i(x)
+    in its root frame, and the tip slope turns the next frame by w_i'(L_i).  ``"exact"``:
+    the same coordinates and mode shapes fix the slope of an inextensible centreline,
+    tan β = w', which keeps its arc length (foreshortening included) and turns the next
+    frame by atan w_i'(L_i) — the FE plant's placement of its nodes; its bending energy
+    is ½ EI ∫ κ² of the exact curvature κ = β' (`reduced_model._inextensible`).  Both
+    have the same mass matrix at q = 0, hence the same linearisation about rest; the
+    exact model is derived on the docs' theory page.
+
     All configuration-independent integrals are computed once here; the hot functions
     run as numba kernels (`reduced_model._kernels`) on `data` and can be called from
     other compiled code.  The methods below allocate their outputs and are meant for
@@ -89,14 +136,17 @@ class ArmModel:
         Physical arm (defaults: the paper's Table 1).
     modes_per_link : (int, int)
         Assumed modes of link 1 and link 2, each 1..4 (the paper: 2, 2).
+    kinematics : {"linear", "exact"}
+        The paper's linear kinematics (default) or exact inextensible kinematics.
     """
 
     def __init__(self, params: ArmParameters | None = None,
-                 modes_per_link: tuple[int, int] = (2, 2)) -> None:
+                 modes_per_link: tuple[int, int] = (2, 2), kinematics: str = "linear") -> None:
         fresh_kernel_caches()  # before any kernel runs: every kernel works on a model
         self.params = params if params is not None else ArmParameters()
         n1, n2 = validate_modes_per_link(modes_per_link)
         self.modes_per_link = (n1, n2)
+        self.kinematics = validate_kinematics(kinematics)
         p = self.params
         tip1, tip2 = p.tip_load(1), p.tip_load(2)
         self.mode_shapes = (
@@ -121,6 +171,9 @@ class ArmModel:
         axes[1:, f1] = dphi1_tip
         axes[2:, 1] = 1.0
         axes[3, f2] = dphi2_tip
+        #: Each link's exact kinematics (`InextensibleLink`); none for the linear model.
+        self.links = tuple(InextensibleLink(m, interpolation_nodes(self.modes_per_link))
+                           for m in self.mode_shapes) if self.kinematics == "exact" else ()
         #: The model packed for compiled code: pass ``packed`` to ``*_packed`` kernels or
         #: `kern.unpack_model(*packed)` inside them.
         self.packed = kern.pack_model(
@@ -129,10 +182,21 @@ class ArmModel:
             gram2=_gram(m2, p.Mp, with_constant=True),
             phi1_tip=phi1_tip, dphi1_tip=dphi1_tip, phi2_tip=phi2_tip,
             M_rotors=axes.T @ np.diag([p.Jh1, p.stator_inertia, p.Jh2, p.Jp]) @ axes,
-            K=K, D=D,
+            K=K, D=D, exact=self._exact_parts() if self.kinematics == "exact" else None,
         )
         self.data = kern.unpack_model(*self.packed)
         self._ws = self.new_workspace()[1]
+
+    def _exact_parts(self) -> dict:
+        """The constants of the exact kinematics (`reduced_model._exact_kernels.ExactData`)."""
+        p = self.params
+        l1, l2 = self.links
+        return {"G1": l1.gram(p.mh2 + p.stator_mass, with_constant=False),
+                "G2": l2.gram(p.Mp, with_constant=True), "dphi1": l1.dphi, "ddphi1": l1.ddphi,
+                "dphi2": l2.dphi, "ddphi2": l2.ddphi, "w1": l1.weights, "w2": l2.weights,
+                "dphi2_tip": self.mode_shapes[1].tip_values[1],
+                "inertia": [p.Jh1, p.stator_inertia, p.Jh2, p.Jp], "EI": [p.EI1, p.EI2],
+                "damping": [p.bending_damping1, p.bending_damping2]}
 
     def new_workspace(self) -> tuple[tuple[np.ndarray, np.ndarray], kern.Workspace]:
         """Fresh scratch space for the kernels: (packed buffers, unpacked `Workspace`)."""
@@ -201,13 +265,35 @@ class ArmModel:
         return 0.5 * float(Qdot @ self.mass_matrix(Q) @ Qdot)
 
     def potential_energy(self, Q) -> float:
-        """Elastic energy ½ QᵀKQ (horizontal plane: no gravity)."""
+        """Elastic energy ½ QᵀKQ (horizontal plane: no gravity); with exact kinematics
+        ½ Σ EI ∫ κ² of the exact curvature."""
         Q = self._vec(Q, self.n, "Q")
-        return 0.5 * float(Q @ self.data.K @ Q)
+        energy = 0.5 * float(Q @ self.data.K @ Q)
+        p = self.params
+        for link, q, EI in zip(self.links, self._link_coordinates(Q), (p.EI1, p.EI2)):
+            energy += link.energy_correction(q, EI)
+        return energy
+
+    def _link_coordinates(self, Q) -> tuple[np.ndarray, np.ndarray]:
+        n1 = self.modes_per_link[0]
+        return Q[2:2 + n1], Q[2 + n1:self.n]
+
+    def _elastic_matrices(self, Q) -> tuple[np.ndarray, np.ndarray]:
+        """The tangent stiffness and the damping matrix at rest at ``Q``: K and D, plus
+        the exact bending terms' for exact kinematics."""
+        K, D = self.data.K.copy(), self.data.D.copy()
+        p, n1 = self.params, self.modes_per_link[0]
+        blocks = (slice(2, 2 + n1), slice(2 + n1, self.n))
+        for link, q, b, EI, d in zip(self.links, self._link_coordinates(Q), blocks,
+                                     (p.EI1, p.EI2), (p.bending_damping1, p.bending_damping2)):
+            K[b, b] += link.stiffness_correction(q, EI)
+            D[b, b] += link.damping_correction(q, d)
+        return K, D
 
     # --- kinematics ------------------------------------------------------------------
     def tip_deflection(self, Q) -> np.ndarray:
-        """Tip deflections (w1(L1), w2(L2)) [m] in each link's root frame."""
+        """Tip deflections [m] across each link's root frame: w1(L1), w2(L2) (exact
+        kinematics: the tips' transverse positions)."""
         return self._tips(Q)[4:]
 
     def tip_position(self, Q) -> np.ndarray:
@@ -224,8 +310,13 @@ class ArmModel:
         """∂(payload position)/∂Q, shape (2, n): maps a tip force F to generalised forces
         Jᵀ F.  With z = payload position as a complex number:
         ∂z/∂θ1 = i z, ∂z/∂θ2 = i r, ∂z/∂q_1k = i e^{iθ1} φ_1k(L1) + i φ_1k'(L1) r,
-        ∂z/∂q_2k = i e^{iα} φ_2k(L2), where r = e^{iα}(L2 + i w2(L2))."""
+        ∂z/∂q_2k = i e^{iα} φ_2k(L2), where r = e^{iα}(L2 + i w2(L2)) (exact
+        kinematics: `reduced_model._exact_kernels.exact_tip_jacobian_into`)."""
         Q = self._vec(Q, self.n, "Q")
+        if self.kinematics == "exact":
+            J = np.empty((2, self.n))
+            exact_kern.exact_tip_jacobian_into(self.data.exact, self._ws.exact, Q, J)
+            return J
         p, n1 = self.params, self.modes_per_link[0]
         (phi1, dphi1), (phi2, _) = self.mode_shapes[0].tip_values, self.mode_shapes[1].tip_values
         w1e, w2e = self.tip_deflection(Q)
@@ -245,7 +336,7 @@ class ArmModel:
         dropped).  ``Q`` defaults to the zero configuration.
         """
         Q = np.zeros(self.n) if Q is None else self._vec(Q, self.n, "Q")
-        M, K = self.mass_matrix(Q), self.data.K
+        M, K = self.mass_matrix(Q), self._elastic_matrices(Q)[0]
         if joints == "locked":
             w2 = scipy.linalg.eigh(K[2:, 2:], M[2:, 2:], eigvals_only=True)
         elif joints == "free":
@@ -259,12 +350,14 @@ class ArmModel:
 
         Exact (no finite differences): ∂Q̈/∂Q_k = −M⁻¹(K e_k + ∂M/∂Q_k Q̈0), with
         ∂M/∂Q_k = C(Q0, e_k) + C(Q0, e_k)ᵀ; Coriolis terms are quadratic in Q̇ and drop out.
+        K and D are the tangent stiffness and the damping at Q0 (exact kinematics: with
+        the exact curvature's terms, which vanish at q = 0).
         """
         n = self.n
         Q0 = np.zeros(n) if Q0 is None else self._vec(Q0, n, "Q0")
         tau0 = np.zeros(2) if tau0 is None else self._vec(tau0, 2, "tau0")
         M = self.mass_matrix(Q0)
-        K, D, Bin = self.data.K, self.data.D, self.input_matrix()
+        (K, D), Bin = self._elastic_matrices(Q0), self.input_matrix()
         Minv = np.linalg.inv(M)
         qdd0 = Minv @ (Bin @ tau0 - K @ Q0)
         dfdQ = np.empty((n, n))

@@ -81,10 +81,17 @@ class LinkModes:
     (the link mass), so modal coordinates carry units of length.  Sign convention:
     φ_j''(0) > 0, i.e. each mode leaves the clamp bending towards +y.
 
+    Parameters
+    ----------
+    L, rho, EI : float
+        The link's length [m], mass per length [kg/m] and flexural rigidity [N m²].
+    tip_mass, tip_inertia : float
+        The load at its tip [kg, kg m²] (the next hub, or the payload).
+    n : int
+        How many modes, 1..4.
+
     Attributes
     ----------
-    L, rho, EI, tip_mass, tip_inertia : float
-        The link and its tip load.
     lam : ndarray (n,)
         Dimensionless roots λ_j = β_j L.
     omega : ndarray (n,)

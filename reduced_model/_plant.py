@@ -6,9 +6,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernels as kern
+from ._joints import (advance_joints_packed, joints_active, motor_state_into,
+                      new_joint_buffers, reset_joints)
 from ._linear import reduced_linear_model
-from ._model import ArmModel, cached_model, validate_modes_per_link
+from ._model import ArmModel, cached_model, validate_kinematics, validate_modes_per_link
+from ._inextensible import readout_matrix
 from ._modes import projection
+from ._readout import modal_readout_into
 from ._parameters import ArmParameters, FieldError
 from ._plant_base import Plant, PlantSettings
 from ._plant_interface import check_sample_time
@@ -23,7 +27,9 @@ class ReducedPlant(Plant):
 
     Torques are held constant over each call of `step` (zero-order hold).  The
     measurement is set by ``sensors`` (default: encoders θ and the modal coordinates q
-    read directly, as the paper assumes); noise belongs to the closed loop.
+    read directly, as the paper assumes); noise belongs to the closed loop.  The joints
+    of ``params`` (friction, drives, torque lag: `reduced_model._joints`) act as on the
+    truth plant; with all of them off the plant is the paper's model.
 
     Parameters
     ----------
@@ -43,6 +49,9 @@ class ReducedPlant(Plant):
         Internal RK4 step [s], default 1 ms.  At 1 ms RK4 resolves the default arm's
         highest mode with 2+2 modes (34 Hz, ω h = 0.21) to ~1e-5 amplitude error
         per period; use 0.25 ms or less with 4 modes per link (up to ~250 Hz).
+    kinematics : {"linear", "exact"}
+        The paper's linear kinematics (default) or exact inextensible kinematics
+        (`ArmModel`).
     """
 
     role = "reduced"
@@ -61,11 +70,16 @@ class ReducedPlant(Plant):
             The plant's own model order, assumed modes of link 1 and link 2 (1..4 each).
         step : float
             Internal RK4 step [s]; ``Ts`` must be a whole multiple of it.
+        kinematics : {"linear", "exact"}
+            How a link's points follow its modal deflection: the paper's linear
+            kinematics, or the exact inextensible centreline (foreshortening included;
+            the geometrically exact FE arm's, `reduced_model.ArmModel`).
         """
 
         kind: str = "reduced"
         modes_per_link: tuple[int, int] = (2, 2)
         step: float = 1e-3
+        kinematics: str = "linear"
 
         def __post_init__(self):
             if self.kind != "reduced":
@@ -76,6 +90,11 @@ class ReducedPlant(Plant):
                 raise FieldError("plant", "modes_per_link", "must be two integers in 1..4, "
                                  f"got {list(self.modes_per_link)!r}") from None
             positive_step(self.step)
+            try:
+                validate_kinematics(self.kinematics)
+            except ValueError as exc:
+                raise FieldError("plant", "kinematics", str(exc).removeprefix(
+                    "kinematics ")) from None
 
         def step_cost(self) -> float:
             return 1e-4  # RK4 of 2n states, pessimistic
@@ -83,16 +102,18 @@ class ReducedPlant(Plant):
         def linear_model(self, params, *, theta, model):
             """The plant's own model linearised at ``theta``, its q outputs in ``model``'s
             mode shapes (as the plant reports them)."""
-            own = cached_model(params, tuple(self.modes_per_link))
+            own = cached_model(params, tuple(self.modes_per_link), self.kinematics)
             same = model.params == params and model.modes_per_link == own.modes_per_link
             return reduced_linear_model(own, theta=theta,
                                         modal_basis=None if same else model.mode_shapes)
 
     def __init__(self, params: ArmParameters | None = None, *, model: ArmModel | None = None,
                  sensors: SensorConfig = SensorConfig(),
-                 modes_per_link: tuple[int, int] = (2, 2), step: float = 1e-3) -> None:
+                 modes_per_link: tuple[int, int] = (2, 2), step: float = 1e-3,
+                 kinematics: str = "linear") -> None:
         params = params if params is not None else ArmParameters()
-        self.model = cached_model(params, validate_modes_per_link(modes_per_link))
+        self.model = cached_model(params, validate_modes_per_link(modes_per_link),
+                                  validate_kinematics(kinematics))
         n = self.model.n
         self._x = np.zeros(2 * n)
         self._f = np.zeros(n)  # generalised forces when a tip force acts
@@ -100,8 +121,15 @@ class ReducedPlant(Plant):
                                 and model.modes_per_link == self.model.modes_per_link)
         basis = self.model.mode_shapes if own else model.mode_shapes
         self._basis_map = None if own else projection(self.model.mode_shapes, basis)
+        #: The map to the measured q (`reduced_model._readout`): the basis map, or the
+        #: exact kinematics' readout of its centreline.
+        self._readout = readout_matrix(self.model.links, basis) if self.model.links else (
+            np.zeros((0, 0)) if own else self._basis_map)
         self._tau = np.zeros(2)
         self._work = self.model.new_workspace()[0]
+        self._joints = new_joint_buffers(params, n)
+        self._joints_on = joints_active(self._joints[0])
+        self.encoder_side = tuple("motor" if params.has_drive(i) else "link" for i in (1, 2))
         Plant.__init__(self, sensors, basis, step)
 
     # --- sensor primitives (see reduced_model._sensors) ---------------------------------
@@ -110,18 +138,32 @@ class ReducedPlant(Plant):
         return self._x[0:2].copy(), self._x[n:n + 2].copy()
 
     def modal_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """(q, q̇) in the modal basis."""
+        """(q, q̇) in the modal basis (exact kinematics: of the centreline, as the FE
+        plant reads its own, `reduced_model._readout`)."""
         n = self.model.n
         q, qd = self._x[2:n], self._x[n + 2:]
+        if self.model.links:
+            m = sum(b.n for b in self.modal_basis)
+            out = np.empty(m), np.empty(m)
+            modal_readout_into(*self.model.packed, self._readout, self._x, *out)
+            return out
         if self._basis_map is None:
             return q.copy(), qd.copy()
         return self._basis_map @ q, self._basis_map @ qd
 
     def field_sampler(self, link: int, x, derivative: int):
-        """Callable giving w_link^(derivative)(x) = Σ φ^(derivative)(x) q (modal field)."""
-        basis = self.model.mode_shapes[link].evaluate(x, derivative).T
+        """Callable giving w_link^(derivative)(x) = Σ φ^(derivative)(x) q (modal field);
+        with exact kinematics the centreline's transverse position (derivative 0) or its
+        curvature (2)."""
         n1 = self.model.modes_per_link[0]
         coords = slice(2, 2 + n1) if link == 0 else slice(2 + n1, self.model.n)
+        if self.model.kinematics == "exact":
+            if derivative not in (0, 2):
+                raise ValueError(f"derivative must be 0 or 2, got {derivative}")
+            curve = self.model.links[link]
+            field = curve.transverse if derivative == 0 else curve.curvature
+            return lambda: field(x, self._x[coords])
+        basis = self.model.mode_shapes[link].evaluate(x, derivative).T
         return lambda: basis @ self._x[coords]
 
     def tip_positions(self) -> np.ndarray:
@@ -130,6 +172,7 @@ class ReducedPlant(Plant):
     def _reset(self, x0: np.ndarray) -> None:
         """Start at ``x0`` = [Q, Q̇] in the plant's own coordinates."""
         self._x[:] = x0
+        reset_joints(self._joints[0], self._joints[1], self._x)
 
     def _advance(self, tau: np.ndarray, steps: int, tip_force) -> None:
         """Hold ``tau`` (2 joint torques, or n generalised forces: the paper's idealised,
@@ -141,13 +184,19 @@ class ReducedPlant(Plant):
             tau_in = self._tau
         else:
             tau_in = np.ascontiguousarray(tau)
-        if tip_force is not None and np.any(tip_force):
-            f = self._f
-            f[:] = self.model.tip_jacobian(self._x[:self.model.n]).T @ np.asarray(tip_force, float)
-            f[:tau_in.shape[0]] += tau_in
-            tau_in = f
+        f = self._f
+        force = tip_force is not None and np.any(tip_force)
+        f[:] = (self.model.tip_jacobian(self._x[:self.model.n]).T @ np.asarray(tip_force, float)
+                if force else 0.0)
         ints, reals = self.model.packed
         wc, wr = self._work
+        if self._joints_on:  # the motor torques go through the joints, Jᵀ F to the arm
+            advance_joints_packed(ints, reals, wc, wr, self._x, tau_in, f, self.h, steps,
+                                  *self._joints)
+            return
+        if force:
+            f[:tau_in.shape[0]] += tau_in
+            tau_in = f
         kern.rk4_advance_packed(ints, reals, wc, wr, self._x, tau_in, self.h, steps)
 
     def compiled_stepping(self) -> dict | None:
@@ -158,9 +207,9 @@ class ReducedPlant(Plant):
         cfg = self.sensors.config
         if cfg.strain_gauges is not None or cfg.encoder_resolution != 0 or cfg.tip_position:
             return None
-        basis = np.zeros((0, 0)) if self._basis_map is None else self._basis_map
         return {"model": (*self.model.packed, *self._work), "x": self._x, "h": self.h,
-                "basis": np.ascontiguousarray(basis, dtype=float),
+                "joints": self._joints,
+                "basis": np.ascontiguousarray(self._readout, dtype=float),
                 "nsteps": lambda Ts: check_sample_time(Ts, self.h)}
 
     @property
@@ -175,17 +224,22 @@ class ReducedPlant(Plant):
 
     def truth_into(self, out: np.ndarray) -> None:
         """The truth vector [θ, q, θ̇, q̇ (q in the modal basis), tips, tip deflections,
-        0, 0] written into ``out``."""
+        0, 0, motor angles and rates] written into ``out``."""
         n, x = self.model.n, self._x
-        if self._basis_map is None:
+        if self.model.links:
+            m = 2 + self._readout.shape[0]
+            out[:2], out[m:m + 2] = x[:2], x[n:n + 2]
+            modal_readout_into(*self.model.packed, self._readout, x, out[2:m], out[m + 2:2 * m])
+        elif self._basis_map is None:
             out[:2 * n] = x
         else:
             m = 2 + self._basis_map.shape[0]
             out[:2], out[m:m + 2] = x[:2], x[n:n + 2]
             out[2:m] = self._basis_map @ x[2:n]
             out[m + 2:2 * m] = self._basis_map @ x[n + 2:]
-        kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-8:-2])
-        out[-2:] = 0.0  # a modal field is represented exactly by its own modes
+        kern.tip_kinematics_packed(*self.model.packed, x[:n], out[-12:-6])
+        out[-6:-4] = 0.0  # the projection residual: not computed for the reduced plant
+        motor_state_into(self._joints[0], self._joints[1], x, out[-4:])
 
 
 def positive_step(step) -> None:

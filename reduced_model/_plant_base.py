@@ -172,6 +172,9 @@ class Plant(abc.ABC):
     actuated: ClassVar[int] = 2
     #: Its configuration (module docstring, 2.).
     Settings: ClassVar[type] = PlantSettings
+    #: What each joint's encoder reads: "link" (θ) or "motor" (a drive's rotor; set by
+    #: the plant before ``Plant.__init__`` where its arm has drives).
+    encoder_side: tuple[str, str] = ("link", "link")
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)

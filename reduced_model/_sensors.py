@@ -15,7 +15,7 @@ import numpy as np
 
 from ._modes import LinkModes
 from ._parameters import FieldError
-from ._plant_interface import Measurement, coordinate_names
+from ._plant_interface import TRUTH_EXTRAS, Measurement, coordinate_names
 
 __all__ = ["SensorConfig", "SensorModel", "STRAIN_QUANTITIES", "measured_names"]
 
@@ -106,23 +106,38 @@ class SensorModel:
     modes : (LinkModes, LinkModes)
         The basis the modal coordinates are expressed in (the plant's measurement basis).
     plant
-        Provides the primitives listed in the module docstring.
+        Provides the primitives listed in the module docstring, and its
+        ``encoder_side``: what each encoder reads, "link" (θ) or "motor" (the rotor of a
+        drive, reflected to the link side: its reading still named ``theta1``/``theta2``,
+        what a law is fed as θ).
+
+    Attributes
+    ----------
+    encoder_side : (str, str)
+        "link" or "motor" for each joint's encoder (and its rate).
     """
 
     def __init__(self, config: SensorConfig, modes: tuple[LinkModes, LinkModes], plant) -> None:
         self.config = config
         self._plant = plant
+        self.encoder_side = tuple(plant.encoder_side)
         modes_per_link = tuple(m.n for m in modes)
         self.names = names = measured_names(modes_per_link, modal=config.modal,
                                             rates=config.rates,
                                             tip_position=config.tip_position)
         states = coordinate_names(modes_per_link)
         states += tuple(f"{n}_dot" for n in states)
+        layout = list(states + TRUTH_EXTRAS)
+        for i, side in enumerate(self.encoder_side):  # a motor-side encoder reads the rotor
+            if side == "motor":
+                for suffix in ("", "_dot"):
+                    layout[layout.index(f"theta{i + 1}{suffix}")] = None
+                    layout[layout.index(f"motor{i + 1}{suffix}")] = f"theta{i + 1}{suffix}"
         direct = (config.strain_gauges is None or not config.modal) and \
             config.encoder_resolution == 0 and not config.tip_position
         #: Where each measured value sits in the plant's truth vector, when the measurement
         #: is exactly those values (no gauges, no quantisation, no payload position).
-        self.truth_index = (np.array([states.index(m) for m in names], dtype=np.int64)
+        self.truth_index = (np.array([layout.index(m) for m in names], dtype=np.int64)
                             if direct else None)
         self._samplers, self._fits = [], []
         if config.modal and config.strain_gauges is not None:
@@ -151,6 +166,12 @@ class SensorModel:
     def measure(self, time: float) -> Measurement:
         cfg = self.config
         theta, theta_dot = self._plant.joint_state()
+        if "motor" in self.encoder_side:
+            motor = self._plant.truth_vector()[-len(TRUTH_EXTRAS):]
+            for i, side in enumerate(self.encoder_side):
+                if side == "motor":
+                    k = TRUTH_EXTRAS.index(f"motor{i + 1}")
+                    theta[i], theta_dot[i] = motor[k], motor[k + 2]
         res = cfg.encoder_resolution
         parts = [np.round(theta / res) * res if res > 0 else theta]
         if cfg.modal:

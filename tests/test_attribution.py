@@ -118,6 +118,7 @@ def test_a_real_attribution_on_the_reduced_plant(tmp_path):
     (["--factors", ""], "needs at least one factor"),
     (["--factors", "estimation"], "'estimation' cannot be idealised"),
     (["--factors", "truncation"], "'truncation' splits the 'plant' factor"),
+    (["--factors", "kinematics"], "does not have the exact kinematics"),
 ])
 def test_bad_factors_are_one_line_errors_and_nothing_is_written(tmp_path, args, text):
     cfg = tmp_path / "s.toml"
@@ -129,3 +130,30 @@ def test_bad_factors_are_one_line_errors_and_nothing_is_written(tmp_path, args, 
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and text in lines[0], proc.stderr
     assert not out.exists()
+
+
+def test_the_joints_are_factors_of_their_own(tmp_path):
+    """The lab arm's joints as factors on the reduced plant (2.5 s, 16 worlds): each world
+    switches the true and the nominal arm alike, the contributions add up to the gap,
+    'bandwidth' on an arm without current loops is exactly null, and 'parameters' leaves
+    the joint factors' fields alone (with friction ideal, the world with parameters ideal
+    has no friction, whatever the nominal arm says)."""
+    s = scenario_from_mapping({
+        "duration": 2.5, "initial_state": "reference", "arm": "lab",
+        "true_params": {"Mp": 0.3, "torque_time_constant1": 0.0,
+                        "torque_time_constant2": 0.0},
+        "nominal_params": {"coulomb1": 0.0}})
+    factors = ("friction", "drive", "bandwidth", "parameters")
+    worlds = att.plan(s, factors, "j")
+    by_real = {w.real: w.run.scenario for w in worlds}
+    ideal = by_real[frozenset()]
+    assert ideal.true_params.static_friction(1) == ideal.nominal_params.static_friction(1) == 0
+    assert not ideal.true_params.has_drive(1) and ideal.true_params.Mp == 0.1
+    only_friction = by_real[frozenset({"friction"})].true_params
+    assert only_friction.coulomb1 == 0.3 and only_friction.Mp == 0.1  # the arm's, not nominal's
+    a, summary = att.attribute(s, factors, tmp_path, name="j", progress=False)
+    assert summary.ok == 16
+    for metric, phi in a.contributions.items():
+        assert sum(phi.values()) == pytest.approx(a.totals[metric], rel=1e-12, abs=1e-15)
+        assert phi["bandwidth"] == 0.0
+        assert phi["friction"] != 0.0

@@ -8,6 +8,7 @@ truth is known exactly; every fit starts away from it.  Simulations run in this 
 """
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -273,7 +274,7 @@ def test_the_command_writes_a_runnable_scenario_and_a_verify_set(tmp_path, capsy
     rid = next((tmp_path / "runs" / "runs").glob("*.npz")).stem
     assert cli.main(["export", "--signals", f"runs/{rid}", "--to", "e1.csv"]) == 0
     (tmp_path / "model.toml").write_text(
-        'include = "arm.toml"\n[true_params]\nEI1 = 11.0\n[calibrate]\n'
+        'include = "arm.toml"\nname = "my-arm"\n[true_params]\nEI1 = 11.0\n[calibrate]\n'
         'fit = ["true_params.EI1", "true_params.Mp"]\n')
     # the CSV and the stored run it came from: two experiments of the same run
     assert cli.main(["calibrate", "e1.csv", f"runs/{rid}", "--config", "model.toml", "--out",
@@ -283,6 +284,7 @@ def test_the_command_writes_a_runnable_scenario_and_a_verify_set(tmp_path, capsy
     assert '"model_adequate": true' in out
     calibrated = load_toml(tmp_path / "cal" / "calibrated.toml")
     scenario_from_mapping(calibrated)  # flexarm run --config takes it
+    assert calibrated["name"] == "my-arm"  # the config's (issue 47: it was "paper")
     (tmp_path / "verify.toml").write_text(
         'include = ["cal/calibrated.toml", "cal/uncertainty.toml"]\n'
         '[[requirement]]\nname = "tracking"\nclaim = "tracking"\n')
@@ -296,6 +298,12 @@ def test_the_command_writes_a_runnable_scenario_and_a_verify_set(tmp_path, capsy
     assert "## Calibration" in report and "measured and fitted signals" in report
     assert "**The model: model adequate" in report and "Ljung–Box" in report
     assert "calibrate/" not in report
+    # Issue 47: not a verify report, no "0 runs" and no empty bullets; its bottom line
+    # first, computed from calibration.json.
+    assert "verify" not in report.split("## Calibration")[0]
+    assert "0 runs" not in report and not re.search(r"^- [\w ]+: *$", report, flags=re.M)
+    assert report.split("\n\n")[1].startswith("**flexarm calibrate fitted true_params.EI1 = ")
+    assert "The verdict on the model: model adequate" in report.split("\n\n")[1]
 
 
 def test_export_signals_reads_back_exactly(tmp_path):
@@ -385,6 +393,27 @@ def test_bad_settings_name_their_key(tmp_path, capsys, fit_names, table, key):
     assert not (tmp_path / "out").exists()
 
 
+def test_settings_of_an_experiment_not_given_name_the_file_to_pass(tmp_path, capsys):
+    """Issue 47: the README's line passed tracking.csv alone while arm.toml has settings
+    for "moving": the error names moving.csv beside it (known-bad: it said only "no
+    experiment of that name"); with no such file, it says what to pass."""
+    (tmp_path / "m.toml").write_text('[calibrate]\nfit = ["true_params.EI1"]\n'
+                                     '[calibrate.experiment.moving]\n'
+                                     'initial_state = "reference"\n')
+    (tmp_path / "good.csv").write_text(GOOD)
+    args = ["calibrate", str(tmp_path / "good.csv"), "--config", str(tmp_path / "m.toml"),
+            "--out", str(tmp_path / "out")]
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("flexarm: error: calibrate.experiment.moving: ") and \
+        f"given: good ({tmp_path / 'good.csv'})" in err and "(moving.csv, or a stored " \
+        "run RESULTS/moving)" in err, err
+    (tmp_path / "moving.csv").write_text(GOOD)
+    assert cli.main(args) == 2
+    assert f"pass {tmp_path / 'moving.csv'} too" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_scenario_file_with_calibrate_still_runs(tmp_path):
     """[calibrate] is a section of a scenario file, not a scenario key: the other commands
     read the file as they did."""
@@ -402,12 +431,14 @@ EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "calibration"
 
 def test_the_shipped_example_is_labelled_small_and_plans():
     """Every data file says it is synthetic, the set stays small (issue: a few hundred
-    KB), and its files pass every check of a calibration."""
+    KB; four files of 5-142 KB), and its files pass every check of a calibration, the
+    friction experiment with its own arm (friction.toml)."""
     from validation.run.experiments import read_frequency_response
     from validation.verdicts.calibration_settings import base_scenario
     files = sorted(EXAMPLE.glob("*.csv"))
-    assert {f.name for f in files} == {"tracking.csv", "moving.csv", "frf.csv"}
-    assert sum(f.stat().st_size for f in files) < 400_000
+    assert {f.name for f in files} == {"tracking.csv", "moving.csv", "frf.csv",
+                                       "reversals.csv"}
+    assert sum(f.stat().st_size for f in files) < 500_000
     for f in files:
         assert f.read_text().startswith("# SYNTHETIC")
     base, table = base_scenario(EXAMPLE / "arm.toml")
@@ -417,6 +448,10 @@ def test_the_shipped_example_is_labelled_small_and_plans():
                             [read_frequency_response(EXAMPLE / "frf.csv")])
     moving = next(t for t in plan.targets if t.experiment.name == "moving")
     assert moving.scenario["initial_state"] == "reference"  # its own setting
+    base, table = base_scenario(EXAMPLE / "friction.toml")
+    settings = calibration_settings(table, None, base)
+    assert "true_params.coulomb1" in settings.names
+    plan_calibration(base, settings, [(read_experiment(EXAMPLE / "reversals.csv"), None)])
 
 
 @pytest.mark.slow

@@ -23,6 +23,7 @@ from validation.batch.executor import LocalPoolRunner, SerialRunner, make_runner
 from validation.report.report import write_report
 from validation.run.results import RunResult
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
+from validation.batch.resimulate import every_signal
 from validation.batch.store import ResultStore, run_id
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -292,7 +293,7 @@ def test_claims_table_of_the_paper_campaign(tmp_path):
     run_campaign(c, tmp_path, progress=False, only=short)
     table = write_claims(tmp_path)
     store = ResultStore(tmp_path)
-    columns = claim_columns(store.rows())
+    columns = claim_columns(store.rows(), lambda row: every_signal(store, row))
     assert [col.key for col in columns] == [("default", "reduced", 1e-3, "rest"),
                                             ("default", "exudyn", 1e-3, "rest")]
     for col in columns:
@@ -301,7 +302,7 @@ def test_claims_table_of_the_paper_campaign(tmp_path):
         for claim in CLAIMS:
             verdict = col.verdicts[claim.key]
             run = col.runs[claim.run]
-            expected = paper_claim_value(claim, run.metrics, run.load())
+            expected = paper_claim_value(claim, run.metrics, store.load(run.run_id))
             # The same numbers through the same arithmetic: exact.
             assert verdict.value == expected, (col.key, claim.key)
             # The verdict is the bound applied to the value, every claim is judged, and
@@ -362,8 +363,11 @@ def test_shipped_campaigns_expand():
     # torque disturbances 2×5, sample time 2×4.  attribution: the PBC with each SMO.
     # stator: 8 stator inertias × (PBC, PBC + sign SMO) at 0.2 ms + 4 at 1 ms.
     # robust: the three systems flexarm verify judges (the PBC with smo-paper, smo-bl, EKF).
+    # lab: the PBC with the sign SMO on the lab arm, with and without the disturbance, on
+    # both plants, from rest and on the reference (2 × 2 × 2).  kinematics: the PBC with
+    # the true state and each observer, from rest and on the reference (6 × 2).
     assert counts == {"attribution": 3, "mismatch": 29, "paper": 100, "robustness": 26,
-                      "stator": 20, "robust": 3}
+                      "stator": 20, "robust": 3, "lab": 8, "kinematics": 12}
 
 
 def test_identifiers_stay_text_in_the_index_and_the_export(tmp_path):

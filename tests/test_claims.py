@@ -17,6 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from validation.batch.resimulate import every_signal
 from validation.report.render import md_cell
 from validation.report.verdict_tables import claims_tables
 from validation.verdicts.claims import CLAIMS, SYSTEM, claim_columns, evaluate
@@ -271,7 +272,8 @@ def mesh_store(tmp_path_factory):
 @pytest.mark.slow  # eight Exudyn runs, GE 32 el/link at Ts = 0.2 ms among them: ~30 s
 def test_mesh_check_marks_table1_not_converged_and_the_default_arm_converged(mesh_store):
     rows = mesh_store.rows()
-    columns = {c.arm: c for c in claim_columns(rows)}
+    signals = lambda row: every_signal(mesh_store, row)  # noqa: E731
+    columns = {c.arm: c for c in claim_columns(rows, signals)}
     assert len(columns) == 2  # the check runs are checks, not columns of their own
     table1, default = columns["table1"], columns["default"]
     # Table 1 (no stator inertia: no mesh limit): ANCF 4 tracks (5 mrad from 1 to 2 s), the
@@ -295,7 +297,7 @@ def test_mesh_check_marks_table1_not_converged_and_the_default_arm_converged(mes
     assert md_cell(tables["default"]["rows"][1]["cells"][0]).startswith("converged against")
     assert tables["default"]["notes"] == []
     # Without its checks a truth-plant run gets no verdict at all.
-    alone = claim_columns([r for r in rows if r.sweep != "mesh-check"])
+    alone = claim_columns([r for r in rows if r.sweep != "mesh-check"], signals)
     assert {v.verdict for c in alone for v in c.verdicts.values()} <= {
         "mesh not checked", "n/a", "not run"}
 

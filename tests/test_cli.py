@@ -177,8 +177,7 @@ def test_a_failed_run_names_no_window_and_no_figures(tmp_path, capsys, plugin_la
     assert main(["run", "--controller", "wronglab:Wrong", "--duration", "1",
                  "--out", str(tmp_path)]) == 1
     out = capsys.readouterr().out
-    assert "no metrics after the transient: the run ended at 0 s, before its 0.5 s " \
-           "transient did" in out
+    assert "no metrics: the run failed after 0 of 1 s" in out
     assert "0.5–0 s" not in out and "real-time factor" not in out and "flexarm show" not in out
 
 
@@ -221,3 +220,18 @@ def test_show_overlays_the_same_scenario_on_the_other_plant_whatever_the_names(t
     printed = capsys.readouterr().out
     assert f"with {rows['exudyn'].run_id}, the same scenario on the exudyn plant, overlaid" \
         in printed
+
+
+def test_a_missing_results_folder_is_not_sent_to_repair(tmp_path, capsys):
+    """Issue 47: `flexarm report results/nosuch` suggested `flexarm repair`, which then
+    failed.  The cure is named only where it has run files to read."""
+    assert main(["report", str(tmp_path / "nosuch")]) == 2
+    err = capsys.readouterr().err
+    assert "not a results folder (no such folder)" in err and "repair" not in err
+    (tmp_path / "bare").mkdir()
+    assert main(["report", str(tmp_path / "bare")]) == 2
+    assert "(no index.sqlite, no runs/)" in capsys.readouterr().err
+    (tmp_path / "bare" / "runs").mkdir()
+    assert main(["report", str(tmp_path / "bare")]) == 2
+    assert f"'flexarm repair {tmp_path / 'bare'}' rebuilds it" in capsys.readouterr().err
+    assert main(["repair", str(tmp_path / "bare")]) == 0  # the cure named works

@@ -31,6 +31,7 @@ CASES = {
     "mismatch (foreign modal basis)": {"true_params": {"Mp": 0.3},
                                        "observer": {"kind": "smo-paper"}},
     "diverging (Table 1 at 1 ms)": {"arm": "table1"},
+    "lab arm (friction, drives, lags)": {"arm": "lab", "observer": {"kind": "smo-paper"}},
 }
 
 

@@ -52,7 +52,7 @@ def simulated(substeps: int, exact: bool) -> np.ndarray:
     mbs.Assemble()
     h = TS / substeps
     settings = simulation_settings(step=h)
-    hold = ExactHold(mbs, settings, h, [[(load, (1.0, 0.0, 0.0))]], []) if exact else None
+    hold = ExactHold(mbs, settings, h, [[(load, "loadVector", (1.0, 0.0, 0.0))]], []) if exact else None
     solver = exu.MainSolverImplicitSecondOrder()
     assert solver.InitializeSolver(mbs, settings)
     out, applied = [], 0.0

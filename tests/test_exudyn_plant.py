@@ -259,3 +259,17 @@ def test_modal_basis_of_another_model_must_match_lengths():
     other = ArmModel(ArmParameters(L1=0.6))
     with pytest.raises(ValueError, match="mode shapes are for L = 0.6"):
         ExudynPlant(model=other)
+
+
+@pytest.mark.parametrize("n, labels", [
+    (4, ["ANCF 8 el/link, step/2", "ANCF 16 el/link, step/4", "GE 32 el/link, step/2"]),
+    # Known-bad (before): 16 el/link raised "mesh.elements_per_link must be an integer
+    # 1..64 ..., got [128, 128]" building the label of the GE check it then left out:
+    # `flexarm stability campaigns/paper.toml` exited 2 after 338 s, at its level-2 map.
+    (16, ["ANCF 32 el/link, step/2", "ANCF 64 el/link, step/4"]),
+    (64, []),
+])
+def test_refinements_beyond_64_elements_are_left_out(n, labels):
+    from validation.run.plants import plant_settings
+    plant = plant_settings({"kind": "exudyn", "mesh": {"elements_per_link": [n, n]}})
+    assert [r.label for r in plant.refinements()] == labels

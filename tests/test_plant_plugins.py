@@ -54,6 +54,14 @@ def test_a_plugin_plant_runs_and_is_reported_as_the_truth(lab):
     assert run.returncode == 0, run.stderr
     (row,) = ResultStore(lab / "out").rows()
     assert row.status == "ok" and row.role == "truth" and row.plant == "labplants:FineArm"
+    # Known bad (issue 48, 11): "these are the FE model's numbers on ; --mesh-check ..." and,
+    # with --mesh-check, "checks incomplete (against )".
+    assert "convergence not checked: the truth plant (labplants:FineArm) declares no " \
+           "refinements" in run.stdout
+    checked = flexarm(lab, "run", "--config", "fine.toml", "--mesh-check", "--out", "never")
+    assert checked.returncode == 2 and "--mesh-check: the truth plant (labplants:FineArm) " \
+                                       "declares no refinements" in checked.stderr
+    assert not (lab / "never").exists()
     report = flexarm(lab, "report", "out")
     assert report.returncode == 0, report.stderr
     html = (lab / "out" / "report" / "report.html").read_text()
@@ -136,3 +144,14 @@ def test_verify_judges_a_reduced_plugin_plant_and_its_truth(plugin_lab):
     assert verdict["simulations"]["reduced"] >= 3, verdict["simulations"]
     rows = ResultStore(lab / "verify").rows()
     assert {r.plant for r in rows if r.role == "reduced"} == {"barplant:BarPlant"}
+
+
+def test_validity_of_a_plugin_plant_says_what_it_cannot_judge(lab):
+    """Known bad (issue 48, 4): `flexarm validity` on a scenario with a plug-in plant
+    judged the built-in plants instead, without a word.  It now refuses in one line
+    (a plug-in declares no linear model) and says how to judge the built-in arms."""
+    proc = flexarm(lab, "validity", "fine.toml", "--out", "v")
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1, proc.stderr
+    assert "plant.kind: labplants:FineArm is a plug-in plant, which declares no linear " \
+           "model" in proc.stderr and "--plant reduced --plant exudyn" in proc.stderr
+    assert not (lab / "v").exists()

@@ -184,3 +184,81 @@ def test_a_law_is_built_at_the_scenarios_control_period(kind, role):
     law = (build_controller if role == "controller" else build_observer)(s, model)
     assert law.Ts == 2e-3
     assert law.compiled().pointer is not None  # compiled() takes no period
+
+
+HELPERS = textwrap.dedent('''
+    import numpy as np
+
+
+    def gains(x):
+        return np.linalg.cholesky(-np.eye(2)) @ x[:2]   # not positive definite: raises
+''')
+CONTROL = textwrap.dedent('''
+    from tracelab.helpers import gains
+
+
+    class Cholesky:
+        def __init__(self, model, *, Ts):
+            pass
+
+        def __call__(self, t, x, ref):
+            return gains(x)
+''')
+
+
+def line_of(text: str, needle: str) -> int:
+    """The 1-based line of ``text`` holding ``needle`` (once)."""
+    (number,) = [i + 1 for i, line in enumerate(text.splitlines()) if needle in line]
+    return number
+
+
+def test_a_raising_plugin_points_at_its_own_line(plugin_dir):
+    """Issue 47: the message names the plug-in's file and line, the result carries its
+    frames (the loop's own frames left out)."""
+    from validation import run_scenario
+    result = run_scenario(scenario_from_mapping(
+        {"duration": 1.0, "controller": {"kind": "mylab_plugins:Boom"}}))
+    line = line_of(PLUGIN, 'raise RuntimeError("boom at half a second")')
+    assert result.status == "failed"
+    assert result.message.endswith(f"(mylab_plugins.py:{line} in __call__)"), result.message
+    assert f'mylab_plugins.py", line {line}, in __call__' in result.traceback
+    assert 'raise RuntimeError("boom at half a second")' in result.traceback
+    assert "validation" not in result.traceback  # the loop is not the author's code
+
+
+def test_a_plugin_raising_in_a_library_points_at_its_helpers(plugin_lab):
+    """Known-bad made visible: numpy raises inside the plug-in's helper module; the
+    frames are the plug-in package's (control.py calling helpers.py), none of numpy's,
+    and the location is the helper's line that called numpy."""
+    from validation import run_scenario
+    lab = plugin_lab({"tracelab/__init__.py": "", "tracelab/helpers.py": HELPERS,
+                      "tracelab/control.py": CONTROL})
+    result = run_scenario(scenario_from_mapping(
+        {"duration": 0.01, "transient": 0.0, "controller": {"kind": "tracelab.control:Cholesky"}}))
+    helper_line = line_of(HELPERS, "np.linalg.cholesky")
+    assert result.message.endswith(f"(tracelab/helpers.py:{helper_line} in gains)"), \
+        result.message
+    frames = result.traceback.splitlines()
+    assert [f for f in frames if f.lstrip().startswith("File")] == [
+        f'  File "{lab / "tracelab" / "control.py"}", line '
+        f'{line_of(CONTROL, "return gains(x)")}, in __call__',
+        f'  File "{lab / "tracelab" / "helpers.py"}", line {helper_line}, in gains']
+
+
+def test_flexarm_run_and_show_print_where_a_plugin_raised(plugin_dir):
+    """The frames are printed by ``flexarm run`` and stored with the run (``flexarm show``
+    prints them from the folder); a failed run prints no metrics."""
+    out = plugin_dir / "boom"
+    line = line_of(PLUGIN, 'raise RuntimeError("boom at half a second")')
+    proc = flexarm(plugin_dir, "run", "--controller", "mylab_plugins:Boom", "--duration", "1",
+                   "--out", str(out))
+    assert proc.returncode == 1, proc.stderr
+    where = f'File "{plugin_dir / "mylab_plugins.py"}", line {line}, in __call__'
+    assert where in proc.stdout and f"mylab_plugins.py:{line} in __call__" in proc.stdout
+    assert "no metrics: the run failed after 0.5 of 1 s" in proc.stdout
+    assert "max |θ1 − θ1d|" not in proc.stdout  # no table measured over 1 ms of a failure
+    (row,) = ResultStore(out).rows()
+    assert f"mylab_plugins.py:{line} in __call__" in row.message
+    assert where in ResultStore(out).read(row.run_id)[0].traceback
+    shown = flexarm(plugin_dir, "show", f"{out}/{row.run_id}", "--no-open")
+    assert shown.returncode == 1 and where in shown.stderr, shown.stderr

@@ -165,7 +165,7 @@ def test_attribution_rule_is_whole():
 def test_an_unchanged_report_is_not_rendered_again(report):
     """Same runs, same code: the content key matches and nothing is written; a changed
     input (here: the campaign's report settings) changes the key."""
-    from validation.report.report import content_key, report_is_current
+    from validation.report.content_key import content_key, report_is_current
     out, _, _ = report
     html = out / "report" / "report.html"
     assert report_is_current(out)
@@ -240,7 +240,7 @@ def test_the_printed_report_shows_every_column_of_every_table(report, tmp_path):
 def test_a_sweep_over_the_plant_table_draws_both_plants_titled_in_words(tmp_path):
     """A campaign sweeping whole plant tables (not plant.kind): each scenario's runs on
     the two plants are one figure group, its title names no plant table."""
-    from validation.report.report import _figure_groups, _title, plant_groups
+    from validation.report.groups import _title, figure_groups, plant_groups
     spec = {"name": "p", "scenario": {"duration": 0.1, "transient": 0.05,
                                       "observer": {"kind": "none"}},
             "sweep": [{"name": "plants", "grid": {"plant": [{"kind": "reduced"},
@@ -250,7 +250,7 @@ def test_a_sweep_over_the_plant_table_draws_both_plants_titled_in_words(tmp_path
     runs = ResultStore(tmp_path).rows()
     groups = plant_groups(runs)
     assert len(groups) == 2 and all([r.role for r in g] == ["truth", "reduced"] for g in groups)
-    (drawn,), _ = _figure_groups(runs, None)
+    (drawn,), _ = figure_groups(runs, None)
     assert len(drawn) == 2
     assert "plant=" not in _title(drawn) and "{" not in _title(drawn)
 
@@ -308,3 +308,46 @@ def test_a_chattering_rate_is_drawn_as_its_mean_and_band(monkeypatch):
                for text in texts), texts
     lo, hi = limits[0]
     assert -6 < lo < -1.2 and 1.2 < hi < 6  # at most 3× the orbit's ±1.26 rad/s, not ±35
+
+
+def test_the_report_opens_with_its_bottom_line(report):
+    """Issue 47: the first thing under the title is sentences a reviewer can quote,
+    computed from the stored runs: the counts, where the divergence is, the claims."""
+    out, page, md = report
+    first = md.split("\n\n")[1]
+    rows = [r for r in ResultStore(out).rows() if r.sweep != "mesh-check"]
+    assert first.startswith(f"**{len(rows)} runs: {len(rows) - 1} completed, 1 diverged, "
+                            "0 failed. 1 divergence is on the default arm at Ts = 8 ms, "
+                            "reduced plant. The paper's "), first
+    assert "claims over 2 columns" in first and "on the truth plant" in first
+    assert '<p class="bottom-line">' in page.split("<h2")[0]
+
+
+def _row(status, arm="table1", Ts=1e-3, plant="truth plant (Exudyn)"):
+    from types import SimpleNamespace
+    return SimpleNamespace(status=status, arm=arm, Ts=Ts, plant_label=plant)
+
+
+def test_the_bottom_line_says_where_runs_diverged_and_counts_checks_apart():
+    """The first screen of issue 47's reproduction said "100 runs: 56 ok, 44 diverged, 0
+    failed" while all 44 divergences were Table 1's arm at 1 ms and 22 mesh-check runs had
+    failed: the sentences name the place and count the checks apart."""
+    from validation.report.bottom_line import bottom_line
+    runs = [_row("ok", "default")] * 56 + [_row("diverged")] * 40 + \
+        [_row("diverged", plant="reduced plant")] * 4
+    checks = [_row("failed")] * 22 + [_row("ok", "default")] * 44
+    lines = bottom_line(runs, checks, [])
+    assert lines == [
+        "100 runs: 56 completed, 44 diverged, 0 failed; their 66 mesh/step-check runs (the "
+        "truth-plant runs again on refined meshes and steps): 44 completed, 0 diverged, 22 "
+        "failed.",
+        "All 44 divergences are on the table1 arm at Ts = 1 ms, reduced plant and truth "
+        "plant (Exudyn); all 22 failed checks are on the table1 arm at Ts = 1 ms, truth "
+        "plant (Exudyn)."]
+    # Divergences in several places: each named with its count, most first.
+    spread = [_row("diverged")] * 3 + [_row("diverged", "default", 5e-3)] * 2
+    assert bottom_line(spread, [], [])[1] == (
+        "The 5 divergences: 3 on the table1 arm at Ts = 1 ms, truth plant (Exudyn); 2 on the "
+        "default arm at Ts = 5 ms, truth plant (Exudyn).")
+    # Nothing stopped: no second sentence.
+    assert bottom_line([_row("ok")] * 3, [], []) == ["3 runs: 3 completed, 0 diverged, 0 failed."]

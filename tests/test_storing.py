@@ -13,7 +13,8 @@ from validation.batch import committing
 from validation.batch.campaign import campaign_from_mapping, expand
 from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
-from validation.batch.resimulate import full_result
+from validation.batch.errors import StoreError
+from validation.batch.resimulate import every_signal
 from validation.batch.store import ResultStore, environment
 from validation.batch.storing import (Destination, StoreTask, landed, leave_token,
                                       run_and_store)
@@ -126,25 +127,25 @@ def test_what_a_run_keeps_and_its_signals_on_demand(reference, tmp_path, keep):
             np.testing.assert_array_equal(stored.signals,
                                           everything.select(names)[:, ::every])
         assert row.size < full.row(row.run_id).size
-        again = full_result(row)
+        assert row.has_file == (names != ())  # metrics only: the row is all of it
+        again = every_signal(kept, row)
         assert again.names == everything.names
         np.testing.assert_array_equal(again.signals, everything.signals)
 
 
 def test_re_simulation_refuses_a_run_it_does_not_reproduce(tmp_path):
     """Known-bad: a stored metric that the scenario does not give (other code made it)."""
-    from validation.batch.index import transaction
+    from validation.batch.index import metric_column, transaction
     out = tmp_path / "kept"
     run_campaign(campaign_from_mapping(dict(SMALL, keep={"signals": "none"})), out,
                  runner=SerialRunner(), progress=False)
     store = ResultStore(out)
     row = store.rows()[0]
-    with transaction(store._connect(create=True)) as db:  # as if other code had stored it
-        metrics = dict(row.metrics, track_max_1=row.metrics["track_max_1"] * (1 + 1e-15))
-        db.execute("UPDATE runs SET metrics = ? WHERE run_id = ?",
-                   (__import__("json").dumps(metrics), row.run_id))
-    with pytest.raises(ValueError, match="did not reproduce its stored metrics"):
-        full_result(store.row(row.run_id))
+    with transaction(store.connection(create=True)) as db:  # as if other code had stored it
+        db.execute(f"UPDATE runs SET {metric_column('track_max_1')} = ? WHERE run_id = ?",
+                   (row.metrics["track_max_1"] * (1 + 1e-15), row.run_id))
+    with pytest.raises(StoreError, match="did not reproduce its stored metrics"):
+        every_signal(store, store.row(row.run_id))
 
 
 def test_packed_signals_unpack_exactly_or_not_at_all():
@@ -217,3 +218,54 @@ def test_a_signal_between_two_results_ends_the_runs_in_flight_before_adopting_fi
     assert order == ["signal", "runs ended", "files looked for"]  # known bad: looked first
     # Known bad: 0 (the one being stored was skipped), then 1 (the one after never looked for).
     assert len(ResultStore(tmp_path).rows()) == 2
+
+
+def test_an_in_memory_store_keeps_float64_signals_and_writes_nothing(tmp_path, monkeypatch):
+    """Known-good: the runs an inner loop asks for come back with every signal as the run
+    made it (float64, equal to the run itself), rows and metrics as a folder's; nothing
+    is written (the working directory stays empty).  Known-bad: the folder's copy of
+    the same run is float32 (what calibration's residuals went through)."""
+    from validation.batch.memory import MemoryStore
+    from validation.run.loop import run_scenario
+    from validation.run.scenario import scenario_from_mapping
+    from validation.verdicts.evaluations import Evaluations
+    monkeypatch.chdir(tmp_path)
+    scenario = scenario_from_mapping(SMALL["scenario"] | {"seed": 5})
+    memory = Evaluations(MemoryStore(), SerialRunner(), "inner")
+    (row,) = memory.run([(scenario, "inner", {"seed": 5})])
+    direct = run_scenario(scenario)
+    kept = every_signal(memory.store, row)
+    assert kept.signals.dtype == np.float64
+    np.testing.assert_array_equal(kept.signals, direct.signals)
+    assert list(tmp_path.iterdir()) == []
+    folder = Evaluations(tmp_path / "out", SerialRunner(), "inner")
+    (stored,) = folder.run([(scenario, "inner", {"seed": 5})])
+    assert stored.metrics.keys() == row.metrics.keys()
+    assert all(stored.metrics[k] == row.metrics[k] or k in ("status",) or
+               (isinstance(row.metrics[k], float) and np.isnan(row.metrics[k]))
+               for k in row.metrics)
+    assert folder.store.load(stored.run_id).signals.dtype == np.float32
+
+
+def test_store_errors_are_not_value_errors_and_reach_the_caller(tmp_path, monkeypatch):
+    """A busy or damaged index while a campaign adopts a file without a row was swallowed
+    by `except ValueError` (StoreError was one) and the run redone; now it reaches the
+    caller.  Known-good: a file that is not a run file is still passed over."""
+    from validation.batch.queue import classify
+    from validation.batch.errors import IndexBusy, NotARunFile
+    assert not issubclass(StoreError, ValueError)
+    c = campaign_from_mapping(SMALL)
+    planned = expand(c)
+    store = ResultStore(tmp_path)
+    store.prepare()
+    (tmp_path / "runs" / f"{planned[0].run_id}.npz").write_bytes(b"not a run file")
+    todo, _ = classify(planned, store, retry_failed=False, reuse_stale=False)
+    assert len(todo) == len(planned)  # unreadable: redone
+    with pytest.raises(NotARunFile):
+        store.adopt(tmp_path / "runs" / f"{planned[0].run_id}.npz")
+
+    def busy(path):
+        raise IndexBusy("busy")
+    monkeypatch.setattr(store, "adopt", busy)
+    with pytest.raises(IndexBusy):
+        classify(planned, store, retry_failed=False, reuse_stale=False)

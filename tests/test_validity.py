@@ -2,6 +2,7 @@
 and figures; the report's validity section drawn from what was stored."""
 import json
 import math
+from pathlib import Path
 
 import pytest
 
@@ -41,6 +42,7 @@ def synthetic_analysis() -> dict:
     curve = {f"{i}->{o}": [1.0, 0.1, 0.01, 0.001] for i, o in CHANNELS}
     arm = {"arm": "default", "Ts": 1e-3, "modes": [2, 2], "law": "mylab:MyPD",
            "truth": "truth plant (Exudyn), ANCF 4 el/link",
+           "left_out": ["joint 1 dry friction (Coulomb 0.3 N m, breakaway 0.4 N m)"],
            "frequencies_hz": f,
            "responses": [{"theta2": t, "reduced": curve, "fe": curve} for t in (0.0, 1.0, 2.0, 3.0)],
            "gaps": [{"theta2": t, "theta": 0.1, "theta_peak_hz": 3.0, "tip": 0.2,
@@ -71,6 +73,8 @@ def test_written_analysis_reads_back_and_is_reported(tmp_path):
     assert "| pbc | exudyn | default | 2.7 | truth plant (Exudyn), ANCF 4 el/link | 2.71 | 0.7 | 3.5 | 4 | (3.4, 4] converged | no | yes | 0.2 |" \
         in text
     assert "δν mylab:MyPD loop at Ts" in text  # the scenario's own controller, named
+    assert ("Not in the linear models of the default arm" in text  # said, not dropped
+            and "joint 1 dry friction (Coulomb 0.3 N m" in text)
     back = load_validity(out / "validity")
     assert back["cases"][0]["certified_s"] == 7e-4
     assert math.isnan(back["arms"][0]["gaps"][0]["loop"])  # not computed stays empty
@@ -103,3 +107,26 @@ def test_validity_of_a_scenario_end_to_end(tmp_path, capsys):
     assert "|" not in printed and "![" not in printed
     assert "pbc · reduced · default: predicted 3.05 ms" in printed
     assert len(printed.splitlines()) == 4
+
+
+def test_validity_finds_the_stability_map_its_file_was_measured_into(tmp_path, monkeypatch):
+    """Issue 47: `flexarm validity campaigns/paper.toml` showed "measured —" for every
+    case although `make demo` had just stored results/paper/stability.  Without
+    --stability it now takes the map `flexarm stability FILE` (results/stability-STEM)
+    or `reproduce-paper`/`campaign` (results/NAME/stability) stored; with none, none."""
+    import argparse
+    from validation.cli.verdicts import _stability_folder
+    from validation.verdicts import stability
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(stability, "GRID", (1e-3,))
+    monkeypatch.setattr(stability, "DURATION", 0.2)
+    (tmp_path / "s.toml").write_text('[controller]\nkind = "pd"\n')
+    args = argparse.Namespace(file="s.toml", stability=None)
+    out = Path("results") / "validity-s"
+    assert _stability_folder(args, out) is None  # known-bad: nothing measured yet
+    assert main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
+                 "--workers", "1", "--no-progress"]) == 0
+    assert _stability_folder(args, out) == Path("results") / "stability-s"
+    assert main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
+                 "--workers", "1", "--no-progress", "--out", "results/s/stability"]) == 0
+    assert _stability_folder(args, out) == Path("results") / "s" / "stability"

@@ -1,7 +1,8 @@
-"""The README's calibration walk-through through the Python API: the truth plant fitted
-to this folder's synthetic experiments (two time series and a frequency response), the
-parameters with their intervals, and the files `flexarm calibrate` writes.  Run from the
-repository root:  .venv/bin/python examples/calibration/calibrate.py"""
+"""The calibration of the docs' guide (docs/guide/calibrate.rst, "Calibrate the truth
+plant to your arm") through the Python API: the truth plant fitted to this folder's
+synthetic experiments (two time series and a frequency response), the parameters with
+their intervals, and the files `flexarm calibrate` writes.  Run from the repository root:
+.venv/bin/python examples/calibration/calibrate.py"""
 from pathlib import Path
 
 from validation import (base_scenario, calibrate, calibration_settings, make_runner,

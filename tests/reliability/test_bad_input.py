@@ -331,6 +331,25 @@ def test_a_refused_runner_keeps_a_results_folder_that_was_there(tmp_path, monkey
     assert sorted(p.name for p in (out / "runs").iterdir()) == stored
 
 
+@pytest.mark.parametrize("command", [["campaign"], ["verify", "--mode", "estimate"]])
+def test_a_refused_runner_removes_the_parents_it_made(tmp_path, monkeypatch, capsys, command):
+    """Known bad (issue 48, 9): refused with ``--out deep/new/out``, the command removed
+    out/ but left deep/ and deep/new/ behind (campaign and verify share the code)."""
+    from validation.cli import common
+    from validation.run.config import ConfigError
+    (tmp_path / "ok.toml").write_text(CAMPAIGN_OK + '[[requirement]]\nname = "t"\n'
+                                      'claim = "tracking"\n[uncertainty]\n'
+                                      '"true_params.Mp" = { uniform = [0.0, 0.2] }\n')
+
+    def unreachable(*args, **kwargs):
+        raise ConfigError("--scheduler", "cannot reach tcp://127.0.0.1:1 within 10 s")
+    monkeypatch.setattr(common, "make_runner", unreachable)
+    assert main([*command, str(tmp_path / "ok.toml"), "--out",
+                 str(tmp_path / "deep" / "new" / "out")]) == 2
+    assert "cannot reach" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.toml"]
+
+
 def test_enough_cases():
     assert len(CASES) >= 25
 
@@ -345,3 +364,18 @@ def test_bad_input_as_a_real_process(argv, text, tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and text in proc.stderr
     assert "Traceback" not in proc.stderr and not (tmp_path / "out").exists()
+
+
+def test_a_time_bound_beyond_the_run_is_refused(tmp_path, capsys):
+    """Known bad (issue 48, 16): ``always[0,30]`` on a 1 s run was accepted and judged on
+    the run's 1 s without a word.  Within the run it is accepted."""
+    requirement = 'requirement=[{{name = "t", formula = "always[0,{}](abs(theta1 - ' \
+                  'theta1_ref) <= 0.5)"}}]'
+    assert main(["run", "--duration", "1", "--set", requirement.format(30), "--out",
+                 str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "requirement[0].formula" in err[0] and \
+        "time bound [0, 30] s reaches beyond the 1 s run" in err[0]
+    assert not (tmp_path / "never").exists()
+    assert main(["run", "--duration", "1", "--set", requirement.format(1), "--out",
+                 str(tmp_path / "ok")]) == 0

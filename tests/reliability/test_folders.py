@@ -196,3 +196,18 @@ def test_a_one_sample_run_is_reported(tmp_path):
     assert proc.returncode == 0, proc.stderr
     proc = flexarm(tmp_path, "report", "out")  # known bad: "max() arg is an empty sequence"
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+
+
+@pytest.mark.parametrize("observer", ["smo-bl", "ekf"])
+def test_a_one_sample_run_with_an_observer_is_shown_and_reported_without_warnings(
+        tmp_path, observer):
+    """Known bad (issue 48, 17): a run that ends before its transient drew its estimation
+    figure's measurement band from no samples, and `show` and `report` printed numpy's
+    "Mean of empty slice" RuntimeWarning."""
+    proc = flexarm(tmp_path, "run", "--duration", "0.001", "--observer", observer,
+                   "--name", "one", "--out", "out")
+    assert proc.returncode == 0, proc.stderr
+    for args in (["show", "out/one", "--no-open"], ["report", "out"]):
+        proc = flexarm(tmp_path, *args)
+        assert proc.returncode == 0, proc.stderr
+        assert "Warning" not in proc.stderr, (args, proc.stderr)

@@ -178,9 +178,12 @@ def test_workers_die_with_a_killed_campaign(lab, workers, tmp_path):
                    '[[sweep]]\ngrid.seed = [0, 1, 2]\n')
     proc = flexarm(lab, "campaign", str(cfg), "--out", str(out), "--workers", workers,
                    "--force-workers", "--no-progress")
-    deadline = time.time() + 300  # the workers exist once the index does
-    while time.time() < deadline and not (out / "index.sqlite").exists():
-        time.sleep(0.05)
+    deadline = time.time() + 300  # the workers start after the index is made: a loaded
+    workers_pids = []               # machine takes seconds, so wait for them, not a time
+    while time.time() < deadline and len(workers_pids) < 1 + int(workers):
+        time.sleep(0.1)
+        workers_pids = subprocess.run(["pgrep", "-s", str(proc.pid)], capture_output=True,
+                                      text=True).stdout.split()
     time.sleep(1.0)  # every worker is now inside a run that never ends
     assert proc.poll() is None, proc.communicate()
     workers_pids = subprocess.run(["pgrep", "-s", str(proc.pid)], capture_output=True,

@@ -178,3 +178,30 @@ def test_a_diverged_run_prints_no_numpy_warnings(tmp_path):
     assert "Warning" not in done.stderr + done.stdout, done.stderr
     (row,) = ResultStore(tmp_path / "out").rows()
     assert row.status == "diverged"
+
+
+GARBAGE_FORM = '''
+from controllers import JointPD
+
+
+class Garbage(JointPD):
+    """A PD whose compiled form is not one."""
+
+    def __call__(self, t, x, ref):
+        return super().__call__(t, x, ref)
+
+    def compiled(self):
+        return "a kernel, honest"
+'''
+
+
+def test_a_law_whose_compiled_form_is_garbage_fails_its_run_naming_the_contract(plugin_lab):
+    """Known bad (issue 48, 15): "AttributeError: 'str' object has no attribute 'pointer'".
+    Now the run fails naming the law and what a compiled form must be."""
+    from validation.batch.worker import execute_run
+    plugin_lab({"garbagelaws.py": GARBAGE_FORM})
+    s = scenario_from_mapping({"duration": 0.01, "controller": {"kind": "garbagelaws:Garbage"}})
+    result, _ = execute_run(s)
+    assert result.status == "failed"
+    assert "garbagelaws:Garbage.compiled() returned 'a kernel, honest'" in result.message
+    assert "controllers.CompiledLaw" in result.message and "pointer" not in result.message

@@ -166,6 +166,27 @@ def test_an_upgraded_installed_plugin_is_new_code(tmp_path, monkeypatch):
         forget_plugins()
 
 
+def test_a_plugin_copied_into_site_packages_without_metadata_is_hashed(tmp_path, monkeypatch):
+    """Known bad (issue 48, 14): a plug-in module put into site-packages by hand (no
+    distribution declares it) entered the fingerprint as "undeclared" only: after an edit,
+    resume reused the old results.  Now its source is hashed like the user's own."""
+    site_dir = tmp_path / "site-packages"
+    site_dir.mkdir()
+    monkeypatch.syspath_prepend(str(site_dir))
+    monkeypatch.setattr(site, "getsitepackages", lambda: [str(site_dir)])
+    module = "KP = {}\n\nclass PD:\n    def __init__(self, model, *, Ts):\n        pass\n"
+    (site_dir / "handcopied.py").write_text(module.format(30.0))
+    forget_plugins()
+    try:
+        assert plugin_sources("handcopied:PD") == (site_dir / "handcopied.py",)
+        before = _fingerprint("handcopied:PD")
+        (site_dir / "handcopied.py").write_text(module.format(60.0))
+        forget_plugins()
+        assert _fingerprint("handcopied:PD") != before
+    finally:
+        forget_plugins()
+
+
 def test_a_plugin_inside_a_project_package_is_hashed(plugin_lab):
     plugin_lab({})  # fresh caches
     inside = _ROOT / "controllers" / "zz_lab_plugin.py"

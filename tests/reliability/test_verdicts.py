@@ -448,8 +448,8 @@ def test_a_requirement_on_a_run_of_one_sample():
     from 0 is its right operand there, θ2 − 3 < 0 gives −3; an until whose window starts
     after the run has no sample to hold in: −∞."""
     formulas = {"always": "always(theta1 <= 1)",
-                "until": "(theta1 <= 1) until[0,0.5] (theta2 > 3)",
-                "late": "(theta1 <= 1) until[0.1,0.5] (theta2 > 3)"}
+                "until": "(theta1 <= 1) until[0,0.001] (theta2 > 3)",
+                "late": "(theta1 <= 1) until[0.001,0.001] (theta2 > 3)"}
     result = run_scenario(scenario_from_mapping(
         {"duration": 1e-3, "requirement": [{"name": k, "formula": f}
                                            for k, f in formulas.items()]}))

@@ -42,7 +42,7 @@ from .runfiles import KEEP_ALL, Keep, keep_from_mapping
 from .store import run_id
 from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
-__all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "is_campaign",
+__all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "own_name", "is_campaign",
            "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
            "MAX_RUNS", "run_name",
            "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes",
@@ -79,7 +79,36 @@ class PlannedRun:
 class Campaign:
     """A base scenario (a mapping, with the file's ``[[requirement]]`` entries), its sweeps
     and the sections of a campaign file (``uncertainty`` and ``verify`` are read by
-    ``flexarm verify``, `validation.verdicts.verify`)."""
+    ``flexarm verify``, `validation.verdicts.verify`).  Made by `load_campaign` or
+    `campaign_from_mapping`; the keys are those of a campaign file (the configuration
+    reference).
+
+    Parameters
+    ----------
+    name : str
+        The campaign's name: its results folder's default and its runs' prefix.
+    base : dict
+        The ``[scenario]`` every run starts from, as a mapping.
+    sweeps : tuple of dict
+        The ``[[sweep]]`` tables (``grid``, ``zip``, ``random``; `expand` runs them).
+    report : dict
+        The ``[report]`` table (which runs' figures the report draws).
+    description : str
+        What the campaign asks, for the report.
+    attribution, uncertainty, verify, calibrate, keep, stability : dict
+        The ``[attribution]``, ``[uncertainty]``, ``[verify]``, ``[calibrate]``, ``[keep]``
+        and ``[stability]`` tables (empty when the file has none).
+
+    Examples
+    --------
+    >>> from validation import campaign_from_mapping, expand
+    >>> campaign = campaign_from_mapping({
+    ...     "name": "gains", "scenario": {"duration": 1.0},
+    ...     "sweep": [{"name": "kp", "grid": {"plant.kind": ["reduced", "exudyn"],
+    ...                                       "seed": [1, 2, 3]}}]})
+    >>> campaign.name, len(expand(campaign))
+    ('gains', 6)
+    """
 
     name: str
     base: dict
@@ -141,6 +170,13 @@ def load_study(path: str | Path, *, name: str | None = None) -> Campaign:
     for key, value in sections.items():
         check(isinstance(value, dict), key, "must be a table")
     return Campaign(name=label[:100], base=base, sweeps=(sweep,) if sweep else (), **sections)
+
+
+def own_name(study: Campaign) -> dict:
+    """``{"name": NAME}`` of a scenario file read by `load_study` that names its run (its
+    one sweep), else ``{}`` (a campaign's sweeps name its runs)."""
+    single = len(study.sweeps) == 1 and set(study.sweeps[0]) == {"name"}
+    return dict(study.sweeps[0]) if single else {}
 
 
 def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:

@@ -443,15 +443,40 @@ def make_runner(kind: str = "local", workers: int | None = None, scheduler: str 
                 *, force: bool = False, run_timeout: float | None = None,
                 memory_limit: int | None = None, scenarios=None,
                 progress: TextIO | None = None) -> Runner:
-    """A runner: "local" (``workers`` processes, default the cores) or "dask" (the
-    cluster at ``scheduler`` or $DASK_SCHEDULER_ADDRESS).  More local workers than cores
-    are refused unless ``force`` (they only share the cores).  ``run_timeout`` [s] limits
-    every run (default: derived from each run, `limits.default_run_timeout`);
-    ``memory_limit`` [MiB] each local worker (default `limits.default_memory_limit`).
-    Every option is checked first (`check_runner`); then local workers are forked after
-    the kernels the runs of ``scenarios`` use are compiled or loaded, with progress on
-    ``progress`` (`compiling.compile_for`; default: the PBC with the paper's SMO on both
-    plants, silently, `worker.warm_up`)."""
+    """A runner: local worker processes or a Dask cluster, for `run_campaign`, `calibrate`
+    and the verdicts; as a context manager, leaving it ends its workers.  Every option is
+    checked first (`check_runner`).
+
+    Parameters
+    ----------
+    kind : {"local", "dask"}
+        Local worker processes, or a Dask cluster.
+    workers : int, optional
+        Local worker processes (default: the cores; 1 is one worker process).
+    scheduler : str, optional
+        The Dask scheduler's address (default $DASK_SCHEDULER_ADDRESS).
+    force : bool
+        Allow more local workers than cores (they only share the cores).
+    run_timeout : float, optional
+        Every run's wall-time limit [s] (default `limits.default_run_timeout`, per run).
+    memory_limit : int, optional
+        Each local worker's memory limit [MiB] (default `limits.default_memory_limit`).
+    scenarios : list of Scenario, optional
+        The runs to come: their kernels are compiled or loaded before the workers fork
+        (default: the PBC with the paper's SMO on both plants, `worker.warm_up`).
+    progress : file, optional
+        Where compilation progress goes (`compiling.compile_for`; default: silent).
+
+    Returns
+    -------
+    Runner
+        `LocalPoolRunner` or `DaskRunner`.
+
+    Raises
+    ------
+    ConfigError
+        A bad option, naming it; an unreachable scheduler or one without workers.
+    """
     where = check_runner(kind, workers, scheduler, force=force, run_timeout=run_timeout,
                          memory_limit=memory_limit)
     keep_freed_memory()  # this process stores the runs (and forks the local workers)

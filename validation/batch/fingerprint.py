@@ -16,8 +16,10 @@ enters with its version and its installed files' record (``RECORD``: a hash per 
 A plug-in law adds its own module and every module that one imports that is not part of
 the Python installation (its helpers, wherever they live: a folder on ``PYTHONPATH``,
 inside one of the project's packages, a sourceless ``.pyc``, an extension module, a zip
-archive on ``sys.path`` — hashed whole, what it imports not followed), found the same way, and every installed package it imports, the same way as the project's: a
-plug-in installed with ``pip`` and upgraded is new code.  Files are located without
+archive on ``sys.path`` — hashed whole, what it imports not followed), found the same
+way, and every installed package it imports, the same way as the project's: a plug-in
+installed with ``pip`` and upgraded is new code; a module in site-packages that no
+distribution declares is hashed by its files, as the user's own.  Files are located without
 importing anything, so reading a results folder never runs a plug-in's code.  Numba's
 compiled artefacts are kept consistent with these sources by `reduced_model._cache_guard`.
 """
@@ -32,7 +34,7 @@ from pathlib import Path
 from reduced_model._imports import walk
 
 __all__ = ["code_fingerprint", "run_fingerprint", "result_sources", "plugin_sources",
-           "plugin_kinds", "forget_plugins"]
+           "plugin_kinds", "forget_plugins", "is_fresh", "fingerprint_of"]
 
 _ROOT = Path(__file__).resolve().parents[2]
 #: Where executing a run starts: everything it can import decides results.
@@ -120,7 +122,9 @@ def code_fingerprint() -> str:
 
 @functools.lru_cache(maxsize=64)
 def _plugin_walk(module: str):
-    return walk([module], None)
+    # An installed module no distribution declares (copied into site-packages by hand)
+    # has no version or record to stand for it: its files are hashed as the user's own.
+    return walk([module], None, declared=lambda top: bool(_distributions(top)))
 
 
 def forget_plugins() -> None:
@@ -163,3 +167,17 @@ def run_fingerprint(scenario: dict) -> str:
             h.update(b"unknown")
         _hash_packages(h, _plugin_walk(kind.partition(":")[0]).packages)
     return h.hexdigest()[:16]
+
+
+def is_fresh(row) -> bool:
+    """Whether the stored run ``row`` (`StoredRun`) was made by this installation's code:
+    its fingerprint is the one its laws and plant would get now (their kinds are columns
+    of the row: no scenario decoded)."""
+    return row.fingerprint == fingerprint_of(row.controller, row.observer, row.plant)
+
+
+def fingerprint_of(controller: str, observer: str, plant: str) -> str:
+    """`run_fingerprint` of a run of these kinds of laws and plant (all that it reads of
+    a scenario)."""
+    return run_fingerprint({"controller": {"kind": controller}, "observer": {"kind": observer},
+                            "plant": {"kind": plant}})

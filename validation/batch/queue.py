@@ -23,11 +23,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..run.requirements import signal_names
+from ..run.scenario import scenario_to_mapping
+
 from .campaign import Campaign, PlannedRun, campaign_keep, expand
 from .executor import Runner, SerialRunner
-from .fingerprint import run_fingerprint
+from .fingerprint import is_fresh
 from .committing import Committer
+from .errors import NotARunFile
+from .index import dictionary_for
 from .interrupts import Interrupted
+from .memory import MemoryStore
 from .progress import progress as progress_counter
 from .store import ResultStore, environment
 from .storing import Destination, StoreTask, landed, leave_token
@@ -107,11 +113,11 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
     # Every row is read (not only the wanted ones): a damaged index shows on any page.
     rows = {r.run_id: r for r in store.rows() if r.run_id in wanted}
     for run in planned:  # a file whose row was lost: its metadata rebuilds the row
-        path = store.runs_dir / f"{run.run_id}.npz"
-        if run.run_id not in rows and path.exists():
+        path = store.out / "runs" / f"{run.run_id}.npz" if store.out else None
+        if run.run_id not in rows and path is not None and path.exists():
             try:
                 rows[run.run_id] = store.adopt(path)
-            except ValueError:
+            except NotARunFile:
                 pass  # unreadable: the run is redone and the file replaced
     damaged = store.verify(list(rows.values()))
     todo = []
@@ -122,7 +128,7 @@ def classify(planned: list[PlannedRun], store: ResultStore, *, retry_failed: boo
         elif run.run_id in damaged:
             summary.damaged[run.run_id] = damaged[run.run_id]
             todo.append(run)
-        elif row.fingerprint != run_fingerprint(row.config) and not reuse_stale:
+        elif not is_fresh(row) and not reuse_stale:
             summary.stale.append(run.run_id)
             todo.append(run)
         elif row.status == "failed" and retry_failed:
@@ -147,8 +153,12 @@ class Job:
 
 def open_job(campaign: Campaign, out, planned: list[PlannedRun], *, retry_failed: bool = False,
              reuse_stale: bool = False, rerun: bool = False) -> Job:
-    """Prepare ``out`` for ``campaign``'s runs ``planned`` and find those it does not hold
-    yet (`classify`)."""
+    """Prepare ``out`` (a results folder, or a `MemoryStore`) for ``campaign``'s runs
+    ``planned`` and find those it does not hold yet (`classify`)."""
+    if isinstance(out, MemoryStore):
+        todo, summary = classify(planned, out, retry_failed=retry_failed,
+                                 reuse_stale=reuse_stale, rerun=rerun)
+        return Job(out, Destination(None, campaign.name, environment()), todo, summary)
     store = ResultStore(out)
     store.prepare()
     store.set_campaign(campaign.name, {"description": campaign.description,
@@ -156,8 +166,15 @@ def open_job(campaign: Campaign, out, planned: list[PlannedRun], *, retry_failed
     store.remove_stale_temporaries()
     todo, summary = classify(planned, store, retry_failed=retry_failed,
                              reuse_stale=reuse_stale, rerun=rerun)
+    dictionary = b""
+    if todo:  # the details of a campaign's runs compressed against its first one
+        first = todo[0].scenario
+        dictionary = dictionary_for(scenario_to_mapping(first), environment(),
+                                    signal_names(first))
+        store.add_dictionary(dictionary)
     destination = Destination(str(store.out), campaign.name, environment(),
-                              campaign_keep(campaign), leave_token(store.out) if todo else None)
+                              campaign_keep(campaign), leave_token(store.out) if todo else None,
+                              dictionary)
     return Job(store, destination, todo, summary)
 
 
@@ -185,7 +202,10 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
     try:
         for key, stored in results:
             job = jobs[key[0]]
-            stored = landed(job.store.out, stored)
+            if stored.result is not None:  # an in-memory store: the result itself
+                job.store.keep(stored.rid, *stored.result)
+            else:
+                stored = landed(job.store.out, stored)
             if stored.values is None:
                 job.summary.unstored.append(stored.error)  # this run's place only
             else:
@@ -201,7 +221,7 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
         for job, committer in zip(jobs, committers):
             job.summary.interrupted = exc.signum
             committer.flush()
-            for row in _landed_uncommitted(job.store, job.todo):
+            for row in _landed_uncommitted(job, job.todo):
                 _count(job.summary, row.status)
     finally:
         try:
@@ -210,7 +230,8 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
         finally:
             bar.close()
             for job in jobs:
-                (job.store.runs_dir / job.destination.reach).unlink(missing_ok=True)
+                if job.destination.reach:
+                    (job.store.runs_dir / job.destination.reach).unlink(missing_ok=True)
 
 
 @dataclass
@@ -278,11 +299,50 @@ def run_campaign(campaign: Campaign, out: str | Path, *, runner: Runner | None =
                  label: str | None = None, export: bool = True,
                  rerun: bool = False) -> CampaignSummary:
     """Expand ``campaign`` and run what ``out`` does not hold yet (`classify`); every run is
-    stored as soon as it finishes (`validation.batch.queue`); the progress bar is labelled
-    ``label`` (default: the campaign's name).  On SIGINT/SIGTERM, what finished is kept
-    and ``summary.interrupted`` holds the signal number.  metrics.csv and manifest.json
-    are exported at the end (unless ``export`` is false: a search calling this for every
-    batch exports once, when it is done)."""
+    stored as soon as it finishes.  On SIGINT/SIGTERM, what finished is kept and
+    ``summary.interrupted`` holds the signal number.
+
+    Parameters
+    ----------
+    campaign : Campaign
+        What to run (`load_campaign`, `campaign_from_mapping`).
+    out : str or pathlib.Path
+        The results folder (created if needed).
+    runner : Runner, optional
+        Where the runs execute (`make_runner`; default: one after the other in this
+        process).
+    retry_failed : bool
+        Run again the runs stored as failed.
+    reuse_stale : bool
+        Keep runs stored by other code instead of running them again.
+    progress : bool
+        A progress bar on stderr.
+    only : list of PlannedRun, optional
+        These of the campaign's runs instead of all (`expand`).
+    label : str, optional
+        The progress bar's label (default: the campaign's name).
+    export : bool
+        Write metrics.csv and manifest.json at the end (a search calling this for every
+        batch exports once, when it is done).
+    rerun : bool
+        Run every run again, stored or not.
+
+    Returns
+    -------
+    CampaignSummary
+        What was run, skipped, stored, failed (``line()``: one line to print).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from validation import campaign_from_mapping, run_campaign
+    >>> campaign = campaign_from_mapping({
+    ...     "name": "short", "scenario": {"duration": 0.02, "transient": 0.0},
+    ...     "sweep": [{"name": "seeds", "grid": {"seed": [1, 2]}}]})
+    >>> summary = run_campaign(campaign, tempfile.mkdtemp(), progress=False)
+    >>> summary.planned, summary.ok
+    (2, 2)
+    """
     planned = only if only is not None else expand(campaign)
     job = open_job(campaign, out, planned, retry_failed=retry_failed, reuse_stale=reuse_stale,
                    rerun=rerun)
@@ -303,10 +363,13 @@ def _count(summary: CampaignSummary, status: str) -> None:
     setattr(summary, status, getattr(summary, status) + 1)
 
 
-def _landed_uncommitted(store: ResultStore, runs: list[PlannedRun]) -> list:
+def _landed_uncommitted(job: Job, runs: list[PlannedRun]) -> list:
     """Adopt the files of ``runs`` that their workers put in place before they were
     stopped, where the index holds no row of them (a result that never came back, or
     whose row the signal stopped from being committed): finished runs, kept."""
+    store = job.store
+    if job.destination.out is None:  # in memory: nothing was put in place
+        return []
     landed_ids = [r.run_id for r in runs if (store.runs_dir / f"{r.run_id}.npz").is_file()]
     known = {row.run_id for row in store.rows_of(landed_ids)}
     adopted = []
@@ -314,7 +377,7 @@ def _landed_uncommitted(store: ResultStore, runs: list[PlannedRun]) -> list:
         if rid not in known:
             try:
                 adopted.append(store.adopt(store.runs_dir / f"{rid}.npz"))
-            except ValueError:
+            except NotARunFile:
                 pass  # not an intact run file: the run is redone on resume
     return adopted
 

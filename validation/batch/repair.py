@@ -1,12 +1,16 @@
 """Repairing a results folder: rebuild its index from the run files whatever the damage,
-and adopt a run file that has no row (`ResultStore.repair`, `ResultStore.adopt`)."""
+and adopt a run file that has no row (`ResultStore.repair`, `ResultStore.adopt`).  Uses
+only the store's public methods."""
 from __future__ import annotations
 
+import json
 import sqlite3
 from pathlib import Path
 
 from ..run.results import RunResult
-from .index import COLUMNS, INDEX_NAME, StoreError, insert_row, is_run_id, run_id, set_aside
+from .errors import NotARunFile, StoreError
+from .index import (FIXED, INDEX_NAME, decode_detail, is_run_id, row_values, run_id,
+                    set_aside)
 from .runfiles import run_row
 
 __all__ = ["repair", "adopt", "MAX_RUN_BYTES"]
@@ -24,9 +28,12 @@ def repair(store) -> dict[str, list[str]]:
     missing or damaged are dropped; every run file without a row (those included) is
     adopted if it is a readable run file whose scenario hashes to its name — an intact
     file is kept whatever its row said — else kept as ``runs/<id>.npz.damaged``;
-    directories and files not named by a run id are skipped.  Returns the run ids (or
+    directories and files not named by a run id are skipped.  The runs that keep metrics
+    only (no file) of an index set aside are copied from it where SQLite can still read
+    them and their scenario hashes to their id ("salvaged").  Returns the run ids (or
     names) per action."""
-    report = {"rebuilt": [], "adopted": [], "dropped": [], "unreadable": [], "skipped": []}
+    report = {"rebuilt": [], "adopted": [], "dropped": [], "unreadable": [], "skipped": [],
+              "salvaged": []}
     index = store.index_path
     odd = index.is_symlink() or (index.exists() and not index.is_file())
     if odd or (store.exists() and not _index_sound(store)):
@@ -36,26 +43,23 @@ def repair(store) -> dict[str, list[str]]:
             Path(f"{index}{suffix}").unlink(missing_ok=True)
         why = "not a file" if odd else "unreadable"
         report["rebuilt"].append(f"{INDEX_NAME} ({why}; kept as {kept.name})")
-    try:
-        db = store._connect(create=True)
-        for values in db.execute(f"SELECT {', '.join(COLUMNS)} FROM runs").fetchall():
-            try:
-                store._stored_run(values)
-            except StoreError:  # no path is built from it: its id may be anything
-                db.execute("DELETE FROM runs WHERE run_id = ?", (values[0],))
-                report["dropped"].append(f"{str(values[0])[:40]!r} (not a stored run)")
-        for rid, why in store.verify().items():  # the file, if intact, is adopted below
-            db.execute("DELETE FROM runs WHERE run_id = ?", (rid,))
-            report["dropped"].append(f"{rid} ({why})")
-    except sqlite3.Error as exc:
-        raise store._error(exc) from None
-    for path in store._run_files():
+        store.prepare()
+        if not odd:
+            report["salvaged"] = _salvage(store, kept)
+    store.prepare()
+    bad = [rid for rid, row in store.scan() if isinstance(row, str)]
+    store.discard(bad)  # no path is built from them: their ids may be anything
+    report["dropped"] += [f"{str(rid)[:40]!r} (not a stored run)" for rid in bad]
+    damaged = store.verify()
+    store.discard(damaged)  # the file, if intact, is adopted below
+    report["dropped"] += [f"{rid} ({why})" for rid, why in damaged.items()]
+    for path in store.run_files():
         if not path.is_file() or not is_run_id(path.stem):
             report["skipped"].append(f"runs/{path.name} (not a run file)")
     for path in store.unindexed_files():
         try:
             adopt(store, path)
-        except ValueError as exc:
+        except NotARunFile as exc:
             set_aside(path)
             report["unreadable"].append(f"{path.stem} ({exc})")
             continue
@@ -68,11 +72,11 @@ def _index_sound(store) -> bool:
     every row (a full disk or a read-only folder is raised, not taken for damage)."""
     store.close()
     try:
-        db = store._connect(create=False)
+        db = store.connection(create=False)
         sound = db.execute("PRAGMA quick_check").fetchone()[0] == "ok"
-        db.execute(f"SELECT {', '.join(COLUMNS)} FROM runs").fetchall()
+        db.execute("SELECT * FROM runs").fetchall()
     except sqlite3.Error as exc:
-        error = store._error(exc)
+        error = store.error(exc)
         if isinstance(error, OSError) or not store.writable():
             raise error from None
         return False
@@ -83,20 +87,60 @@ def _index_sound(store) -> bool:
     return sound
 
 def adopt(store, path: Path):
-    """Index a run file that has no row (its metadata holds everything); ValueError if
+    """Index a run file that has no row (its metadata holds everything); `NotARunFile` if
     it is not a readable run file, or its scenario does not hash to its name."""
     path = Path(path)
     if not is_run_id(path.stem):
-        raise ValueError(f"{path.name} is not named by a run id")
+        raise NotARunFile(f"{path.name} is not named by a run id")
     try:  # a FIFO, a device or a sparse giant is never read
         if not path.is_file() or path.stat().st_size > MAX_RUN_BYTES:
-            raise ValueError(f"not a regular run file of at most {MAX_RUN_BYTES >> 30} GiB")
+            raise NotARunFile(f"not a regular run file of at most {MAX_RUN_BYTES >> 30} GiB")
         data = path.read_bytes()
     except OSError as exc:
-        raise ValueError(f"unreadable ({exc.strerror or exc})") from None
-    result, meta = RunResult.from_bytes(data)
+        raise NotARunFile(f"unreadable ({exc.strerror or exc})") from None
+    try:
+        result, meta = RunResult.from_bytes(data)
+        row = run_row(path.stem, result, meta, data)
+        values = row_values(row)
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise NotARunFile(str(exc)) from None
     if not isinstance(result.config, dict) or run_id(result.config) != path.stem:
-        raise ValueError(f"its scenario does not hash to its name {path.stem} (a copy of "
-                         "another run's file?)")
-    insert_row(store._connect(create=True), run_row(path.stem, result, meta, data))
+        raise NotARunFile(f"its scenario does not hash to its name {path.stem} (a copy of "
+                          "another run's file?)")
+    store.insert([values])
     return store.row(path.stem)
+
+
+def _salvage(store, damaged: Path) -> list[str]:
+    """Copy the runs without a file (metrics only) that SQLite can still read from the
+    index set aside as ``damaged`` into the new one; their ids."""
+    salvaged, rows, dictionaries = [], [], {}
+    try:
+        db = sqlite3.connect(f"{damaged.resolve().as_uri()}?mode=ro", uri=True)
+        try:
+            sets = {i: json.loads(n) for i, n in db.execute("SELECT * FROM metric_sets")}
+            dictionaries = dict(db.execute("SELECT key, data FROM dictionaries"))
+            cursor = db.execute("SELECT * FROM runs WHERE file = ''")
+            names = [d[0] for d in cursor.description]
+            for values in cursor:
+                row = dict(zip(names, values))
+                try:
+                    scenario, _ = decode_detail(row["detail"], dictionaries[row["dictionary"]]
+                                                if row["dictionary"] else b"")
+                    a_names, m_names = (tuple(part) for part in sets[row["metric_set"]])
+                except (KeyError, ValueError):
+                    continue
+                if not is_run_id(row["run_id"]) or run_id(json.loads(scenario)) != row["run_id"]:
+                    continue
+                rows.append((tuple(row[c] for c in FIXED), m_names,
+                             tuple(row["m:" + n] for n in m_names), a_names,
+                             tuple(row["a:" + n] for n in a_names)))
+                salvaged.append(row["run_id"])
+        finally:
+            db.close()
+    except sqlite3.Error:
+        pass  # what was read before the damage is kept
+    for key in {r[0][FIXED.index("dictionary")] for r in rows} - {""}:
+        store.add_dictionary(dictionaries[key])
+    store.insert(rows)
+    return salvaged

@@ -1,12 +1,14 @@
-"""Run files: one per run, ``runs/<run id>.npz``, holding its signals — all of them, or
-what its campaign keeps (`Keep`) — and everything its index row holds (so that a file
-alone rebuilds its row).  `run_file` makes a run's bytes and its row (checksum and size
+"""Run files: one per run that keeps signals, ``runs/<run id>.npz``, holding them — all,
+or what its campaign keeps (`Keep`) — and everything its index row holds (so that a file
+alone rebuilds its row).  A run that keeps metrics only has no file: its row holds all
+of it (a file would cost 9 KB on disk for ~1 KB of metrics).  `run_file` makes a run's bytes and its row (checksum and size
 computed where the bytes are); `write_file` puts them in place under a temporary name,
 then renamed; `run_row` is the one place a row is made, for a new run and for an
 adopted file."""
 from __future__ import annotations
 
 import hashlib
+import dataclasses
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -19,8 +21,7 @@ from .fingerprint import run_fingerprint
 from .index import finite_or_none, set_aside
 
 __all__ = ["write_run", "run_file", "write_file", "run_row", "META_KEYS", "Keep", "KEEP_ALL",
-           "KEEP_METRICS",
-           "keep_from_mapping", "KEEP_KEYS"]
+           "KEEP_NONE", "keep_from_mapping", "KEEP_KEYS"]
 
 #: What a run file's metadata holds beside the result (`RunResult.to_bytes`); ``kept``
 #: only where the file keeps less than every signal at every sample (`Keep.meta`).
@@ -48,6 +49,11 @@ class Keep:
     def everything(self) -> bool:
         return self.signals is None and self.every == 1
 
+    @property
+    def metrics_only(self) -> bool:
+        """Whether no signal is kept (the run then has no file)."""
+        return self.signals == ()
+
     def apply(self, result: RunResult) -> RunResult:
         """``result`` reduced to what is kept (itself if everything is)."""
         if self.everything:
@@ -56,12 +62,9 @@ class Keep:
             tuple(n for n in result.names if n in self.signals)
         rows = [result.names.index(n) for n in names]
         time = result.time[::self.every] if names else result.time[:0]  # metrics only
-        return RunResult(time=time, names=names,
-                         signals=np.ascontiguousarray(result.signals[rows, ::self.every]
-                                                      [:, :time.size]),
-                         status=result.status, message=result.message,
-                         end_time=result.end_time, config=result.config,
-                         timings=result.timings)
+        return dataclasses.replace(
+            result, time=time, names=names,
+            signals=np.ascontiguousarray(result.signals[rows, ::self.every][:, :time.size]))
 
     def meta(self, result: RunResult) -> dict:
         """The file's note of what it keeps of ``result`` (nothing if everything): the
@@ -73,8 +76,8 @@ class Keep:
 
 
 KEEP_ALL = Keep()
-#: A file that keeps the metrics and the scenario alone.
-KEEP_METRICS = Keep(signals=())
+#: Metrics only.
+KEEP_NONE = Keep(())
 
 
 def keep_from_mapping(table: dict, known: tuple[str, ...]) -> Keep:
@@ -104,30 +107,34 @@ def keep_from_mapping(table: dict, known: tuple[str, ...]) -> Keep:
     return Keep(names, every, compress)
 
 
-def run_row(rid: str, result: RunResult, meta: dict, data: bytes) -> dict:
+def run_row(rid: str, result: RunResult, meta: dict, data: bytes | None) -> dict:
     """The index row of run ``rid``: its result, the file's metadata ``meta`` (`META_KEYS`)
-    and the file's bytes ``data`` (checksum and size)."""
+    and the file's bytes ``data`` (checksum and size; None: the run has no file)."""
     return {"run_id": rid, "name": result.config.get("name", ""),
             "campaign": meta.get("campaign", ""), "sweep": meta.get("sweep", ""),
             "axes": meta.get("axes", {}), "status": result.status, "message": result.message,
             "end_time": result.end_time, "fingerprint": meta.get("fingerprint", ""),
             "scenario": result.config, "metrics": meta.get("metrics", {}),
             "timings": finite_or_none(result.timings),
-            "environment": meta.get("environment", {}), "file": f"runs/{rid}.npz",
-            "sha256": hashlib.sha256(data).hexdigest(), "size": len(data),
-            "finished": meta.get("finished", "")}
+            "environment": meta.get("environment", {}), "kept": meta.get("kept"),
+            "file": f"runs/{rid}.npz" if data is not None else "",
+            "sha256": hashlib.sha256(data).hexdigest() if data is not None else "",
+            "size": len(data) if data is not None else 0, "finished": meta.get("finished", "")}
 
 
 def run_file(rid: str, result: RunResult, metrics: dict, *, campaign: str = "",
              sweep: str = "", axes: dict | None = None, env: dict,
-             keep: Keep = KEEP_ALL) -> tuple[bytes, dict]:
-    """The bytes of run ``rid``'s file and its index row.  Signals are stored as float32
-    (7 digits, for plots; metrics come from the float64 signals), those ``keep`` keeps."""
+             keep: Keep = KEEP_ALL) -> tuple[bytes | None, dict]:
+    """The bytes of run ``rid``'s file (None if it keeps metrics only: no file) and its
+    index row.  Signals are stored as float32 (7 digits, for plots; metrics come from the
+    float64 signals), those ``keep`` keeps."""
     meta = {"campaign": campaign, "sweep": sweep, "axes": axes or {},
             "fingerprint": run_fingerprint(result.config),
             "metrics": finite_or_none(metrics), "environment": env,
             "finished": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             **keep.meta(result)}
+    if keep.metrics_only:
+        return None, run_row(rid, result, meta, None)
     result.signals = result.signals.astype("float32", copy=False)
     data = keep.apply(result).to_bytes(meta, packed=keep.compress)
     return data, run_row(rid, result, meta, data)
@@ -144,8 +151,10 @@ def write_file(out: Path, rid: str, data: bytes) -> None:
 def write_run(out: Path, rid: str, result: RunResult, metrics: dict, *, campaign: str = "",
               sweep: str = "", axes: dict | None = None, env: dict,
               keep: Keep = KEEP_ALL) -> dict:
-    """Write run ``rid``'s file into the results folder ``out`` and return its index row."""
+    """Write run ``rid``'s file (if it has one) into the results folder ``out`` and return
+    its index row."""
     data, row = run_file(rid, result, metrics, campaign=campaign, sweep=sweep, axes=axes,
                          env=env, keep=keep)
-    write_file(out, rid, data)
+    if data is not None:
+        write_file(out, rid, data)
     return row

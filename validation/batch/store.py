@@ -1,12 +1,14 @@
-"""A results folder: one signal file per run, indexed by an SQLite database.
+"""A results folder: an SQLite index of every run, and a file per run that keeps signals.
 
-    OUT/index.sqlite        one row per run: id, name, campaign, sweep and swept values,
-                            status, message, timings, versions, code fingerprint, the
-                            resolved scenario, every metric, and the run file's SHA-256 and
-                            size (WAL journal; rows committed in batches:
-                            `validation.batch.committing`)
+    OUT/index.sqlite        one row per run: id, name, campaign, sweep, status, message,
+                            code fingerprint, what tables show of its scenario, every metric
+                            and swept value in a typed column of its own, the scenario,
+                            timings and environment compressed (decoded on demand), and
+                            the run file's SHA-256 and size (`validation.batch.index`; WAL
+                            journal; rows committed in batches: `validation.batch.committing`)
     OUT/runs/<run_id>.npz   signals (float32) and the same metadata (`RunResult.to_bytes`):
-                            a file alone is enough to rebuild its row (`repair`)
+                            a file alone is enough to rebuild its row (`repair`).  A run
+                            that keeps metrics only has no file: its row holds all of it.
     OUT/metrics.csv         exports, written from the index (`export`)
     OUT/manifest.json       (read back only to refuse an export that would lose runs)
 
@@ -16,20 +18,20 @@ the worker that made the run, under a temporary name, then renamed; its row is c
 after, by the command: `validation.batch.storing`, `validation.batch.committing`).
 
 The store trusts nothing it reads.  A row's run id must be 12 hex digits and its file
-``runs/<id>.npz`` before either touches a path (else the index is refused, and `repair`
-drops the row).  A run whose file is missing, not a regular file, of the wrong size or
-checksum, or whose scenario does not hash to its id is *damaged*: reported by id, never
-used, redone on resume.  A run file is adopted (by resume or `repair`) only if its own
-scenario hashes to its name.  An index SQLite cannot read — a corrupt page, a truncated
-or empty file — is named with the cure (`repair`, which rebuilds it from the run files
-whatever the damage); a full disk and a read-only folder are named as such (a healthy
-read-only folder can still be read).  Nothing here imports a plug-in.  The run id is a
-hash of the resolved scenario; the row also records the code fingerprint
-(`validation.batch.fingerprint`), so a result made by other code is *stale* and is not reused.
+``runs/<id>.npz`` (or none) before either touches a path (else the index is refused, and
+`repair` drops the row).  A run whose file is missing, not a regular file, of the wrong
+size or checksum, or whose scenario does not hash to its id is *damaged*: reported by
+id, never used, redone on resume.  A run file is adopted (by resume or `repair`) only if
+its own scenario hashes to its name.  An index SQLite cannot read — a corrupt page, a
+truncated or empty file — is named with the cure (`repair`, which rebuilds it from the
+run files whatever the damage); a full disk and a read-only folder are named as such (a
+healthy read-only folder can still be read).  Nothing here imports a plug-in or runs a
+simulation.  The run id is a hash of the resolved scenario; the row also records the code
+fingerprint (`validation.batch.fingerprint`), so a result made by other code is *stale*
+and is not reused.
 
-This module reads and writes; the index itself (schema, transactions, rows) is
-`validation.batch.index`, a run's file `validation.batch.runfiles`, rebuilding the index
-`validation.batch.repair`, the exports `validation.batch.export`.
+This module reads and writes through `BaseStore`'s methods; rebuilding the index
+(`validation.batch.repair`) and the exports (`validation.batch.export`) use only them.
 """
 from __future__ import annotations
 
@@ -38,109 +40,38 @@ import functools
 import hashlib
 import json
 import os
-import platform
 import sqlite3
-import subprocess
 import time
-from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError, version
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..run.results import STATUSES, LinkedFolder, RunResult, own_folder
 from . import export, repair
-from .index import (BUSY_TIMEOUT, COLUMNS, INDEX_NAME, JSON_COLUMNS, SCHEMA, SCHEMA_VERSION,
-                    StoreError, insert_row, insert_rows, is_run_id, json_table, metric_values,
-                    run_id, set_wal, transaction)
-from .resimulate import full_result
+from .base import BaseStore
+from .errors import IndexBusy, IndexDamaged, ReadOnlyFolder, StoreError
+from .index import (BUSY_TIMEOUT, FIXED, INDEX_NAME, SCHEMA, SCHEMA_VERSION, dictionary_key,
+                    insert_rows, is_run_id, json_table, metric_column, open_read_only,
+                    row_values, run_id, set_wal, transaction)
+from .provenance import environment
+from .records import StoredRun, records
 from .runfiles import write_run
 
 __all__ = ["ResultStore", "StoredRun", "StoreError", "run_id", "is_run_id", "environment",
            "INDEX_NAME"]
 
-
-@functools.lru_cache(maxsize=1)
-def environment() -> dict:
-    """Versions and git revision recorded with every run."""
-    def pkg(name):
-        try:
-            return version(name)
-        except PackageNotFoundError:
-            return None
-    from ..run.plants import ENGINE_PACKAGES
-    env = {name: pkg(name) for name in ("flexarm-validation", *ENGINE_PACKAGES, "numpy",
-                                        "numba", "scipy")}
-    env["python"] = platform.python_version()
-    try:
-        env["git"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                                    text=True, timeout=5, cwd=Path(__file__).parent
-                                    ).stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        env["git"] = None
-    return env
-
-
-
-@dataclass
-class StoredRun:
-    """One row of the index.  ``load()`` reads and verifies the run's file (every signal,
-    re-simulated where the file keeps less)."""
-
-    run_id: str
-    name: str
-    status: str
-    message: str
-    end_time: float | None
-    fingerprint: str
-    config: dict
-    metrics: dict
-    campaign: str = ""
-    sweep: str = ""
-    axes: dict = field(default_factory=dict)
-    timings: dict = field(default_factory=dict)
-    environment: dict = field(default_factory=dict)
-    file: str = ""
-    sha256: str = ""
-    size: int = 0
-    finished: str = ""
-    store: "ResultStore | None" = field(default=None, repr=False, compare=False)
-
-    def load(self) -> RunResult:
-        """Every signal of the run at every sample: from its file, or re-simulated where
-        the file keeps less (`validation.batch.resimulate.full_result`)."""
-        return full_result(self)
-
-    @property
-    def plant(self) -> str:
-        return self.config.get("plant", {}).get("kind", "?")
-
-    @property
-    def role(self) -> str:
-        """"truth" or "reduced" (`validation.run.plants.role_of`: no code imported)."""
-        from ..run.plants import role_of
-        return role_of(self.config)
-
-    @property
-    def plant_label(self) -> str:
-        """How tables and figures name the run's plant."""
-        from ..run.plants import label_of
-        return label_of(self.config)
-
-
-
 def _sqlite_errors(method):
-    """``method`` with SQLite's errors turned into what they mean here
-    (`ResultStore._error`): one line naming the folder."""
+    """``method`` with SQLite's errors turned into what they mean here (`ResultStore.error`):
+    one line naming the folder."""
     @functools.wraps(method)
     def wrapper(self, *args, **kwargs):
         try:
             return method(self, *args, **kwargs)
         except sqlite3.Error as exc:
-            raise self._error(exc) from None
+            raise self.error(exc) from None
     return wrapper
 
 
-
-class ResultStore:
+class ResultStore(BaseStore):
     """Reads and writes one results folder (created on the first write).
 
     Parameters
@@ -150,19 +81,23 @@ class ResultStore:
     """
 
     def __init__(self, out: str | Path) -> None:
-        self.out = Path(out)
-        self.runs_dir = self.out / "runs"
-        self.index_path = self.out / INDEX_NAME
+        self._out = Path(out)
+        self.runs_dir = self._out / "runs"
+        self.index_path = self._out / INDEX_NAME
         self._db: sqlite3.Connection | None = None
+        self._dictionaries: dict[str, bytes] = {}
+
+    out = property(lambda self: self._out, doc="The results folder.")
 
     # --- the database ------------------------------------------------------------------
     def exists(self) -> bool:
         return self.index_path.is_file()
 
-    def _connect(self, create: bool) -> sqlite3.Connection:
+    def connection(self, *, create: bool) -> sqlite3.Connection:
         """The connection to the index; ``create``: create the folder and the index if
         they do not exist (a writer), else the index must exist (a reader, who can also
-        read a read-only folder)."""
+        read a read-only folder).  sqlite3.Error as SQLite raises it (`error` says what
+        it means)."""
         if self._db is not None:
             return self._db
         if not create:
@@ -178,11 +113,11 @@ class ResultStore:
             db = self._open()
         except sqlite3.Error as exc:
             if create or (self.writable() and not self._disk_full()):
-                raise self._error(exc) from None
+                raise self.error(exc) from None
             try:  # a healthy folder, read-only or on a full disk: still readable
-                db = self._open_read_only()
+                db = open_read_only(self.index_path)
             except sqlite3.Error:
-                raise self._error(exc) from None
+                raise self.error(exc) from None
         self._db = db
         return db
 
@@ -190,9 +125,11 @@ class ResultStore:
         """StoreError unless this is a results folder that can be read (its own index and
         runs/, no links in their place)."""
         self._check_layout()
-        if not self.exists():
-            raise StoreError(f"{self.out}: not a results folder (no {INDEX_NAME}; "
-                             f"'flexarm repair {self.out}' rebuilds it from runs/)")
+        if not self.exists():  # the repair suggested only where it has run files to read
+            why = (f"no {INDEX_NAME}; 'flexarm repair {self.out}' rebuilds it from runs/"
+                   if self.runs_dir.is_dir() else
+                   f"no {INDEX_NAME}, no runs/" if self.out.is_dir() else "no such folder")
+            raise StoreError(f"{self.out}: not a results folder ({why})")
 
     def _check_layout(self) -> None:
         """The folder's own files are its own: the index and runs/ are no symbolic links
@@ -213,41 +150,22 @@ class ResultStore:
             set_wal(db)
             # NORMAL: a transaction is durable once the WAL is checkpointed; an
             # application crash never loses a committed run, a power cut may lose the
-            # last ones (they are then redone on resume: their files fail verification).
+            # last ones (they are then redone on resume).
             db.execute("PRAGMA synchronous=NORMAL")
             tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master")}
-            if "runs" not in tables and existed and self._run_files():
+            if "runs" not in tables and existed and self.run_files():
                 # An index without its table (an empty or truncated file) next to run
                 # files: not a new index but a lost one — never read as "no runs".
                 raise sqlite3.DatabaseError("the index holds no table of runs")
+            if "meta" in tables:
+                found = db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
+                if found and found[0] != str(SCHEMA_VERSION):
+                    raise StoreError(
+                        f"{self.index_path}: index schema {found[0]}, this version reads "
+                        f"{SCHEMA_VERSION}; 'flexarm repair {self.out}' rebuilds the index "
+                        "from the run files")
             db.executescript(SCHEMA)
             db.execute("INSERT OR IGNORE INTO meta VALUES ('schema', ?)", (str(SCHEMA_VERSION),))
-            (schema,) = db.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()
-        except BaseException:
-            db.close()
-            raise
-        if schema != str(SCHEMA_VERSION):
-            db.close()
-            raise StoreError(f"{self.index_path}: index schema {schema}, this version reads "
-                             f"{SCHEMA_VERSION}; 'flexarm repair {self.out}' rebuilds the index "
-                             "from the run files")
-        return db
-
-    def _open_read_only(self) -> sqlite3.Connection:
-        """The index of a folder SQLite cannot write its shared-memory file into
-        (read-only, or on a full disk).  With no WAL journal (or an empty one) every
-        committed run is in the index itself, which no writer can change there: opened
-        as immutable (SQLite needs no shared-memory file then)."""
-        wal = Path(f"{self.index_path}-wal")
-        if wal.exists() and wal.stat().st_size > 0:
-            raise sqlite3.OperationalError("read-only folder whose journal (-wal) holds "
-                                           "runs not yet in the index")
-        uri = f"{self.index_path.resolve().as_uri()}?immutable=1"
-        db = sqlite3.connect(uri, uri=True, isolation_level=None)
-        try:
-            tables = {name for (name,) in db.execute("SELECT name FROM sqlite_master")}
-            if "runs" not in tables:
-                raise sqlite3.DatabaseError("the index holds no table of runs")
         except BaseException:
             db.close()
             raise
@@ -258,7 +176,9 @@ class ResultStore:
         return os.access(self.out, os.W_OK) and (not self.runs_dir.exists()
                                                  or os.access(self.runs_dir, os.W_OK))
 
-    def _run_files(self) -> list[Path]:
+    def run_files(self) -> list[Path]:
+        """Every ``runs/*.npz`` entry, sorted (whatever it is: `unindexed_files` keeps
+        the run files)."""
         return sorted(self.runs_dir.glob("*.npz")) if self.runs_dir.is_dir() else []
 
     def _disk_full(self) -> bool:
@@ -267,20 +187,31 @@ class ResultStore:
         except (OSError, AttributeError):  # no folder yet, or no statvfs (Windows)
             return False
 
-    def _error(self, exc: sqlite3.Error) -> Exception:
+    def error(self, exc: sqlite3.Error) -> Exception:
         """What an SQLite error means here, as one line naming the folder: a full disk
-        (`OSError` ENOSPC), a read-only folder, or a damaged index and its cure."""
+        (`OSError` ENOSPC), a read-only folder, a busy index, or a damaged index and its
+        cure."""
         name = getattr(exc, "sqlite_errorname", "") or ""
         if name == "SQLITE_FULL" or (self._disk_full() and name.startswith(
                 ("SQLITE_IOERR", "SQLITE_CANTOPEN"))):
             return OSError(errno.ENOSPC, "No space left on device", str(self.out))
         if not self.writable():
-            return StoreError(f"{self.out}: read-only, runs cannot be stored here ({exc})")
+            return ReadOnlyFolder(f"{self.out}: read-only, runs cannot be stored here ({exc})")
         if name == "SQLITE_BUSY":
-            return StoreError(f"{self.index_path}: busy: another process kept it locked for "
-                              f"{BUSY_TIMEOUT:g} s ({exc})")
-        return StoreError(f"{self.index_path}: the index is damaged ({exc}); "
-                          f"'flexarm repair {self.out}' rebuilds it from runs/")
+            return IndexBusy(f"{self.index_path}: busy: another process kept it locked for "
+                             f"{BUSY_TIMEOUT:g} s ({exc})")
+        return IndexDamaged(f"{self.index_path}: the index is damaged ({exc}); "
+                            f"'flexarm repair {self.out}' rebuilds it from runs/")
+
+    @contextmanager
+    def locked(self):
+        """Hold the index's write lock while the caller reads (nothing is written: of two
+        processes exporting at once, the later one reads every row the earlier wrote)."""
+        try:
+            with transaction(self.connection(create=False), commit=False):
+                yield self
+        except sqlite3.Error as exc:
+            raise self.error(exc) from None
 
     def close(self) -> None:
         if self._db is not None:
@@ -293,7 +224,7 @@ class ResultStore:
     def prepare(self) -> None:
         """Create the folder and its index (StoreError naming the folder if it cannot)."""
         try:
-            self._connect(create=True)
+            self.connection(create=True)
         except OSError as exc:
             if exc.errno == errno.ENOSPC:
                 raise
@@ -308,27 +239,42 @@ class ResultStore:
         then renamed), then its row (replacing an older row of the same id)."""
         if not is_run_id(rid):
             raise StoreError(f"{rid!r} is not a run id (12 hex digits)")
-        db = self._connect(create=True)
+        db = self.connection(create=True)
         row = write_run(self.out, rid, result, metrics, campaign=campaign, sweep=sweep,
                         axes=axes, env=env or environment())
-        insert_row(db, row)
+        with transaction(db):
+            insert_rows(db, [row_values(row)])
         return self.out / row["file"]
 
     @_sqlite_errors
     def insert(self, rows: list[tuple]) -> None:
-        """Commit the rows (`index.row_values`) of runs whose files are in place, in one
-        transaction (`validation.batch.committing`)."""
-        with transaction(self._connect(create=True)) as db:
+        with transaction(self.connection(create=True)) as db:
             insert_rows(db, rows)
 
     @_sqlite_errors
+    def add_dictionary(self, data: bytes) -> str:
+        """Keep a preset dictionary of rows' details (`index.dictionary_for`); its key."""
+        key = dictionary_key(data)
+        with transaction(self.connection(create=True)) as db:
+            db.execute("INSERT OR IGNORE INTO dictionaries VALUES (?, ?)", (key, data))
+            (kept,) = db.execute("SELECT data FROM dictionaries WHERE key = ?",
+                                 (key,)).fetchone()
+        if kept != data:
+            raise IndexDamaged(f"{self.index_path}: dictionary {key} differs from its key")
+        return key
+
+    @_sqlite_errors
     def set_campaign(self, name: str, info: dict) -> None:
-        """Record a campaign that stores runs here (description, report settings, …);
-        keys already recorded for it and not in ``info`` are kept."""
-        with transaction(self._connect(create=True)) as db:
+        with transaction(self.connection(create=True)) as db:
             old = db.execute("SELECT info FROM campaigns WHERE name = ?", (name,)).fetchone()
             merged = {**(json_table(old[0]) if old else {}), **info}
             db.execute("INSERT OR REPLACE INTO campaigns VALUES (?, ?)", (name, json.dumps(merged)))
+
+    @_sqlite_errors
+    def discard(self, ids) -> None:
+        """Delete the rows of ``ids`` (their files, if any, are left where they are)."""
+        with transaction(self.connection(create=True)) as db:
+            db.executemany("DELETE FROM runs WHERE run_id = ?", [(i,) for i in ids])
 
     def remove_stale_temporaries(self, older_than: float = 3600.0) -> int:
         """Delete temporary files a killed writer left behind more than ``older_than``
@@ -344,35 +290,71 @@ class ResultStore:
         return removed
 
     # --- reading ------------------------------------------------------------------------
-    @_sqlite_errors
-    def rows(self, *, where: str = "", params: tuple = ()) -> list[StoredRun]:
-        """Index rows (``where`` is an SQL condition on the columns), sorted by name.
-        A row whose id or file could name a path outside runs/, or whose contents are
-        not what the store writes, is refused (StoreError naming it and the cure)."""
-        db = self._connect(create=False)
-        sql = f"SELECT {', '.join(COLUMNS)} FROM runs {'WHERE ' + where if where else ''} " \
-              "ORDER BY name, run_id"
-        return [self._stored_run(values) for values in db.execute(sql, params)]
+    def _dictionary(self, db, key: str) -> bytes:
+        if key and key not in self._dictionaries:
+            found = db.execute("SELECT data FROM dictionaries WHERE key = ?", (key,)).fetchone()
+            if found is None:
+                raise ValueError(f"its detail's dictionary {key[:20]!r} is not in the index")
+            self._dictionaries[key] = found[0]
+        return self._dictionaries.get(key, b"")
 
-    def _stored_run(self, values) -> StoredRun:
-        row = dict(zip(COLUMNS, values))
-        rid = row["run_id"]
+    def scan(self, *, where: str = "", params: tuple = (), metrics=None):
+        """(run id, `StoredRun` or why the row is not a stored run) of every row, in no
+        order: what `rows` refuses, `repair` drops; ``metrics``: as `rows`'."""
+        db = self.connection(create=False)
         try:
-            if not is_run_id(rid) or row["file"] != f"runs/{rid}.npz":
-                raise ValueError("its id must be 12 hex digits and its file runs/<id>.npz")
-            if row["status"] not in STATUSES:
-                raise ValueError(f"status {str(row['status'])[:20]!r} is none of {STATUSES}")
-            if not (isinstance(row["size"], int) and row["size"] > 0
-                    and isinstance(row["sha256"], str) and len(row["sha256"]) == 64):
-                raise ValueError("its file's size and checksum are not a size and a SHA-256")
-            for c in JSON_COLUMNS:
-                row[c] = json_table(row[c])
-            row["metrics"] = metric_values(row["metrics"])
-        except (ValueError, TypeError, AttributeError) as exc:
-            raise StoreError(f"{self.index_path}: row {str(rid)[:40]!r} is not a stored run "
-                             f"({exc}); 'flexarm repair {self.out}' drops it") from None
-        row["config"] = row.pop("scenario")
-        return StoredRun(**row, store=self)
+            sets = {i: tuple(json.loads(names)[1]) for i, names in
+                    db.execute("SELECT id, names FROM metric_sets")}
+            columns = "*"
+            if metrics is not None:  # only these metric columns are read
+                have = {c[1] for c in db.execute("PRAGMA table_info(runs)")}
+                wanted = [m for m in dict.fromkeys(metrics) if "m:" + m in have]
+                sets = {i: tuple(n for n in names if n in wanted) for i, names in sets.items()}
+                columns = ", ".join([*FIXED, "metric_set", *map(metric_column, wanted)])
+            cursor = db.execute(f"SELECT {columns} FROM runs "
+                                f"{'WHERE ' + where if where else ''}", params)
+            yield from records(cursor, sets, lambda key: self._dictionary(db, key))
+        except sqlite3.Error as exc:
+            raise self.error(exc) from None
+
+    def rows(self, *, where: str = "", params: tuple = (), metrics=None) -> list[StoredRun]:
+        """Index rows (``where`` is an SQL condition on the columns: `index.metric_column`
+        names a metric's), sorted by name; with only the ``metrics`` named (None: every
+        one; reading 10^5 runs' ~140 metrics each is most of reading their rows).  A row
+        whose id or file could name a path outside runs/, or whose contents are not what
+        the store writes, is refused (StoreError naming it and the cure)."""
+        out = []
+        for rid, row in self.scan(where=where, params=params, metrics=metrics):
+            if isinstance(row, str):
+                raise IndexDamaged(f"{self.index_path}: row {str(rid)[:40]!r} is not a stored "
+                                   f"run ({row}); 'flexarm repair {self.out}' drops it")
+            out.append(row)
+        out.sort(key=lambda r: (r.name, r.run_id))
+        return out
+
+    @_sqlite_errors
+    def check_pages(self) -> None:
+        """`IndexDamaged` unless SQLite finds every page of the index sound
+        (``PRAGMA quick_check``: a damaged page a query does not read is found too)."""
+        found = self.connection(create=False).execute("PRAGMA quick_check(1)").fetchone()[0]
+        if found != "ok":
+            found = " ".join(found.replace("*** in database main ***", "").split())
+            raise IndexDamaged(f"{self.index_path}: the index is damaged ({found}); "
+                               f"'flexarm repair {self.out}' rebuilds it from runs/")
+
+    def refuse_malformed(self) -> None:
+        """`IndexDamaged` naming the first row that is not a stored run, checked in SQL
+        (what `StoredRun.check` checks of every row, without reading them into Python)."""
+        statuses = ", ".join(f"'{s}'" for s in STATUSES)
+        bad = self.columns(["run_id"], where=(
+            "typeof(run_id) != 'text' OR length(run_id) != 12 OR run_id GLOB '*[^0-9a-f]*' "
+            f"OR status NOT IN ({statuses}) OR (file != '' AND (file != 'runs/' || run_id "
+            "|| '.npz' OR typeof(size) != 'integer' OR size <= 0 OR length(sha256) != 64)) "
+            "OR metric_set NOT IN (SELECT id FROM metric_sets) LIMIT 1"))
+        if bad:
+            rid = bad[0][0]
+            raise IndexDamaged(f"{self.index_path}: row {str(rid)[:40]!r} is not a stored run; "
+                               f"'flexarm repair {self.out}' drops it")
 
     def rows_of(self, ids) -> list[StoredRun]:
         """The rows of the runs ``ids`` that the index holds (queried by id, in chunks: a
@@ -384,13 +366,30 @@ class ResultStore:
             out += self.rows(where=f"run_id IN ({', '.join('?' * len(chunk))})", params=chunk)
         return out
 
-    def row(self, rid: str) -> StoredRun | None:
-        found = self.rows(where="run_id = ?", params=(rid,))
-        return found[0] if found else None
+    @_sqlite_errors
+    def columns(self, names, *, where: str = "", params: tuple = ()) -> list[tuple]:
+        """The values of the index's columns ``names`` (quoted identifiers, e.g.
+        `index.metric_column`) of every row (or those ``where`` selects), as tuples:
+        a table of many runs read without building a record per run."""
+        db = self.connection(create=False)
+        sql = f"SELECT {', '.join(names)} FROM runs {'WHERE ' + where if where else ''}"
+        return db.execute(sql, params).fetchall()
+
+    @_sqlite_errors
+    def layouts(self) -> dict[int, tuple[tuple, tuple]]:
+        """``metric_set`` id → (swept names, metric names), each in its runs' order."""
+        return {i: tuple(tuple(part) for part in json.loads(names)) for i, names in
+                self.connection(create=False).execute("SELECT id, names FROM metric_sets")}
+
+    @_sqlite_errors
+    def column_names(self) -> list[str]:
+        """The index's columns (metrics ``m:<name>``, swept values ``a:<name>``)."""
+        return [row[1] for row in self.connection(create=False).execute(
+            "PRAGMA table_info(runs)")]
 
     @_sqlite_errors
     def campaigns(self) -> dict[str, dict]:
-        db = self._connect(create=False)
+        db = self.connection(create=False)
         out = {}
         for name, info in db.execute("SELECT * FROM campaigns"):
             try:
@@ -399,18 +398,26 @@ class ResultStore:
                 out[name] = {}  # descriptive only: a damaged entry is left out
         return out
 
-    def load(self, rid: str) -> RunResult:
-        """The run's result as its file keeps it (every signal: `StoredRun.load`), verified against its row (StoreError
-        naming the run if the file is missing or damaged)."""
-        return self.read(rid)[0]
-
     def read(self, rid: str) -> tuple[RunResult, dict]:
-        """(result, the file's metadata) of run ``rid`` (`load`); the metadata's ``kept``
-        says what the file keeps of the run's signals when it is not all of them."""
         row = self.row(rid)
         if row is None:
             raise StoreError(f"{self.out}: no run {rid}")
-        return RunResult.from_bytes(self._verified_bytes(row))
+        if not row.has_file:  # metrics only: the row is all of it
+            return self._from_row(row), {"kept": row.kept or {}}
+        try:
+            return RunResult.from_bytes(self._verified_bytes(row))
+        except ValueError as exc:
+            raise StoreError(f"run {row.run_id}: {self.out / row.file}: {exc}") from None
+
+    @staticmethod
+    def _from_row(row: StoredRun) -> RunResult:
+        import numpy as np
+        try:
+            return RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0), np.float32),
+                             status=row.status, message=row.message, end_time=row.end_time,
+                             config=row.config, timings=row.timings)
+        except ValueError as exc:
+            raise IndexDamaged(f"run {row.run_id}: {exc}") from None
 
     def _verified_bytes(self, row: StoredRun) -> bytes:
         path = self.out / row.file
@@ -432,10 +439,17 @@ class ResultStore:
         ``checksum``) of the wrong SHA-256."""
         damaged = {}
         for row in self.rows() if rows is None else rows:
-            path = self.out / row.file
-            if run_id(row.config) != row.run_id:
+            try:
+                text = row.scenario_text
+            except ValueError as exc:
+                damaged[row.run_id] = str(exc)
+                continue
+            if hashlib.sha256(text.encode()).hexdigest()[:12] != row.run_id:
                 damaged[row.run_id] = "its scenario does not hash to its id"
                 continue
+            if not row.has_file:
+                continue
+            path = self.out / row.file
             try:
                 info = path.stat()
             except OSError:
@@ -455,8 +469,8 @@ class ResultStore:
     def unindexed_files(self) -> list[Path]:
         """Run files (regular files named ``<run id>.npz``) with no row in the index
         (e.g. a row lost with a deleted index)."""
-        known = {r.file for r in self.rows()} if self.exists() else set()
-        return [p for p in self._run_files()
+        known = {f for (f,) in self.columns(["file"])} if self.exists() else set()
+        return [p for p in self.run_files()
                 if p.is_file() and is_run_id(p.stem) and f"runs/{p.name}" not in known]
 
     # --- repair and export ----------------------------------------------------------------
@@ -465,11 +479,9 @@ class ResultStore:
         return repair.repair(self)
 
     def adopt(self, path: Path) -> StoredRun:
-        """Index a run file that has no row (`repair.adopt`)."""
-        try:
-            return repair.adopt(self, path)
-        except sqlite3.Error as exc:
-            raise self._error(exc) from None
+        """Index a run file that has no row (`repair.adopt`); `NotARunFile` if it is not
+        an intact run file of its name."""
+        return repair.adopt(self, path)
 
     def export(self, *, allow_fewer: bool = False) -> tuple[Path, Path]:
         """Write metrics.csv and manifest.json from the index (`export.export`)."""

@@ -23,8 +23,9 @@ import secrets
 from dataclasses import dataclass
 from pathlib import Path
 
-from .index import COLUMNS, StoreError, row_values
-from .runfiles import KEEP_ALL, Keep, run_file, write_file
+from .errors import StoreError
+from .index import STATUS, row_values
+from .runfiles import KEEP_ALL, KEEP_NONE, Keep, run_file, write_file
 from .worker import OVER_MEMORY, execute_run, failed_result, warm_up, worker_init
 
 __all__ = ["Destination", "StoreTask", "Stored", "run_and_store", "store_failure",
@@ -34,15 +35,19 @@ __all__ = ["Destination", "StoreTask", "Stored", "run_and_store", "store_failure
 @dataclass(frozen=True)
 class Destination:
     """Where a campaign's runs are stored and what is recorded with each: the results
-    folder ``out``, the campaign's name, the environment (versions) recorded with every
-    run, what a run keeps (`Keep`), and the name of the token file in ``out/runs`` that
-    proves a worker sees this folder (None: workers send the file's bytes)."""
+    folder ``out`` (None: an in-memory store, `validation.batch.memory`, sent every
+    result whole, its signals in float64), the campaign's name, the environment
+    (versions) recorded with every run, what a run keeps (`Keep`), the name of the token
+    file in ``out/runs`` that proves a worker sees this folder (None: workers send the
+    file's bytes), and the preset dictionary rows' details are compressed with
+    (`index.dictionary_for`)."""
 
-    out: str
+    out: str | None
     campaign: str
     env: dict
     keep: Keep = KEEP_ALL
     reach: str | None = None
+    dictionary: bytes = b""
 
 
 @dataclass(frozen=True)
@@ -63,7 +68,8 @@ class Stored:
     file's bytes if the worker could not write them (else None); or, if the file could
     not be written at all, why (``error``, with ``errno`` when the system said one).
     ``exhausted``: the run reached its worker's memory limit; what that process still
-    holds (a plug-in's module-level data) is unknown, so the runner replaces it."""
+    holds (a plug-in's module-level data) is unknown, so the runner replaces it.
+    ``result``: (result, metrics) for an in-memory store."""
 
     rid: str
     values: tuple | None
@@ -71,10 +77,11 @@ class Stored:
     error: str = ""
     errno: int | None = None
     exhausted: bool = False
+    result: tuple | None = None
 
     @property
     def status(self) -> str:
-        return self.values[COLUMNS.index("status")] if self.values else "failed"
+        return self.values[0][STATUS] if self.values else "failed"
 
 
 def leave_token(out: Path) -> str:
@@ -97,12 +104,18 @@ def _reaches(out: str, token: str) -> bool:
 
 def _store(task: StoreTask, result, metrics) -> Stored:
     d = task.destination
+    if d.out is None:
+        data, row = run_file(task.rid, result, metrics, campaign=d.campaign,
+                             sweep=task.sweep, axes=task.axes, env=d.env, keep=KEEP_NONE)
+        return Stored(task.rid, row_values(row, d.dictionary), result=(result, metrics))
     reaches = d.reach is not None and _reaches(d.out, d.reach)
     # A file to send is sent compressed (`validation.run.packing`: half the bytes).
     keep = d.keep if reaches else dataclasses.replace(d.keep, compress=True)
     data, row = run_file(task.rid, result, metrics, campaign=d.campaign, sweep=task.sweep,
                          axes=task.axes, env=d.env, keep=keep)
-    values = row_values(row)
+    values = row_values(row, d.dictionary)
+    if data is None:  # metrics only: the row is all of it
+        return Stored(task.rid, values)
     if not reaches:
         return Stored(task.rid, values, data)
     return _written(Path(d.out), task.rid, data, values)
@@ -111,7 +124,8 @@ def _store(task: StoreTask, result, metrics) -> Stored:
 def run_and_store(task: StoreTask) -> Stored:
     """Execute ``task``'s run (`worker.execute_run`: never raises for the run's sake) and
     store it (module docstring)."""
-    result, metrics = execute_run(task.scenario)
+    result, metrics = execute_run(task.scenario,
+                                  float32=task.destination.out is not None)
     stored = _store(task, result, metrics)
     if result.status == "failed" and result.message.startswith(OVER_MEMORY):
         return dataclasses.replace(stored, exhausted=True)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..run import loop, metrics, requirements  # noqa: F401 - loaded once, before the fork
 from ..run.results import RunResult
+from ..run.tracebacks import own_frames
 from .interrupts import Interrupted
 
 __all__ = ["OVER_MEMORY", "execute_run", "load_run_libraries", "failed_result",
@@ -43,14 +44,16 @@ def keep_freed_memory() -> None:
         mallopt(-3, 32 << 20)  # M_MMAP_THRESHOLD (glibc's largest on 64-bit)
 
 
-def failed_result(scenario, exc: BaseException | str) -> tuple[RunResult, dict]:
+def failed_result(scenario, exc: BaseException | str,
+                  traceback: str = "") -> tuple[RunResult, dict]:
     """The "failed" result of ``scenario`` (a `Scenario` or its mapping) that raised
-    ``exc`` (or ended as the message ``exc`` says)."""
+    ``exc`` (or ended as the message ``exc`` says), with the frames of its plug-ins' code
+    where it raised (``traceback``, `RunResult.traceback`)."""
     from ..run.scenario import Scenario, scenario_to_mapping
     config = scenario_to_mapping(scenario) if isinstance(scenario, Scenario) else scenario
     message = exc if isinstance(exc, str) else describe(exc)
     return (RunResult(time=np.zeros(0), names=(), signals=np.zeros((0, 0)), status="failed",
-                      message=message, config=config),
+                      message=message, config=config, traceback=traceback),
             {"status": "failed", "end_time": 0.0})
 
 
@@ -75,9 +78,10 @@ def _over_memory(message: str) -> str:
     return f"{OVER_MEMORY} {_memory_limit} MiB ({message})"
 
 
-def execute_run(scenario) -> tuple[RunResult, dict]:
+def execute_run(scenario, *, float32: bool = True) -> tuple[RunResult, dict]:
     """Run one scenario (in a worker; a checked `Scenario`, or a mapping to check): the
-    result, with signals as float32 (what the store keeps; half the bytes to send back),
+    result, with signals as float32 (what the store keeps; half the bytes to send back;
+    float64 if not ``float32``: for an in-memory store),
     and its metrics — with each requirement's robustness ``rho_<name>`` — computed
     from the float64 signals.  Whatever the run raises —
     including `SystemExit` and `KeyboardInterrupt` from a law — becomes a "failed"
@@ -98,15 +102,26 @@ def execute_run(scenario) -> tuple[RunResult, dict]:
         with np.errstate(over="ignore", invalid="ignore"):
             metrics = all_metrics(result)
             metrics |= requirement_metrics(result, metrics)
-            result.signals = result.signals.astype(np.float32)
+            if float32:
+                result.signals = result.signals.astype(np.float32)
     except Interrupted:  # a Ctrl-C to this process (a serial runner): not the run's
         raise
     except (Exception, SystemExit, KeyboardInterrupt) as exc:  # noqa: BLE001 - the run's failure
+        where, frames = own_frames(exc, _plugin_modules(scenario))
         return failed_result(scenario, _over_memory(
-            f"{describe(exc)}, {time.perf_counter() - started:.3g} s after the run started"))
+            f"{describe(exc)}, {time.perf_counter() - started:.3g} s after the run started"
+            f" ({where})"), frames)
     if result.status == "failed":
         result.message = _over_memory(result.message)
     return result, metrics
+
+
+def _plugin_modules(scenario) -> list[str]:
+    """The modules of the plug-ins ``scenario`` (a `Scenario` or its mapping) names."""
+    from ..run.scenario import Scenario, scenario_to_mapping
+    from .fingerprint import plugin_kinds
+    mapping = scenario_to_mapping(scenario) if isinstance(scenario, Scenario) else scenario
+    return [kind.partition(":")[0] for kind in plugin_kinds(mapping)]
 
 
 def worker_init(parent: int, memory_mib: int | None) -> None:
@@ -173,7 +188,8 @@ def _short_run(scenario) -> None:
     from ..run.loop import run_scenario
     from ..run.scenario import scenario_from_mapping, scenario_to_mapping
     data = scenario_to_mapping(scenario)
-    data.update(duration=(scenario.sensors.delay + 2) * scenario.Ts, transient=0.0)
+    data.update(duration=(scenario.sensors.delay + 2) * scenario.Ts, transient=0.0,
+                requirement=[])  # what is compiled needs no requirement (nor fits them)
     run_scenario(scenario_from_mapping(data))
 
 

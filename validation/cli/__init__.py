@@ -1,11 +1,11 @@
 """The ``flexarm`` command line: a thin layer over the library.
 
 Bad input ends with one line on stderr and exit status 2, before anything is written;
-a run or campaign with failed runs exits 1, a verdict command one whose verdict a failed
-run left missing; SIGINT/SIGTERM exit 130/143 after keeping
-what finished (at once, while the program is still starting); a full disk is one line
-naming the folder, exit 1.  Never a traceback, and never status 0 because code a
-command ran (a plug-in) called ``sys.exit``.
+exit status 1 when something a command was asked for is missing because a run failed
+(the one rule, command by command: docs/guide/execution.rst, "Exit statuses");
+SIGINT/SIGTERM exit 130/143 after keeping what finished (at once, while the program is
+still starting); a full disk is one line naming the folder, exit 1.  Never a traceback,
+and never status 0 because code a command ran (a plug-in) called ``sys.exit``.
 
 `main` runs a command; `parser` declares every command's arguments; the commands live
 by what they work on: `modes`, `one_run` (run, show), `campaigns` (campaign,

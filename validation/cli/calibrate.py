@@ -7,10 +7,12 @@ import json
 import sys
 from pathlib import Path
 
+from ..run.config import ConfigError
 from ..run.experiments import from_run, read_experiment, read_frequency_response, write_experiment
 
 from .common import EXIT_FAILED, runner_for
 from .one_run import stored_run
+from ..batch.resimulate import every_signal
 
 #: Failing residual tests listed on the terminal (all are in calibration.json).
 _FAILING_SHOWN = 8
@@ -21,8 +23,8 @@ def _experiment(spec: str):
     path = Path(spec)
     if path.suffix.lower() == ".csv" or path.is_file():
         return read_experiment(path), None
-    row = stored_run(spec, "DATA")
-    return from_run(row.load(), row.run_id, spec), row.config
+    store, row = stored_run(spec, "DATA")
+    return from_run(every_signal(store, row), row.run_id, spec), row.config
 
 
 def _fit_names(text: str | None) -> list[str] | None:
@@ -91,6 +93,14 @@ def _print_parameters(result: dict) -> None:
         else:
             print(f"  {name:<{width}}  {p['estimate']:.7g} ± {p['std']:.2g}  "
                   f"(95 %: {lo:.7g} .. {hi:.7g})")
+    rough = [(n, p["jacobian"]) for n, p in result["parameters"].items()
+             if not p["jacobian"]["settled"]]
+    if rough:
+        print("  the outputs jump as " + ", ".join(
+            f"{n.rsplit('.', 1)[-1]} ({100 * j['halves']:.3g} %)" for n, j in rough)
+            + " change (stick-slip or backlash events moving across integration steps: its "
+              "forward and backward differences disagree by that much); the slope its "
+              "interval rests on is uncertain (docs: Calibrate, friction and drives)")
 
 
 def _print_adequacy(adequacy: dict) -> None:
@@ -118,9 +128,12 @@ def _print_comparison(rows: list[dict]) -> None:
 
 def export_signals(args: argparse.Namespace) -> int:
     """``flexarm export --signals RESULTS/RUN [--to FILE]``: the run as an experiment CSV."""
-    row = stored_run(args.signals, "--signals")
-    exp = from_run(row.load(), row.run_id, args.signals)
-    comment = (f"run {row.run_id} ({row.name}) of {row.store.out}, as flexarm calibrate reads "
+    if args.to is not None and (Path(args.to).is_dir() or Path(args.to).is_symlink()):
+        raise ConfigError("--to", f"{args.to} is a directory or a link: give the CSV "
+                                  "file to write")
+    store, row = stored_run(args.signals, "--signals")
+    exp = from_run(every_signal(store, row), row.run_id, args.signals)
+    comment = (f"run {row.run_id} ({row.name}) of {store.out}, as flexarm calibrate reads "
                f"an experiment: t [s], the joint torques applied [N m], the measurements")
     if args.to is None:
         write_experiment(exp, sys.stdout, comment)

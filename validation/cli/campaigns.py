@@ -3,8 +3,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 from pathlib import Path
 
+from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore
 
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
@@ -53,10 +55,11 @@ def campaigns_dir() -> Path:
 
 
 def cmd_reproduce_paper(args: argparse.Namespace) -> int:
-    """The paper's campaign, the stability map, the mesh checks of the truth-plant runs
-    it does not explain, the claims and the report; a short summary on the terminal.
-    Exit 1 only if a verdict is missing (a run that decides one failed); failures that
-    decide nothing are counted in the summary."""
+    """The paper's campaign (with ``--lab`` its claims' runs on the lab arm), the
+    stability map, the mesh checks of the truth-plant runs it does not explain, the
+    claims and the report; a short summary on the terminal.  Exit 1 only if a verdict is
+    missing (a run that decides one failed); failures that decide nothing are counted in
+    the summary."""
     from ..batch.campaign import expand, load_campaign
     from ..batch.queue import run_campaign
     from ..report.verdict_tables import write_claims
@@ -64,10 +67,11 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     from ..verdicts.claims import claim_columns
     from ..verdicts.stability import beyond_every_limit
     from .summaries import claims_summary
-    campaign = load_campaign(campaigns_dir() / "paper.toml")
+    which = "lab" if args.lab else "paper"
+    campaign = load_campaign(campaigns_dir() / f"{which}.toml")
     tolerance = tolerance_from(campaign.stability, args.tolerance)
     runs = paper_keep(expand(campaign), campaign)
-    out = Path(args.out or Path("results") / "paper")
+    out = Path(args.out or Path("results") / which)
     scenarios = [r.scenario for r in runs]
     runner = runner_for(args, scenarios, out, *([] if args.no_stability else [out / "stability"]))
     with runner:
@@ -88,7 +92,8 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
                              progress=not args.no_progress)
         if checks and checks != EXIT_FAILED:  # interrupted
             return checks
-    columns = claim_columns(ResultStore(out).rows())
+    store = ResultStore(out)
+    columns = claim_columns(store.rows(), functools.partial(every_signal, store))
     write_claims(out, columns)
     lines, missing = claims_summary(columns, out / "claims.md")
     print("\n".join(lines))
@@ -103,10 +108,10 @@ def paper_keep(runs, campaign) -> list:
     figures (``[report] figures``) read them —, the claims' signals for the disturbance
     run (`mesh.CHECK_KEEP`), the metrics alone for every other run (re-simulated bit for
     bit on demand: ``flexarm run --like``)."""
-    from ..batch.runfiles import KEEP_METRICS, Keep
+    from ..batch.runfiles import KEEP_NONE, Keep
     from ..verdicts.claims import DISTURBED, SYSTEM
     from ..verdicts.mesh import CHECK_KEEP
     everything = {SYSTEM, *campaign.report.get("figures", [])}
     keeps = {name: Keep(compress=True) for name in everything} | {DISTURBED: CHECK_KEEP}
     return [dataclasses.replace(r, keep=keeps.get(r.scenario.name.split("/")[-1],
-                                                  KEEP_METRICS)) for r in runs]
+                                                  KEEP_NONE)) for r in runs]

@@ -41,7 +41,7 @@ def runner_for(args, scenarios, *folders: Path):
     options = dict(force=args.force_workers, run_timeout=args.run_timeout,
                    memory_limit=args.memory_limit)
     check_runner(executor, args.workers, getattr(args, "scheduler", None), **options)
-    created = [Path(f) for f in folders if not Path(f).exists()]
+    created = [(Path(f), _first_missing(Path(f))) for f in folders if not Path(f).exists()]
     try:
         for folder in folders:
             open_output(folder)
@@ -50,10 +50,19 @@ def runner_for(args, scenarios, *folders: Path):
     except BaseException:
         # Refused (an unreachable scheduler) or stopped before any run: the folders this
         # command created go again, as long as they hold no run.
-        for folder in reversed(created):
+        for folder, top in reversed(created):  # with the parents it made (deep/new/out)
             if not any(ResultStore(folder).runs_dir.glob("*.npz")):
-                shutil.rmtree(folder, ignore_errors=True)
+                shutil.rmtree(top, ignore_errors=True)
         raise
+
+
+def _first_missing(path: Path) -> Path:
+    """The outermost folder of ``path`` (itself included) that does not exist yet: what
+    creating it makes."""
+    path = path.absolute()
+    while not path.parent.exists() and path.parent != path:
+        path = path.parent
+    return path
 
 
 def finish(summary, name: str, out) -> int:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import copy
 import dataclasses
+import functools
 import math
 import sys
 from pathlib import Path
@@ -13,9 +14,10 @@ from ..batch.campaign import PlannedRun
 from ..batch.executor import available_cores, check_runner, make_runner
 from ..batch.interrupts import Interrupted
 from ..batch.queue import run_planned
+from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore, StoreError, run_id
 from ..run.config import ConfigError, check_label
-from ..run.plants import is_truth, plant_settings
+from ..run.plants import is_truth
 from ..run.scenario import Scenario, default_transient, scenario_from_mapping
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
 from ..verdicts.mesh import is_check
@@ -29,7 +31,7 @@ _RUN_FLAGS = {"plant": "plant.kind", "controller": "controller.kind", "arm": "ar
 
 
 def stored_run(spec: str, flag: str):
-    """The stored run ``RESULTS/RUN``: RESULTS is the leading part of the path that holds
+    """(store, row) of the stored run ``RESULTS/RUN``: RESULTS is the leading part of the path that holds
     a results index; RUN is a run id (or a unique prefix of one, at least 4 characters)
     or a run name (in full, or its part after the campaign's "/").  A name shared by a
     run and its mesh/step checks (which keep its name) means the run itself."""
@@ -42,7 +44,8 @@ def stored_run(spec: str, flag: str):
     else:
         raise ConfigError(flag, f"{spec}: expected RESULTS/RUN (a results folder holding "
                                 f"{INDEX_NAME}, then a run id or name)")
-    rows = ResultStore(folder).rows()
+    store = ResultStore(folder)
+    rows = store.rows()
     found = [r for r in rows if r.run_id == selector] or \
         [r for r in rows if len(selector) >= 4 and r.run_id.startswith(selector)] or \
         [r for r in rows if r.name == selector] or \
@@ -53,12 +56,12 @@ def stored_run(spec: str, flag: str):
                                 f"{', '.join(names[:12])}{', ...' if len(names) > 12 else ''})")
     nominal = [r for r in found if not is_check(r)]
     if len(found) > 1 and len(nominal) == 1:
-        return nominal[0]
+        return store, nominal[0]
     if len(found) > 1:
         choices = "; ".join(f"{r.run_id} ({_kind_of_run(r)})" for r in found[:12])
         raise ConfigError(flag, f"{len(found)} runs of {folder} are named {selector!r}; give "
                                 f"one's id: {choices}{'; ...' if len(found) > 12 else ''}")
-    return found[0]
+    return store, found[0]
 
 
 def _kind_of_run(row) -> str:
@@ -70,9 +73,9 @@ def _kind_of_run(row) -> str:
     return f"nominal run, {row.plant} plant, {describe_run(row.config)}"
 
 
-def _checks_note(row) -> str:
+def _checks_note(store, row) -> str:
     """What --like says about the mesh/step checks stored under the same name."""
-    checks = [r.run_id for r in row.store.rows() if is_check(r) and r.axes.get("of") == row.run_id]
+    checks = [r.run_id for r in store.rows() if is_check(r) and r.axes.get("of") == row.run_id]
     if not checks:
         return ""
     return (f"; the nominal run: its {len(checks)} mesh/step check(s) share its name "
@@ -89,7 +92,7 @@ def auto_name(s: Scenario) -> str:
 
 def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     """The scenario of ``flexarm run`` and what to tell the user about where it came from."""
-    from ..batch.campaign import load_study
+    from ..batch.campaign import load_study, own_name
     notes, like = [], getattr(args, "like", None)
     if like and args.config:
         raise ConfigError("--like", "--like and --config exclude each other")
@@ -105,14 +108,12 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     if given is not None:
         check_label(given, "name")
     if like:
-        row = stored_run(like, "--like")
+        store, row = stored_run(like, "--like")
         data = copy.deepcopy(row.config)
     elif args.config:
         study = load_study(args.config, name=given)
-        data = deep_merge({}, study.base)
-        if len(study.sweeps) == 1 and set(study.sweeps[0]) == {"name"}:
-            data["name"] = study.sweeps[0]["name"]  # a scenario file's own name
-        elif study.sweeps:
+        data = deep_merge({}, study.base) | own_name(study)
+        if study.sweeps and not own_name(study):
             notes.append(f"{args.config} is a campaign: running its [scenario] base (its "
                          f"{len(study.sweeps)} sweep(s) are not run: flexarm campaign "
                          f"{args.config})")
@@ -138,8 +139,8 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
         old, new = flatten(row.config), flatten(scenario_to_mapping(scenario))
         changed = [f"{k} = {new.get(k)!r} (was {old.get(k)!r})" for k in sorted(old | new)
                    if old.get(k) != new.get(k)]
-        head = f"rerunning {row.run_id} ({row.name}, stored in {row.store.out}" \
-               f"{_checks_note(row) if not is_check(row) else ''})"
+        head = f"rerunning {row.run_id} ({row.name}, stored in {store.out}" \
+               f"{_checks_note(store, row) if not is_check(row) else ''})"
         notes.append(head + (" exactly" if not changed else
                              f" with {len(changed)} change(s): " + "; ".join(changed)))
         if row.fingerprint != run_fingerprint(row.config):
@@ -231,9 +232,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     rid = run_id(data)
     check_runner(run_timeout=args.run_timeout, memory_limit=args.memory_limit)
     truth = is_truth(data)
+    refinable = bool(scenario.plant.refinements())
     if args.mesh_check and not truth:
         raise ConfigError("--mesh-check", f"the {scenario.plant.kind} plant is not a "
                                           "discretisation: only a truth plant has mesh checks")
+    if args.mesh_check and not refinable:
+        raise ConfigError("--mesh-check", f"the {scenario.plant.label} declares no refinements "
+                                          "(a plug-in plant is described without importing "
+                                          "it): check its convergence yourself")
     store = open_output(args.out or Path("results") / f"run-{rid}")  # bad --out: nothing ran
     workers = min(available_cores(), 3) if args.mesh_check else 1  # the 3 checks side by side
     with make_runner("local", workers, run_timeout=args.run_timeout,
@@ -255,18 +261,29 @@ def cmd_run(args: argparse.Namespace) -> int:
     obs = "" if s.observer.kind == "none" else f" + {s.observer.kind}"
     print(f"{s.name}: {s.controller.kind}{obs} on the {s.plant.kind} plant, {s.arm} arm, "
           f"{s.duration:g} s at Ts = {s.Ts:g} s, from {s.initial_state}")
+    if s.true_params.joints_text():
+        print(f"  the true arm's joints: {s.true_params.joints_text()}")
     if result.message:
         print(f"  {result.status}: {result.message}")
-    units = {r.metric: r for r in s.requirement}
-    print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS},
-                         units))
+    if result.status == "failed":
+        if frames := failure_frames(store, rid):
+            print(frames)
+        print(f"  no metrics: the run failed after {result.end_time or 0:g} of {s.duration:g} s "
+              "(a run that failed measures nothing)")
+    else:
+        units = {r.metric: r for r in s.requirement}
+        print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS},
+                             units))
     if getattr(args, "like_row", None) is not None and result.status == "ok":
         print(_compare_with_stored(args.like_row, metrics))
-    if truth:
+    if truth and refinable:
         print("  " + (convergence_line(store, rid) if args.mesh_check else
                       f"convergence not checked: these are the FE model's numbers on "
-                      f"{plant_settings(data['plant']).discretisation()}; --mesh-check runs the "
-                      "same loop on refined meshes and steps"))
+                      f"{scenario.plant.discretisation()}; --mesh-check runs the same loop on "
+                      "refined meshes and steps"))
+    elif truth:
+        print(f"  convergence not checked: the {scenario.plant.label} declares no refinements "
+              "(check its convergence yourself)")
     print(f"results: {path} (index and metrics.csv in {store.out})" + (
         f"; figures: flexarm show {store.out}/{rid}" if result.status == "ok" else ""))
     if args.mesh_check and checked:
@@ -279,7 +296,7 @@ def convergence_line(store, rid: str) -> str:
     judged value (a claim's measure) within the tolerance on every check, or which moved."""
     from ..verdicts.claims import mesh_rows
     from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
-    rows = mesh_rows(store.rows())
+    rows = mesh_rows(store.rows(), functools.partial(every_signal, store))
     mine = [r for r in rows if r.run.run_id == rid]
     labels = [label for label, _ in mine[0].values[1:]] if mine else []
     against = f"against {'; '.join(labels)}"
@@ -295,14 +312,26 @@ def convergence_line(store, rid: str) -> str:
             f"+ {MESH_ATOL:.0%} of its bound")
 
 
+def failure_frames(store: ResultStore, rid: str) -> str:
+    """The stored frames of the code that raised in run ``rid`` (`RunResult.traceback`),
+    indented under a heading, or ""."""
+    frames = store.read(rid)[0].traceback
+    if not frames:
+        return ""
+    return "  where it raised (its own code; innermost last):\n" + "\n".join(
+        "  " + line for line in frames.splitlines())
+
+
 def cmd_show(args: argparse.Namespace) -> int:
     from ..report.show import open_in_browser, show_run
-    row = stored_run(args.run, "RESULTS/RUN")
+    store, row = stored_run(args.run, "RESULTS/RUN")
     if row.status != "ok":
         print(f"{row.run_id} ({row.name}) {row.status}: {row.message}; a run that did not "
               "complete is not drawn", file=sys.stderr)
+        if frames := failure_frames(store, row.run_id):
+            print(frames, file=sys.stderr)
         return EXIT_FAILED
-    page, files, note = show_run(row)
+    page, files, note = show_run(store, row)
     if note:
         print(note)
     for f in files:

@@ -93,7 +93,8 @@ def _add_cases(p) -> None:
     p.add_argument("--plant", action="append", choices=PLANT_KINDS,
                    help="plant(s) (default: both for a scenario, the campaign's own)")
     p.add_argument("--arm", action="append", choices=tuple(ARMS),
-                   help="arm(s) (default: both for a scenario, the campaign's own)")
+                   help="arm(s) (default: default and table1 for a scenario, the campaign's "
+                        "own)")
 
 
 def _add_tolerance(p) -> None:
@@ -156,7 +157,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="rerun a stored run exactly (RUN: its id or name; a name shared "
                           "with mesh/step checks means the nominal run), with the flags and "
                           "--set as changes")
-    run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm or the paper's table1 "
+    run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm, the paper's table1 or "
+                                                        f"the harmonic-drive lab arm "
                                                         f"(default: {d.arm})")
     run.add_argument("--plant", choices=PLANT_KINDS, help=f"reduced model or Exudyn truth plant "
                                                      f"(default: {d.plant.kind})")
@@ -224,7 +226,11 @@ def build_parser() -> argparse.ArgumentParser:
     paper = sub.add_parser("reproduce-paper",
                            help="run campaigns/paper.toml, the stability map, the claims "
                                 "table and the report")
-    paper.add_argument("--out", metavar="DIR", help="results folder (default results/paper)")
+    paper.add_argument("--lab", action="store_true",
+                       help="the paper's claims on the lab arm (harmonic drives: friction, "
+                            "drives, current loops; campaigns/lab.toml) instead of its two arms")
+    paper.add_argument("--out", metavar="DIR",
+                       help="results folder (default results/paper, with --lab results/lab)")
     _add_execution(paper, dask=False)
     paper.add_argument("--no-stability", action="store_true", help="skip the stability map")
     _add_tolerance(paper)
@@ -250,7 +256,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="results folder; writes DIR/validity (default "
                           "results/validity-<file name>)")
     val.add_argument("--stability", metavar="DIR",
-                     help="stability map to compare with (default: DIR/stability or DIR)")
+                     help="stability map to compare with (default: OUT/stability or OUT, "
+                          "else results/NAME/stability as reproduce-paper and campaign store "
+                          "it, else results/stability-STEM as flexarm stability does)")
     _add_cases(val)
     val.add_argument("--no-progress", action="store_true", help="no progress bar")
     val.set_defaults(func=cmd_validity)
@@ -275,7 +283,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "its [attribution] table)")
     att.add_argument("--factors", metavar="F1,F2,...",
                      help="plant, truncation, parameters, sensing, estimation, sampling, "
-                          "actuation (default: every factor the scenario has)")
+                          "actuation, friction, drive, bandwidth, kinematics (default: every "
+                          "factor the scenario has but the joints' and kinematics)")
     att.add_argument("--out", metavar="DIR", help="results folder")
     att.add_argument("--mesh-check", action="store_true",
                      help="also run every truth-plant world on the check meshes and with a "

@@ -9,7 +9,8 @@ from ..batch.store import ResultStore, StoreError
 
 def render_report(results, *, animate: bool, progress: bool, force: bool = False) -> str:
     """Render the report of ``results`` unless it is current; the line to print."""
-    from ..report.report import report_is_current, write_report
+    from ..report.content_key import report_is_current
+    from ..report.report import write_report
     if not force and report_is_current(results, animate=animate):
         html_path = Path(results) / "report" / "report.html"
         return f"report: {html_path} is up to date (same runs, same code): not rendered again"
@@ -34,7 +35,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise StoreError("export: give RESULTS_DIR (or --signals RESULTS/RUN)")
     store = ResultStore(args.results)
     csv_path, json_path = store.export()
-    print(f"exported {len(store.rows())} runs: {csv_path} and {json_path}")
+    count = len(store.columns(["run_id"]))  # the rows exported, not read again whole
+    print(f"exported {count} runs: {csv_path} and {json_path}")
     return 0
 
 

@@ -90,6 +90,10 @@ def validity_summary(data: dict, folder: Path) -> list[str]:
     """Per case: the predicted, certified and measured limit in one line; where the files
     are."""
     lines = [f"linear validity: {len(data['cases'])} cases -> {folder / 'validity.md'}"]
+    for arm in data["arms"]:
+        if arm["left_out"]:
+            lines.append(f"  {arm['arm']} arm: not in the linear models (nonlinear): "
+                         + "; ".join(arm["left_out"]))
     for r in data["cases"]:
         lines.append(f"  {r['case']} · {r['plant']} · {r['arm']}: predicted "
                      f"{_period(r['predicted_s'])}, certified "

@@ -5,15 +5,16 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import shlex
 import sys
 from pathlib import Path
 
 from ..batch.interrupts import signals_interrupt
 from ..batch.store import ResultStore, StoreError
-from ..run.config import ConfigError
+from ..run.config import ConfigError, check
 from ..run.plants import ROLES
 from ..run.results import own_folder
-from ..run.scenario import ARMS, PLANT_KINDS, scenario_from_mapping
+from ..run.scenario import PAPER_ARMS, PLANT_KINDS, scenario_from_mapping
 
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
 
@@ -40,11 +41,12 @@ def stability_map_into(runner, scenarios, out: Path, *, progress: bool, toleranc
 
 def _stability_scenarios(args: argparse.Namespace) -> tuple[list, list | None, list | None]:
     """(scenarios, plants, arms) of `flexarm stability`/`validity FILE`: a single scenario
-    on both plants and both arms (unless --plant/--arm), or every run of a campaign."""
+    on both plants and the paper's two arms (unless --plant/--arm), or every run of a
+    campaign."""
     from ..batch.campaign import expand, load_study
     scenarios = [r.scenario for r in expand(load_study(args.file))]
     if len(scenarios) == 1:
-        return scenarios, args.plant or list(PLANT_KINDS), args.arm or list(ARMS)
+        return scenarios, args.plant or list(PLANT_KINDS), args.arm or list(PAPER_ARMS)
     return scenarios, args.plant, args.arm
 
 
@@ -62,16 +64,26 @@ def cmd_stability(args: argparse.Namespace) -> int:
                                   tolerance=tolerance, plants=plants, arms=arms)[0]
 
 
+def _default_maps(file: str) -> list[Path]:
+    """Where the commands that measure a stability map put it by default for ``file``:
+    ``reproduce-paper``/``campaign`` into results/NAME/stability (NAME: the campaign's),
+    ``stability`` into results/stability-STEM."""
+    from ..batch.campaign import load_study
+    return [Path("results") / load_study(file).name / "stability",
+            Path("results") / f"stability-{Path(file).stem}"]
+
+
 def _stability_folder(args, out: Path) -> Path | None:
     """The stability map whose measurements `flexarm validity` joins: --stability, else
-    OUT/stability, else OUT itself if it holds one, else none."""
+    OUT/stability, else OUT itself if it holds one, else the first of `_default_maps`
+    that holds one, else none."""
     if args.stability:
         store = ResultStore(args.stability)
         if not store.exists():
             raise StoreError(f"--stability {args.stability}: not a results folder "
                              "(no index.sqlite)")
         return store.out
-    for folder in (out / "stability", out):
+    for folder in (out / "stability", out, *_default_maps(args.file)):
         if ResultStore(folder).exists() and ResultStore(folder).rows(where="sweep = 'stability'"):
             return folder
     return None
@@ -84,6 +96,11 @@ def cmd_validity(args: argparse.Namespace) -> int:
     from ..verdicts.validity import validity_analysis
     from .summaries import validity_summary
     scenarios, plants, arms = _stability_scenarios(args)
+    plugins = sorted({s.plant.kind for s in scenarios if s.plant.kind not in PLANT_KINDS})
+    check(not plugins or args.plant, "plant.kind", f"{', '.join(plugins)} is a plug-in plant, which declares "
+                                     "no linear model: validity compares the reduced model's "
+                                     "and the FE arm's (give --plant reduced --plant exudyn to "
+                                     "judge the built-in arms for this law)")
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)
     out = Path(args.out or Path("results") / f"validity-{Path(args.file).stem}")
     stability = _stability_folder(args, out)
@@ -93,8 +110,11 @@ def cmd_validity(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise StoreError(f"--out {out}: cannot write ({exc.strerror or exc})") from None
 
-    print(f"linear validity of {len(cases)} cases"
-          + (f", measured map: {stability}" if stability else ", no measured stability map"))
+    where = " or ".join(str(f) for f in _default_maps(args.file))
+    print(f"linear validity of {len(cases)} cases" + (
+        f", measured map: {stability}" if stability else
+        f", no measured stability map (none in {where}: 'flexarm stability {args.file}' or "
+        "'flexarm reproduce-paper' measures one, --stability DIR names another)"))
     bar = progress_bar(len(cases), "validity", unit="case", enabled=not args.no_progress)
     try:
         data = validity_analysis(cases, stability_dir=stability,
@@ -308,13 +328,14 @@ def cmd_baseline_update(args: argparse.Namespace) -> int:
 
 
 def cmd_baseline_add(args: argparse.Namespace) -> int:
-    from ..verdicts.baselines import check_from_run, load_baselines, parse_margin, write_baselines
+    from ..verdicts.baselines import (DEFAULT_FILE, check_from_run, load_baselines, parse_margin,
+                                      write_baselines)
     from .one_run import stored_run
     margin = parse_margin(args.margin)
-    row = stored_run(args.run, "RESULTS/RUN")
+    store, row = stored_run(args.run, "RESULTS/RUN")
     baselines = load_baselines(args.file)
     metric = tuple(k.strip() for k in args.metric)
-    updated, added = check_from_run(baselines, row, metric, margin=margin, op=args.op,
+    updated, added = check_from_run(baselines, store, row, metric, margin=margin, op=args.op,
                                     name=args.name)
     write_baselines(updated, updated.checks)
     what = metric[0] if len(metric) == 1 else f"max({', '.join(metric)})"
@@ -325,5 +346,6 @@ def cmd_baseline_add(args: argparse.Namespace) -> int:
     if duration > 5:
         print(f"  note: a {duration:g} s scenario: `make test` measures every short check; "
               "a scenario of 5 s or less keeps it short")
-    print(f"  flexarm baseline check --only {added.name}   # measures it again")
+    where = "" if Path(args.file) == Path(DEFAULT_FILE) else f" --file {shlex.quote(args.file)}"
+    print(f"  flexarm baseline check --only {added.name}{where}   # measures it again")
     return 0

@@ -75,7 +75,7 @@ def calibration_section(store) -> tuple[dict | None, list]:
             continue
         tasks.append((SECTION, f"experiment {e['name']}: measured and fitted signals (top), "
                                "residuals (bottom)",
-                      lambda csv=csv, row=row, name=e["name"]: _fit_figure(csv, row, name)))
+                      lambda csv=csv, row=row, name=e["name"]: _fit_figure(store, csv, row, name)))
     return data, tasks
 
 
@@ -112,10 +112,11 @@ def _comparison_row(row: dict) -> list[str]:
             fmt_number(row["delta_aic"]), fmt_number(row["bic"])]
 
 
-def _fit_figure(csv: Path, row, name: str) -> bytes:
+def _fit_figure(store, csv: Path, row, name: str) -> bytes:
     import matplotlib.pyplot as plt
     measured = read_experiment(csv)
-    fitted = row.load()
+    from ..batch.resimulate import every_signal
+    fitted = every_signal(store, row)
     t = np.arange(measured.samples) * measured.Ts
     k = min(measured.samples, len(fitted.time))
     n = len(measured.names)

@@ -165,8 +165,8 @@ def estimation_errors(group, title: str, transient: float, bound: float | None =
             e = scale * (res[f"xhat_{s}"].astype(float) - res[s])
             series.append((res.time, e))
             plant_trace(ax, run, res.time, e)
-            if f"y_{s}" in res:
-                late = res.time >= transient
+            late = res.time >= transient
+            if f"y_{s}" in res and late.any():  # a run that ended before its transient: no band
                 sigma = scale * float(np.sqrt(np.mean(
                     (res[f"y_{s}"][late].astype(float) - res[s][late]) ** 2)))
                 if sigma > 0:  # a band under the data, its edges on top of it

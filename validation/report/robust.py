@@ -166,6 +166,7 @@ def _case_figures(v: dict, store) -> list:
     truth_id = (v.get("runs") or {}).get("truth")
     if truth_id is None:
         return []
+    from ..batch.resimulate import every_signal
     from ..batch.store import run_id
     from ..run.config import to_mapping
     from ..run.vibration import vibration_cutoff
@@ -192,7 +193,7 @@ def _case_figures(v: dict, store) -> list:
     cutoff = vibration_cutoff(ArmParameters.from_mapping(truth.config["true_params"]))
 
     def loaded():
-        return [(r, r.load()) for r in group]
+        return [(r, every_signal(store, r)) for r in group]
     return [(SECTION, f"{title}: joint tracking (Fig. 3)",
              lambda: fig.tracking(loaded(), title, transient)),
             (SECTION, f"{title}: tip deflections and vibration (Fig. 4)",

@@ -21,21 +21,21 @@ _FILES = {"(Fig. 3)": "fig3_tracking", "(Fig. 4)": "fig4_deflections",
           "(Fig. 8)": "fig8_phase_portrait"}
 
 
-def show_run(row) -> tuple[Path, list[Path], str]:
-    """Draw the paper's figures of the stored run ``row`` (ok runs only); returns the
-    page, the PNG files and a note naming the run drawn with it (or "")."""
-    from ..batch.fingerprint import run_fingerprint
-    from .report import claim_bounds, figure_group, paper_figure_tasks
-    store = row.store
+def show_run(store, row) -> tuple[Path, list[Path], str]:
+    """Draw the paper's figures of the stored run ``row`` of ``store`` (ok runs only);
+    returns the page, the PNG files and a note naming the run drawn with it (or "")."""
+    from ..batch.fingerprint import is_fresh
+    from ..batch.resimulate import STALE
+    from .groups import claim_bounds, figure_group, paper_figure_tasks
     group = [r for r in figure_group(row, store.rows()) if r.status == "ok"]
     others = [r for r in group if r.run_id != row.run_id]
     note = "".join(f"with {r.run_id}, the same scenario on the {r.plant} plant, overlaid\n"
                    for r in others)
-    if row.fingerprint != run_fingerprint(row.config):
-        note += "note: this run was stored by other code than this installation\n"
+    if not is_fresh(row):
+        note += f"note: this run was {STALE}\n"
     folder = own_folder(store.out, "show", row.run_id)
     files, figures = [], []
-    for _, caption, draw in paper_figure_tasks(group, claim_bounds()):
+    for _, caption, draw in paper_figure_tasks(store, group, claim_bounds()):
         name = next(v for k, v in _FILES.items()
                     if caption.partition(" — ")[0].endswith(k)) + ".png"
         data = draw()

@@ -5,6 +5,7 @@ expects, notes, the mesh and run rows)."""
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import math
@@ -12,6 +13,7 @@ from pathlib import Path
 
 from reduced_model import ArmParameters
 
+from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore
 from ..run.requirements import Requirement
 from ..run.results import own_folder, write_atomic
@@ -165,7 +167,8 @@ def write_claims(results_dir, columns: list[Column] | None = None) -> str:
     """Write claims.md and claims.csv in ``results_dir`` from its stored runs (their
     ``columns``, if the caller has them: `claim_columns`); return the markdown."""
     if columns is None:
-        columns = claim_columns(ResultStore(results_dir).rows())
+        store = ResultStore(results_dir)
+        columns = claim_columns(store.rows(), functools.partial(every_signal, store))
     if not columns:
         raise ValueError(f"{results_dir}: no run named {SYSTEM!r}; the claims need the paper "
                          "campaign (flexarm reproduce-paper)")
@@ -359,6 +362,8 @@ def write_validity(data: dict, out) -> str:
         write_atomic(out / name, lambda fh, png=png: fh.write(png), binary=True)
         files.append({"caption": caption, "file": name})
     text = render("validity.md.j2", head=head, rows=rows, ghead=ghead, grows=grows,
+                  left_out={arm["arm"]: arm["left_out"] for arm in data["arms"]
+                            if arm["left_out"]},
                   figures=files, timings=data["timings"], points=data["points"],
                   periods=", ".join(f"{1e3 * t:g}" for t in data["certify_periods"]))
     write_atomic(out / "validity.md", lambda fh: fh.write(text))

@@ -32,8 +32,10 @@ from numba import njit, types
 from numba.experimental import structref
 
 from controllers import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, reference_into
+from reduced_model._joints import advance_joints, motor_state_into
 from reduced_model._kernels import (rk4_advance, tip_kinematics_packed, unpack_model,
                                     unpack_workspace)
+from reduced_model._readout import modal_readout_into
 
 __all__ = ["SampleStatus", "status_message", "DisturbanceKind", "DisturbanceTarget", "Group",
            "signal_layout", "noise_stream", "SampleContext", "new_context", "context",
@@ -380,46 +382,46 @@ def sample_laws(c, t, k, row):
 
 
 @njit(cache=True)
-def _reduced_truth(xp, basis, n, pm_i, pm_r, tips, truth):
-    """The reduced plant's truth vector: [θ, q, θ̇, q̇] in the model's basis (``basis``
-    maps the plant's modal coordinates; 0 × 0: the same), tips, tip deflections, 0, 0."""
+def _reduced_truth(xp, basis, n, pm_i, pm_r, tips, truth, jp, js):
+    """The reduced plant's truth vector: [θ, q, θ̇, q̇] in the model's basis (``basis``:
+    the plant's readout, `reduced_model._readout`), tips, tip deflections, 0, 0,
+    the motors' angles and rates (joint buffers ``jp``, ``js``)."""
     N = 2 * n
     npl = xp.shape[0] // 2
-    if basis.shape[0] == 0:
-        for i in range(N):
-            truth[i] = xp[i]
-    else:
-        truth[0], truth[1] = xp[0], xp[1]
-        truth[n], truth[n + 1] = xp[npl], xp[npl + 1]
-        for i in range(n - 2):
-            q = 0.0
-            qd = 0.0
-            for j in range(npl - 2):
-                q += basis[i, j] * xp[2 + j]
-                qd += basis[i, j] * xp[npl + 2 + j]
-            truth[2 + i] = q
-            truth[n + 2 + i] = qd
+    truth[0], truth[1] = xp[0], xp[1]
+    truth[n], truth[n + 1] = xp[npl], xp[npl + 1]
+    modal_readout_into(pm_i, pm_r, basis, xp, truth[2:n], truth[n + 2:N])
     tip_kinematics_packed(pm_i, pm_r, xp[:npl], tips)
     for i in range(6):
         truth[N + i] = tips[i]
     truth[N + 6] = truth[N + 7] = 0.0
+    motor_state_into(jp, js, xp, truth[N + 8:N + 12])
 
 
 @njit(cache=True)
-def run_reduced(c, rows, h, nsteps, xp, pm_i, pm_r, p_wc, p_wr, basis):
+def run_reduced(c, rows, h, nsteps, xp, pm_i, pm_r, p_wc, p_wr, basis, jp, js, jw):
     """The closed loop on the reduced plant, every sample compiled (`sample_laws`), one
     sample per row of ``rows``: returns the samples done and the `SampleStatus` (the
     offending value in ``c.info[0]``).  ``xp`` is the plant state (its own coordinates);
-    ``basis`` maps its modal coordinates to the model's (0 × 0: the same basis)."""
+    ``basis`` is its readout of the model's modal coordinates (`reduced_model._readout`);
+    ``jp``, ``js``, ``jw`` are its joints' buffers (`reduced_model._joints`)."""
     tips = np.zeros(6)
     model, work = unpack_model(pm_i, pm_r), unpack_workspace(pm_i, p_wc, p_wr)
+    joints = False
+    for i in range(jp.shape[0]):
+        joints = joints or jp[i] != 0.0
+    ext = np.zeros(xp.shape[0] // 2)  # no payload force on this path
     n_samples = rows.shape[0]
     for k in range(n_samples):
-        _reduced_truth(xp, basis, c.n, pm_i, pm_r, tips, c.truth)
+        _reduced_truth(xp, basis, c.n, pm_i, pm_r, tips, c.truth, jp, js)
         code = sample_laws(c, k * c.Ts, k, rows[k])
         if code != SampleStatus.OK:
             return k, code
-        rk4_advance(model, xp, c.tau_plant[:c.counts[1]], h, nsteps, work)
+        if joints:
+            advance_joints(model, xp, c.tau_plant[:c.counts[1]], ext, h, nsteps, work, jp,
+                           js, jw)
+        else:
+            rk4_advance(model, xp, c.tau_plant[:c.counts[1]], h, nsteps, work)
     # the state after the last period is checked too (as the Python loop does)
-    _reduced_truth(xp, basis, c.n, pm_i, pm_r, tips, c.truth)
+    _reduced_truth(xp, basis, c.n, pm_i, pm_r, tips, c.truth, jp, js)
     return n_samples, check_bounds(c.truth, c.n, c.bounds, c.info)

@@ -33,10 +33,11 @@ _IDEALISED_ONLY = {"kv_flex", "compensate_damping"}
 _OBSERVER_METHODS = ("reset", "update")
 
 
-def nominal_model(params: ArmParameters, modes_per_link: tuple[int, int]) -> ArmModel:
+def nominal_model(params: ArmParameters, modes_per_link: tuple[int, int],
+                  kinematics: str = "linear") -> ArmModel:
     """The `ArmModel` the laws are built on (`reduced_model.cached_model`: built once
     per process; laws must not mutate it)."""
-    return cached_model(params, tuple(modes_per_link))
+    return cached_model(params, tuple(modes_per_link), kinematics)
 
 
 def measurement_names(scenario, model: ArmModel) -> tuple[str, ...]:

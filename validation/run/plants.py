@@ -177,7 +177,8 @@ def is_truth(config: dict) -> bool:
 
 def plant_for_role(nominal: dict, role: str) -> dict:
     """The plant of ``role`` for a system whose nominal scenario is ``nominal``: the
-    reduced plant at the controller's own model order (the designer's model), or its
+    reduced plant at the controller's own model order and kinematics (the designer's
+    model), or its
     truth plant — its own plug-in plant where that plays the role, its own truth plant,
     else the default truth kind —, at the nominal plant's internal step where it has
     one."""
@@ -187,6 +188,7 @@ def plant_for_role(nominal: dict, role: str) -> dict:
         return copy.deepcopy(plant)
     if role == "reduced":
         return {"kind": "reduced", "modes_per_link": list(nominal["model"]["modes_per_link"]),
+                "kinematics": nominal["model"].get("kinematics", "linear"),
                 "step": plant.get("step", ReducedPlant.Settings.step)}
     return {"kind": DEFAULT_TRUTH, "step": plant.get("step", ExudynPlant.Settings.step)}
 

@@ -59,6 +59,10 @@ def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False
     only at the start of the last one, as the floor should be timed).  ``exact_hold``
     False replays with Exudyn's own first-order treatment of the torque jumps (the
     truth plant before issue 31: what ``bench/bench_hold.py`` measures against)."""
+    p = scenario.true_params
+    if p.torque_time_constant1 > 0 or p.torque_time_constant2 > 0:
+        raise ValueError("a bare replay holds each period's torque as it is; an arm with "
+                         "current-loop lags needs the plant's own advance")
     plant = fresh_plant(scenario)
     if not exact_hold:
         plant.hold = None

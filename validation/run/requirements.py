@@ -313,7 +313,7 @@ def signal_names(scenario) -> tuple[str, ...]:
 
 def check_requirements(scenario) -> None:
     """Names unique, every formula's signals recorded by the run, its time bounds whole
-    multiples of Ts (ConfigError naming ``requirement[i]``)."""
+    multiples of Ts and within the run (ConfigError naming ``requirement[i]``)."""
     names = set()
     for i, req in enumerate(scenario.requirement):
         where = f"requirement[{i}]"
@@ -330,8 +330,28 @@ def check_requirements(scenario) -> None:
                                                   f"{', '.join(signals)})") from None
         except ConfigError as exc:
             raise exc.under(where) from None
+        for begin, end in _time_bounds(spec.ast.specs[0]):
+            check(end <= scenario.duration * (1 + 1e-9), f"{where}.formula",
+                  f"{req.formula!r}: its time bound [{begin:g}, {end:g}] s reaches beyond the "
+                  f"{scenario.duration:g} s run, which could judge only the part of it within "
+                  "the run: shorten the bound or lengthen the run")
         _evaluate(req.formula, signals, scenario.Ts, np.array([0.0, scenario.Ts]),
                   {v: np.zeros(2) for v in used}, where)
+
+
+#: RTAMT's time units, in seconds ("": the specification's default, seconds).
+_UNITS = {"": 1.0, "s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+
+
+def _time_bounds(node) -> list[tuple[float, float]]:
+    """Every [begin, end] time bound of a parsed formula [s]."""
+    out = []
+    if hasattr(node, "begin") and hasattr(node, "end"):
+        out.append((float(node.begin) * _UNITS.get(node.begin_unit, 1.0),
+                    float(node.end) * _UNITS.get(node.end_unit, 1.0)))
+    for child in getattr(node, "children", ()):
+        out += _time_bounds(child)
+    return out
 
 
 def _evaluate(formula: str, signals: tuple[str, ...], Ts: float, time: np.ndarray,

@@ -29,11 +29,14 @@ STATUSES = ("ok", "diverged", "failed")
 class RunResult:
     """Signals of one run at the control instants t_k = k·Ts.
 
-    Attributes
+    Parameters
     ----------
     time : ndarray (n_samples,)
+        The control instants [s].
     names : tuple of str
+        The signals' names (the signal reference), one per row of ``signals``.
     signals : ndarray (n_signals, n_samples)
+        SI units, radians.
     status : {"ok", "diverged", "failed"}
         "diverged": the state left its bounds or became non-finite; "failed": the plant's
         solver gave up.  Signals then end at the last sample before that.
@@ -45,6 +48,20 @@ class RunResult:
         The fully resolved scenario.
     timings : dict
         Wall-clock seconds (total, plant, controller, observer) and the real-time factor.
+    traceback : str
+        Where a law or plug-in plant raised, if it did: the frames of its own code (its
+        module and package, file and line) as Python prints them
+        (`validation.run.tracebacks`); "" otherwise.  The message names the innermost.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from validation import RunResult
+    >>> result = RunResult(time=np.array([0.0, 1e-3]), names=("theta1", "theta2"),
+    ...                    signals=np.array([[0.0, 0.1], [0.0, -0.1]]))
+    >>> t, y = result                     # unpacks like python-control's responses
+    >>> y.shape, result["theta2"][-1], result.ok
+    ((2, 2), np.float64(-0.1), True)
     """
 
     time: np.ndarray
@@ -55,6 +72,7 @@ class RunResult:
     end_time: float = 0.0
     config: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    traceback: str = ""
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -138,7 +156,8 @@ class RunResult:
         compressed without loss (`validation.run.packing`; ``meta["packed"]`` says how,
         and their shape)."""
         meta = {"status": self.status, "message": self.message, "end_time": self.end_time,
-                "config": self.config, "timings": self.timings, **(extra or {})}
+                "config": self.config, "timings": self.timings,
+                **({"traceback": self.traceback} if self.traceback else {}), **(extra or {})}
         signals = self.signals
         if packed:
             from .packing import CODEC, pack
@@ -162,16 +181,24 @@ class RunResult:
                 text = npz["meta"]
                 meta = json.loads(text.tobytes().decode() if text.dtype == np.uint8
                                   else str(text))
-                signals = npz["signals"]
+                signals, times, names = npz["signals"], npz["time"], npz["names"]
                 if "packed" in meta:
                     from .packing import CODEC, unpack
                     if meta["packed"]["codec"] != CODEC:
                         raise ValueError(f"signals packed as {meta['packed']['codec']!r}")
-                    signals = unpack(signals.tobytes(), meta["packed"]["shape"])
-                result = cls(time=npz["time"], names=tuple(str(n) for n in npz["names"]),
+                    # The shape the file declares must be the run's own (its names and
+                    # samples, held uncompressed) before anything is inflated: a crafted
+                    # shape would otherwise be inflated up to the packer's 4 GiB cap.
+                    shape = meta["packed"]["shape"]
+                    if list(shape) != [names.size, times.size]:
+                        raise ValueError(f"packed signals of shape {shape}, the run has "
+                                         f"{names.size} signals at {times.size} samples")
+                    signals = unpack(signals.tobytes(), shape)
+                result = cls(time=times, names=tuple(str(n) for n in names),
                              signals=signals, status=meta["status"],
                              message=meta["message"], end_time=meta["end_time"],
-                             config=meta["config"], timings=meta["timings"])
+                             config=meta["config"], timings=meta["timings"],
+                             traceback=str(meta.get("traceback", "")))
         except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as exc:
             raise ValueError(f"not a stored run ({type(exc).__name__}: {exc})") from None
         return result, meta

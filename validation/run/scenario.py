@@ -27,14 +27,20 @@ __all__ = [
     "Scenario", "PlantTable", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
     "SensorSpec", "DisturbanceSpec", "DivergenceSpec", "check_scenario",
     "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "PLANT_KINDS", "ARMS",
+    "PAPER_ARMS",
     "DEFAULT_TRANSIENT", "default_transient",
 ]
 
 #: The arms a scenario can start from: the practical default (Table 1 + a motor-2 stator
-#: inertia of 0.01 kg m² + bending damping 2e-3 N m² s) and the paper's Table 1 exactly.
+#: inertia of 0.01 kg m² + bending damping 2e-3 N m² s), the paper's Table 1 exactly, and
+#: the default arm behind small harmonic drives (`ArmParameters.lab`).
 ARMS = {"default": "practical default arm (Table 1 + stator inertia 0.01 kg m² + damping "
                    "2e-3 N m² s)",
-        "table1": "the paper's Table 1 exactly (no stator inertia, no damping)"}
+        "table1": "the paper's Table 1 exactly (no stator inertia, no damping)",
+        "lab": "the default arm behind small harmonic drives: joint friction with "
+               "stiction, gear compliance, rotor inertia, backlash, a 500 Hz current loop"}
+#: The arms a single scenario's stability map and validity are judged on (unless --arm).
+PAPER_ARMS = ("default", "table1")
 FEEDBACK = ("auto", "true", "estimate")
 #: Caps that keep a typo from exhausting memory or hanging a run: samples held in memory
 #: (5e6 = 83 min at 1 kHz, ~3 GB of signals) and internal plant steps per run.
@@ -66,10 +72,10 @@ class Scenario:
     ----------
     name : str
         The run's name in results and reports.
-    arm : {"default", "table1"}
+    arm : {"default", "table1", "lab"}
         The arm both parameter tables start from: the practical default (Table 1 + a
-        motor-2 stator inertia + structural damping) or the paper's Table 1 exactly
-        (`ARMS`).
+        motor-2 stator inertia + structural damping), the paper's Table 1 exactly, or the
+        default arm behind small harmonic drives (`ARMS`, `ArmParameters.lab`).
     plant : PlantTable
         The plant simulated, chosen by its ``kind``: the settings of a built-in plant
         (`reduced_model.ReducedPlant.Settings`, `plant_exudyn.ExudynPlant.Settings`) or
@@ -232,7 +238,7 @@ def check_scenario(s: Scenario) -> None:
 def arm_parameters(arm: str) -> ArmParameters:
     """The parameters of a named arm (`ARMS`)."""
     one_of(arm, tuple(ARMS), "arm")
-    return ArmParameters.table1() if arm == "table1" else ArmParameters()
+    return {"table1": ArmParameters.table1, "lab": ArmParameters.lab}.get(arm, ArmParameters)()
 
 
 def _check_modelable(params: ArmParameters, modes, key: str) -> None:
@@ -270,6 +276,22 @@ def scenario_from_mapping(data: dict) -> Scenario:
     -------
     Scenario
         The scenario, every default filled in, checked (`check_scenario`).
+
+    Raises
+    ------
+    ConfigError
+        Naming the dotted key of an unknown key or a bad value.
+
+    Examples
+    --------
+    >>> from validation import scenario_from_mapping
+    >>> s = scenario_from_mapping({"duration": 2.0, "true_params": {"Mp": 0.5}})
+    >>> s.duration, s.true_params.Mp, s.nominal_params.Mp, s.controller.kind
+    (2.0, 0.5, 0.1, 'pbc')
+    >>> scenario_from_mapping({"plant": {"kind": "exudyn", "stepp": 1e-3}})
+    Traceback (most recent call last):
+        ...
+    validation.run.config.ConfigError: plant.stepp: unknown key for kind 'exudyn' (...)
     """
     base = to_mapping(arm_parameters(data.get("arm", "default")))
     data = dict(data)

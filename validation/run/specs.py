@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from controllers import ReferenceKind
-from reduced_model import STRAIN_QUANTITIES, validate_modes_per_link
+from reduced_model import KINEMATICS, STRAIN_QUANTITIES, validate_modes_per_link
 
 from ._sample import DisturbanceKind, DisturbanceTarget
 from .config import ConfigError, check
@@ -60,12 +60,19 @@ class ModelSpec:
     ----------
     modes_per_link : (int, int)
         Assumed modes of link 1 and link 2 in the model the laws are built on (1..4 each).
+    kinematics : {"linear", "exact"}
+        The kinematics of that model: the paper's linear kinematics, or exact
+        inextensible kinematics (`reduced_model.ArmModel`).  The PBC, the observers and
+        the EKF use its dynamics; the rigid-arm laws (PD, computed torque) and the LQR,
+        designed at q = 0 where both kinematics agree, are the same on either.
     """
 
     modes_per_link: tuple[int, int] = (2, 2)
+    kinematics: str = "linear"
 
     def __post_init__(self):
         _modes(self.modes_per_link)
+        one_of(self.kinematics, KINEMATICS, "kinematics")
 
 
 def class_path(cls, where: str) -> str:

@@ -23,6 +23,14 @@ the plant's Shapley sum is split the same way, so the two parts — *modes left 
 *beyond assumed modes* (distributed FE, geometric nonlinearity) — add up to the plant's
 contribution exactly.
 
+``kinematics`` names the paper's largest modelling error: its linear kinematics.  Real,
+every reduced plant of a world (the plant factor's ideal level, the 4+4 level) has the
+exact inextensible kinematics of the real arm (`reduced_model.ArmModel`); ideal, the
+paper's linear ones.  A truth plant has its own, exact geometry at both levels, so the
+factor acts only where the plant is reduced: with ``plant`` it shares the part of the
+plant's gap that the kinematics explain (two factors alone: each gets half of the change
+exact kinematics make, m(reduced, exact) − m(reduced, linear)).
+
 Worlds that diverge or fail have no metrics.  Rule: if some worlds have no value, the
 smallest set H of factors such that every such world has a factor of H at its real level
 is held at its ideal level; the Shapley values are computed over the other factors
@@ -36,6 +44,8 @@ import copy
 import itertools
 import math
 from dataclasses import dataclass, field
+
+from reduced_model._parameters import JOINT_EFFECTS
 
 from ..run.config import ConfigError, check
 from ..batch.campaign import PlannedRun
@@ -54,15 +64,24 @@ DIVERGED_RULE = " ".join(next(p for p in __doc__.split("\n\n")
 #: What each factor switches from its real level (the scenario's) to its ideal one.
 FACTORS = {
     "plant": "truth plant → the controller's own reduced model as plant (same modes per "
-             "link as the controller's model)",
+             "link and kinematics as the controller's model)",
     "truncation": "splits 'plant' along reduced (controller's order) → reduced 4+4 modes → "
                   "FE: modes left out vs beyond assumed modes",
-    "parameters": "true parameters → the nominal parameters (no parameter error)",
+    "parameters": "true parameters → the nominal parameters (no parameter error; the "
+                  "joints' fields of friction, drive and bandwidth stay theirs where those "
+                  "are factors too)",
     "sensing": "the scenario's sensors (noise, quantisation, gauges, delay) → exact "
                "measurements of the same quantities",
     "estimation": "the observer's estimate → the true state fed to the controller",
     "sampling": "the scenario's Ts → Ts / 10 (closer to the continuous-time design)",
     "actuation": "torque limits and disturbances → none",
+    "friction": "the arm's joint friction (Coulomb, stiction, Stribeck, viscous) → none, "
+                "in the true and the nominal arm",
+    "drive": "the arm's drives (gear compliance and damping, rotor inertia, backlash) → "
+             "rigid joints, in the true and the nominal arm (the encoders then read θ)",
+    "bandwidth": "the current loops' lag → an ideal torque, in the true and the nominal arm",
+    "kinematics": "the reduced plant's exact inextensible kinematics → the paper's linear "
+                  "kinematics (on every reduced plant of a world; none on a truth plant)",
 }
 #: Attributed metrics: name → (how it is made from a run's metrics, unit).
 METRICS = {
@@ -113,6 +132,17 @@ def parse_factors(names, scenario: Scenario) -> tuple[str, ...]:
     if "truncation" in names:
         check(scenario.plant.role == "truth", "--factors",
               "'truncation' needs a truth plant (the scenario's plant is the reduced one)")
+    if "kinematics" in names:
+        check(scenario.model.kinematics == "linear", "--factors", "'kinematics' idealises "
+              "the plant to the paper's linear kinematics, but the controller's model has "
+              "the exact ones (model.kinematics = \"exact\")")
+        if scenario.plant.role == "truth":
+            check("plant" in names, "--factors", "'kinematics' acts on the reduced plant: "
+                  "list 'plant' too (the scenario's plant is the truth plant)")
+        else:
+            check(getattr(scenario.plant, "kinematics", None) == "exact", "--factors",
+                  "'kinematics' cannot be idealised: the scenario's reduced plant does not "
+                  "have the exact kinematics (set plant.kinematics = \"exact\")")
     return tuple(names)
 
 
@@ -130,14 +160,23 @@ def _step_for(Ts: float, step: float) -> float:
     return Ts / math.ceil(Ts / step - 1e-9)
 
 
-def _idealise(data: dict, factor: str) -> None:
-    """Switch ``factor`` of the resolved scenario mapping ``data`` to its ideal level."""
-    if factor == "plant":
+def _idealise(data: dict, factor: str, players) -> None:
+    """Switch ``factor`` of the resolved scenario mapping ``data`` to its ideal level
+    (``players``: every factor of the attribution)."""
+    if factor in JOINT_EFFECTS:
+        for table in ("true_params", "nominal_params"):
+            data[table].update({f"{name}{i}": 0.0 for name in JOINT_EFFECTS[factor]
+                                for i in (1, 2)})
+    elif factor == "plant":
         data["plant"] = with_plant(data["plant"], "reduced",
                                    modes_per_link=list(data["model"]["modes_per_link"]),
+                                   kinematics=data["model"].get("kinematics", "linear"),
                                    step=_step_for(data["Ts"], min(data["plant"]["step"], 1e-3)))
     elif factor == "parameters":
-        data["true_params"] = copy.deepcopy(data["nominal_params"])
+        own = {f"{name}{i}" for effect in JOINT_EFFECTS if effect in players
+               for name in JOINT_EFFECTS[effect] for i in (1, 2)}
+        data["true_params"] = {key: data["true_params"][key] if key in own else value
+                               for key, value in data["nominal_params"].items()}
     elif factor == "sensing":
         s = data["sensors"]
         data["sensors"] = dict(s, modal="direct" if s["modal"] == "gauges" else s["modal"],
@@ -153,8 +192,16 @@ def _idealise(data: dict, factor: str) -> None:
     elif factor == "actuation":
         data["torque_limit"] = 0.0
         data["disturbances"] = []
+    elif factor == "kinematics":
+        _set_kinematics(data, "linear")
     else:
         raise KeyError(factor)
+
+
+def _set_kinematics(data: dict, kinematics: str) -> None:
+    """The kinematics of the world's reduced plant (a truth plant keeps its own)."""
+    if data["plant"].get("kind", "reduced") == "reduced":
+        data["plant"] = dict(data["plant"], kinematics=kinematics)
 
 
 def _truncation_level(data: dict) -> None:
@@ -185,7 +232,9 @@ def plan(scenario: Scenario, factors: tuple[str, ...], name: str) -> list[World]
             data = copy.deepcopy(base)
             for f in players:
                 if f not in real:
-                    _idealise(data, f)
+                    _idealise(data, f, players)
+            if "kinematics" in real:  # a reduced plant made by idealising 'plant' too
+                _set_kinematics(data, "exact")
             if level == "truncated":
                 _truncation_level(data)
             label = "+".join(sorted(real)) or "ideal"

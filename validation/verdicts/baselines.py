@@ -327,7 +327,7 @@ def _scenario_name(run_name: str) -> str:
                    for c in run_name.split("/")[-1]).strip("-") or "run"
 
 
-def check_from_run(baselines: Baselines, row, metric: tuple[str, ...], *, margin: float,
+def check_from_run(baselines: Baselines, store, row, metric: tuple[str, ...], *, margin: float,
                    op: str = "<=", name: str | None = None) -> tuple[Baselines, Check]:
     """A new check of a stored run's ``metric`` (several: their maximum) at the value it
     measured, its bound set by ``margin`` (`updated_bound`); the run's scenario joins
@@ -353,7 +353,7 @@ def check_from_run(baselines: Baselines, row, metric: tuple[str, ...], *, margin
     -------
     (Baselines, Check)
     """
-    where = f"{row.store.out}/{row.run_id}"
+    where = f"{store.out}/{row.run_id}"
     check(row.status == "ok", "RESULTS/RUN", f"{where} {row.status}: a check needs a run that "
                                              "completed")
     check(row.fingerprint == run_fingerprint(row.config), "RESULTS/RUN",

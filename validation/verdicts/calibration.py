@@ -60,8 +60,10 @@ replays what is stored and continues to the same answer.  A replayed experiment'
 torques are a file in the output folder, named in the scenario by path and SHA-256: Dask
 workers must see that folder at the same path.
 
-**Uncertainty** and the verdict on the model: `validation.verdicts.calibration_intervals`
-and `validation.verdicts.calibration_adequacy`.
+**Uncertainty** rests on a Jacobian of second order at the estimate, each column checked
+for a jump of the outputs within its step (stick–slip: `validation.verdicts.
+calibration_differences`); the intervals and the verdict on the model:
+`validation.verdicts.calibration_intervals` and `validation.verdicts.calibration_adequacy`.
 """
 from __future__ import annotations
 
@@ -79,9 +81,11 @@ from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
 from ..run.tomlfiles import deep_merge, set_dotted
 from .calibration_adequacy import adequacy, residual_blocks, residual_rms
 from .calibration_comparison import comparison, data_fingerprint, model_description
+from .calibration_differences import STENCILS, settled_jacobian
 from .calibration_intervals import parameter_uncertainty
 from .calibration_outputs import write_inputs, write_results
 from .calibration_plan import Plan, linear_response
+from ..batch.resimulate import every_signal
 from .evaluations import Evaluations
 
 __all__ = ["calibrate", "FIT_SWEEP"]
@@ -132,11 +136,12 @@ class _Problem:
     """The residuals of a plan at points u (the parameters over their scales), each
     simulation a stored run on the campaign runner."""
 
-    def __init__(self, plan: Plan, out: Path, runner, inputs: list[dict]) -> None:
+    def __init__(self, plan: Plan, out, runner, inputs: list[dict]) -> None:
         self.plan, self.settings = plan, plan.settings
         self.scale = np.array([p.scale for p in plan.settings.parameters])
         self.inputs = inputs  # per target: the scenario keys that reproduce its input
-        self.evals = Evaluations(out, runner, f"{FIT_SWEEP}")
+        self.evals = Evaluations(out, runner, FIT_SWEEP, description=(
+            "the plant's parameters fitted to measured experiments (flexarm calibrate)"))
         self.horizon = self.band = math.inf
 
     # scenarios
@@ -190,7 +195,7 @@ class _Problem:
         measured = exp.signals[:, :k]
         r = np.full(measured.shape, _PENALTY)
         if row is not None and row.status != "failed":
-            result = row.load()
+            result = every_signal(self.evals.store, row)
             done = min(k, len(result.time))
             sim = result.select([f"y_{n}" for n in exp.names])[:, :done].astype(np.float64)
             r[:, :done] = (sim - measured[:, :done]) / target.sigma[:, None]
@@ -214,35 +219,22 @@ class _Problem:
         return max(2, int(np.searchsorted(response.frequency, self.band, side="right")))
 
     # the fit's callables
-    def jacobian(self, u: np.ndarray, f: np.ndarray, lower, upper, *, central: bool) -> np.ndarray:
-        """Finite differences at ``u`` (``f`` its residual), one batch of simulations:
-        forward (a step that would cross the upper bound goes down), or of second order
-        — central, or, where a central step would cross a bound, one-sided into the
-        bounds, (−3 f(u) + 4 f(u + h) − f(u + 2h)) / 2h.  A step across a bound would read
-        the penalty of an arm that cannot be modelled (a negative mass) as a slope: with
-        stator_mass on its bound 0 the central difference hid that the data see only its
-        sum with mh2, and a false 95 % interval of mh2 was reported."""
+    def jacobian(self, u: np.ndarray, f: np.ndarray, upper) -> np.ndarray:
+        """Forward differences at ``u`` (``f`` its residual), one batch of simulations (a
+        step that would cross the upper bound goes down); the fit's steps.  The Jacobian
+        the uncertainty rests on is `settled_jacobian`'s."""
         p = len(u)
         h = self.settings.fd_step * np.maximum(np.abs(u), 1.0)
+        h = np.where(u + h > upper, -h, h)
         unit = np.eye(p)
-        if not central:
-            h = np.where(u + h > upper, -h, h)
-            values = self.residuals([u + h[j] * unit[j] for j in range(p)])
-            return np.column_stack([(values[j] - f) / h[j] for j in range(p)])
-        side = _one_sided(u, h, lower, upper)
-        near = np.where(side == 0, h, side * h)
-        far = np.where(side == 0, -h, 2 * side * h)
-        values = self.residuals([u + near[j] * unit[j] for j in range(p)] +
-                                [u + far[j] * unit[j] for j in range(p)])
-        return np.column_stack([
-            (values[j] - values[p + j]) / (2 * h[j]) if side[j] == 0 else
-            side[j] * (4 * values[j] - values[p + j] - 3 * f) / (2 * h[j]) for j in range(p)])
+        values = self.residuals([u + h[j] * unit[j] for j in range(p)])
+        return np.column_stack([(values[j] - f) / h[j] for j in range(p)])
 
     def resolution(self, stencil: float) -> float:
         """The noise the float32 storage of the simulated signals puts into one column of
         the difference Jacobian (norm, in the residual's units per unit of u): a rounding
         error of spacing δ is uniform, variance δ²/12, and a difference formula Σ c_i f_i / h
-        has variance ``stencil`` δ²/(12 h²), ``stencil`` = Σ c_i² (`_STENCILS`)."""
+        has variance ``stencil`` δ²/(12 h²), ``stencil`` = Σ c_i² (`calibration_differences.STENCILS`)."""
         total = 0.0
         for i, target in enumerate(self.plan.targets):
             k = self.samples(i)
@@ -251,19 +243,7 @@ class _Problem:
         return math.sqrt(total * stencil / 12.0) / self.settings.fd_step
 
 
-#: Σ c_i² of the difference formulas: forward (1, −1), central (1, −1)/2, one-sided of
-#: second order (−3, 4, −1)/2.
-_STENCILS = {"forward": 2.0, "central": 0.5, "one-sided": 6.5}
-
-
-def _one_sided(u: np.ndarray, h: np.ndarray, lower, upper) -> np.ndarray:
-    """Per parameter: 0 where a central step of ``h`` stays within the bounds, else the
-    direction (+1, −1) of a one-sided second-order difference that does."""
-    central = (u - h >= lower) & (u + h <= upper)
-    return np.where(central, 0.0, np.where(u + 2 * h <= upper, 1.0, -1.0))
-
-
-def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
+def calibrate(plan: Plan, out, *, runner, log=print, compare=(), store=None) -> dict:
     """Fit the plan's parameters with scipy's ``least_squares`` (module docstring).
 
     Parameters
@@ -281,6 +261,11 @@ def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
     compare : list of (str, dict)
         Other fits of the same data (`calibration_comparison.read_fits`): the result gets
         a ``comparison`` of them and this one.
+    store : BaseStore, optional
+        Where the simulations are kept (default: the folder ``out``, which a calibration
+        stopped and started again resumes from); an in-memory store
+        (`validation.batch.memory.MemoryStore`) keeps them in this process, every signal
+        in float64, nothing written to ``runs/``.
 
     Returns
     -------
@@ -291,7 +276,7 @@ def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
     out = Path(out)
     settings = plan.settings
     inputs = write_inputs(plan, out)
-    problem = _Problem(plan, out, runner, inputs)
+    problem = _Problem(plan, store or out, runner, inputs)
     lower = np.array([q.lower for q in settings.parameters]) / problem.scale
     upper = np.array([q.upper for q in settings.parameters]) / problem.scale
     u = np.array([q.start for q in settings.parameters]) / problem.scale
@@ -304,8 +289,8 @@ def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
         return cache[key]
 
     def jac(v):
-        J = problem.jacobian(v, fun(v), lower, upper, central=False)
-        floor = _RESOLUTION_MARGIN * problem.resolution(_STENCILS["forward"])
+        J = problem.jacobian(v, fun(v), upper)
+        floor = _RESOLUTION_MARGIN * problem.resolution(STENCILS["forward"])
         return _without_invisible(J, floor, settings.fd_step)
 
     stages = []
@@ -327,10 +312,13 @@ def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
     problem.horizon = problem.band = math.inf
     cache.clear()
     r = fun(u)
-    J = problem.jacobian(u, r, lower, upper, central=True)
-    h = settings.fd_step * np.maximum(np.abs(u), 1.0)
-    stencil = _STENCILS["one-sided" if _one_sided(u, h, lower, upper).any() else "central"]
-    floor = _RESOLUTION_MARGIN * problem.resolution(stencil) if plan.targets else 0.0
+    J, steps = settled_jacobian(problem.residuals, u, r,
+                                settings.fd_step * np.maximum(np.abs(u), 1.0), lower, upper,
+                                _RESOLUTION_MARGIN * problem.resolution(STENCILS["halves"])
+                                * settings.fd_step)
+    # each column's float32 noise, at its own step and formula
+    floor = np.array([_RESOLUTION_MARGIN * problem.resolution(STENCILS[s["formula"]])
+                      * settings.fd_step / s["step"] for s in steps])
     estimate = u * problem.scale
     blocks = residual_blocks(plan, r)
     verdict = adequacy(blocks, judged=settings.inputs == "replay")
@@ -340,6 +328,8 @@ def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
         bounds=[(q.lower, q.upper) for q in settings.parameters],
         model_error=verdict["model_error"] if effective else None,
         noise_variance=verdict["noise_variance"])
+    for name, step, x in zip(settings.names, steps, problem.scale):  # its column, settled
+        stats["parameters"][name]["jacobian"] = {**step, "step": step["step"] * float(x)}
     result = {
         "model_adequate": verdict["model_adequate"], "adequacy": verdict,
         "parameters": stats["parameters"], "interval_kind": stats["interval_kind"],
@@ -348,7 +338,7 @@ def calibrate(plan: Plan, out, *, runner, log=print, compare=()) -> dict:
         "cost": float(0.5 * r @ r), "iterations": sum(s["iterations"] for s in stages),
         "simulations": len(problem.evals.seen),
         "residual_variance": stats["residual_variance"], "dof": stats["dof"],
-        "singular_values": stats["singular_values"], "jacobian_floor": floor,
+        "singular_values": stats["singular_values"], "jacobian_floor": floor.tolist(),
         "inputs": settings.inputs, "stages": stages,
         "experiments": [{"name": t.experiment.name, "source": t.experiment.source,
                          "samples": t.experiment.samples, "Ts": t.experiment.Ts,

@@ -30,18 +30,27 @@ What the interval is depends on the verdict on the model
   (Cauchy–Schwarz, no assumption on the error's correlation), and the data show only
   the rest, ‖e‖ = √(rᵀr − Σ n σ̂²) (the residual beyond its white part).  The interval is
   the noise's 95 % interval (the white part's level) widened by κ ‖e‖ √((JᵀJ)⁻¹_ii),
-  `MODEL_ERROR_FACTOR` κ = 3: it holds the physical value whenever the absorbed part
+  `MODEL_ERROR_FACTOR` κ = 5: it holds the physical value whenever the absorbed part
   is at most κ times the part left.  Measured ‖P d‖/‖e‖ (the reduced model and the
   truth plant's default mesh on data of the geometrically exact arm, 16 el/link, at
-  three arms, 1-8 s, with and without observer and pulse): 0.15 (ANCF 4 el/link, 8 s),
-  0.9-1.3 (reduced model, 2-8 s), 2.1-2.15 (reduced model, 1 s: a short record shows
-  less of the error).  With κ = 3 every interval of these cases holds the hidden value
-  (EI1 of the 1 s case at 0.58 of its half-width; the issue's 8 s case: EI1 8.32..9.10,
-  EI2 9.47..13.31, Mp 0.317..0.454 around 8.6, 11.3, 0.37), where the block-bootstrap
-  (cluster) sandwich covariance of correlated residuals, 4-64 blocks, missed all three
-  (EI1 ±0.04-0.10 around a bias of 0.11): the bias of a model error is not a random
-  effect the residual's correlation reveals.  A direction the model error leaves
-  undetermined to more than ±100 % (by the same measure) is not identifiable.
+  three arms, 1-8 s, with and without observer and pulse), fitting EI1, EI2, Mp: 0.15
+  (ANCF 4 el/link, 8 s), 0.9-1.3 (reduced model, 2-8 s), 2.1-2.15 (reduced model, 1 s:
+  a short record shows less of the error).  Fitting coulomb1 and viscous1 as well, on
+  data with joint-1 friction (25 fits, 1-4 s, most tracking with velocity reversals):
+  0.2-1.2 (ANCF 4 el/link), 1.0-2.6 (reduced model, 2-4 s), 3.5 (reduced model, 1 s) and 4.4
+  (the lab arm, 1 s): more parameters absorb more of the error.  κ = 3, chosen on the
+  first set (the issue's 8 s case: EI1 8.32..9.10, EI2 9.47..13.31, Mp 0.317..0.454
+  around 8.6, 11.3, 0.37), missed on the second: EI1 of the reduced model on 1 s of the
+  ANCF arm by 1 % of its half-width, and coulomb1 of the ANCF arm (+1.8 %, 2 s, seed 0)
+  at 1.23 half-widths — beyond the linearised bound, whose ratio there was 1.18: the
+  friction level absorbs the model error through the timing of stick–slip transitions,
+  a change no linearisation sees.  The largest κ these fits needed to hold every hidden
+  value was 3.7 (that coulomb1; next EI1 of 1 s records, 2.9-3.0); κ = 5 leaves a third
+  more.  The block-bootstrap (cluster) sandwich covariance of correlated residuals, 4-64
+  blocks, missed all three of the first set (EI1 ±0.04-0.10 around a bias of 0.11): the
+  bias of a model error is not a random effect the residual's correlation reveals.  A
+  direction the model error leaves undetermined to more than ±100 % (by the same
+  measure) is not identifiable.
 """
 from __future__ import annotations
 
@@ -57,7 +66,7 @@ __all__ = ["parameter_uncertainty", "MODEL_ERROR_FACTOR"]
 _MAX_RELATIVE_STD = 1.0
 #: κ: an inadequate model's intervals allow a parameter error κ times the largest that a
 #: model error of the residual's size could hide (module docstring).
-MODEL_ERROR_FACTOR = 3.0
+MODEL_ERROR_FACTOR = 5.0
 #: A parameter whose weight on an unidentifiable direction is at least this is named.
 _NAMED_WEIGHT = 0.1
 
@@ -75,7 +84,7 @@ def _direction(v: np.ndarray, names, scale) -> str:
 
 
 def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, *,
-                          floor: float = 0.0, bounds=None, level: float = 0.95,
+                          floor=0.0, bounds=None, level: float = 0.95,
                           model_error: float | None = None,
                           noise_variance: float | None = None) -> dict:
     """Standard errors, intervals, correlations and identifiability (module docstring).
@@ -90,9 +99,10 @@ def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, 
         The parameters.
     estimate, scale : ndarray (p,)
         The estimate x and the scale of each parameter.
-    floor : float
-        The Jacobian's own error (norm of one column's noise): a direction whose singular
-        value is not above it is invisible to the data.
+    floor : float or ndarray (p,)
+        The Jacobian's own error (norm of one column's noise, or of each column's where
+        their steps differ): a direction whose singular value is not above its error
+        (√Σ (v_j floor_j)², v the direction) is invisible to the data.
     bounds : list of (lower, upper), optional
         An estimate on a bound has no valid interval.
     level : float
@@ -127,10 +137,11 @@ def parameter_uncertainty(J: np.ndarray, r: np.ndarray, names, estimate, scale, 
     visible, determined = [], []
     top = S[0] if S.size and S[0] > 0 else 1.0
     for k in range(p):
-        if S[k] <= floor or S[k] <= 1e-12 * top:
+        error = float(np.sqrt(np.sum((Vt[k] * floor) ** 2)))
+        if S[k] <= error or S[k] <= 1e-12 * top:
             why = (f"J is singular along {_direction(Vt[k], names, scale)}: its singular "
                    f"value, {S[k] / top:.2g} of the largest, is within the Jacobian's own error "
-                   f"({floor / top:.2g}): the data do not see this change")
+                   f"({error / top:.2g}): the data do not see this change")
         else:
             visible.append(k)
             if spread / S[k] <= _MAX_RELATIVE_STD:

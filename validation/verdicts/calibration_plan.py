@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -67,6 +68,18 @@ def _experiment_mapping(base: dict, exp: Experiment, own: dict | None,
     return data
 
 
+def _not_given(name: str, experiments: list[Experiment]) -> str:
+    """Why the settings of experiment ``name`` have no data, and which file to pass: the
+    ``name.csv`` beside a given file if there is one."""
+    given = ", ".join(f"{e.name} ({e.source})" for e in experiments) or "none"
+    beside = [Path(e.source).with_name(f"{name}.csv") for e in experiments]
+    found = next((str(p) for p in beside if p.is_file()), None)
+    cure = f"pass {found} too" if found else \
+        f"pass its data too ({name}.csv, or a stored run RESULTS/{name})"
+    return (f"settings of an experiment that is not given (an experiment is named after its "
+            f"file; given: {given}): {cure}, or remove the table")
+
+
 def plan_calibration(base: Scenario, settings: CalibrationSettings,
                      experiments: list[tuple[Experiment, dict | None]],
                      responses: list[FrequencyResponse] = ()) -> Plan:
@@ -101,7 +114,8 @@ def plan_calibration(base: Scenario, settings: CalibrationSettings,
     twice = sorted({n for n in names if names.count(n) > 1})
     check(not twice, "DATA", f"two experiments are called {', '.join(twice)} (rename a file)")
     for name in settings.experiment:
-        check(name in names, f"calibrate.experiment.{name}", "no experiment of that name")
+        check(name in names, f"calibrate.experiment.{name}",
+              _not_given(name, [e for e, _ in experiments]))
     mapping = scenario_to_mapping(base)
     targets = []
     for exp, own in experiments:

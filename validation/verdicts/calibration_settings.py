@@ -12,6 +12,7 @@ from reduced_model import ArmParameters
 from ..run.config import ConfigError, check
 from ..run.scenario import Scenario, scenario_from_mapping
 from ..run.tomlfiles import flatten
+from .calibration_joints import check_overlap, check_start_arm, joint_bounds
 
 __all__ = ["Parameter", "CalibrationSettings", "calibration_settings", "base_scenario",
            "INPUT_MODES"]
@@ -67,7 +68,8 @@ def _number(value, key: str, *, positive: bool = False) -> float:
     return float(value)
 
 
-def _parameter(name: str, table: dict, base: Scenario) -> Parameter:
+def _start(name: str, table: dict, base: Scenario) -> float:
+    """The start of the fitted field ``name`` (checked to be one first)."""
     where = f"--fit {name}"
     head, _, field = name.partition(".")
     if head == "sensors":
@@ -79,9 +81,15 @@ def _parameter(name: str, table: dict, base: Scenario) -> Parameter:
           f"not a fittable field (true_params.<one of {', '.join(sorted(known - _FIXED))}>)")
     check(field not in _FIXED, where, "the links' lengths are not fitted (measure them; the "
                                       "controller's model must have the same)")
-    start = _number(table.get("start", {}).get(name, getattr(base.true_params, field)),
-                    f"calibrate.start.{name}")
+    return _number(table.get("start", {}).get(name, getattr(base.true_params, field)),
+                   f"calibrate.start.{name}")
+
+
+def _parameter(name: str, table: dict, base: Scenario, starts: dict) -> Parameter:
+    field = name.partition(".")[2]
+    start = starts[field]
     lower, upper = 0.0, math.inf
+    given = {n.partition(".")[2] for n in table.get("bounds", {})}
     if name in table.get("bounds", {}):
         pair = table["bounds"][name]
         check(isinstance(pair, list) and len(pair) == 2, f"calibrate.bounds.{name}",
@@ -90,6 +98,7 @@ def _parameter(name: str, table: dict, base: Scenario) -> Parameter:
         upper = pair[1] if pair[1] == math.inf else _number(pair[1], f"calibrate.bounds.{name}[1]")
     check(0 <= lower < upper, f"calibrate.bounds.{name}",
           f"needs 0 <= lower < upper (an arm's values are >= 0), got [{lower}, {upper}]")
+    lower, upper = joint_bounds(name, field, base.true_params, given, starts, lower, upper)
     check(lower <= start <= upper, f"calibrate.start.{name}",
           f"{start!r} is outside the bounds [{lower}, {upper}]")
     scale = start if start > 0 else upper - lower
@@ -138,7 +147,10 @@ def calibration_settings(table: dict, fit: list[str] | None, base: Scenario) -> 
     for key in ("start", "bounds"):
         for name in table[key]:
             check(name in names, f"calibrate.{key}.{name}", "not a fitted field (--fit)")
-    parameters = tuple(_parameter(n, table, base) for n in names)
+    starts = {n.partition(".")[2]: _start(n, table, base) for n in names}
+    parameters = tuple(_parameter(n, table, base, starts) for n in names)
+    check_overlap({p.name.partition(".")[2]: (p.name, p.lower, p.upper) for p in parameters})
+    check_start_arm(base.true_params, starts)
     inputs = table.get("inputs", "replay")
     check(inputs in INPUT_MODES, "calibrate.inputs", f"must be one of "
                                                      f"{', '.join(INPUT_MODES)}, got {inputs!r}")
@@ -176,8 +188,10 @@ def base_scenario(path) -> tuple[Scenario, dict]:
     Returns
     -------
     (Scenario, dict)
-        The scenario and the ``[calibrate]`` table (empty when there is none).
+        The scenario, named as the file names it (else after the file or campaign), and
+        the ``[calibrate]`` table (empty when there is none).
     """
-    from ..batch.campaign import load_study
+    from ..batch.campaign import load_study, own_name
     study = load_study(path)
-    return scenario_from_mapping(study.base), study.calibrate
+    return (scenario_from_mapping({"name": study.name} | study.base | own_name(study)),
+            study.calibrate)

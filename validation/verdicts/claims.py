@@ -94,19 +94,18 @@ class Column:
 
 
 class _Measured:
-    """One stored run, its signals loaded once when a measure needs them, its metrics at
-    each transient computed once (`_measured` keeps one per run).  A mesh-check run's
-    signals are those its file keeps (`mesh.CHECK_KEEP`: what the claims' measures read;
-    its window family is never measured), never re-simulated."""
+    """One stored run, its signals loaded once (``signals``: (run, names) → those signals,
+    every one for no names), its metrics at each transient computed once (`_measured`
+    keeps one per run).  A claim that reads signals asks for its own (`Claim.signals`):
+    a mesh-check run's file keeps them (`mesh.CHECK_KEEP`) and is read, not re-simulated."""
 
-    def __init__(self, stored) -> None:
-        self.stored, self._result, self._metrics = stored, None, {}
+    def __init__(self, stored, signals) -> None:
+        self.stored, self.signals, self._result, self._metrics = stored, signals, None, {}
 
     @property
     def result(self):
         if self._result is None:
-            self._result = self.stored.store.read(self.stored.run_id)[0] \
-                if mesh_check.is_check(self.stored) else self.stored.load()
+            self._result = self.signals(self.stored, ())
         return self._result
 
     def metrics(self, transient: float | None = None) -> dict:
@@ -120,13 +119,27 @@ class _Measured:
         return self._metrics[transient]
 
     def value(self, claim: Claim, transient: float | None = None):
-        return claim.measure(self.metrics(transient), self.result if claim.signals else None)
+        if not claim.signals:
+            return claim.measure(self.metrics(transient), None)
+        if transient is None and self._result is None:  # the claim's own signals suffice
+            return claim.measure(self.metrics(), self.signals(self.stored, claim.signals))
+        return claim.measure(self.metrics(transient), self.result)
 
 
-def _measured(stored, cache: dict) -> _Measured:
+class _Cache(dict):
+    """Measured runs by id, and how their signals are had ((a run, names) → those
+    signals, every one for no names; default: the run object's own ``load()``, a run held
+    in memory)."""
+
+    def __init__(self, signals=None) -> None:
+        super().__init__()
+        self.signals = signals or (lambda run, names=(): run.load())
+
+
+def _measured(stored, cache: _Cache) -> _Measured:
     key = getattr(stored, "run_id", id(stored))
     if key not in cache:
-        cache[key] = _Measured(stored)
+        cache[key] = _Measured(stored, cache.signals)
     return cache[key]
 
 
@@ -221,15 +234,16 @@ def _mesh_text(claim: Claim, values: tuple) -> str:
 
 
 def evaluate(claim: Claim, stored, checks: dict | None = None, *,
-             cache: dict | None = None) -> Verdict:
+             cache: _Cache | None = None) -> Verdict:
     """The verdict of ``claim`` on one stored run (None: not run).  ``checks``: its
     mesh-check runs ({label: stored run or None}), for a truth-plant run; None for the
-    reduced plant.  ``cache`` shares loaded signals and metrics between calls."""
+    reduced plant.  ``cache`` shares loaded signals and metrics between calls, and says
+    how signals are had (`_Cache`)."""
     if stored is None:
         return Verdict(math.nan, "not run")
     if stored.status != "ok":
         return Verdict(math.nan, stored.status, stored.message)
-    cache = {} if cache is None else cache
+    cache = _Cache() if cache is None else cache
     run = _measured(stored, cache)
     value, note = run.value(claim)
     verdict = claim.judge(value)
@@ -258,11 +272,13 @@ def evaluate(claim: Claim, stored, checks: dict | None = None, *,
     return Verdict(value, verdict, note, windows, meshes, **estimate)
 
 
-def claim_columns(runs) -> list[Column]:
+def claim_columns(runs, signals=None) -> list[Column]:
     """Columns of verdicts from stored runs (objects with ``name``, ``config``,
-    ``status``, ``message``, ``metrics``, ``sweep``, ``plant``, ``run_id`` and ``load()``),
-    sorted by arm, plant, Ts, start.  Mesh-check runs among ``runs`` are used as the
-    checks of the runs they refine, never as columns of their own."""
+    ``status``, ``message``, ``metrics``, ``sweep``, ``plant``, ``run_id``), sorted by
+    arm, plant, Ts, start; ``signals``: (a run, names) → those signals, every one for no
+    names (e.g. `every_signal` of its store; default: the run object's own ``load()``).
+    Mesh-check runs among ``runs`` are used as the checks of the runs they refine, never
+    as columns of their own."""
     runs = list(runs)
     by_id = {r.run_id: r for r in runs}
     groups: dict[tuple, dict] = {}
@@ -271,7 +287,7 @@ def claim_columns(runs) -> list[Column]:
         short = r.name.split("/")[-1]
         if short in wanted and not mesh_check.is_check(r):
             groups.setdefault(column_key(r.config), {})[short] = r
-    columns, cache = [], {}
+    columns, cache = [], _Cache(signals)
     order = {"default": 0, "table1": 1, "rest": 0, "reference": 1}
     truth = {k: is_truth(next(iter(g.values())).config) for k, g in groups.items()}
     for key in sorted(groups, key=lambda k: (order.get(k[0], 9), truth[k], k[1], -k[2],
@@ -298,15 +314,15 @@ class MeshRow:
     error: float = math.nan  # estimated error of the nominal value
 
 
-def mesh_rows(runs) -> list[MeshRow]:
+def mesh_rows(runs, signals=None) -> list[MeshRow]:
     """For every truth-plant run among ``runs`` that has checks stored, each claim that
     applies to it (value not NaN), on every mesh; a run that did not complete gives one
-    row comparing statuses."""
+    row comparing statuses.  ``signals``: as `claim_columns`'."""
     runs = list(runs)
     by_id = {r.run_id: r for r in runs}
-    out, cache = [], {}
+    out, cache = [], _Cache(signals)
     for r in runs:
-        if not is_truth(r.config) or mesh_check.is_check(r):
+        if r.role != "truth" or mesh_check.is_check(r):
             continue
         checks = mesh_check.checks_of(r, by_id)
         if not any(checks.values()):

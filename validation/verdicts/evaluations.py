@@ -52,27 +52,27 @@ def effective_rho(row, requirement: Requirement) -> float | None:
 
 @dataclass
 class Evaluations:
-    """Scenarios run on the campaign runner into ``out`` and read back from the store;
-    simulations counted per plant role (distinct scenarios asked for).  A search asks
-    with `run`; a question answered beside others (`validation.batch.queue`) yields
-    `batch` and hands the rows it is sent to `record`."""
+    """Scenarios run on the campaign runner into ``out`` (a folder, or a `BaseStore`: an
+    in-memory one) and read back; simulations counted per plant role (distinct scenarios
+    asked for).  A search asks with `run`; a question answered beside others (`queue`)
+    yields `batch` and hands the rows it is sent to `record`."""
 
-    out: Path
+    out: object
     runner: object
     name: str
     seen: set = field(default_factory=set)
     count: dict = field(default_factory=lambda: {"reduced": 0, "truth": 0})
     failed: list = field(default_factory=list)
+    description: str = "verdicts over uncertainty (flexarm verify)"  # the campaign's
 
     def __post_init__(self):
-        self.store = ResultStore(self.out)
+        self.store = ResultStore(self.out) if isinstance(self.out, (str, Path)) else self.out
 
     def batch(self, items: list[tuple]) -> Batch:
         """The batch of ``items`` = [(scenario, sweep, axes)]."""
         planned = [PlannedRun(run_id(scenario_to_mapping(scenario)), scenario, sweep, axes)
                    for scenario, sweep, axes in items]
-        return Batch(self.out, self.name, planned,
-                     description="verdicts over uncertainty (flexarm verify)")
+        return Batch(self.out, self.name, planned, description=self.description)
 
     def record(self, batch: Batch, rows: list) -> list:
         """``rows`` (a batch's, in order), counted: simulations per plant, failed runs."""

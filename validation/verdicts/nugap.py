@@ -245,6 +245,7 @@ def nu_gap(P1, P2, *, points_per_decade: int = POINTS_PER_DECADE) -> float:
     Examples
     --------
     >>> import control
+    >>> from validation import nu_gap
     >>> round(nu_gap(control.tf(1, [1, -0.001]), control.tf(1, [1, 0.001])), 6)
     0.002
     """
@@ -320,6 +321,7 @@ def stability_margin(P, C, *, points_per_decade: int = POINTS_PER_DECADE) -> flo
     Examples
     --------
     >>> import control
+    >>> from validation import stability_margin
     >>> round(stability_margin(control.tf(4, [1, -0.001]), 1.0), 4)
     0.7069
     """

@@ -87,7 +87,8 @@ class _Case:
 
     def __init__(self, config: dict) -> None:
         self.scenario = s = scenario_from_mapping(config)
-        self.model = nominal_model(s.nominal_params, s.model.modes_per_link)
+        self.model = nominal_model(s.nominal_params, s.model.modes_per_link,
+                                   s.model.kinematics)
         self.reference = make_reference(s.reference)
         self.names = list(self.model.state_names)
         n = self.model.n

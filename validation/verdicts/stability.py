@@ -48,7 +48,7 @@ from ..batch.campaign import PlannedRun
 
 from ..batch.queue import run_planned
 from ..batch.executor import Runner
-from ..batch.runfiles import KEEP_METRICS
+from ..batch.runfiles import KEEP_NONE
 from ..run.laws import applies_generalised_forces
 from ..run.plants import is_truth, plant_settings, with_plant
 from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
@@ -151,7 +151,7 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
         for plant in plants or (data["plant"]["kind"],):
             for arm in arms or (data["arm"],):
                 base = dict(data, disturbances=[], initial_state="reference",
-                            duration=DURATION, transient=DURATION / 2)
+                            duration=DURATION, transient=DURATION / 2, requirement=[])
                 base["plant"] = with_plant(base["plant"], plant)
                 base["arm"] = arm
                 params = scenario_to_mapping(arm_parameters(arm))
@@ -199,7 +199,7 @@ def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
     rid = run_id(scenario_to_mapping(scenario))
     return PlannedRun(rid, scenario, "stability", {"Ts": Ts, "plant.kind": case.plant,
                                                    "arm": case.arm, "level": case.level},
-                      keep=KEEP_METRICS)  # an outcome is a status and metrics
+                      keep=KEEP_NONE)  # an outcome is a status and metrics
 
 
 class _Search:

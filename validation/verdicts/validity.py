@@ -34,6 +34,7 @@ import control
 import numpy as np
 
 from reduced_model import ArmModel
+from reduced_model._joint_linear import nonlinear_joint_effects
 
 from ..run.laws import build_controller
 from ..run.plants import is_truth, truth_settings
@@ -89,7 +90,8 @@ def arm_validity(config: dict) -> dict:
         def hold(t, x=x):
             return x[:2].copy(), np.zeros(2), np.zeros(2)
         gain = as_statespace(law_gain(law, x, 0.0, hold, shared=(model,)))
-        views = {"theta": (red[["theta1", "theta2"], :], fe[["theta1", "theta2"], :]),
+        encoders = ["motor1", "motor2"]  # θ, or a drive's rotor: what the encoders read
+        views = {"theta": (red[encoders, :], fe[encoders, :]),
                  "tip": (red[["tip_defl1", "tip_defl2"], :],
                          fe[["tip_defl1", "tip_defl2"], :]),
                  "loop": (gain * control.sample_system(red[names, :], s.Ts),
@@ -104,7 +106,7 @@ def arm_validity(config: dict) -> dict:
             row[view], row[f"{view}_peak_hz"] = detail.value, detail.frequency / (2 * np.pi)
         gaps.append(row)
     return {"arm": s.arm, "Ts": s.Ts, "modes": list(s.model.modes_per_link),
-            "law": s.controller.kind,
+            "law": s.controller.kind, "left_out": list(nonlinear_joint_effects(s.true_params)),
             "truth": _truth_text(config), "frequencies_hz": list(FREQUENCIES_HZ),
             "responses": responses, "gaps": gaps}
 
@@ -234,7 +236,7 @@ _NUMBER = (int, float)
 _CURVES = {f"{i}->{o}": [_NUMBER] for i, o in CHANNELS}
 #: What the report reads of validity.json (`validation.run.results.read_json`).
 _SCHEMA = {
-    "arms": [{"arm": str, "Ts": _NUMBER, "modes": [int], "truth": str,
+    "arms": [{"arm": str, "Ts": _NUMBER, "modes": [int], "truth": str, "left_out": [str],
               "frequencies_hz": [_NUMBER],
               "responses": [{"theta2": _NUMBER, "reduced": _CURVES, "fe": _CURVES}],
               "gaps": [{"theta2": _NUMBER, **{k: _NUMBER for v in _GAP_VIEWS

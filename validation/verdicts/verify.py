@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..batch.queue import answer_all
+from ..batch.resimulate import every_signal
 from ..run.config import ConfigError
 from ..run.requirements import Requirement
 from .evaluations import (Evaluations, asked, effective_rho, number, point_axes,
@@ -139,7 +140,7 @@ def conform_question(system: System, out, *, budget: int, seed: int, log=print):
         distances = []
         for k, p in enumerate(points):
             reduced, truth = rows[2 * k], rows[2 * k + 1]
-            d = _distance(reduced, truth)
+            d = _distance(ev.store, reduced, truth)
             distances.append(d)
             if d is not None and (best is None or d > best[0]):
                 best = (d, p, reduced, truth)
@@ -171,14 +172,14 @@ def conform_question(system: System, out, *, budget: int, seed: int, log=print):
     return verdict
 
 
-def _distance(reduced, truth) -> float | None:
+def _distance(store, reduced, truth) -> float | None:
     """max over time and joints of |θ_truth − θ_reduced| (stored signals, common span);
     +∞ when exactly one plant diverged, None when a run failed."""
     if "failed" in (reduced.status, truth.status):
         return None
     if (reduced.status == "diverged") != (truth.status == "diverged"):
         return math.inf
-    a, b = reduced.load(), truth.load()
+    a, b = every_signal(store, reduced), every_signal(store, truth)
     n = min(a.time.size, b.time.size)
     diff = a.select(["theta1", "theta2"])[:, :n].astype(float) - \
         b.select(["theta1", "theta2"])[:, :n].astype(float)

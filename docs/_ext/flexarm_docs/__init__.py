@@ -4,7 +4,8 @@ At ``builder-inited`` each generator writes one reStructuredText file into
 ``docs/_generated/``, which the pages ``.. include::``: the configuration keys
 (`configref`), the command line (`cliref`), the signal names and metric keys
 (`signalref`), the paper's claims (`claimsref`), the built-in laws (`lawsref`) and the findings of a stored
-``flexarm reproduce-paper`` (`findings`).  Nothing in them is typed by hand.
+``flexarm reproduce-paper`` (`findings`).  Nothing in them is typed by hand.  MathJax is
+copied into the built site (`mathjax`): the site needs no network.
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from pathlib import Path
 
 from .rst import escape_bars
 from . import claimsref, cliref, configref, findings, lawsref, signalref
+from .mathjax import copy_mathjax
 
 #: File name in docs/_generated → the function returning its text (given the docs folder).
 GENERATORS = {
@@ -45,4 +47,5 @@ def escape_docstring_bars(app, what, name, obj, options, lines) -> None:
 def setup(app):
     app.connect("builder-inited", generate)
     app.connect("autodoc-process-docstring", escape_docstring_bars)
+    app.connect("build-finished", copy_mathjax)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

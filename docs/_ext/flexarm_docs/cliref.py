@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .rst import heading, list_table, literal
+from .rst import heading, list_table, literal, literal_words
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
@@ -37,7 +37,7 @@ def _argument_rows(parser: argparse.ArgumentParser) -> list[list[str]]:
         choices = ", ".join(literal(c) for c in a.choices) if a.choices else ""
         help_text = (a.help or "").replace("%(default)s", str(a.default)) \
             .replace("%%", "%")
-        rows.append([literal(names), help_text, choices, default])
+        rows.append([literal(names), literal_words(help_text), choices, default])
     return rows
 
 
@@ -45,14 +45,14 @@ def _command(path: list[str], parser, help_text: str, level: str) -> list[str]:
     title = " ".join(path)
     out = [f".. _cli-{'-'.join(path[1:]) or 'flexarm'}:\n\n", heading(f"``{title}``", level)]
     if help_text:
-        out.append(help_text.strip() + "\n\n")
+        out.append(literal_words(help_text.strip()) + "\n\n")
     parser.prog = title
     out.append(".. code-block:: text\n\n")
     out += [f"   {line}\n" for line in parser.format_usage().removeprefix("usage: ")
             .rstrip().splitlines()]
     out.append("\n")
     if parser.description and parser.description != help_text:
-        out.append(parser.description.strip() + "\n\n")
+        out.append(literal_words(parser.description.strip()) + "\n\n")
     rows = _argument_rows(parser)
     if rows:
         out.append(list_table(["argument", "meaning", "choices", "default"], rows,

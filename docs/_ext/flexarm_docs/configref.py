@@ -151,10 +151,14 @@ def render(docs) -> str:
     special = {(ControllerSpec, "kind"): law.format(", ".join(map(literal, CONTROLLERS))),
                (ObserverSpec, "kind"): '``"none"``, ' + law.format(
                    ", ".join(map(literal, OBSERVERS)))}
-    table1, default = ArmParameters.table1(), ArmParameters()
-    arm_overrides = {f.name: f"``table1``: {_toml(getattr(table1, f.name))}"
+    default = ArmParameters()
+    arms = {"table1": ArmParameters.table1(), "lab": ArmParameters.lab()}
+    arm_overrides = {f.name: "; ".join(f"``{arm}``: {_toml(getattr(p, f.name))}"
+                                       for arm, p in arms.items()
+                                       if getattr(p, f.name) != getattr(default, f.name))
                      for f in dataclasses.fields(ArmParameters)
-                     if getattr(table1, f.name) != getattr(default, f.name)}
+                     if any(getattr(p, f.name) != getattr(default, f.name)
+                            for p in arms.values())}
     sections = [
         ("Top-level keys", Scenario, {}, None,
          "The keys of a scenario file (or of a campaign's ``[scenario]`` table)."),
@@ -169,8 +173,8 @@ def render(docs) -> str:
          'The truth plant\'s finite elements (``kind = "exudyn"`` only).'),
         ("``[true_params]`` and ``[nominal_params]``", ArmParameters, {}, arm_overrides,
          "The arm simulated and the arm the laws believe in, SI units; both start from "
-         "the parameters of ``arm`` (the defaults shown; ``table1``'s where they "
-         "differ) and override them key by key."),
+         "the parameters of ``arm`` (the defaults shown; ``table1``'s and ``lab``'s "
+         "where they differ) and override them key by key."),
         ("``[model]``", ModelSpec, {}, None, "The laws' model."),
         ("``[controller]``", ControllerSpec, {}, None,
          "The options each built-in law takes are listed on its API page."),

@@ -27,6 +27,21 @@ def escape_bars(text: str) -> str:
     return "".join(parts)
 
 
+#: What a reader copies into a shell or a file: a flag ("--set", "-n", "--tier=short") or a
+#: word with an "@" ("pbc+smo-paper@reduced", which docutils would link as an e-mail).
+_COPIED = re.compile(r"(?<![\w`-])(--?[A-Za-z][\w.-]*(?:=[^\s,;)]+)?|[\w.+:-]+@[\w.+:-]*\w)")
+
+
+def literal_words(text: str) -> str:
+    """``text`` with its flags and its words holding an "@" as inline literals (outside
+    the literals it has): as prose, "--set" would become "–set" (smart quotes) and
+    "controller+observer@plant" a ``mailto:`` link."""
+    parts = _LITERAL.split(text)
+    for i in range(0, len(parts), 2):
+        parts[i] = _COPIED.sub(r"``\1``", parts[i])
+    return "".join(parts)
+
+
 def heading(text: str, underline: str) -> str:
     return f"{text}\n{underline * len(text)}\n\n"
 

@@ -1,0 +1,146 @@
+"""The report's bottom line: two or three sentences a reviewer can quote, computed from
+the stored results — how many runs completed, diverged and failed (the mesh/step checks
+counted apart from the runs they check), where the divergences and failures are (which
+arm, control period and plant), and what became of the paper's claims on each plant, the
+verdicts that cannot be given named with what stops them.  A calibration's folder says
+what was fitted and the verdict on the model instead."""
+from __future__ import annotations
+
+from collections import Counter
+
+from ..run.plants import is_truth
+
+__all__ = ["bottom_line", "UNDECIDED"]
+
+#: What stops a claim's verdict, by the verdict given instead (`verdicts.claims.Verdict`).
+UNDECIDED = {
+    "not converged": "the truth plant's value moved when its mesh and step were refined",
+    "window-sensitive": "the verdict changes with the analysis window",
+    "mesh not checked": "the truth plant's mesh/step checks were not run",
+    "diverged": "the run diverged",
+    "failed": "the run failed",
+    "not run": "the claim's run is not in the folder",
+}
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word if n == 1 else word + 's'}"
+
+
+def _places(runs) -> list[tuple[int, str]]:
+    """(count, "the table1 arm at Ts = 1 ms, truth plant (Exudyn)") per arm and control
+    period, most first."""
+    counts = Counter((r.arm, r.Ts) for r in runs)  # the row's columns: no scenario decoded
+    out = []
+    for (arm, Ts), n in counts.most_common():
+        plants = sorted({r.plant_label for r in runs if (r.arm, r.Ts) == (arm, Ts)})
+        out.append((n, f"the {arm} arm at Ts = {1e3 * Ts:g} ms, {' and '.join(plants)}"))
+    return out
+
+
+def _where(runs, what: str) -> str:
+    """"all 44 divergences are on the table1 arm at Ts = 1 ms, …" or "the 5 …: 3 on …;
+    2 on …" (three places at most, then how many more)."""
+    places = _places(runs)
+    if len(places) == 1:
+        return f"{'all ' if len(runs) > 1 else ''}{_plural(len(runs), what)} " \
+               f"{'are' if len(runs) > 1 else 'is'} on {places[0][1]}"
+    shown = "; ".join(f"{n} on {place}" for n, place in places[:3])
+    more = f"; {len(places) - 3} more places" if len(places) > 3 else ""
+    return f"the {_plural(len(runs), what)}: {shown}{more}"
+
+
+def _counted(runs) -> str:
+    count = Counter(r.status for r in runs)
+    return f"{count['ok']} completed, {count['diverged']} diverged, {count['failed']} failed"
+
+
+def _runs_sentence(runs, checks) -> str:
+    text = f"{_plural(len(runs), 'run')}: {_counted(runs)}"
+    if checks:
+        text += (f"; their {_plural(len(checks), 'mesh/step-check run')} (the truth-plant "
+                 f"runs again on refined meshes and steps): {_counted(checks)}")
+    return text + "."
+
+
+def _stops_sentence(runs, checks) -> str:
+    parts = [_where([r for r in group if r.status == s], word)
+             for group, s, word in ((runs, "diverged", "divergence"),
+                                    (runs, "failed", "failure"),
+                                    (checks, "failed", "failed check"))
+             if any(r.status == s for r in group)]
+    if not parts:
+        return ""
+    text = "; ".join(parts)
+    return text[0].upper() + text[1:] + "."
+
+
+def _claims_sentence(columns) -> str:
+    """The claims' verdicts counted per plant role, the undecided ones by what stops them."""
+    from ..verdicts.claims import CLAIMS
+    parts = []
+    for role, name in (("truth", "the truth plant"), ("reduced", "the reduced model")):
+        verdicts = Counter(v.verdict for c in columns
+                           if is_truth(next(iter(c.runs.values())).config) == (role == "truth")
+                           for v in c.verdicts.values() if v.verdict != "n/a")
+        if not verdicts:
+            continue
+        undecided = [f"{verdicts[v]} {v} ({meaning})" for v, meaning in UNDECIDED.items()
+                     if verdicts[v]]
+        text = f"on {name} {verdicts['holds']} hold and {verdicts['fails']} fail"
+        if undecided:
+            total = sum(verdicts[v] for v in UNDECIDED)
+            text += f"; {total} are not given: " + ", ".join(undecided)
+        parts.append(text)
+    if not parts:
+        return ""
+    return (f"The paper's {len(CLAIMS)} claims over {_plural(len(columns), 'column')} (arm, "
+            f"plant, control period, start): " + "; ".join(parts) + ".")
+
+
+def _calibration_sentence(calibration: dict) -> str:
+    fitted = "; ".join(f"{row[0]} = {row[1]}" + (f" ({calibration['interval']} {row[3]})"
+                                                   if row[3] != "—" else " (not identifiable)")
+                       for row in calibration["rows"])
+    verdict = calibration["adequacy"]["verdict"] if calibration.get("adequacy") else \
+        "not judged"
+    return f"flexarm calibrate fitted {fitted}. The verdict on the model: {verdict}."
+
+
+def bottom_line(runs, checks, columns, calibration: dict | None = None) -> list[str]:
+    """The report's first sentences.
+
+    Parameters
+    ----------
+    runs : list of StoredRun
+        The runs the report shows (fresh, verified; no mesh/step checks).
+    checks : list of StoredRun
+        The mesh/step-check runs of those runs.
+    columns : list of Column
+        The claims' columns (`validation.verdicts.claims.claim_columns`), or [].
+    calibration : dict, optional
+        The report's calibration section (`validation.report.calibration`).
+
+    Returns
+    -------
+    list of str
+        One to four sentences, each complete on its own.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as Run
+    >>> runs = [Run(status=s, arm="table1", Ts=1e-3, plant_label="reduced plant")
+    ...         for s in ("ok", "diverged", "diverged")]
+    >>> print("\\n".join(bottom_line(runs, [], [])))
+    3 runs: 1 completed, 2 diverged, 0 failed.
+    All 2 divergences are on the table1 arm at Ts = 1 ms, reduced plant.
+    """
+    lines = []
+    if runs:
+        lines += [_runs_sentence(runs, checks), _stops_sentence(runs, checks)]
+    if columns:
+        lines.append(_claims_sentence(columns))
+    if calibration:
+        lines.append(_calibration_sentence(calibration))
+    return [line for line in lines if line]
+

@@ -1,0 +1,82 @@
+"""Whether a report shows what its results folder holds now: its *content key* hashes
+the stored runs it reads (ids, checksums, whether each is fresh), the campaigns' report
+settings, the stability map's runs, the calibration and validity files, the code and
+library versions that draw it, and the options; an unchanged key leaves the report as it
+is (`validation.report.report.write_report`)."""
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+from pathlib import Path
+
+from ..batch.fingerprint import fingerprint_of
+from ..batch.store import ResultStore
+
+__all__ = ["content_key", "report_is_current", "paths"]
+
+_KEY_FILE = ".content-key"
+
+
+@functools.lru_cache(maxsize=1)
+def _drawing_code() -> str:
+    """A hash of the code and libraries that turn stored runs into a report."""
+    from importlib.metadata import version
+
+    from ..run.plants import ENGINE_PACKAGES
+    h = hashlib.sha256()
+    root = Path(__file__).resolve().parents[2]
+    for package in ("validation", "reduced_model", "plant_exudyn", "controllers"):
+        for path in sorted((root / package).rglob("*")):
+            if path.suffix in (".py", ".j2") and "__pycache__" not in path.parts:
+                h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
+    for name in ("matplotlib", "jinja2", "numpy", "scipy", *ENGINE_PACKAGES):
+        h.update(f"{name}={version(name)}".encode())
+    return h.hexdigest()
+
+
+def _rows_digest(store: ResultStore) -> str:
+    """A hash of what the report reads of each stored run (its detail whole: swept values
+    included, never decoded)."""
+    if not store.exists():
+        return ""
+    store.rows(where="0")  # refuses an index it cannot read
+    h, now = hashlib.sha256(), {}
+    for *values, controller, observer, plant, detail in store.columns(
+            ["run_id", "sha256", "size", "status", "name", "sweep", "fingerprint",
+             "controller", "observer", "plant", "detail"], where="1 ORDER BY run_id"):
+        kinds = (controller, observer, plant)
+        if kinds not in now:  # the fingerprint each kind of run gets from this code
+            now[kinds] = fingerprint_of(*kinds)
+        h.update(f"{values}{values[-1] == now[kinds]}".encode() + detail)
+    return h.hexdigest()
+
+
+def content_key(results_dir, *, animate: bool) -> str:
+    """The hash of everything a report of ``results_dir`` shows (module docstring)."""
+    store = ResultStore(results_dir)
+    validity = store.out / "validity" / "validity.json"
+    calibration = store.out / "calibration.json"
+    parts = {"runs": _rows_digest(store), "campaigns": store.campaigns(),
+             "calibration": hashlib.sha256(calibration.read_bytes()).hexdigest()
+             if calibration.is_file() else "",
+             "stability": _rows_digest(ResultStore(store.out / "stability")),
+             "validity": hashlib.sha256(validity.read_bytes()).hexdigest()
+             if validity.is_file() else "",
+             "code": _drawing_code(), "animate": animate}
+    text = json.dumps(parts, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def paths(results_dir) -> tuple[Path, Path, Path]:
+    out = ResultStore(results_dir).out / "report"
+    return out / "report.html", out / "report.md", out / _KEY_FILE
+
+
+def report_is_current(results_dir, *, animate: bool = True) -> bool:
+    """Whether the report of ``results_dir`` exists and shows what the folder holds now
+    (the same content key)."""
+    html_path, md_path, key_path = paths(results_dir)
+    return (html_path.is_file() and md_path.is_file() and key_path.is_file()
+            and key_path.read_text().strip() == content_key(results_dir, animate=animate))
+
