@@ -2,6 +2,7 @@
 runs, and how a command ends."""
 from __future__ import annotations
 
+import functools
 import shutil
 import sys
 import tempfile
@@ -81,6 +82,7 @@ def mesh_checks(runner, out: Path, run_ids: set, *, progress: bool,
     and the other formulation, then level 2 of the runs whose verdict it could still
     change (`claims.finer_runs`).  A non-zero exit status if interrupted or a check
     failed."""
+    from ..batch.resimulate import every_signal
     from ..verdicts.claims import finer_runs
     from ..verdicts.mesh import FIRST_STAGE, MESH_SWEEP, run_checks
     store = ResultStore(out)
@@ -88,7 +90,8 @@ def mesh_checks(runner, out: Path, run_ids: set, *, progress: bool,
     rows = [r for r in store.rows() if r.run_id in wanted]
     summary = run_checks(rows, out, runner=runner, progress=progress, levels=FIRST_STAGE)
     if not summary.interrupted:
-        finer = [r for r in finer_runs(store.rows()) if r.run_id in wanted]
+        finer = [r for r in finer_runs(store.rows(), functools.partial(every_signal, store))
+                 if r.run_id in wanted]
         summary = summary + run_checks(finer, out, runner=runner, progress=progress,
                                        levels=(2,))
     if summary.planned:

@@ -201,13 +201,13 @@ def _mesh_values(claim: Claim, run: _Measured, checks: dict,
     return converged, tuple(values)
 
 
-def finer_runs(rows) -> list:
+def finer_runs(rows, signals=None) -> list:
     """The truth-plant runs among stored ``rows`` whose level-1 check leaves a judged
     value's verdict open (`mesh.second_level_needed`, for any claim that applies to the
-    run): their level 2 is worth running."""
+    run): their level 2 is worth running.  ``signals``: as `claim_columns`'."""
     rows = list(rows)
     by_id = {r.run_id: r for r in rows}
-    out, cache = [], {}
+    out, cache = [], _Cache(signals)
     for r in rows:
         if not is_truth(r.config) or mesh_check.is_check(r) or r.status != "ok":
             continue
