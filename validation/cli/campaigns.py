@@ -4,12 +4,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import functools
+import sys
 from pathlib import Path
 
 from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore
 
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
+from .job_clock import PAPER, JobClock
 from .results import render_report
 from .verdicts import stability_map_into
 
@@ -74,12 +76,17 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     out = Path(args.out or Path("results") / which)
     scenarios = [r.scenario for r in runs]
     runner = runner_for(args, scenarios, out, *([] if args.no_stability else [out / "stability"]))
+    clock = JobClock(f"reproduce-paper{' --lab' if args.lab else ''}", PAPER,
+                     stream=None if args.no_progress else sys.stderr)
+    clock.begin(skipped=(["the stability map"] if args.no_stability else [])
+                + (["the report"] if args.no_report else []))
     with runner:
         summary = run_campaign(campaign, out, runner=runner, progress=not args.no_progress,
                                only=runs)
         if summary.interrupted:
             return finish(summary, campaign.name, out)
         print(summary.line(campaign.name, out))
+        clock.done("the paper's runs")
         stability, explained = 0, set()
         if not args.no_stability:
             stability, results = stability_map_into(
@@ -88,15 +95,18 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
             if stability not in (0, EXIT_FAILED):  # interrupted
                 return stability
             explained = beyond_every_limit(results, ResultStore(out).rows())
+            clock.done("the stability map")
         checks = mesh_checks(runner, out, {r.run_id for r in runs}, beyond=explained,
                              progress=not args.no_progress)
         if checks and checks != EXIT_FAILED:  # interrupted
             return checks
+        clock.done("the mesh checks")
     store = ResultStore(out)
     columns = claim_columns(store.rows(), functools.partial(every_signal, store))
     write_claims(out, columns)
     lines, missing = claims_summary(columns, out / "claims.md")
     print("\n".join(lines))
+    clock.done("the claims")
     if not args.no_report:
         print(render_report(out, animate=not args.no_animation, progress=not args.no_progress))
     return EXIT_FAILED if missing or stability else 0

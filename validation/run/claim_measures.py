@@ -124,7 +124,7 @@ class Claim:
     windowed: bool = True  # measured after the scenario's transient
     strict: bool = False  # holds only below the bound (x̂ ≡ 0 scores the bound exactly)
     #: The signals ``measure`` reads from the run (none: it reads metrics alone, and is
-    #: handed no signals).
+    #: handed no signals); a scan of every run measures it on its own ``run`` only.
     signals: tuple = ()
 
     def judge(self, value: float) -> str:

@@ -136,6 +136,13 @@ class _Cache(dict):
         self.signals = signals or (lambda run, names=(): run.load())
 
 
+def _may_apply(claim: Claim, run) -> bool:
+    """Whether ``claim`` is worth measuring on stored ``run`` when every run is scanned: a
+    claim that reads signals only on its own runs (`Claim.run`), so that a run keeping only
+    its metrics is never re-simulated to find that the claim does not apply."""
+    return not claim.signals or run.name.split("/")[-1] == claim.run
+
+
 def _measured(stored, cache: _Cache) -> _Measured:
     key = getattr(stored, "run_id", id(stored))
     if key not in cache:
@@ -216,7 +223,7 @@ def finer_runs(rows, signals=None) -> list:
         if first is None or first.status != "ok":
             continue
         run = _measured(r, cache)
-        for claim in CLAIMS:
+        for claim in (c for c in CLAIMS if _may_apply(c, r)):
             value = run.value(claim)[0]
             if not math.isnan(value) and mesh_check.second_level_needed(
                     value, _measured(first, cache).value(claim)[0], claim.bound):
@@ -340,7 +347,7 @@ def mesh_rows(runs, signals=None) -> list[MeshRow]:
             continue
         run = _measured(r, cache)
         for claim in CLAIMS:
-            if math.isnan(run.value(claim)[0]):
+            if not _may_apply(claim, r) or math.isnan(run.value(claim)[0]):
                 continue
             converged, values = _mesh_values(claim, run, checks, cache)
             order, error = mesh_check.sequence_estimate(r.config, values[0][1], dict(values))
