@@ -23,8 +23,8 @@ RESUMED = 0.1
 #: ``flexarm reproduce-paper``'s phases and their wall times [s] on the reference machine
 #: (2 cores, quiet, two workers; bench/results/bench_paper.json of 2026-11-28), kernels
 #: compiled already (the compile says its own estimate).
-PAPER = (("the paper's runs", 77.0), ("the stability map", 170.0), ("the mesh checks", 0.0),
-         ("the claims", 0.0), ("the report", 0.0))
+PAPER = (("the paper's runs", 82.0), ("the stability map", 175.0), ("the mesh checks", 40.0),
+         ("the claims", 2.0), ("the report", 47.0))
 
 
 def _duration(seconds: float) -> str:

@@ -41,9 +41,11 @@ from . import mesh as mesh_check
 from .resolution import UNDECIDED, judged
 
 __all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "finer_runs",
-           "SYSTEM",
-           "DISTURBED", "WINDOWS", "column_key", "claims_records", "mesh_rows", "MeshRow"]
+           "SYSTEM", "DISTURBED", "CLAIM_RUNS", "WINDOWS", "column_key", "claims_records",
+           "mesh_rows", "MeshRow"]
 
+#: The names of the runs the claims are judged on (a campaign's other runs decide none).
+CLAIM_RUNS = frozenset(c.run for c in CLAIMS)
 #: The family of transients [s] every windowed claim is measured over.
 WINDOWS = (1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0)
 
@@ -289,10 +291,9 @@ def claim_columns(runs, signals=None) -> list[Column]:
     runs = list(runs)
     by_id = {r.run_id: r for r in runs}
     groups: dict[tuple, dict] = {}
-    wanted = {c.run for c in CLAIMS}
     for r in runs:
         short = r.name.split("/")[-1]
-        if short in wanted and not mesh_check.is_check(r):
+        if short in CLAIM_RUNS and not mesh_check.is_check(r):
             groups.setdefault(column_key(r.config), {})[short] = r
     columns, cache = [], _Cache(signals)
     order = {"default": 0, "table1": 1, "rest": 0, "reference": 1}
