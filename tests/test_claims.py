@@ -340,3 +340,46 @@ def test_a_margin_inside_the_values_error_is_undecided(values, expected):
     v = evaluate(claim, run(config, values[0], "nominal"), checks)
     assert v.verdict == expected, v
     assert v.error == pytest.approx(0.0005 / (1 - 2 ** -math.log2(0.0005 / 0.0002)))
+
+
+@pytest.mark.parametrize("values, expected, finer", [
+    # ANCF 4, ANCF 8 step/2, (ANCF 16 step/4 not run), GE 32 [rad]; bound 0.02 rad
+    ((0.0100, 0.0105, 0.0102), "holds", False),  # margin 10 mrad > 2 × 0.5 mrad: decided
+    ((0.01985, 0.01975, 0.0198), "mesh not checked", True),  # 0.15 mrad ≤ 2 × 0.1 mrad
+    ((0.0100, 0.0150, 0.0102), "not converged", False),  # level 1 disagrees: decided
+])
+def test_a_second_level_is_run_only_where_it_could_change_the_verdict(values, expected,
+                                                                      finer, monkeypatch):
+    """Issue 46: a refinement whose first level agrees within the tolerance and leaves a
+    margin larger than twice the difference (the error left for an order ≥ 1) needs no
+    second level — the claim is decided without it (known good); one whose margin is
+    inside that is "mesh not checked" until level 2 runs, and `finer_runs` asks for it
+    (known bad); a first level that disagrees decides alone: not converged."""
+    from validation.batch.store import run_id
+    from validation.verdicts import claims as claims_module
+    from validation.verdicts import mesh as mesh_check
+    from validation.verdicts.claims import finer_runs
+    claim = dataclasses.replace(CLAIM["tracking"], windowed=False)
+    config = scenario_to_mapping(scenario_from_mapping({"plant": {"kind": "exudyn"}}))
+    refinements = mesh_check.refinements(config)
+
+    def run(config, value, rid, sweep="t"):
+        return SimpleNamespace(name=f"paper/{SYSTEM}", config=config, status="ok", message="",
+                               end_time=20.0, metrics={"track_max_1": value,
+                                                       "track_max_2": value / 2},
+                               run_id=rid, sweep=sweep, load=lambda: None)
+    checks = {refinements[0].label: run(mesh_check.refined_config(config, refinements[0]),
+                                        values[1], "level1", mesh_check.MESH_SWEEP),
+              refinements[1].label: None,
+              refinements[2].label: run(mesh_check.refined_config(config, refinements[2]),
+                                        values[2], "ge", mesh_check.MESH_SWEEP)}
+    nominal = run(config, values[0], "nominal")
+    v = evaluate(claim, nominal, checks)
+    assert v.verdict == expected, v
+    assert dict(v.meshes)[refinements[1].label] == ("not run" if finer else "not needed")
+    # finer_runs finds the checks of a stored run by their scenarios' run ids
+    for c in checks.values():
+        if c is not None:
+            c.run_id = run_id(scenario_to_mapping(scenario_from_mapping(c.config)))
+    monkeypatch.setattr(claims_module, "CLAIMS", (claim,))
+    assert (finer_runs([nominal, *(c for c in checks.values() if c)]) == [nominal]) == finer

@@ -20,11 +20,11 @@ A campaign file (TOML)::
     random."disturbances[0].start" = {uniform = [2.0, 18.0]}   # [i] indexes a list
 
 Within a sweep the grid, zip and random parts combine by product.  A random axis under
-``scale`` draws a factor of the base value; ``also`` gives other fields the same draw.
-The same axes declare the uncertainty sets of ``flexarm verify`` (`RandomAxis`).  Each run's scenario is
-resolved and checked before anything runs; its id is a hash of the resolved scenario, so
-rerunning a campaign into the same folder skips what is done (resume; running is
-`validation.batch.queue`'s).
+``scale`` draws a factor of the base value; ``also`` gives other fields the same draw.  The
+same axes declare the uncertainty sets of ``flexarm verify`` (`RandomAxis`).  Each run's
+scenario is resolved and checked before anything runs; its id is a hash of the resolved
+scenario, so rerunning a campaign into the same folder skips what is done (resume;
+running is `validation.batch.queue`'s).
 """
 from __future__ import annotations
 
@@ -43,8 +43,7 @@ from .store import run_id
 from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "own_name", "is_campaign",
-           "CAMPAIGN_KEYS", "campaign_from_mapping", "expand",
-           "MAX_RUNS", "run_name",
+           "CAMPAIGN_KEYS", "campaign_from_mapping", "expand", "MAX_RUNS", "run_name",
            "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes",
            "campaign_keep"]
 
@@ -56,20 +55,21 @@ _TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "a
              "requirement", "uncertainty", "verify", "calibrate", "keep", "stability"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
 _SPEC_KEYS = {"scale", "uniform", "loguniform", "choices", "also"}
-#: Sections a scenario file may have too (``flexarm verify`` reads a scenario file's
-#: ``[uncertainty]`` and ``[verify]``, ``flexarm calibrate`` its ``[calibrate]``,
-#: ``flexarm stability`` its ``[stability]``; ``[[requirement]]`` is a scenario key).
+#: Sections a scenario file may have too (``flexarm verify`` reads ``[uncertainty]`` and
+#: ``[verify]``, ``calibrate`` ``[calibrate]``, ``stability`` ``[stability]``).
 _VERIFY_KEYS = ("uncertainty", "verify", "calibrate", "stability")
 
 
 @dataclass(frozen=True)
 class PlannedRun:
-    """One expanded run: its id, resolved scenario and the axis values that made it."""
+    """One expanded run: its id, resolved scenario, the axis values that made it and what
+    its file keeps where a verdict decides it (None: its campaign's ``[keep]``)."""
 
     run_id: str
     scenario: Scenario
     sweep: str
     axes: dict = field(default_factory=dict)
+    keep: Keep | None = None
 
 
 @dataclass(frozen=True)
@@ -424,8 +424,9 @@ def expand(campaign: Campaign) -> list[PlannedRun]:
     runs = _expand(campaign)
     names = {r.scenario.name for r in runs}
     for wanted in campaign.report.get("figures", []):
+        shown = ", ".join(sorted(n.split("/")[-1] for n in names))
         check(any(n == wanted or n.endswith("/" + wanted) for n in names), "report.figures",
-              f"no run named {wanted!r} (runs: {', '.join(sorted(n.split('/')[-1] for n in names))})")
+              f"no run named {wanted!r} (runs: {shown})")
     return runs
 
 
@@ -477,9 +478,8 @@ def _expand(campaign: Campaign) -> list[PlannedRun]:
 
 
 def run_name(campaign: str, label, where: str) -> str:
-    """The name of a campaign's run: ``"<campaign>/<label>"``, both plain names (letters,
-    digits, ``. _ - + @``; `check_label`) — the rule for every run name (`check_run_name`),
-    whether the label comes from a name axis or a sweep's name."""
+    """A campaign's run's name, ``"<campaign>/<label>"``, both plain names (`check_label`;
+    the label from a name axis or the sweep's name): the rule for every run name."""
     check_label(label, where)
     return f"{campaign}/{label}"
 

@@ -16,6 +16,8 @@ last wave instead of the end of each system's.
 """
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -193,7 +195,8 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
 
     tasks = (((k, r.run_id), StoreTask(r.run_id, r.scenario, r.sweep,  # checked: not parsed
                                         {a: _jsonable(v) for a, v in r.axes.items()},  # again
-                                        j.destination))
+                                        j.destination if r.keep is None else
+                                        dataclasses.replace(j.destination, keep=r.keep)))
              for k, j in enumerate(jobs) for r in j.todo)
     results = runner.results(tasks, idle)
     try:

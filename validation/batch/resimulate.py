@@ -42,12 +42,15 @@ def resimulable(row) -> bool:
                              for part in ("controller", "observer", "plant")})
 
 
-def every_signal(store, row) -> RunResult:
+def every_signal(store, row, names: tuple = ()) -> RunResult:
     """Every signal of stored run ``row`` of ``store`` at every sample: read from its file,
-    or, where the file keeps less, re-simulated and checked (module docstring)."""
+    or, where the file keeps less, re-simulated and checked (module docstring).  With
+    ``names``, only those are asked for: a file that keeps them at every sample (a mesh
+    check's, `validation.verdicts.mesh.CHECK_KEEP`) is read as it is."""
     result, meta = store.read(row.run_id)
     kept = meta.get("kept")
-    if kept is None:
+    if kept is None or (names and int(kept.get("every", 1)) == 1
+                        and set(names) <= set(result.names)):
         return result
     where = f"{store.out}/{row.run_id}" if store.out else row.run_id
     if not resimulable(row):

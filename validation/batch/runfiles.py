@@ -20,8 +20,8 @@ from ..run.results import RunResult, write_atomic
 from .fingerprint import run_fingerprint
 from .index import finite_or_none, set_aside
 
-__all__ = ["write_run", "run_file", "write_file", "run_row", "META_KEYS", "Keep", "KEEP_ALL", "KEEP_NONE",
-           "keep_from_mapping", "KEEP_KEYS"]
+__all__ = ["write_run", "run_file", "write_file", "run_row", "META_KEYS", "Keep", "KEEP_ALL",
+           "KEEP_NONE", "keep_from_mapping", "KEEP_KEYS"]
 
 #: What a run file's metadata holds beside the result (`RunResult.to_bytes`); ``kept``
 #: only where the file keeps less than every signal at every sample (`Keep.meta`).

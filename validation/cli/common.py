@@ -2,6 +2,7 @@
 runs, and how a command ends."""
 from __future__ import annotations
 
+import functools
 import shutil
 import sys
 import tempfile
@@ -74,12 +75,25 @@ def finish(summary, name: str, out) -> int:
     return EXIT_FAILED if summary.any_failed else 0
 
 
-def mesh_checks(runner, out: Path, run_ids: set, *, progress: bool) -> int:
-    """Run the mesh checks of the truth-plant runs ``run_ids`` stored in ``out``; a
-    non-zero exit status if interrupted or a check failed."""
-    from ..verdicts.mesh import MESH_SWEEP, run_checks
-    rows = [r for r in ResultStore(out).rows() if r.run_id in run_ids]
-    summary = run_checks(rows, out, runner=runner, progress=progress)
+def mesh_checks(runner, out: Path, run_ids: set, *, progress: bool,
+                beyond: frozenset = frozenset()) -> int:
+    """Run the mesh checks of the truth-plant runs ``run_ids`` stored in ``out`` but those
+    in ``beyond`` (beyond every stability limit: `stability.beyond_every_limit`): level 1
+    and the other formulation, then level 2 of the runs whose verdict it could still
+    change (`claims.finer_runs`).  A non-zero exit status if interrupted or a check
+    failed."""
+    from ..batch.resimulate import every_signal
+    from ..verdicts.claims import finer_runs
+    from ..verdicts.mesh import FIRST_STAGE, MESH_SWEEP, run_checks
+    store = ResultStore(out)
+    wanted = set(run_ids) - set(beyond)
+    rows = [r for r in store.rows() if r.run_id in wanted]
+    summary = run_checks(rows, out, runner=runner, progress=progress, levels=FIRST_STAGE)
+    if not summary.interrupted:
+        finer = [r for r in finer_runs(store.rows(), functools.partial(every_signal, store))
+                 if r.run_id in wanted]
+        summary = summary + run_checks(finer, out, runner=runner, progress=progress,
+                                       levels=(2,))
     if summary.planned:
         print(summary.line(MESH_SWEEP, out))
     if summary.interrupted:

@@ -20,11 +20,11 @@ from .common import EXIT_FAILED, finish, mesh_checks, runner_for
 
 
 def stability_map_into(runner, scenarios, out: Path, *, progress: bool, tolerance: float,
-                       plants=None, arms=None) -> int:
+                       plants=None, arms=None) -> tuple[int, list]:
     """Run the stability map into ``out`` (opened by the caller), each limit bisected to
-    ``tolerance``, and print its summary; the exit status: 130/143 if it was interrupted,
-    1 if a limit is missing because a run failed where it lies (a failure above a limit
-    found decides nothing: counted only)."""
+    ``tolerance``, and print its summary; (the exit status, the results): 130/143 if it
+    was interrupted, 1 if a limit is missing because a run failed where it lies (a
+    failure above a limit found decides nothing: counted only)."""
     from ..report.verdict_tables import write_stability
     from ..verdicts.stability import cases_from_scenarios, stability_map
     from .summaries import stability_summary
@@ -32,11 +32,11 @@ def stability_map_into(runner, scenarios, out: Path, *, progress: bool, toleranc
     results, summary = stability_map(cases, out, runner=runner, progress=progress,
                                      tolerance=tolerance)
     if summary.interrupted:
-        return finish(summary, "stability", out)
+        return finish(summary, "stability", out), []
     write_stability(results, out, tolerance=tolerance)
     lines, missing = stability_summary(results, out / "stability.md", tolerance=tolerance)
     print("\n".join(lines))
-    return EXIT_FAILED if missing else 0
+    return EXIT_FAILED if missing else 0, results
 
 
 def _stability_scenarios(args: argparse.Namespace) -> tuple[list, list | None, list | None]:
@@ -61,7 +61,7 @@ def cmd_stability(args: argparse.Namespace) -> int:
     runner = runner_for(args, [scenario_from_mapping(c.base) for c in cases], out)
     with runner:
         return stability_map_into(runner, scenarios, out, progress=not args.no_progress,
-                                  tolerance=tolerance, plants=plants, arms=arms)
+                                  tolerance=tolerance, plants=plants, arms=arms)[0]
 
 
 def _default_maps(file: str) -> list[Path]:

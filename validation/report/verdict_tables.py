@@ -52,9 +52,12 @@ def mesh_status(run, checks: dict | None, verdicts: dict) -> str:
     moved = [k for k, v in verdicts.items() if v.verdict == "not converged"]
     if moved:
         return f"NOT CONVERGED against {labels}: {', '.join(moved)}"
-    if any(v is None for v in checks.values()):
+    if any(v.verdict == "mesh not checked" for v in verdicts.values()):
         return f"checks incomplete ({labels})"
-    return f"converged against {labels}"
+    skipped = [label for label, other in checks.items() if other is None]
+    ran = ", ".join(label for label, other in checks.items() if other is not None)
+    return f"converged against {ran}" + (
+        f" ({', '.join(skipped)}: not needed, the first level decides)" if skipped else "")
 
 
 def claims_tables(columns: list[Column]) -> list[dict]:

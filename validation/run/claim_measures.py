@@ -123,6 +123,9 @@ class Claim:
     run: str = SYSTEM
     windowed: bool = True  # measured after the scenario's transient
     strict: bool = False  # holds only below the bound (x̂ ≡ 0 scores the bound exactly)
+    #: The signals ``measure`` reads from the run (none: it reads metrics alone, and is
+    #: handed no signals); a scan of every run measures it on its own ``run`` only.
+    signals: tuple = ()
 
     def judge(self, value: float) -> str:
         if isinstance(value, float) and math.isnan(value):
@@ -202,7 +205,8 @@ CLAIMS = (
           "max |θ − θd| from a 1 N m, 0.2 s torque pulse on joint 1 to the end ≤ 0.02 rad",
           "the tracking yardstick, held through the perturbation", 0.02, "rad",
           _disturbance, guards="a loop that a torque pulse knocks off the reference",
-          run=DISTURBED, windowed=False),
+          run=DISTURBED, windowed=False,
+          signals=("theta1", "theta2", "theta1_ref", "theta2_ref")),
 )
 
 

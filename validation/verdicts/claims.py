@@ -40,9 +40,12 @@ from ..run.metrics import all_metrics
 from . import mesh as mesh_check
 from .resolution import UNDECIDED, judged
 
-__all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "SYSTEM",
-           "DISTURBED", "WINDOWS", "column_key", "claims_records", "mesh_rows", "MeshRow"]
+__all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "finer_runs",
+           "SYSTEM", "DISTURBED", "CLAIM_RUNS", "WINDOWS", "column_key", "claims_records",
+           "mesh_rows", "MeshRow"]
 
+#: The names of the runs the claims are judged on (a campaign's other runs decide none).
+CLAIM_RUNS = frozenset(c.run for c in CLAIMS)
 #: The family of transients [s] every windowed claim is measured over.
 WINDOWS = (1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0)
 
@@ -93,8 +96,10 @@ class Column:
 
 
 class _Measured:
-    """One stored run, its signals loaded once (``signals``: run → every signal), its
-    metrics at each transient computed once (`_measured` keeps one per run)."""
+    """One stored run, its signals loaded once (``signals``: (run, names) → those signals,
+    every one for no names), its metrics at each transient computed once (`_measured`
+    keeps one per run).  A claim that reads signals asks for its own (`Claim.signals`):
+    a mesh-check run's file keeps them (`mesh.CHECK_KEEP`) and is read, not re-simulated."""
 
     def __init__(self, stored, signals) -> None:
         self.stored, self.signals, self._result, self._metrics = stored, signals, None, {}
@@ -102,7 +107,7 @@ class _Measured:
     @property
     def result(self):
         if self._result is None:
-            self._result = self.signals(self.stored)
+            self._result = self.signals(self.stored, ())
         return self._result
 
     def metrics(self, transient: float | None = None) -> dict:
@@ -116,16 +121,28 @@ class _Measured:
         return self._metrics[transient]
 
     def value(self, claim: Claim, transient: float | None = None):
+        if not claim.signals:
+            return claim.measure(self.metrics(transient), None)
+        if transient is None and self._result is None:  # the claim's own signals suffice
+            return claim.measure(self.metrics(), self.signals(self.stored, claim.signals))
         return claim.measure(self.metrics(transient), self.result)
 
 
 class _Cache(dict):
-    """Measured runs by id, and how their signals are had (a run → every signal;
-    default: the run object's own ``load()``, a run held in memory)."""
+    """Measured runs by id, and how their signals are had ((a run, names) → those
+    signals, every one for no names; default: the run object's own ``load()``, a run held
+    in memory)."""
 
     def __init__(self, signals=None) -> None:
         super().__init__()
-        self.signals = signals or (lambda run: run.load())
+        self.signals = signals or (lambda run, names=(): run.load())
+
+
+def _may_apply(claim: Claim, run) -> bool:
+    """Whether ``claim`` is worth measuring on stored ``run`` when every run is scanned: a
+    claim that reads signals only on its own runs (`Claim.run`), so that a run keeping only
+    its metrics is never re-simulated to find that the claim does not apply."""
+    return not claim.signals or run.name.split("/")[-1] == claim.run
 
 
 def _measured(stored, cache: _Cache) -> _Measured:
@@ -162,15 +179,22 @@ def _flip_note(family: tuple) -> str:
 def _mesh_values(claim: Claim, run: _Measured, checks: dict,
                  cache: dict) -> tuple[bool | None, tuple]:
     """(converged?, ((mesh label, value or status text), ...)) of ``claim`` on the run's
-    mesh and its check meshes; converged is None when a check has not been run."""
+    mesh and its check meshes; converged is None when a check that could change the
+    verdict has not been run (a second level the first decides is "not needed":
+    `mesh.second_level_needed`)."""
     own = plant_settings(run.stored.config["plant"]).discretisation()
     value = run.value(claim)[0]
     values = [(own, value)]
     converged: bool | None = True
+    levels = {r.label: r.level for r in mesh_check.refinements(run.stored.config)}
+    first = None  # the value on level 1, where it completed
     for label, other in checks.items():
         if other is None:
-            values.append((label, "not run"))
-            converged = None
+            needed = levels.get(label) != 2 or (
+                first is not None and mesh_check.second_level_needed(value, first, claim.bound))
+            values.append((label, "not run" if needed else "not needed"))
+            if needed and converged:
+                converged = None
             continue
         if other.status != "ok":
             values.append((label, f"{other.status} at {other.end_time:g} s"))
@@ -178,10 +202,36 @@ def _mesh_values(claim: Claim, run: _Measured, checks: dict,
                 converged = False
             continue
         other_value = _measured(other, cache).value(claim)[0]
+        if levels.get(label) == 1:
+            first = other_value
         values.append((label, other_value))
         if converged and not mesh_check.agrees(value, other_value, claim.bound):
             converged = False
     return converged, tuple(values)
+
+
+def finer_runs(rows, signals=None) -> list:
+    """The truth-plant runs among stored ``rows`` whose level-1 check leaves a judged
+    value's verdict open (`mesh.second_level_needed`, for any claim that applies to the
+    run): their level 2 is worth running.  ``signals``: as `claim_columns`'."""
+    rows = list(rows)
+    by_id = {r.run_id: r for r in rows}
+    out, cache = [], _Cache(signals)
+    for r in rows:
+        if not is_truth(r.config) or mesh_check.is_check(r) or r.status != "ok":
+            continue
+        label = next((c.label for c in mesh_check.refinements(r.config) if c.level == 1), None)
+        first = mesh_check.checks_of(r, by_id).get(label)
+        if first is None or first.status != "ok":
+            continue
+        run = _measured(r, cache)
+        for claim in (c for c in CLAIMS if _may_apply(c, r)):
+            value = run.value(claim)[0]
+            if not math.isnan(value) and mesh_check.second_level_needed(
+                    value, _measured(first, cache).value(claim)[0], claim.bound):
+                out.append(r)
+                break
+    return out
 
 
 def _mesh_text(claim: Claim, values: tuple) -> str:
@@ -234,16 +284,16 @@ def evaluate(claim: Claim, stored, checks: dict | None = None, *,
 def claim_columns(runs, signals=None) -> list[Column]:
     """Columns of verdicts from stored runs (objects with ``name``, ``config``,
     ``status``, ``message``, ``metrics``, ``sweep``, ``plant``, ``run_id``), sorted by
-    arm, plant, Ts, start; ``signals``: a run → every signal (e.g. `every_signal` of its
-    store; default: the run object's own ``load()``).  Mesh-check runs among ``runs`` are used as the
-    checks of the runs they refine, never as columns of their own."""
+    arm, plant, Ts, start; ``signals``: (a run, names) → those signals, every one for no
+    names (e.g. `every_signal` of its store; default: the run object's own ``load()``).
+    Mesh-check runs among ``runs`` are used as the checks of the runs they refine, never
+    as columns of their own."""
     runs = list(runs)
     by_id = {r.run_id: r for r in runs}
     groups: dict[tuple, dict] = {}
-    wanted = {c.run for c in CLAIMS}
     for r in runs:
         short = r.name.split("/")[-1]
-        if short in wanted and not mesh_check.is_check(r):
+        if short in CLAIM_RUNS and not mesh_check.is_check(r):
             groups.setdefault(column_key(r.config), {})[short] = r
     columns, cache = [], _Cache(signals)
     order = {"default": 0, "table1": 1, "rest": 0, "reference": 1}
@@ -298,7 +348,7 @@ def mesh_rows(runs, signals=None) -> list[MeshRow]:
             continue
         run = _measured(r, cache)
         for claim in CLAIMS:
-            if math.isnan(run.value(claim)[0]):
+            if not _may_apply(claim, r) or math.isnan(run.value(claim)[0]):
                 continue
             converged, values = _mesh_values(claim, run, checks, cache)
             order, error = mesh_check.sequence_estimate(r.config, values[0][1], dict(values))

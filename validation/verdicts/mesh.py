@@ -20,7 +20,10 @@ link *and* half the step; level 2, four times the elements and a quarter of the 
 (where that stays within 64 el/link); and the other formulation at a resolution at least
 as fine, with half the step (the geometrically exact beam converges slower: 8× ANCF's
 elements, GE 32 el/link for ANCF 4).  They are ordinary runs of the results store (sweep
-``mesh-check``): stored, deduplicated, resumed and verified like any other.  `agrees` is
+``mesh-check``): stored, deduplicated, resumed and verified like any other, keeping their
+metrics and the few signals the claims read (`CHECK_KEEP`).  Level 1 and the other
+formulation come first (`FIRST_STAGE`); level 2 only for a value whose verdict it could
+still change (`second_level_needed`).  `agrees` is
 the stated tolerance a judged value must keep between the checks; `status_agrees`
 compares runs that did not complete.  Where both levels exist, `richardson` gives the
 observed order of the sequence and the estimated error of the nominal value, reported
@@ -34,16 +37,23 @@ from ..batch.campaign import PlannedRun
 
 from ..batch.queue import run_planned
 from ..batch.executor import Runner
+from ..batch.runfiles import Keep
 from ..batch.store import run_id
+from ..run.claim_measures import CLAIMS
 from ..run.plants import LEVELS, Refinement, is_truth, plant_settings
 from ..run.scenario import scenario_from_mapping, scenario_to_mapping
 
-__all__ = ["MESH_SWEEP", "MESH_RTOL", "MESH_ATOL", "refinements", "refined_config",
-           "check_runs", "run_checks", "checks_of", "is_check", "agrees", "status_agrees",
+__all__ = ["MESH_SWEEP", "CHECK_KEEP", "MESH_RTOL", "MESH_ATOL", "FIRST_STAGE",
+           "refinements", "refined_config", "check_runs", "run_checks", "checks_of",
+           "is_check", "agrees", "second_level_needed", "status_agrees",
            "richardson", "sequence_estimate"]
 
 #: The sweep name of the check runs in a results store.
 MESH_SWEEP = "mesh-check"
+#: What a check run's file keeps: the metrics, and the signals the claims' measures read
+#: (the joint errors after the disturbance claim's pulse) — 4 of the run's ~60 signals;
+#: the rest is re-simulated on demand (``flexarm run --like``).
+CHECK_KEEP = Keep(tuple(dict.fromkeys(name for c in CLAIMS for name in c.signals)))
 #: Tolerance of a judged value between meshes: |a − b| ≤ MESH_RTOL · max(|a|, |b|) +
 #: MESH_ATOL · bound.  On the default arm (PBC + sign SMO, 3 s from the reference) ANCF 4,
 #: ANCF 8 and GE 32 give every claim's value within 7 %, except the angle estimate error
@@ -52,6 +62,9 @@ MESH_SWEEP = "mesh-check"
 #: 20 mrad — from being judged on its chatter-level digits.  Table 1 moves by 40–70 %.
 MESH_RTOL = 0.1
 MESH_ATOL = 0.05
+#: The checks every truth-plant result gets first: level 1 of its refined sequence and
+#: the other formulation (None); level 2 only where `second_level_needed`.
+FIRST_STAGE = (1, None)
 
 
 def refinements(config: dict) -> list[Refinement]:
@@ -70,27 +83,30 @@ def is_check(row) -> bool:
     return getattr(row, "sweep", "") == MESH_SWEEP
 
 
-def check_runs(rows, *, of_checks: bool = False) -> list[PlannedRun]:
+def check_runs(rows, *, levels=None) -> list[PlannedRun]:
     """The check runs of every truth-plant run among ``rows`` (stored runs) that is not a
-    check itself (with ``of_checks``, of those too: a stability map's refined level runs
-    what a coarser level stored as its checks)."""
+    check itself; ``levels``: only the checks of these levels of the refined sequence
+    (None among them: the other formulation; default every check)."""
     planned: dict[str, PlannedRun] = {}
     for row in rows:
-        if not is_truth(row.config) or (is_check(row) and not of_checks):
+        if not is_truth(row.config) or is_check(row):
             continue
         for r in refinements(row.config):
+            if levels is not None and r.level not in levels:
+                continue
             scenario = scenario_from_mapping(refined_config(row.config, r))
             rid = run_id(scenario_to_mapping(scenario))
             planned.setdefault(rid, PlannedRun(rid, scenario, MESH_SWEEP,
-                                               {"mesh": r.label, "of": row.run_id}))
+                                               {"mesh": r.label, "of": row.run_id},
+                                               keep=CHECK_KEEP))
     return list(planned.values())
 
 
 def run_checks(rows, out, *, runner: Runner | None = None, progress: bool = True,
-               of_checks: bool = False):
-    """Run the check runs of ``rows`` (`check_runs`) into the results folder ``out``
-    (what it holds already is skipped); returns the campaign summary."""
-    return run_planned(check_runs(rows, of_checks=of_checks), out, name=MESH_SWEEP,
+               levels=None):
+    """Run the check runs of ``rows`` (`check_runs`, of ``levels``) into the results
+    folder ``out`` (what it holds already is skipped); returns the campaign summary."""
+    return run_planned(check_runs(rows, levels=levels), out, name=MESH_SWEEP,
                        description="closed-loop convergence of the truth-plant runs",
                        runner=runner, progress=progress)
 
@@ -116,6 +132,19 @@ def agrees(a: float, b: float, bound: float) -> bool:
     if math.isinf(a) or math.isinf(b):
         return a == b
     return abs(a - b) <= MESH_RTOL * max(abs(a), abs(b)) + MESH_ATOL * abs(bound)
+
+
+def second_level_needed(value: float, level1: float, bound: float) -> bool:
+    """Whether a judged value needs the second level of its refined sequence to be
+    decided: its first level agrees within the tolerance (`agrees`; one that does not
+    decides alone: not converged) and its margin to ``bound`` is not larger than twice
+    their difference — the error left for a sequence of order p ≥ 1 is at most
+    |f0 − f1| / (1 − 2^−p) ≤ 2 |f0 − f1|, so a larger margin keeps its verdict whatever
+    the second level gives."""
+    if not agrees(value, level1, bound):
+        return False
+    difference = 0.0 if value == level1 else abs(value - level1)
+    return not abs(value - bound) > 2.0 * difference
 
 
 def status_agrees(a, b) -> bool:

@@ -48,6 +48,7 @@ from ..batch.campaign import PlannedRun
 
 from ..batch.queue import run_planned
 from ..batch.executor import Runner
+from ..batch.runfiles import KEEP_NONE
 from ..run.laws import applies_generalised_forces
 from ..run.plants import is_truth, plant_settings, with_plant
 from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
@@ -58,7 +59,7 @@ from .sampled import predicted_period
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "GROWTH_LIMIT", "MAX_LEVEL", "OUTCOMES",
            "StabilityCase", "Limit", "StabilityResult", "cases_from_scenarios",
-           "stability_map", "load_stability", "outcome"]
+           "stability_map", "load_stability", "outcome", "beyond_every_limit"]
 
 GRID = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
 DURATION = 2.0
@@ -197,7 +198,8 @@ def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
     scenario = scenario_from_mapping(_scenario_at(case, Ts))
     rid = run_id(scenario_to_mapping(scenario))
     return PlannedRun(rid, scenario, "stability", {"Ts": Ts, "plant.kind": case.plant,
-                                                   "arm": case.arm, "level": case.level})
+                                                   "arm": case.arm, "level": case.level},
+                      keep=KEEP_NONE)  # an outcome is a status and metrics
 
 
 class _Search:
@@ -283,6 +285,26 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
 
 def _case_key(case: StabilityCase) -> tuple:
     return case.label, _options_key(case.base), case.plant, case.arm
+
+
+def beyond_every_limit(results: list[StabilityResult], rows) -> set[str]:
+    """The ids of the stored runs among ``rows`` that diverged at a control period at or
+    beyond their case's first divergence on every level of the map: a divergence the
+    stability map explains (their mesh checks would decide nothing)."""
+    first = {}
+    for r in results:
+        highs = [high for _, _, high in r.resolved["divergence"].levels]
+        if highs and not any(math.isnan(h) for h in highs):
+            first[_case_key(r.case)] = max(highs)
+    out = set()
+    for row in rows:
+        if row.status != "diverged":
+            continue
+        (case,) = cases_from_scenarios([scenario_from_mapping(row.config)]) or (None,)
+        if case is not None and float(row.config["Ts"]) >= first.get(_case_key(case),
+                                                                       math.inf):
+            out.add(row.run_id)
+    return out
 
 
 def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[StabilityResult]:
