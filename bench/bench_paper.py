@@ -55,6 +55,27 @@ def reproduce(tree: Path, scratch: Path) -> dict:
             "disk": disk(out) if out.exists() else {"total": 0}}
 
 
+#: How each phase's summary line starts (its end), in order: what `JobClock.PAPER` holds.
+PHASE_ENDS = (("the paper's runs", "paper: "), ("the stability map", "stability map: "),
+              ("the mesh checks", "mesh-check: "), ("the claims", "the paper's claims"),
+              ("the report", "report: "))
+
+
+def phases(lines: list) -> dict:
+    """{phase: seconds} from a run's timed lines, in the order the run had them (an
+    earlier revision ran the mesh checks before the map); "cold start": up to the last
+    compile line."""
+    compiled = [t for t, line in lines if "groups ready" in line]
+    out = {"cold start": compiled[-1] if compiled else 0.0}
+    ends = sorted((t, phase) for phase, start in PHASE_ENDS
+                  for t in [next((t for t, line in lines if line.startswith(start)), None)]
+                  if t is not None)
+    last = out["cold start"]
+    for end, phase in ends:
+        out[phase], last = end - last, end
+    return out
+
+
 def main(rev: str) -> None:
     with tempfile.TemporaryDirectory(prefix="flexarm-paper-") as tmp:
         scratch = Path(tmp)
@@ -79,6 +100,8 @@ def main(rev: str) -> None:
             {"measure": "results folder [MB]", "before": b["disk"]["total"] / MB,
              "after": a["disk"]["total"] / MB, **target(a["disk"]["total"] / MB, "<=", 300)}]
     for which in ("before", "after"):
+        for phase, seconds in phases(runs[which]["lines"]).items():
+            rows.append({"measure": f"  {phase} [s] ({which})", which: seconds})
         for name, size in runs[which]["disk"].items():
             if name != "total":
                 rows.append({"measure": f"  {name}/ [MB] ({which})", which: size / MB})

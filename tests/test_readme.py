@@ -103,3 +103,13 @@ def test_the_readme_and_getting_started_say_where_flexarm_is():
     head = README.split("## From the command line")[0]
     for text in (head, start):
         assert "source .venv/bin/activate" in text and ".venv/bin/flexarm" in text
+
+
+def test_the_time_and_disk_the_readme_states_are_the_measured_ones():
+    """Issue 46: the README states the main job's time and disk on two cores; they are the
+    job's measured profile (`validation.cli.job_clock`, from bench/bench_paper.py), which
+    the command's own estimate uses — the README cannot drift from it."""
+    from validation.cli.job_clock import PAPER, PAPER_COLD_START, PAPER_DISK_MB
+    minutes = round((PAPER_COLD_START + sum(seconds for _, seconds in PAPER)) / 60)
+    assert f"about {minutes} min on two cores" in " ".join(README.split())
+    assert f"{PAPER_DISK_MB:.0f} MB in `results/paper`" in " ".join(README.split())
