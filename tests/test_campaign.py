@@ -296,7 +296,7 @@ def test_claims_table_of_the_paper_campaign(tmp_path):
     run_campaign(c, tmp_path, progress=False, only=short)
     table = write_claims(tmp_path)
     store = ResultStore(tmp_path)
-    columns = claim_columns(store.rows(), lambda row: every_signal(store, row))
+    columns = claim_columns(store.rows(), lambda row, names=(): every_signal(store, row, names))
     assert [col.key for col in columns] == [("default", "reduced", 1e-3, "rest"),
                                             ("default", "exudyn", 1e-3, "rest")]
     for col in columns:

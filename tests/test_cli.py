@@ -145,8 +145,9 @@ def test_rerun_like_an_ambiguous_name_lists_the_ids(stored, capsys):
 
 def test_a_truth_plant_run_says_whether_it_converged(tmp_path, capsys):
     """A plain truth-plant run says that its convergence was not checked; --mesh-check
-    runs its 3 checks and says whether its judged values agree; --like by its name then
-    means the nominal run, not one of the checks that share the name."""
+    runs its checks (level 1 and GE decide here: level 2 is said to be not needed, issue
+    46) and says whether its judged values agree; --like by its name then means the
+    nominal run, not one of the checks that share the name."""
     from validation.batch.store import ResultStore
     short = ["--plant", "exudyn", "--duration", "0.05", "--observer", "none"]
     assert main(["run", *short, "--out", str(tmp_path / "plain")]) == 0
@@ -155,14 +156,14 @@ def test_a_truth_plant_run_says_whether_it_converged(tmp_path, capsys):
     out = tmp_path / "checked"
     assert main(["run", *short, "--mesh-check", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "converged against ANCF 8 el/link, step/2; ANCF 16 el/link, step/4; GE 32 " \
-           "el/link, step/2" in printed
+    assert "converged against ANCF 8 el/link, step/2; GE 32 el/link, step/2 (ANCF 16 " \
+           "el/link, step/4: not needed, the first level decides)" in printed
     rows = ResultStore(out).rows()
     (nominal,) = [r for r in rows if r.sweep != "mesh-check"]
-    assert len(rows) == 4 and {r.name for r in rows} == {"pbc@exudyn"}
+    assert len(rows) == 3 and {r.name for r in rows} == {"pbc@exudyn"}
     assert main(["run", "--like", f"{out}/pbc@exudyn", "--out", str(tmp_path / "again")]) == 0
     printed = capsys.readouterr().out
-    assert f"rerunning {nominal.run_id} (pbc@exudyn, stored in {out}; the nominal run: its 3 " \
+    assert f"rerunning {nominal.run_id} (pbc@exudyn, stored in {out}; the nominal run: its 2 " \
            "mesh/step check(s) share its name" in printed
     assert main(["run", *short[2:], "--mesh-check"]) == 2  # the reduced plant has no mesh
     assert "--mesh-check: the reduced plant is not a discretisation" in capsys.readouterr().err

@@ -298,8 +298,10 @@ def convergence_line(store, rid: str) -> str:
     from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
     rows = mesh_rows(store.rows(), functools.partial(every_signal, store))
     mine = [r for r in rows if r.run.run_id == rid]
-    labels = [label for label, _ in mine[0].values[1:]] if mine else []
-    against = f"against {'; '.join(labels)}"
+    values = mine[0].values[1:] if mine else ()
+    skipped = [label for label, v in values if v == "not needed"]
+    against = "against " + "; ".join(label for label, v in values if v != "not needed") + (
+        f" ({'; '.join(skipped)}: not needed, the first level decides)" if skipped else "")
     moved = [r for r in mine if r.converged is False]
     if any(r.converged is None for r in mine) or not mine:
         return f"convergence: checks incomplete ({against})"
