@@ -76,8 +76,9 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     out = Path(args.out or Path("results") / which)
     scenarios = [r.scenario for r in runs]
     runner = runner_for(args, scenarios, out, *([] if args.no_stability else [out / "stability"]))
-    clock = JobClock(f"reproduce-paper{' --lab' if args.lab else ''}", PAPER,
-                     stream=None if args.no_progress else sys.stderr)
+    # The profile is the paper campaign's: the lab campaign's (8 runs) is not measured.
+    clock = JobClock("reproduce-paper", PAPER,
+                     stream=None if args.no_progress or args.lab else sys.stderr)
     clock.begin(skipped=(["the stability map"] if args.no_stability else [])
                 + (["the report"] if args.no_report else []))
     with runner:
