@@ -31,8 +31,10 @@ def validity_map(params, modes: tuple[int, int], arm_text: str) -> bytes:
             axes[0, col].plot(theta2, red[:, k], color=f"C{k}", label=f"mode {k + 1}, reduced")
             axes[0, col].plot(theta2, fe[:, k], color=f"C{k}", ls="--", marker=".",
                               label=f"mode {k + 1}, FE")
-            axes[1, col].plot(theta2, 100 * (red[:, k] - fe[:, k]) / fe[:, k], color=f"C{k}",
-                              marker=".")
+            # a rigid mode (0 Hz: free joints behind a drive) has no relative error to draw
+            relative = np.divide(red[:, k] - fe[:, k], fe[:, k], out=np.full(len(fe), np.nan),
+                                 where=fe[:, k] > 0)
+            axes[1, col].plot(theta2, 100 * relative, color=f"C{k}", marker=".")
         axes[0, col].set_yscale("log")
         axes[0, col].set_ylabel("frequency [Hz]")
         axes[0, col].set_title(f"joints {joints}", fontsize=10)
