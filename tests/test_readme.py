@@ -34,7 +34,7 @@ def shown_lines() -> list[str]:
 
 LINES = list(dict.fromkeys(shown_lines()))  # a command shown twice runs once
 COMMANDS = [line for line in LINES if line.startswith("flexarm ")]
-#: What the commands slower than ~20 s took on two shared cores (a fresh folder, numba's
+#: What the commands slower than ~10 s took on two shared cores (a fresh folder, numba's
 #: cache warm), and the command that needs one of them first: `make test-all` runs them.
 SLOW = {"flexarm reproduce-paper --lab --no-stability": "460 s",
         "flexarm attribute campaigns/kinematics.toml": "186 s",
@@ -46,6 +46,8 @@ SLOW = {"flexarm reproduce-paper --lab --no-stability": "460 s",
         "flexarm verify campaigns/robust.toml --mode falsify --requirement tracking": "FALSIFY",
         "flexarm calibrate examples/calibration/tracking.csv examples/calibration/moving.csv "
         "--config examples/calibration/arm.toml": "75 s",
+        "flexarm attribute examples/lab-arm.toml --factors friction,drive,bandwidth,plant":
+        "12 s",
         "flexarm calibrate examples/calibration/reversals.csv "
         "--config examples/calibration/friction.toml": "64 s",
         "flexarm baseline check": "BASELINE"}

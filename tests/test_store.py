@@ -378,7 +378,11 @@ def _index_pages_overwritten(out) -> None:
     path.write_bytes(bytes(data))
 
 
-@pytest.mark.parametrize("damage", ["random bytes mid-file", "0 bytes", "not a database"])
+# Random bytes in make test; the empty file and the foreign database (7 s each) in
+# make test-all.
+@pytest.mark.parametrize("damage", ["random bytes mid-file",
+                                    pytest.param("0 bytes", marks=pytest.mark.slow),
+                                    pytest.param("not a database", marks=pytest.mark.slow)])
 def test_a_damaged_index_is_named_and_rebuilt_whatever_the_damage(folder, damage):
     out, c, metrics = folder
     (out / "metrics.csv").write_text((out / "metrics.csv").read_text())  # as exported
