@@ -16,9 +16,7 @@ last wave instead of the end of each system's.
 """
 from __future__ import annotations
 
-import dataclasses
-
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -196,7 +194,7 @@ def run_jobs(jobs: list[Job], runner, *, progress: bool = True, label: str = "")
     tasks = (((k, r.run_id), StoreTask(r.run_id, r.scenario, r.sweep,  # checked: not parsed
                                         {a: _jsonable(v) for a, v in r.axes.items()},  # again
                                         j.destination if r.keep is None else
-                                        dataclasses.replace(j.destination, keep=r.keep)))
+                                        replace(j.destination, keep=r.keep)))
              for k, j in enumerate(jobs) for r in j.todo)
     results = runner.results(tasks, idle)
     try:

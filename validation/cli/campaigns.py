@@ -59,9 +59,9 @@ def campaigns_dir() -> Path:
 def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     """The paper's campaign (with ``--lab`` its claims' runs on the lab arm), the
     stability map, the mesh checks of the truth-plant runs the claims are judged on (but
-    those the map explains), the claims and the report; a short summary on the terminal.  Exit 1 only if a verdict is
-    missing (a run that decides one failed); failures that decide nothing are counted in
-    the summary."""
+    those the map explains), the claims and the report; a short summary on the terminal.
+    Exit 1 only if a verdict is missing (a run that decides one failed); failures that
+    decide nothing are counted in the summary."""
     from ..batch.campaign import expand, load_campaign
     from ..batch.queue import run_campaign
     from ..report.verdict_tables import write_claims

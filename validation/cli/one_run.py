@@ -295,13 +295,10 @@ def convergence_line(store, rid: str) -> str:
     """Whether the stored truth-plant run ``rid`` survived its mesh/step checks: every
     judged value (a claim's measure) within the tolerance on every check, or which moved."""
     from ..verdicts.claims import mesh_rows
-    from ..verdicts.mesh import MESH_ATOL, MESH_RTOL
+    from ..verdicts.mesh import MESH_ATOL, MESH_RTOL, checked_against
     rows = mesh_rows(store.rows(), functools.partial(every_signal, store))
     mine = [r for r in rows if r.run.run_id == rid]
-    values = mine[0].values[1:] if mine else ()
-    skipped = [label for label, v in values if v == "not needed"]
-    against = "against " + "; ".join(label for label, v in values if v != "not needed") + (
-        f" ({'; '.join(skipped)}: not needed, the first level decides)" if skipped else "")
+    against = "against " + checked_against(mine[0].values[1:] if mine else (), "; ")
     moved = [r for r in mine if r.converged is False]
     if any(r.converged is None for r in mine) or not mine:
         return f"convergence: checks incomplete ({against})"

@@ -54,10 +54,9 @@ def mesh_status(run, checks: dict | None, verdicts: dict) -> str:
         return f"NOT CONVERGED against {labels}: {', '.join(moved)}"
     if any(v.verdict == "mesh not checked" for v in verdicts.values()):
         return f"checks incomplete ({labels})"
-    skipped = [label for label, other in checks.items() if other is None]
-    ran = ", ".join(label for label, other in checks.items() if other is not None)
-    return f"converged against {ran}" + (
-        f" ({', '.join(skipped)}: not needed, the first level decides)" if skipped else "")
+    return "converged against " + mesh_check.checked_against(
+        [(label, mesh_check.NOT_NEEDED if other is None else "")
+         for label, other in checks.items()])
 
 
 def claims_tables(columns: list[Column]) -> list[dict]:

@@ -192,7 +192,7 @@ def _mesh_values(claim: Claim, run: _Measured, checks: dict,
         if other is None:
             needed = levels.get(label) != 2 or (
                 first is not None and mesh_check.second_level_needed(value, first, claim.bound))
-            values.append((label, "not run" if needed else "not needed"))
+            values.append((label, "not run" if needed else mesh_check.NOT_NEEDED))
             if needed and converged:
                 converged = None
             continue

@@ -45,8 +45,8 @@ from ..run.scenario import scenario_from_mapping, scenario_to_mapping
 
 __all__ = ["MESH_SWEEP", "CHECK_KEEP", "MESH_RTOL", "MESH_ATOL", "FIRST_STAGE",
            "refinements", "refined_config", "check_runs", "run_checks", "checks_of",
-           "is_check", "agrees", "second_level_needed", "status_agrees",
-           "richardson", "sequence_estimate"]
+           "is_check", "agrees", "second_level_needed", "NOT_NEEDED", "checked_against",
+           "status_agrees", "richardson", "sequence_estimate"]
 
 #: The sweep name of the check runs in a results store.
 MESH_SWEEP = "mesh-check"
@@ -132,6 +132,18 @@ def agrees(a: float, b: float, bound: float) -> bool:
     if math.isinf(a) or math.isinf(b):
         return a == b
     return abs(a - b) <= MESH_RTOL * max(abs(a), abs(b)) + MESH_ATOL * abs(bound)
+
+
+#: What a check's value reads where the first level decides (`second_level_needed`).
+NOT_NEEDED = "not needed"
+
+
+def checked_against(values, sep: str = ", ") -> str:
+    """"A, B (C: not needed, the first level decides)" of ``values`` ((check label,
+    value or status text), ...): the checks run and those the first level made needless."""
+    skipped = [label for label, v in values if v == NOT_NEEDED]
+    return sep.join(label for label, v in values if v != NOT_NEEDED) + (
+        f" ({sep.join(skipped)}: {NOT_NEEDED}, the first level decides)" if skipped else "")
 
 
 def second_level_needed(value: float, level1: float, bound: float) -> bool:
