@@ -4,6 +4,7 @@ said a command exits 1 when runs failed, while ``make demo`` exits 0 with failed
 that decide no verdict).  The rule: 1 when something the command was asked for is
 missing because a run failed — a run, for ``run`` and ``campaign``; a verdict, for the
 verdict commands; a failed run that decides nothing is counted and named, status 0."""
+import math
 import re
 from pathlib import Path
 
@@ -69,6 +70,7 @@ def test_a_verdict_command_whose_failed_run_decides_nothing_exits_0(law, monkeyp
     """Known-good: the failure at 8 ms lies above the divergence at 4 ms; both limits
     are found, the failure is named, the status is 0."""
     monkeypatch.setattr(stability, "GRID", (1e-3, 4e-3, 8e-3))
+    monkeypatch.setattr(stability, "predicted_period", lambda config: math.nan)  # the grid
     # The coarsest tolerance (50 %): the bracket (1, 4] ms is bisected twice, not seven times.
     status = main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
                    "--workers", "1", "--no-progress", "--tolerance", "0.5",
@@ -82,6 +84,7 @@ def test_a_verdict_command_whose_failed_run_leaves_a_verdict_missing_exits_1(law
                                                                            capsys):
     """Known-bad: without the 4 ms point the failure at 8 ms is where the limits lie."""
     monkeypatch.setattr(stability, "GRID", (1e-3, 8e-3))
+    monkeypatch.setattr(stability, "predicted_period", lambda config: math.nan)  # the grid
     status = main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
                    "--workers", "1", "--no-progress", "--out", str(law / "o")])
     assert status == 1

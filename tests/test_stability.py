@@ -119,7 +119,11 @@ def test_the_reduced_pbc_limit_to_a_tolerance_contains_the_zoh_prediction(tmp_pa
     stable: 0.013 ms at 1 %), contains the exact-ZOH prediction, 3.051 ms."""
     r = _reduced_pbc(tmp_path, tolerance)
     assert r.predicted == pytest.approx(3.051e-3, rel=1e-3)
-    assert r.divergence.width <= tolerance and r.runs > len(stability.GRID)
+    assert r.divergence.width <= tolerance
+    # The search starts at the prediction's lattice cell: at 5 % that cell, (2.99, 3.07] ms,
+    # brackets the limit in its two runs; at 1 % the loop turns unstable 0.3 % above the
+    # prediction: one cell up, 3 runs.  The grid and a bisection from it took 14 runs.
+    assert r.runs == {0.05: 2, 0.01: 3}[tolerance], r.runs
     low, high = r.resolved["divergence"].interval()
     assert low <= r.predicted < high, (low, high)
     assert r.resolved["divergence"].verdict == ""  # the reduced plant: no refined sequence
@@ -182,6 +186,24 @@ def test_a_bracket_is_bisected_to_the_tolerance_on_one_lattice(tolerance):
         moved, _ = _search(lattice, _threshold(0.993 * limit), hints)
         lower = limit_of(moved, GOOD["divergence"])
         assert lower.largest <= 0.993 * limit < lower.first_bad and lower.width <= tolerance
+
+
+def test_a_search_starts_at_the_cell_of_the_predicted_limit():
+    """Known good: a prediction in the limit's cell brackets it in its two runs; one 10 %
+    off (either way) still ends in the same cell, stepping outwards.  Known bad for a
+    start: a prediction beyond the lattice starts at its end point; none (NaN) or an
+    unbounded one (inf: the LQR's) starts from the whole grid."""
+    lattice = Lattice(stability.GRID, 0.01)
+    limit = 2.77e-3
+    exact, _ = _search(lattice, _threshold(limit), lattice.cell(limit))
+    assert len(exact) == 2
+    for predicted in (0.9 * limit, 1.1 * limit):
+        tested, _ = _search(lattice, _threshold(limit), lattice.cell(predicted))
+        found = limit_of(tested, GOOD["divergence"])
+        assert found.largest <= limit < found.first_bad and found.width <= 0.01
+        assert len(tested) < len(stability.GRID) + lattice.depth
+    assert lattice.cell(2.5e-6) == {1e-4} and lattice.cell(0.5) == {1e-2}
+    assert lattice.cell(math.nan) == lattice.cell(math.inf) == set(stability.GRID)
 
 
 def test_a_limit_beyond_the_grid_is_not_bisected():

@@ -3,8 +3,10 @@ tested control periods, the lattice of periods a map tests, and the next periods
 bracket search asks for.
 
 A limit is bracketed by the largest tested Ts at or below which every run was good and
-the first tested Ts that was not (`limit_of`).  A map tests a grid first (0.1–10 ms) and
-then bisects each bracket geometrically until it is within the tolerance.  The periods
+the first tested Ts that was not (`limit_of`).  A map starts each case at the lattice cell
+of its predicted limit (`Lattice.cell`; a case with no finite prediction starts from the
+whole grid, 0.1–10 ms), steps outwards until each limit is bracketed and then bisects the
+bracket geometrically until it is within the tolerance.  The periods
 bisected to are the points of one *lattice* (`Lattice`): every grid interval cut into
 2^d equal ratios, d the smallest depth at which the widest interval's cell (2 → 5 ms) is
 within the tolerance — so a bracket within the tolerance is one cell, the brackets of
@@ -12,8 +14,8 @@ the levels of a refined sequence are cells of the same lattice (they are the sam
 or they are not: no round-off decides whether they overlap), and a map at 10 % reuses
 its runs at 1 % (a coarser lattice's points are points of every finer one, bit for bit).
 
-A refined level starts from the brackets of the level before (`next_points`' hints): it
-tests their two ends and, where an outcome changed, steps outwards by 1, 2, 4, … cells
+A refined level starts likewise from the brackets of the level before (`next_points`'
+hints): it tests their two ends and, where an outcome changed, steps outwards by 1, 2, 4, … cells
 until the limit is bracketed again, then bisects.  A bracket that kept both outcomes is
 found in two runs.
 """
@@ -99,6 +101,14 @@ class Lattice:
         """The index of the smallest point at or above ``Ts`` (len(points) if none)."""
         return bisect.bisect_left(self.points, Ts)
 
+    def cell(self, Ts: float) -> set[float]:
+        """The two points around ``Ts`` (the nearest end point when ``Ts`` lies beyond the
+        lattice); the whole grid when ``Ts`` is not a finite positive period."""
+        if not (math.isfinite(Ts) and Ts > 0):
+            return set(self.grid)
+        i = self.below(Ts)
+        return {self.points[j] for j in (i, i + 1) if 0 <= j < len(self.points)}
+
     def inside(self, low: float, high: float) -> range:
         """The indices of the points strictly inside (low, high)."""
         return range(self.below(low) + 1, self.above(high))
@@ -111,7 +121,7 @@ class Lattice:
 
 def next_points(tested: dict, lattice: Lattice, hints) -> set[float]:
     """The next periods one level of a case tests: ``hints`` while nothing is tested
-    (the grid, or the ends of the level before's brackets); then, per limit, the middle
+    (the cell of a predicted limit, the grid, or the ends of the level before's brackets); then, per limit, the middle
     lattice point of an unresolved bracket, or the next step outwards — 1, 2, 4, …
     cells beyond what was tested — for a limit all of whose tested runs were good (or
     bad).  Nothing for a limit that ends at a failed run (a failure says nothing about

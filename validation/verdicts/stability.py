@@ -3,10 +3,14 @@ control period Ts at which the loop does not diverge and, separately, the larges
 it keeps tracking.
 
 A design made in continuous time (the paper's) meets the real arm through a sampler and
-a zero-order hold.  For each case this module runs short closed loops on a grid of Ts
-(`GRID`, 0.1–10 ms) and bisects each limit on a log scale between its last good and first
-bad value until the bracket is within a relative tolerance (default 1 %,
-`validation.verdicts.bisection`; each result counts the runs it took).  Runs start moving
+a zero-order hold.  For each case this module runs short closed loops at control periods
+Ts of a lattice over `GRID` (0.1–10 ms): first the two around the case's predicted limit
+(below; a case without a finite prediction: every grid point), then outwards in steps of
+1, 2, 4, … cells until each limit is bracketed, then it bisects each limit on a log
+scale between its last good and first bad value until the bracket is within a relative
+tolerance (default 1 %, `validation.verdicts.bisection`; each result counts the runs it
+took).  So a run is spent where it moves a limit: the grid's short periods, the costliest
+runs, are run only where a limit lies below them.  Runs start moving
 with the reference (no start-up kick) and last `DURATION` seconds.  Each run has one
 *outcome*:
 
@@ -20,8 +24,9 @@ with the reference (no start-up kick) and last `DURATION` seconds.  Each run has
 - ``failed``: the plant's solver or a law gave up — no verdict about stability at all;
   the stability command exits 1 when a case has one.
 
-Two limits, each a claim about every tested Ts at or below it: the largest Ts with **no
-divergence** and the largest Ts that **keeps tracking**.  A failed run ends a limit's
+Two limits, each a claim about every tested Ts at or below it (below the first bracket
+tested, the prediction speaks, not a run): the largest Ts with **no divergence** and the
+largest Ts that **keeps tracking**.  A failed run ends a limit's
 scan (nothing is known there).  Each limit is monotone in what it claims; a tested Ts
 above a limit that nevertheless did not diverge (or kept tracking) is reported as a
 *non-monotone* case, never smoothed over.  On the truth plant each limit is then judged
@@ -205,8 +210,8 @@ def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
 class _Search:
     """One case's bracket search, level by level: {Ts: (outcome, detail)} per level."""
 
-    def __init__(self, case: StabilityCase) -> None:
-        self.case, self.levels = case, [{}]
+    def __init__(self, case: StabilityCase, start: set[float]) -> None:
+        self.case, self.start, self.levels = case, start, [{}]
 
     @property
     def at(self) -> StabilityCase:
@@ -217,7 +222,7 @@ class _Search:
     def next_points(self, lattice: Lattice, refine: bool) -> set[float]:
         """The periods to test next at this level; when it is resolved, the hints of the
         next level if a limit has not converged (and ``refine``), else nothing."""
-        hints = self.hints() if len(self.levels) > 1 else lattice.grid
+        hints = self.hints() if len(self.levels) > 1 else self.start
         points = next_points(self.levels[-1], lattice, hints)
         if points or not (refine and self.case.truth and len(self.levels) <= MAX_LEVEL):
             return points
@@ -251,13 +256,14 @@ def _resolve(case: StabilityCase, limits: list[Limit], *, final: bool) -> Resolv
 def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = None,
                   progress: bool = True, mesh_check: bool = True,
                   tolerance: float = TOLERANCE) -> tuple[list[StabilityResult], object]:
-    """Map every case into the results folder ``out`` (resumable like any campaign): the
-    grid, the bisections to ``tolerance`` and, with ``mesh_check``, the truth-plant cases
+    """Map every case into the results folder ``out`` (resumable like any campaign): from
+    the lattice cell of its predicted limit (or the grid), the bracket searches and
+    bisections to ``tolerance`` and, with ``mesh_check``, the truth-plant cases
     again on the refined sequence until their limits converge (module docstring).  Every
     round asks every case's next periods at once (the progress bar names the round).
     Returns the results and the summary of every round together."""
     lattice = Lattice(GRID, tolerance)
-    searches = [_Search(case) for case in cases]
+    searches = [_Search(case, lattice.cell(predicted_period(case.base))) for case in cases]
     store = ResultStore(out)
     summary, round_ = None, 0
     while summary is None or not summary.interrupted:
@@ -266,7 +272,7 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
         if not planned and summary is not None:
             break
         round_ += 1
-        label = "stability: grid" if round_ == 1 else \
+        label = "stability: start" if round_ == 1 else \
             f"stability: bisection {round_ - 1} (to {tolerance:.2g})"
         more = run_planned(planned.values(), out, name="stability", export=False,
                            description="sampled-data stability map", runner=runner,
