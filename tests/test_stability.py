@@ -206,6 +206,25 @@ def test_a_search_starts_at_the_cell_of_the_predicted_limit():
     assert lattice.cell(math.nan) == lattice.cell(math.inf) == set(stability.GRID)
 
 
+def test_a_case_with_an_observer_starts_from_the_grid(tmp_path, monkeypatch):
+    """Known bad for a start at the prediction: the PBC with the position-only sign SMO
+    (the prediction is the PBC's fed the true state, 3.05 ms) diverges 18 % below it on
+    the default arm's reduced plant, and is stable again at 3.05 ms — a search started
+    there brackets (3.05, 3.07] ms and misses it.  From the grid the map finds it."""
+    from validation.batch.campaign import expand, load_campaign
+    from validation.cli.campaigns import campaigns_dir
+    runs = expand(load_campaign(campaigns_dir() / "paper.toml"))
+    s = next(r.scenario for r in runs if r.scenario.observer.kind == "smo-pos")
+    (case,) = stability.cases_from_scenarios([s], plants=["reduced"], arms=["default"])
+    assert stability._start(case, Lattice(stability.GRID, 0.01)) == set(stability.GRID)
+    (r,), _ = stability.stability_map([case], tmp_path, progress=False)
+    assert r.divergence.first_bad < 0.9 * r.predicted, (r.divergence, r.predicted)
+    # Started at the prediction's cell, the same map misses it.
+    monkeypatch.setattr(stability, "_start", lambda case, lattice: lattice.cell(r.predicted))
+    (seeded,), _ = stability.stability_map([case], tmp_path / "seeded", progress=False)
+    assert seeded.divergence.largest > r.predicted > r.divergence.first_bad
+
+
 def test_a_limit_beyond_the_grid_is_not_bisected():
     lattice = Lattice(stability.GRID, 0.01)
     for limit in (5e-5, 0.02):
