@@ -298,7 +298,9 @@ def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
     accelerations Σ_j Ȧ_j Q̇_j of each link, and h_i = Re(conj(A_i) G v).
     """
     if d.exact.N > 0:
-        exact_mass_bias_into(d.exact, ws.exact, Q, Qd, M, h, with_bias)
+        # ``with_bias`` passed as a run-time value: a literal True / False would compile
+        # the exact kernel once per value (8 s each on a cold cache).
+        exact_mass_bias_into(d.exact, ws.exact, Q, Qd, M, h, M.shape[0] > 0 and with_bias)
         return
     n1, n2 = d.n1, d.n2
     n = 2 + n1 + n2
@@ -406,7 +408,7 @@ def bias_forces_into(d, Q, Qd, h, ws):
             s += d.K[i, j] * Q[j] + d.D[i, j] * Qd[j]
         h[i] += s
     if d.exact.N > 0:
-        exact_elastic_into(d.exact, Q, Qd, h, True)
+        exact_elastic_into(d.exact, Q, Qd, h, h.shape[0] > 0)  # True, at run time (above)
 
 
 @njit(cache=True, inline="always")
