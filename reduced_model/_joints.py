@@ -220,9 +220,16 @@ def _stop(d, x, rot, jp, js, jw, ws):
                 rot[2 + i] = 0.0
             else:
                 project = True
-    if not project:
-        return
-    # Q̇ −= Y S⁻¹ Gᵀ Q̇, Y = M⁻¹ G, S = Gᵀ Y, G the columns e_j of the stuck joints.
+    if project:
+        _project_stuck(d, x, jp, js, jw, ws)
+
+
+@njit(cache=True)
+def _project_stuck(d, x, jp, js, jw, ws):
+    """Q̇ −= Y S⁻¹ Gᵀ Q̇, Y = M⁻¹ G, S = Gᵀ Y, G the columns e_j of the stuck joints
+    (called, not inlined: rare, and the mass matrix it forms is a large piece of
+    machine code)."""
+    n = x.shape[0] // 2
     kern.mass_matrix_into(d, x[:n], ws.M, ws)
     if not cholesky_factor_inplace(ws.M):
         x[n:] = np.nan
@@ -270,24 +277,28 @@ def advance_joints(d, x, tau, ext, h, nsteps, ws, jp, js, jw):
             u[i], u_end[i] = lag_step(tau[i], js[_APPLIED + i], jp[_T + i], h)
         for i in range(n):  # generalised forces of the step: ext plus the modal inputs
             fext[i] = ext[i] + (tau[i] if 2 <= i < tau.shape[0] else 0.0)
-        for _pass in range(4):  # stuck coordinates whose holding torque exceeds τs slip
-            _derivatives(d, x, rot, u, fext, k, rk, lam, ws, jp, js, jw)
-            released = False
-            for i in range(2):
-                if jp[_TS + i] > 0.0 and js[_MODE + i] == 0.0 and abs(lam[i]) > jp[_TS + i]:
-                    js[_MODE + i] = -math.copysign(1.0, lam[i])
-                    released = True
-            if not released:
-                break
         for i in range(m):
             xt[i] = x[i]
             acc[i] = 0.0
         for i in range(4):
             rt[i] = rot[i]
             racc[i] = 0.0
-        for stage in range(4):
-            if stage > 0:
-                _derivatives(d, xt, rt, u, fext, k, rk, lam, ws, jp, js, jw)
+        # One call site of the (inlined) derivatives, a third less machine code to
+        # compile: the first stage is evaluated again, up to 4 times in all, while stuck
+        # coordinates whose holding torque exceeds τs slip.
+        stage = evaluations = 0
+        while stage < 4:
+            _derivatives(d, xt, rt, u, fext, k, rk, lam, ws, jp, js, jw)
+            if stage == 0:
+                evaluations += 1
+                released = False
+                for i in range(2):
+                    if jp[_TS + i] > 0.0 and js[_MODE + i] == 0.0 and \
+                            abs(lam[i]) > jp[_TS + i]:
+                        js[_MODE + i] = -math.copysign(1.0, lam[i])
+                        released = True
+                if released and evaluations < 4:
+                    continue
             weight = 2.0 if stage == 1 or stage == 2 else 1.0
             step = h if stage == 2 else 0.5 * h
             for i in range(m):
@@ -296,6 +307,7 @@ def advance_joints(d, x, tau, ext, h, nsteps, ws, jp, js, jw):
             for i in range(4):
                 racc[i] += weight * rk[i]
                 rt[i] = rot[i] + step * rk[i]
+            stage += 1
         for i in range(m):
             x[i] += h / 6.0 * acc[i]
         for i in range(4):
