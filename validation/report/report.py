@@ -47,7 +47,7 @@ from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
 from ..verdicts.mesh import MESH_SWEEP, is_check
-from ..verdicts.validity import load_validity
+from ..verdicts.validity_file import load_validity
 from .verdict_tables import gap_rows, stability_rows, study_view, table_rows
 
 __all__ = ["write_report", "report_data", "contents", "file_stem", "SECTIONS"]
@@ -100,8 +100,7 @@ def _included(store: ResultStore):
     runs, they are not reported as runs; the evaluations of a verdict over uncertainty
     have their own section, `robust_section`, not a row each; so do a calibration's
     simulations, `calibration_section`)."""
-    from ..verdicts.calibration import FIT_SWEEP
-    from ..verdicts.evaluations import ROBUST_SWEEPS
+    from ..verdicts.evaluations import FIT_SWEEP, ROBUST_SWEEPS
     all_rows = store.rows(metrics=read_metrics(store))
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
