@@ -12,7 +12,7 @@ from validation.batch.queue import run_campaign
 from validation.cli import main
 from validation.report.report import write_report
 from validation.report.verdict_tables import write_validity
-from validation.verdicts.validity import CHANNELS, load_validity
+from validation.verdicts.validity_file import CHANNELS, load_validity
 
 
 @pytest.mark.parametrize("argv, text", [

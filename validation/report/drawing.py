@@ -4,17 +4,20 @@ time one core needs.
 
 Tasks are callables without arguments; on Linux they run in worker processes forked
 from this one (which inherit them: nothing is pickled but the PNG bytes coming back),
-elsewhere or on one core, in this process.  The results folder's database connection is
+while this one goes on with its own work (`drawing`: the report's tables); elsewhere or
+on one core, in this process.  The results folder's database connection is
 closed before forking: each worker opens its own (an SQLite connection must not cross a
 fork).
 """
 from __future__ import annotations
 
+import contextlib
+import gc
 import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
-__all__ = ["draw_all"]
+__all__ = ["drawing", "draw_all"]
 
 _TASKS: list = []  # what the forked workers inherit
 
@@ -23,19 +26,32 @@ def _draw(index: int):
     return _TASKS[index]()
 
 
-def draw_all(tasks: list, *, stores=(), progress: bool = True,
-             label: str = "report figures") -> list:
-    """The result of every task, in order, with progress on stderr
-    (`validation.batch.progress`).  ``stores``: results folders whose connections to close
-    before forking (they reopen on their next use)."""
+@contextlib.contextmanager
+def drawing(tasks: list, *, stores=(), progress: bool = True, label: str = "report figures"):
+    """Draw ``tasks`` while the body of the ``with`` statement runs (the report's tables):
+    yields a function that waits for the result of every task and returns them, in order,
+    with progress on stderr (`validation.batch.progress`).  On several cores the workers
+    start drawing at once; on one, the tasks run in this process when it is called.
+    ``stores``: results folders whose connections to close before forking (they reopen
+    on their next use)."""
     from ..batch.executor import available_cores
     workers = min(available_cores(), len(tasks))
     if workers < 2 or "fork" not in multiprocessing.get_all_start_methods():
-        return _collect(((i, make()) for i, make in enumerate(tasks)), len(tasks), label,
-                        progress)
+        yield lambda: _collect(((i, make()) for i, make in enumerate(tasks)), len(tasks),
+                               label, progress)
+        return
     for store in stores:
         store.close()
-    return _in_workers(tasks, workers, label, progress)
+    with _in_workers(tasks, workers) as futures:
+        yield lambda: _collect(((futures[f], f.result()) for f in as_completed(futures)),
+                               len(tasks), label, progress)
+
+
+def draw_all(tasks: list, *, stores=(), progress: bool = True,
+             label: str = "report figures") -> list:
+    """The result of every task, in order (`drawing` with nothing to do meanwhile)."""
+    with drawing(tasks, stores=stores, progress=progress, label=label) as drawn:
+        return drawn()
 
 
 def _collect(done, n: int, label: str, progress: bool) -> list:
@@ -61,10 +77,16 @@ def _start_drawer(parent: int) -> None:
     release_signals()  # held while it was forked
 
 
-def _in_workers(tasks: list, workers: int, label: str, progress: bool) -> list:
+@contextlib.contextmanager
+def _in_workers(tasks: list, workers: int):
+    """Future → index of every task, submitted to ``workers`` forked processes."""
     global _TASKS
     from ..run.processes import signals_held
     _TASKS = tasks
+    # What this process holds (10^5 stored runs) moves out of the collector's reach until
+    # the figures are drawn: its passes would otherwise copy every page of it into each
+    # worker (copy-on-write) and slow this process's own work meanwhile.
+    gc.freeze()
     try:
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("fork"),
                                  initializer=_start_drawer,
@@ -72,8 +94,11 @@ def _in_workers(tasks: list, workers: int, label: str, progress: bool) -> list:
             with signals_held():
                 started = pool.submit(int)  # every worker forked now, before any thread starts
             started.result()
-            futures = {pool.submit(_draw, i): i for i in range(len(tasks))}
-            return _collect(((futures[f], f.result()) for f in as_completed(futures)),
-                            len(tasks), label, progress)
+            try:
+                yield {pool.submit(_draw, i): i for i in range(len(tasks))}
+            except BaseException:  # the tables failed or were stopped: no figure more is begun
+                pool.shutdown(cancel_futures=True)
+                raise
     finally:
         _TASKS = []
+        gc.unfreeze()

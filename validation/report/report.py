@@ -32,7 +32,7 @@ from . import figures as fig
 from .sweep_figures import sweep_figures
 from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
-from .drawing import draw_all
+from .drawing import drawing
 from ..batch.fingerprint import fingerprint_of, is_fresh
 from ..batch.resimulate import every_signal
 from .render import fmt_number, folded_text, render
@@ -47,7 +47,7 @@ from ..run.results import own_folder, write_atomic
 from ..run.scenario import ARMS
 from ..batch.store import ResultStore, StoreError
 from ..verdicts.mesh import MESH_SWEEP, is_check
-from ..verdicts.validity import load_validity
+from ..verdicts.validity_file import load_validity
 from .verdict_tables import gap_rows, stability_rows, study_view, table_rows
 
 __all__ = ["write_report", "report_data", "contents", "file_stem", "SECTIONS"]
@@ -94,15 +94,18 @@ class ReportData:
 
 
 
-def _included(store: ResultStore):
-    """(rows, runs to report, warnings, evaluations of `flexarm verify`): runs whose file
-    verifies and that this code made (mesh-check runs are in ``rows``: they check the
-    runs, they are not reported as runs; the evaluations of a verdict over uncertainty
-    have their own section, `robust_section`, not a row each; so do a calibration's
-    simulations, `calibration_section`)."""
-    from ..verdicts.calibration import FIT_SWEEP
-    from ..verdicts.evaluations import ROBUST_SWEEPS
-    all_rows = store.rows(metrics=read_metrics(store))
+def report_rows(store: ResultStore) -> list:
+    """Every row of ``store``, with the metrics the report reads (`many.read_metrics`)."""
+    return store.rows(metrics=read_metrics(store))
+
+
+def _included(store: ResultStore, all_rows: list):
+    """(rows, runs to report, warnings, evaluations of `flexarm verify`) of ``all_rows``,
+    every row of ``store``: runs whose file verifies and that this code made (mesh-check
+    runs are in ``rows``: they check the runs, they are not reported as runs; the
+    evaluations of a verdict over uncertainty have their own section, `robust_section`,
+    not a row each; so do a calibration's simulations, `calibration_section`)."""
+    from ..verdicts.evaluations import FIT_SWEEP, ROBUST_SWEEPS
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     damaged = store.verify(all_rows)
@@ -141,13 +144,16 @@ def _scope(runs) -> list[str]:
 
 
 def report_data(results_dir, *, animate: bool = True, progress: bool = True,
-                animation_path: Path | None = None) -> ReportData:
-    """Everything the report shows, as data (figures as PNG bytes)."""
+                animation_path: Path | None = None, rows: list | None = None) -> ReportData:
+    """Everything the report shows, as data (figures as PNG bytes); ``rows``: every row
+    of the folder with the metrics the report reads (`report_rows`), if already read.
+    The figures are drawn while the tables are computed (`drawing.drawing`)."""
     from ..verdicts.claims import CLAIMS, claim_columns
     from .summary import NOTE_MEANING, pairs_table, verdict_counts
     from .verdict_tables import claims_tables
     store = ResultStore(results_dir)
-    all_rows, runs, warnings, evaluations = _included(store)
+    all_rows, runs, warnings, evaluations = _included(
+        store, report_rows(store) if rows is None else rows)
     fresh_ids = {r.run_id for r in runs}
     checks = [r for r in all_rows if is_check(r) and r.run_id not in fresh_ids
               and is_fresh(r)]
@@ -161,22 +167,12 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     data = ReportData(title=", ".join(names), folder=str(store.out),
                       description="; ".join(i["description"] for i in info
                                             if i.get("description")),
-                      scope=_scope(counted) if counted else [], warnings=warnings)
+                      scope=[], warnings=warnings)
     bounds = claim_bounds()
 
     signals = functools.partial(every_signal, store)
     columns = claim_columns(runs + checks, signals)
     data.mesh = mesh_table(runs + checks, signals)
-    if columns:
-        data.summary = verdict_counts(columns)
-        data.claims = claims_tables(columns)
-        data.claims_criteria = [{"text": c.text, "criterion": c.criterion,
-                                 "bound": f"{fmt_number(c.bound)} {c.unit}",
-                                 "rationale": c.rationale} for c in CLAIMS]
-        data.claim_notes = [f"{c.text.split(':')[0]} ({c.key.replace('_', ' ')}): "
-                            f"{NOTE_MEANING[c.key]}" for c in CLAIMS if c.key in NOTE_MEANING]
-    data.pairs = pairs_table(runs, fig.describe_run) if len({r.role for r in runs}) > 1 \
-        else None
     stability_dir = store.out / "stability"
     tasks = []
     if ResultStore(stability_dir).exists():
@@ -212,21 +208,12 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     tasks += robust_tasks
     data.calibration, calibration_tasks = calibration_section(store)
     tasks += calibration_tasks
-    data.bottom_line = bottom_line(counted, checks, columns, data.calibration)
     many = is_many(runs)
     if many:  # summarised: no table row and no figure per run
-        data.many = distributions(runs)
         tasks.append(("Distributions", "distributions over the runs that completed",
                       lambda: histograms(runs)))
-    else:
-        data.estimation = estimation_table(runs)
-    if runs and not many:  # a folder of `flexarm verify` alone has its section instead
-        data.runs, data.metrics = runs_table(runs), metrics_table(runs)
 
     groups, skipped = figure_groups(runs, wanted) if not many else ([], [])
-    if many and data.many:  # a run's figures: `flexarm show`, e.g. of a worst run
-        data.many["stopped"].append(f"no run's figures are drawn here: 'flexarm show "
-                                    f"{store.out}/RUN' draws any run's")
     data.notes["paper_figures"] = [f"{r.name}, {fig.describe_run(r.config)}: not drawn, every "
                                    f"run of it {r.status} ({r.message})" for r in skipped]
     for group in groups:
@@ -257,12 +244,36 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     makes = [make for _, _, make in tasks]
     if animate and groups and animation_path is not None:
         makes.append(lambda: animation(store, groups[0], animation_path))
-    drawn = draw_all(makes, stores=[store], progress=progress)
-    for (section, caption, _), made in zip(tasks, drawn):
+
+    with drawing(makes, stores=[store], progress=progress) as drawn:  # the tables meanwhile
+        data.scope = _scope(counted) if counted else []
+        if columns:
+            data.summary = verdict_counts(columns)
+            data.claims = claims_tables(columns)
+            data.claims_criteria = [{"text": c.text, "criterion": c.criterion,
+                                     "bound": f"{fmt_number(c.bound)} {c.unit}",
+                                     "rationale": c.rationale} for c in CLAIMS]
+            data.claim_notes = [f"{c.text.split(':')[0]} ({c.key.replace('_', ' ')}): "
+                                f"{NOTE_MEANING[c.key]}" for c in CLAIMS
+                                if c.key in NOTE_MEANING]
+        data.pairs = pairs_table(runs, fig.describe_run) if len({r.role for r in runs}) > 1 \
+            else None
+        data.bottom_line = bottom_line(counted, checks, columns, data.calibration)
+        if many:
+            data.many = distributions(runs)
+        else:
+            data.estimation = estimation_table(runs)
+        if runs and not many:  # a folder of `flexarm verify` alone has its section instead
+            data.runs, data.metrics = runs_table(runs), metrics_table(runs)
+        if many and data.many:  # a run's figures: `flexarm show`, e.g. of a worst run
+            data.many["stopped"].append(f"no run's figures are drawn here: 'flexarm show "
+                                        f"{store.out}/RUN' draws any run's")
+        figures = drawn()
+    for (section, caption, _), made in zip(tasks, figures):
         items = made if isinstance(made, list) else [(caption, made)]
         data.figures += [Figure(section, c, p) for c, p in items]
-    if len(drawn) > len(tasks) and drawn[-1] is not None:
-        caption, poster = drawn[-1]
+    if len(figures) > len(tasks) and figures[-1] is not None:
+        caption, poster = figures[-1]
         data.animation = {"caption": caption, "file": animation_path.name,
                           "poster": Figure("Animation", caption, poster)}
     return data
@@ -322,7 +333,8 @@ def write_report(results_dir, *, animate: bool = True, progress: bool = True,
     if not force and report_is_current(results_dir, animate=animate):
         return html_path, md_path
     out = html_path.parent
-    key = content_key(results_dir, animate=animate)
+    rows = report_rows(store)  # read once: for the key and for the report
+    key = content_key(results_dir, animate=animate, rows=rows)
     created = not out.exists()
     try:
         own_folder(store.out, "report", "figures")
@@ -330,7 +342,7 @@ def write_report(results_dir, *, animate: bool = True, progress: bool = True,
         raise StoreError(f"{out}: cannot write the report ({exc.strerror or exc})") from None
     try:
         data = report_data(results_dir, animate=animate, progress=progress,
-                           animation_path=out / "arm.gif")
+                           animation_path=out / "arm.gif", rows=rows)
     except BaseException:
         if created:  # refused (no runs, a damaged verdict) or stopped: no report folder
             shutil.rmtree(out, ignore_errors=True)

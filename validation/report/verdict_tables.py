@@ -25,7 +25,7 @@ from ..verdicts.claims import (CLAIMS, SYSTEM, WINDOWS, Column, claim_columns,
                                claims_records)
 from ..verdicts.stability import (DURATION, GRID, GROWTH_LIMIT, MAX_LEVEL, TRACKING_LIMIT,
                                   Limit, StabilityResult)
-from ..verdicts.validity import _GAP_VIEWS
+from ..verdicts.validity_file import GAP_VIEWS
 from .linear_figures import validity_figures
 from .render import display_unit, fmt_number, folded, folded_text, render
 from .summary import value_text, verdict_parts
@@ -342,7 +342,7 @@ def gap_rows(data: dict) -> tuple[list[str], list[list[str]]]:
     for arm in data["arms"]:
         for g in arm["gaps"]:
             rows.append([arm["arm"], fmt_number(g["theta2"])] +
-                        [fmt_number(g[k]) for v in _GAP_VIEWS for k in (v, f"{v}_peak_hz")])
+                        [fmt_number(g[k]) for v in GAP_VIEWS for k in (v, f"{v}_peak_hz")])
     return head, rows
 
 

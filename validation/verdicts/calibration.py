@@ -86,12 +86,10 @@ from .calibration_intervals import parameter_uncertainty
 from .calibration_outputs import write_inputs, write_results
 from .calibration_plan import Plan, linear_response
 from ..batch.resimulate import every_signal
-from .evaluations import Evaluations
+from .evaluations import FIT_SWEEP, Evaluations
 
-__all__ = ["calibrate", "FIT_SWEEP"]
+__all__ = ["calibrate"]
 
-#: The sweep the calibration's simulations are stored under (reports keep them apart).
-FIT_SWEEP = "calibrate"
 #: Residual, in noise levels, of a sample a simulation did not reach (it diverged or
 #: failed at a trial point): far beyond any fit, so the step is rejected.
 _PENALTY = 1e3

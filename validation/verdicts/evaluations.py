@@ -27,11 +27,13 @@ from ..run.results import write_atomic
 from ..run.scenario import scenario_to_mapping
 from ..run.tomlfiles import toml_text
 
-__all__ = ["ROBUST_SWEEPS", "effective_rho", "Evaluations", "ask", "asked", "point_axes",
-           "number", "write_verdict", "write_scenario"]
+__all__ = ["ROBUST_SWEEPS", "FIT_SWEEP", "effective_rho", "Evaluations", "ask", "asked",
+           "point_axes", "number", "write_verdict", "write_scenario"]
 
 #: The sweep names the evaluations are stored under (reports keep them apart).
 ROBUST_SWEEPS = ("estimate", "falsify", "conform")
+#: The sweep the calibration's simulations are stored under (reports keep them apart too).
+FIT_SWEEP = "calibrate"
 
 
 def effective_rho(row, requirement: Requirement) -> float | None:

@@ -61,7 +61,6 @@ from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_ma
 from ..batch.store import ResultStore, run_id
 from .bisection import GOOD, TOLERANCE, Lattice, Limit, limit_of, next_points
 from .resolution import ResolvedLimit, resolve_limit
-from .sampled import predicted_period
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "GROWTH_LIMIT", "MAX_LEVEL", "OUTCOMES",
            "StabilityCase", "Limit", "StabilityResult", "cases_from_scenarios",
@@ -396,6 +395,7 @@ def _result(case: StabilityCase, levels: list[dict], growth: dict | None = None
     (`_band`, from ``growth``: {Ts: growth rate} of the finest level's runs); the
     prediction on the case's own plant (its base mesh: the FE prediction has converged at
     ANCF 4 el/link, and on a mesh 4× finer it costs minutes)."""
+    from .sampled import predicted_period  # python-control: not for a report without a map
     finest = len(levels) - 1
     tested = dict(sorted(levels[-1].items()))
     limits = _limits(levels)

@@ -28,7 +28,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from pathlib import Path
 
 import control
 import numpy as np
@@ -38,16 +37,16 @@ from reduced_model._joint_linear import nonlinear_joint_effects
 
 from ..run.laws import build_controller
 from ..run.plants import is_truth, truth_settings
-from ..run.results import read_json
 from ..run.scenario import scenario_from_mapping
 from .linear import law_gain, reduced_linear_model
 from .nugap import as_statespace, gap_detail
 from .resolution import UNDECIDED
 from .sampled import POINTS, certificate, certified_period, prediction
 from .stability import _label, _options_key, load_stability
+from .validity_file import CHANNELS
 
 __all__ = ["THETA2", "FREQUENCIES_HZ", "CERTIFY_PERIODS", "STEP_CHECK", "arm_validity",
-           "case_rows", "validity_analysis", "load_validity"]
+           "case_rows", "validity_analysis"]
 
 #: θ2 grid [rad] of the ν-gap map and the frequency responses.
 THETA2 = tuple(float(t) for t in np.linspace(0.0, np.pi, 7))
@@ -57,10 +56,6 @@ FREQUENCIES_HZ = tuple(float(f) for f in np.logspace(-1, np.log10(300.0), 400))
 CERTIFY_PERIODS = (1e-4, 2e-4, 3e-4, 5e-4, 7e-4, 1e-3, 1.5e-3, 2e-3, 3e-3, 5e-3, 1e-2)
 #: The truth plant rerun around an FE prediction: factors of the prediction, steps per Ts.
 STEP_CHECK = ((0.97, 1.05), 200)
-#: (input, output) channels of the frequency responses.
-CHANNELS = (("tau1", "theta1"), ("tau2", "theta2"), ("tau1", "tip_defl1"),
-            ("tau2", "tip_defl2"))
-_GAP_VIEWS = ("theta", "tip", "loop")
 
 
 def arm_validity(config: dict) -> dict:
@@ -230,31 +225,3 @@ def validity_analysis(cases, *, stability_dir=None, progress=None) -> dict:
     return {"arms": per_arm, "cases": rows, "timings": timings,
             "stability": str(stability_dir) if stability_dir else "",
             "certify_periods": list(CERTIFY_PERIODS), "points": POINTS}
-
-
-_NUMBER = (int, float)
-_CURVES = {f"{i}->{o}": [_NUMBER] for i, o in CHANNELS}
-#: What the report reads of validity.json (`validation.run.results.read_json`).
-_SCHEMA = {
-    "arms": [{"arm": str, "Ts": _NUMBER, "modes": [int], "truth": str, "left_out": [str],
-              "frequencies_hz": [_NUMBER],
-              "responses": [{"theta2": _NUMBER, "reduced": _CURVES, "fe": _CURVES}],
-              "gaps": [{"theta2": _NUMBER, **{k: _NUMBER for v in _GAP_VIEWS
-                                              for k in (v, f"{v}_peak_hz")}}]}],
-    "cases": [{"case": str, "plant": str, "arm": str, "predicted_s": _NUMBER, "mesh": str,
-               "predicted_fine_s": _NUMBER, "mesh_fine": str, "certified_s": _NUMBER,
-               "certificate": [dict], "largest_stable_s": _NUMBER,
-               "first_unstable_s": _NUMBER, "limit_low_s": _NUMBER,
-               "limit_high_s": _NUMBER, "limit_verdict": str, "in_bracket": str, "sound": str,
-               "conservatism": _NUMBER, "note": str, "evidence": str}],
-}
-
-
-def load_validity(folder) -> dict | None:
-    """The stored analysis of a validity folder (validity.json), or None; ValueError
-    naming the file and key if it is not what `flexarm validity` writes."""
-    path = Path(folder) / "validity.json"
-    if not path.is_file():
-        return None
-    return read_json(path, _SCHEMA)
-
