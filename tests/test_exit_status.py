@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from validation.cli import main
-from validation.verdicts import stability
+from validation.verdicts import sampled, stability
 
 ROOT = Path(__file__).resolve().parent.parent
 RULE_PAGE = ROOT / "docs" / "guide" / "execution.rst"
@@ -70,7 +70,7 @@ def test_a_verdict_command_whose_failed_run_decides_nothing_exits_0(law, monkeyp
     """Known-good: the failure at 8 ms lies above the divergence at 4 ms; both limits
     are found, the failure is named, the status is 0."""
     monkeypatch.setattr(stability, "GRID", (1e-3, 4e-3, 8e-3))
-    monkeypatch.setattr(stability, "predicted_period", lambda config: math.nan)  # the grid
+    monkeypatch.setattr(sampled, "predicted_period", lambda config: math.nan)  # the grid
     # The coarsest tolerance (50 %): the bracket (1, 4] ms is bisected twice, not seven times.
     status = main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
                    "--workers", "1", "--no-progress", "--tolerance", "0.5",
@@ -84,7 +84,7 @@ def test_a_verdict_command_whose_failed_run_leaves_a_verdict_missing_exits_1(law
                                                                            capsys):
     """Known-bad: without the 4 ms point the failure at 8 ms is where the limits lie."""
     monkeypatch.setattr(stability, "GRID", (1e-3, 8e-3))
-    monkeypatch.setattr(stability, "predicted_period", lambda config: math.nan)  # the grid
+    monkeypatch.setattr(sampled, "predicted_period", lambda config: math.nan)  # the grid
     status = main(["stability", "s.toml", "--plant", "reduced", "--arm", "default",
                    "--workers", "1", "--no-progress", "--out", str(law / "o")])
     assert status == 1

@@ -248,6 +248,7 @@ def _start(case: StabilityCase, lattice: Lattice) -> set[float]:
     observer in the loop the prediction is the same law's without it, and the loop need
     not be monotone: the PBC with the position-only sign SMO on the default arm's reduced
     plant diverges at 2.51 ms and not at 3.05 ms, where its prediction lies."""
+    from .sampled import predicted_period  # python-control: not for a report without a map
     if case.base["observer"]["kind"] != "none":
         return set(lattice.grid)
     return lattice.cell(predicted_period(case.base))
