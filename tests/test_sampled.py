@@ -118,3 +118,17 @@ def test_stability_map_predicted_column_is_the_zoh_prediction():
     config = scenario_to_mapping(scenario_from_mapping({"arm": "table1"}))
     result = stability._result(stability.StabilityCase("pbc", "reduced", "table1", config), [{}])
     assert result.predicted == pytest.approx(0.3046e-3, rel=1e-3)
+
+
+def test_a_case_and_its_stored_runs_share_one_linearisation():
+    """The stability map predicts from its case, the report from the case rebuilt from a
+    stored run (at another period and plant step): one key, so one linearisation per
+    process (~1 s a case; reproduce-paper's report computed all 42 again, 35 s).  Known
+    bad: another arm is another case."""
+    from validation.verdicts import sampled
+    (c,) = stability.cases_from_scenarios([scenario_from_mapping({})], plants=["exudyn"],
+                                          arms=["default"])
+    run = stability._scenario_at(c, 2.5e-3)
+    assert run["Ts"] != c.base["Ts"] and run["plant"]["step"] != c.base["plant"]["step"]
+    assert sampled._key(run) == sampled._key(c.base)
+    assert sampled._key(dict(c.base, arm="table1")) != sampled._key(c.base)

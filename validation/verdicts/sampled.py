@@ -56,6 +56,10 @@ POINTS = 5
 #: The scan of the predicted period [s]: 0.01 µs (the FE Table-1 arm's limits are µs)
 #: to 0.1 s.
 _SCAN = (1e-8, 0.1, 49)
+#: The period a case's law is first built at, to see whether it can be linearised and
+#: what it applies (the paper's period; the prediction then builds it at every period
+#: it scans).
+PROBE_TS = 1e-3
 _PREDICTION_RTOL = 1e-3
 
 
@@ -141,7 +145,12 @@ def _case(config_json: str) -> _Case:
 
 
 def _key(config: dict) -> str:
-    return json.dumps(config, sort_keys=True)
+    """A case's key: its mapping without what a stability map varies from run to run —
+    the period (the law is first built at `PROBE_TS`) and the plant's step — so that the
+    map's case and the same case rebuilt from any of its stored runs (the report's) share
+    one linearisation, computed once per process (~1 s a case)."""
+    plant = {k: v for k, v in config["plant"].items() if k != "step"}
+    return json.dumps(dict(config, Ts=PROBE_TS, plant=plant), sort_keys=True)
 
 
 @functools.lru_cache(maxsize=256)
@@ -159,7 +168,7 @@ def _prediction(config_json: str) -> Prediction:
         return Prediction(math.nan, math.nan, f"{case.scenario.controller.kind} raised "
                           f"{type(exc).__name__} while being linearised: {exc}")
     if K0 is None:
-        return Prediction(math.nan, math.nan, "the law does not build at the case's Ts")
+        return Prediction(math.nan, math.nan, f"the law does not build at Ts = {PROBE_TS:g} s")
     forces = K0[0].shape[0] > 2
     if forces and spec.actuated == 2:
         return Prediction(math.nan, math.nan, "the law applies forces on the modal "
