@@ -4,7 +4,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import cumulative_trapezoid
 
 from reduced_model import (ArmModel, ArmParameters, FieldError, LinkModes, Measurement,
                            Plant, PlantFailure, SensorConfig, cached_model)
@@ -392,6 +391,7 @@ class ExudynPlant(Plant):
             """Inextensible curve with slope angle β = atan(w'): (x, y, β) at arc lengths s."""
             fine = np.linspace(0.0, modes.L, 4001)
             beta = np.arctan(modes.dphi(fine).T @ q)
+            from scipy.integrate import cumulative_trapezoid  # 0.2 s: not for a report
             x = cumulative_trapezoid(np.cos(beta), fine, initial=0.0)
             y = cumulative_trapezoid(np.sin(beta), fine, initial=0.0)
             return (np.interp(s, fine, x), np.interp(s, fine, y),

@@ -29,6 +29,7 @@ import functools
 import hashlib
 import re
 from importlib.metadata import PackageNotFoundError, distribution, packages_distributions
+from importlib.util import find_spec
 from pathlib import Path
 
 from reduced_model._imports import walk
@@ -70,8 +71,8 @@ def _distributions(top: str) -> tuple[str, ...]:
     the ones they require (numba's llvmlite, say), sorted."""
     try:
         names = [distribution(top).name]
-    except PackageNotFoundError:
-        names = list(_top_levels().get(top, ()))
+    except PackageNotFoundError:  # not installed (pandas, optional), or named otherwise
+        names = list(_top_levels().get(top, ())) if find_spec(top) is not None else []
     found: set[str] = set()
     while names:
         name = _REQUIREMENT.match(names.pop()).group(0).lower().replace("_", "-")
