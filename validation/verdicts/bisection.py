@@ -3,10 +3,10 @@ tested control periods, the lattice of periods a map tests, and the next periods
 bracket search asks for.
 
 A limit is bracketed by the largest tested Ts at or below which every run was good and
-the first tested Ts that was not (`limit_of`).  A map starts each case at the lattice cell
-of its predicted limit (`Lattice.cell`; a case with no finite prediction starts from the
-whole grid, 0.1–10 ms), steps outwards until each limit is bracketed and then bisects the
-bracket geometrically until it is within the tolerance.  The periods
+the first tested Ts that was not (`limit_of`).  A map starts a case at the lattice cell of
+its predicted limit (`Lattice.cell`) or at the whole grid, 0.1–10 ms (which, the map
+decides: `validation.verdicts.stability`), steps outwards until each limit is bracketed
+and then bisects the bracket geometrically until it is within the tolerance.  The periods
 bisected to are the points of one *lattice* (`Lattice`): every grid interval cut into
 2^d equal ratios, d the smallest depth at which the widest interval's cell (2 → 5 ms) is
 within the tolerance — so a bracket within the tolerance is one cell, the brackets of
@@ -15,9 +15,9 @@ or they are not: no round-off decides whether they overlap), and a map at 10 % r
 its runs at 1 % (a coarser lattice's points are points of every finer one, bit for bit).
 
 A refined level starts likewise from the brackets of the level before (`next_points`'
-hints): it tests their two ends and, where an outcome changed, steps outwards by 1, 2, 4, … cells
-until the limit is bracketed again, then bisects.  A bracket that kept both outcomes is
-found in two runs.
+hints): it tests their two ends and, where an outcome changed, steps outwards by 1, 2, 4,
+… cells until the limit is bracketed again, then bisects.  A bracket that kept both
+outcomes is found in two runs.
 """
 from __future__ import annotations
 
@@ -121,11 +121,11 @@ class Lattice:
 
 def next_points(tested: dict, lattice: Lattice, hints) -> set[float]:
     """The next periods one level of a case tests: ``hints`` while nothing is tested
-    (the cell of a predicted limit, the grid, or the ends of the level before's brackets); then, per limit, the middle
-    lattice point of an unresolved bracket, or the next step outwards — 1, 2, 4, …
-    cells beyond what was tested — for a limit all of whose tested runs were good (or
-    bad).  Nothing for a limit that ends at a failed run (a failure says nothing about
-    where the limit is), nor beyond the lattice."""
+    (the cell of a predicted limit, the grid, or the ends of the level before's brackets);
+    then, per limit, the middle lattice point of an unresolved bracket, or the next step
+    outwards — 1, 2, 4, … cells beyond what was tested — for a limit all of whose tested
+    runs were good (or bad).  Nothing for a limit that ends at a failed run (a failure
+    says nothing about where the limit is), nor beyond the lattice."""
     if not tested:
         return set(hints)
     points, out = lattice.points, set()
