@@ -122,8 +122,10 @@ def test_the_reduced_pbc_limit_to_a_tolerance_contains_the_zoh_prediction(tmp_pa
     assert r.divergence.width <= tolerance
     # The search starts at the prediction's lattice cell: at 5 % that cell, (2.99, 3.07] ms,
     # brackets the limit in its two runs; at 1 % the loop turns unstable 0.3 % above the
-    # prediction: one cell up, 3 runs.  The grid and a bisection from it took 14 runs.
-    assert r.runs == {0.05: 2, 0.01: 3}[tolerance], r.runs
+    # prediction: one cell up, 3 runs (2 if the prediction, resolved to 0.1 %, lands above
+    # the lattice point 3.0511 ms it now lies 0.01 % below).  The grid and a bisection
+    # from it took 14 runs.
+    assert r.runs <= {0.05: 2, 0.01: 3}[tolerance], r.runs
     low, high = r.resolved["divergence"].interval()
     assert low <= r.predicted < high, (low, high)
     assert r.resolved["divergence"].verdict == ""  # the reduced plant: no refined sequence
@@ -222,7 +224,9 @@ def test_a_case_with_an_observer_starts_from_the_grid(tmp_path, monkeypatch):
     # Started at the prediction's cell, the same map misses it.
     monkeypatch.setattr(stability, "_start", lambda case, lattice: lattice.cell(r.predicted))
     (seeded,), _ = stability.stability_map([case], tmp_path / "seeded", progress=False)
-    assert seeded.divergence.largest > r.predicted > r.divergence.first_bad
+    # It claims no divergence 20 % above the divergence the grid found (3.05 against
+    # 2.51 ms): far from any round-off of the prediction (0.1 %) or the lattice (1 %).
+    assert seeded.divergence.largest > 1.1 * r.divergence.first_bad
 
 
 def test_a_limit_beyond_the_grid_is_not_bisected():

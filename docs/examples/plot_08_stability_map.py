@@ -3,10 +3,11 @@ The sampled-data stability map
 ===============================
 
 A controller designed in continuous time meets the arm through a sampler and a
-zero-order hold.  The stability map runs short closed loops on a grid of control
-periods, bisects each limit until its bracket is within a tolerance (here 1 %), and sets
-the measured limits next to the prediction from the exact zero-order-hold eigenvalues of
-the linearised sampled loop.
+zero-order hold.  The stability map predicts each limit from the exact zero-order-hold
+eigenvalues of the linearised sampled loop, runs short closed loops at the two control
+periods around the prediction (a law fed the true state; a case with an observer starts
+from a grid of 0.1–10 ms), steps outwards until each limit is bracketed, and bisects it
+until its bracket is within a tolerance (here 1 %): a handful of runs per case.
 Here the PBC and a joint PD on the reduced plant of the default arm (the truth plant's
 map is the same call: ``flexarm stability FILE``, which also checks its convergence).
 """
@@ -30,7 +31,8 @@ for r in results:
           f"predicted {1e3 * r.predicted:.4g} ms")
 
 # %%
-# Every tested control period with its outcome; the dashed line is the prediction.
+# Every tested control period with its outcome; the dashed line is the prediction the
+# search started from.
 colours = dict(zip(OUTCOMES, ("tab:green", "tab:orange", "tab:red", "black")))
 fig, ax = plt.subplots(figsize=(7, 2.8))
 for row, r in enumerate(results):
