@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
-from reduced_model._exact_kernels import exact_elastic_into
+from reduced_model._exact_pointers import exact_elastic_into
 from reduced_model._kernels import (coriolis_matrix_into, mass_matrix_into, unpack_model,
                                     unpack_workspace)
 from reduced_model._views import matrix_view

@@ -39,9 +39,10 @@ import numpy as np
 from numba import njit
 
 from . import _kernels as kern
+from . import _on_demand
 from ._cholesky import cholesky_factor_inplace, cholesky_solve_factored, cholesky_solve_inplace
 
-__all__ = ["PARAMETERS", "new_joint_buffers", "joints_active", "reset_joints",
+__all__ = ["PARAMETERS", "STATE", "new_joint_buffers", "work_length", "joints_active", "reset_joints",
            "advance_joints", "advance_joints_packed", "motor_state_into", "lag_step"]
 
 #: The joint fields of `ArmParameters` in ``jp`` (entry 2·field + joint).
@@ -52,6 +53,9 @@ _TC, _TS, _VS, _B, _K, _D, _J, _BL, _T = (2 * i for i in range(len(PARAMETERS)))
 # way), rotor angle, rotor rate, torque at the lag's output.
 _MODE, _ROT, _ROT_RATE, _APPLIED = 0, 2, 4, 6
 STATE = 8
+#: Where `advance_joints` is compiled as an entry point (`reduced_model._on_demand`).
+_ENTRIES = "reduced_model._joint_entries"
+_ADVANCE = _on_demand.slot(_ENTRIES, "advance")
 
 
 def new_joint_buffers(params, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -61,7 +65,15 @@ def new_joint_buffers(params, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
         for i in (1, 2):
             jp[2 * f + i - 1] = (params.static_friction(i) if name == "static"
                                  else getattr(params, f"{name}{i}"))
-    return jp, np.zeros(STATE), np.zeros(6 * n + 20)
+    if joints_active(jp):  # `advance_joints_packed` will be called: compile or load it
+        _on_demand.load(_ENTRIES)
+    return jp, np.zeros(STATE), np.zeros(work_length(n))
+
+
+@njit(cache=True, inline="always")
+def work_length(n):
+    """The length of ``jw`` for an arm of ``n`` coordinates (`_work`)."""
+    return 6 * n + 20
 
 
 @njit(cache=True, inline="always")
@@ -319,6 +331,9 @@ def advance_joints(d, x, tau, ext, h, nsteps, ws, jp, js, jw):
 
 @njit(cache=True)
 def advance_joints_packed(ints, reals, wc, wr, x, tau, ext, h, nsteps, jp, js, jw):
-    """`advance_joints` on the model's packed buffers (the entry point from Python)."""
-    advance_joints(kern.unpack_model(ints, reals), x, tau, ext, h, nsteps,
-                   kern.unpack_workspace(ints, wc, wr), jp, js, jw)
+    """`advance_joints` on the model's packed buffers, through the pointer of
+    `reduced_model._on_demand` (compiled only where some joint effect is on:
+    `new_joint_buffers` loads it), from Python and from compiled loops."""
+    _on_demand.call(_on_demand.entry(_ADVANCE), (
+        ints, ints.shape[0], reals, reals.shape[0], wc, wc.shape[0], wr, wr.shape[0], x,
+        x.shape[0], tau, tau.shape[0], ext, h, nsteps, jp, js, jw))

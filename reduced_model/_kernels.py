@@ -48,8 +48,8 @@ import numpy as np
 from numba import njit
 
 from ._exact_data import ExactRef, ExactScratch, exact_reals, exact_workspace_sizes
-from ._exact_kernels import (exact_coriolis_matrix_into, exact_elastic_into,
-                             exact_mass_bias_into, exact_tips_into)
+from ._exact_pointers import (exact_coriolis_matrix_into, exact_elastic_into,
+                              exact_mass_bias_into, exact_tips_into, load_exact_kernels)
 from ._cholesky import cholesky_solve_inplace
 from ._views import matrix_view
 
@@ -109,6 +109,7 @@ def pack_model(*, n1, n2, L1, L2, gram1, gram2, phi1_tip, dphi1_tip, phi2_tip, M
     n = 2 + n1 + n2
     rows1 = [0, *range(2, 2 + n1)]
     if exact is not None:
+        load_exact_kernels()
         exact = {"L": [L1, L2], "phi1_tip": phi1_tip, "dphi1_tip": dphi1_tip,
                  "phi2_tip": phi2_tip, **exact}
     exact_ints, exact_parts = exact_reals(exact, n1, n2)
@@ -298,9 +299,7 @@ def mass_bias_into(d, Q, Qd, M, h, ws, with_bias=True):
     accelerations Σ_j Ȧ_j Q̇_j of each link, and h_i = Re(conj(A_i) G v).
     """
     if d.exact.N > 0:
-        # ``with_bias`` passed as a run-time value: a literal True / False would compile
-        # the exact kernel once per value (8 s each on a cold cache).
-        exact_mass_bias_into(d.exact, ws.exact, Q, Qd, M, h, M.shape[0] > 0 and with_bias)
+        exact_mass_bias_into(d.exact, ws.exact, Q, Qd, M, h, with_bias)
         return
     n1, n2 = d.n1, d.n2
     n = 2 + n1 + n2
@@ -408,7 +407,7 @@ def bias_forces_into(d, Q, Qd, h, ws):
             s += d.K[i, j] * Q[j] + d.D[i, j] * Qd[j]
         h[i] += s
     if d.exact.N > 0:
-        exact_elastic_into(d.exact, Q, Qd, h, h.shape[0] > 0)  # True, at run time (above)
+        exact_elastic_into(d.exact, Q, Qd, h, True)
 
 
 @njit(cache=True, inline="always")

@@ -284,3 +284,38 @@ def test_large_motion_follows_the_geometrically_exact_fe_arm():
               for k in ("exact", "linear")}
     assert np.all(errors["exact"] < tolerance), errors
     assert np.all(errors["linear"] > 10 * tolerance), errors
+
+
+# --- how the paper's kernels reach the exact ones ---------------------------------------------
+def test_the_paper_kinematics_never_load_the_exact_kernels():
+    """A fresh process that builds and runs the paper's model leaves the exact kernels
+    unloaded (not compiled on a cold cache); building an exact model loads them."""
+    import subprocess
+    import sys
+    code = ("import sys, numpy as np\n"
+            "from reduced_model import ArmModel\n"
+            "m = ArmModel(); m.acceleration(np.zeros(m.n), np.zeros(m.n), [1.0, 0.0])\n"
+            "print('reduced_model._exact_entries' in sys.modules)\n"
+            "ArmModel(kinematics='exact')\n"
+            "print('reduced_model._exact_entries' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert out == ["False", "True"]
+
+
+def test_an_exact_model_without_its_kernels_loaded_fails_saying_so(exact):
+    """An exact model whose process holds no pointers to the exact kernels (as one
+    unpickled elsewhere would) raises instead of calling a null pointer; with them the
+    same call gives the mass matrix."""
+    from reduced_model import _on_demand
+    saved = list(_on_demand._table)
+    try:
+        for slot in range(len(saved)):
+            _on_demand._table[slot] = None
+        with pytest.raises(RuntimeError, match="compiled on demand is not loaded"):
+            exact.mass_matrix(Q_BENT)
+    finally:
+        for slot, address in enumerate(saved):
+            _on_demand._table[slot] = address
+    M = exact.mass_matrix(Q_BENT)
+    assert np.allclose(M, M.T) and np.all(np.linalg.eigvalsh(M) > 0)

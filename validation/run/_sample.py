@@ -32,7 +32,7 @@ from numba import njit, types
 from numba.experimental import structref
 
 from controllers import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, reference_into
-from reduced_model._joints import advance_joints, motor_state_into
+from reduced_model._joints import advance_joints_packed, motor_state_into
 from reduced_model._kernels import (rk4_advance, tip_kinematics_packed, unpack_model,
                                     unpack_workspace)
 from reduced_model._readout import modal_readout_into
@@ -418,8 +418,8 @@ def run_reduced(c, rows, h, nsteps, xp, pm_i, pm_r, p_wc, p_wr, basis, jp, js, j
         if code != SampleStatus.OK:
             return k, code
         if joints:
-            advance_joints(model, xp, c.tau_plant[:c.counts[1]], ext, h, nsteps, work, jp,
-                           js, jw)
+            advance_joints_packed(pm_i, pm_r, p_wc, p_wr, xp, c.tau_plant[:c.counts[1]], ext, h,
+                                  nsteps, jp, js, jw)
         else:
             rk4_advance(model, xp, c.tau_plant[:c.counts[1]], h, nsteps, work)
     # the state after the last period is checked too (as the Python loop does)
