@@ -132,3 +132,21 @@ def test_a_case_and_its_stored_runs_share_one_linearisation():
     assert run["Ts"] != c.base["Ts"] and run["plant"]["step"] != c.base["plant"]["step"]
     assert sampled._key(run) == sampled._key(c.base)
     assert sampled._key(dict(c.base, arm="table1")) != sampled._key(c.base)
+
+
+def test_the_cases_of_one_controller_share_one_linearisation():
+    """The prediction is the controller's fed the true state, so a controller's cases with
+    each observer share one linearisation (the paper's map: 18 for 42 cases); the note
+    says what it leaves out, and an observer case gets no ν-gap certificate.  Known bad:
+    another controller is another linearisation."""
+    from validation.verdicts import sampled
+    scenarios = [scenario_from_mapping({"controller": {"kind": c}, "observer": {"kind": o}})
+                 for c, o in (("pbc", "none"), ("pbc", "smo-paper"), ("pd", "none"))]
+    alone, observed, other = stability.cases_from_scenarios(scenarios, plants=["reduced"],
+                                                            arms=["default"])
+    assert sampled._key(observed.base) == sampled._key(alone.base)
+    assert sampled._key(other.base) != sampled._key(alone.base)
+    assert sampled.prediction(alone.base).note == ""
+    assert sampled.prediction(observed.base).note == \
+        "the controller fed the true state (smo-paper not in the loop)"
+    assert sampled.certificate(observed.base, [1e-3]) == []

@@ -218,11 +218,12 @@ def test_a_case_with_an_observer_starts_from_the_grid(tmp_path, monkeypatch):
     runs = expand(load_campaign(campaigns_dir() / "paper.toml"))
     s = next(r.scenario for r in runs if r.scenario.observer.kind == "smo-pos")
     (case,) = stability.cases_from_scenarios([s], plants=["reduced"], arms=["default"])
-    assert stability._start(case, Lattice(stability.GRID, 0.01)) == set(stability.GRID)
+    assert stability._start(case, Lattice(stability.GRID, 0.01), None) == set(stability.GRID)
     (r,), _ = stability.stability_map([case], tmp_path, progress=False)
     assert r.divergence.first_bad < 0.9 * r.predicted, (r.divergence, r.predicted)
     # Started at the prediction's cell, the same map misses it.
-    monkeypatch.setattr(stability, "_start", lambda case, lattice: lattice.cell(r.predicted))
+    monkeypatch.setattr(stability, "_start",
+                        lambda case, lattice, prediction: lattice.cell(r.predicted))
     (seeded,), _ = stability.stability_map([case], tmp_path / "seeded", progress=False)
     # It claims no divergence 20 % above the divergence the grid found (3.05 against
     # 2.51 ms): far from any round-off of the prediction (0.1 %) or the lattice (1 %).

@@ -191,3 +191,37 @@ def test_a_ctrl_c_while_a_process_is_forked_is_not_lost(start):
     done = _signal_while_forking(STARTS[start])
     assert done.returncode == 130 and "ran on" not in done.stdout, done
     assert "Exception ignored" not in done.stderr, done.stderr
+
+
+def test_no_process_is_forked_while_another_thread_works_between_forks():
+    """A thread computing beside the runs (the stability map's predictions) works within
+    `between_forks`; a fork (`signals_held`) waits until it leaves, so no child inherits
+    a lock that thread holds.  Known good: with no such work the fork goes at once."""
+    import threading
+
+    from validation.run.processes import between_forks, signals_held
+    inside, leave, order = threading.Event(), threading.Event(), []
+
+    def work():
+        with between_forks():
+            inside.set()
+            leave.wait()
+            order.append("work")
+
+    def fork():
+        with signals_held():
+            order.append("fork")
+
+    worker = threading.Thread(target=work)
+    worker.start()
+    inside.wait()
+    forking = threading.Thread(target=fork)
+    forking.start()
+    forking.join(0.5)  # ample for a lock that is free; it is not: still waiting
+    assert forking.is_alive() and order == []
+    leave.set()
+    worker.join()
+    forking.join()
+    assert order == ["work", "fork"]
+    fork()  # no work between forks: straight through
+    assert order == ["work", "fork", "fork"]

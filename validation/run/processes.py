@@ -17,6 +17,10 @@ Every process is started under `signals_held`: ``os.fork`` runs the fork callbac
 libraries loaded (logging releases its lock in one), and an exception a signal handler
 raises inside such a callback is printed as "Exception ignored" and lost — a Ctrl-C that
 landed while a worker was forked was forgotten and the command ran on (seen in CI).
+`signals_held` also waits for `between_forks`: a thread of this process that computes
+beside the runs (the stability map's predictions) does each piece of its work inside it,
+so that no child is forked while that thread holds a lock (numba's compiler lock, a
+library's own mutex) that the child would inherit held by no one, for ever.
 """
 from __future__ import annotations
 
@@ -25,12 +29,14 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 from contextlib import contextmanager
 
 from .config import ConfigError
 
 __all__ = ["die_with_parent", "lead_process_group", "kill_group", "describe_exit",
-           "contained", "ContainedFault", "contain_checks", "checked_apart", "CHECK_TIMEOUT"]
+           "contained", "ContainedFault", "contain_checks", "checked_apart", "CHECK_TIMEOUT",
+           "signals_held", "release_signals", "between_forks"]
 
 #: How long importing and constructing a plug-in in its check may take by default [s]:
 #: a plug-in that compiles a numba kernel on construction takes 10–45 s on a busy 2-core
@@ -66,14 +72,34 @@ def die_with_parent(parent: int) -> None:
 _HELD = {signal.SIGINT, signal.SIGTERM}
 
 
+_fork_lock = threading.Lock()
+
+
+def _new_fork_lock() -> None:
+    global _fork_lock
+    _fork_lock = threading.Lock()  # a child's own: the parent's is held while it forks
+
+
+os.register_at_fork(after_in_child=_new_fork_lock)
+
+
+@contextmanager
+def between_forks():
+    """Inside, no process is forked from this one (module docstring)."""
+    with _fork_lock:
+        yield
+
+
 @contextmanager
 def signals_held():
     """SIGINT/SIGTERM held back (blocked) inside, for starting a process (module
     docstring): one that arrives meanwhile is raised on leaving, in the caller's code.  The
-    child inherits the held signals and calls `release_signals` once its handlers are set."""
+    child inherits the held signals and calls `release_signals` once its handlers are set.
+    Inside, no other thread of this process is within `between_forks`."""
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD)
     try:
-        yield
+        with between_forks():
+            yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 

@@ -44,6 +44,7 @@ from ..run.laws import build_controller, nominal_model
 from ..run.loop import make_reference
 from ..run.plants import truth_settings
 from ..run.scenario import scenario_from_mapping
+from ..run.specs import ObserverSpec
 from .linear import (NotLinearisable, closed_loop_matrix, growth_rate, largest_stable_period,
                      law_gain, reduced_linear_model)
 from .nugap import FactorisationError, as_statespace, gap_detail, margin_detail
@@ -145,12 +146,22 @@ def _case(config_json: str) -> _Case:
 
 
 def _key(config: dict) -> str:
-    """A case's key: its mapping without what a stability map varies from run to run —
-    the period (the law is first built at `PROBE_TS`) and the plant's step — so that the
-    map's case and the same case rebuilt from any of its stored runs (the report's) share
-    one linearisation, computed once per process (~1 s a case)."""
+    """A case's key: its mapping without what its linearisation does not depend on — the
+    period (the law is first built at `PROBE_TS`), the plant's step, the run's name, and
+    the observer (the loop linearised is the controller's fed the true state) — so that
+    the map's case and the same case rebuilt from any of its stored runs (the report's),
+    and the cases of one controller with each observer, share one linearisation, computed
+    once per process (~1 s a case: the paper's map has 42 cases and 18 linearisations)."""
     plant = {k: v for k, v in config["plant"].items() if k != "step"}
-    return json.dumps(dict(config, Ts=PROBE_TS, plant=plant), sort_keys=True)
+    data = {k: v for k, v in config.items() if k != "name"}
+    return json.dumps(dict(data, Ts=PROBE_TS, plant=plant, observer={"kind": "none"},
+                           feedback="auto"), sort_keys=True)
+
+
+def _observer(config: dict) -> str:
+    """The observer of the case ``config`` (the one its key leaves out), read without
+    checking the case (one that does not build has no prediction, which says why)."""
+    return config.get("observer", {}).get("kind", ObserverSpec.kind)
 
 
 @functools.lru_cache(maxsize=256)
@@ -173,10 +184,6 @@ def _prediction(config_json: str) -> Prediction:
     if forces and spec.actuated == 2:
         return Prediction(math.nan, math.nan, "the law applies forces on the modal "
                           f"coordinates: the {spec.label} has two actuators")
-    notes = []
-    if case.scenario.observer.kind != "none":
-        notes.append(f"the controller fed the true state ({case.scenario.observer.kind} "
-                     "not in the loop)")
     truth = spec if spec.role == "truth" else None
     limit, where = math.inf, math.nan
     for i in range(len(case.points)):
@@ -197,13 +204,18 @@ def _prediction(config_json: str) -> Prediction:
                                       rtol=_PREDICTION_RTOL)
         if value < limit:
             limit, where = value, float(case.theta(i)[1])
-    return Prediction(limit, where, "; ".join(notes))
+    return Prediction(limit, where, "")
 
 
 def prediction(config: dict) -> Prediction:
     """The predicted largest stable period of a stability-map case on the linearisation
     of its own plant (module docstring), with the θ2 that limits it and a note."""
-    return _prediction(_key(config))
+    predicted = _prediction(_key(config))
+    observer = _observer(config)
+    if observer == "none" or predicted.note:
+        return predicted
+    return dataclasses.replace(predicted, note=f"the controller fed the true state "
+                                               f"({observer} not in the loop)")
 
 
 def predicted_period(config: dict) -> float:
@@ -217,9 +229,9 @@ def certificate(config: dict, periods) -> list[CertificateRow]:
     in increasing order, up to the first that is not certified (module docstring).
     Empty for a law that cannot be certified (forces on the modal coordinates, an
     observer in the loop, not linearisable, a truth plant without a linearisation)."""
-    case = _case(_key(config))
-    if case.scenario.observer.kind != "none":
+    if _observer(config) != "none":
         return []
+    case = _case(_key(config))
     spec = truth_settings(config)
     reduced = [case.reduced_plant(i, nominal=True)[case.names, :]
                for i in range(len(case.points))]

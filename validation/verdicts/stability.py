@@ -48,6 +48,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 
 from ..batch.campaign import PlannedRun
@@ -57,6 +58,7 @@ from ..batch.executor import Runner
 from ..batch.runfiles import KEEP_NONE
 from ..run.laws import applies_generalised_forces
 from ..run.plants import is_truth, plant_settings, with_plant
+from ..run.processes import between_forks
 from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import ResultStore, run_id
 from .bisection import GOOD, TOLERANCE, Lattice, Limit, limit_of, next_points
@@ -210,8 +212,13 @@ def _planned(case: StabilityCase, Ts: float) -> PlannedRun:
 class _Search:
     """One case's bracket search, level by level: {Ts: (outcome, detail)} per level."""
 
-    def __init__(self, case: StabilityCase, start: set[float]) -> None:
+    def __init__(self, case: StabilityCase, start: set[float] | Future) -> None:
         self.case, self.start, self.levels = case, start, [{}]
+
+    @property
+    def waiting(self) -> bool:
+        """Whether the search waits for its start: the prediction it starts from."""
+        return isinstance(self.start, Future) and not self.start.done()
 
     @property
     def at(self) -> StabilityCase:
@@ -222,7 +229,14 @@ class _Search:
     def next_points(self, lattice: Lattice, refine: bool) -> set[float]:
         """The periods to test next at this level; when it is resolved, the hints of the
         next level if a limit has not converged (and ``refine``), else nothing."""
-        hints = self.hints() if len(self.levels) > 1 else self.start
+        if len(self.levels) > 1:
+            hints = self.hints()
+        elif isinstance(self.start, Future):
+            if self.waiting:
+                return set()
+            hints = lattice.cell(self.start.result())
+        else:
+            hints = self.start
         points = next_points(self.levels[-1], lattice, hints)
         if points or not (refine and self.case.truth and len(self.levels) <= MAX_LEVEL):
             return points
@@ -242,16 +256,40 @@ class _Search:
                 for Ts in (lim[-1].largest, lim[-1].first_bad) if not math.isnan(Ts)}
 
 
-def _start(case: StabilityCase, lattice: Lattice) -> set[float]:
+def _start(case: StabilityCase, lattice: Lattice, prediction: Future) -> set[float] | Future:
     """The periods a case tests first: the lattice cell of its predicted limit — for a law
     fed the true state, whose loop the prediction is — else the whole grid.  With an
     observer in the loop the prediction is the same law's without it, and the loop need
     not be monotone: the PBC with the position-only sign SMO on the default arm's reduced
-    plant diverges at 2.51 ms and not at 3.05 ms, where its prediction lies."""
-    from .sampled import predicted_period  # python-control: not for a report without a map
+    plant diverges at 2.51 ms and not at 3.05 ms, where its prediction lies.  The cell is
+    the ``prediction`` (a `Future` of the period, `_Predictions`) until it is known."""
     if case.base["observer"]["kind"] != "none":
         return set(lattice.grid)
-    return lattice.cell(predicted_period(case.base))
+    return prediction
+
+
+class _Predictions:
+    """The predicted limit of every case (`validation.verdicts.sampled`: ~1 s of
+    python-control a linearisation, 18 for the paper's 42 cases), computed by a thread of
+    this process while the workers run the map: the cases fed the true state first, whose
+    searches start from their prediction, then the others (their results report it)."""
+
+    def __init__(self, cases: list[StabilityCase]) -> None:
+        self._thread = ThreadPoolExecutor(1, thread_name_prefix="stability-prediction")
+        observed = sorted(range(len(cases)), key=lambda i: cases[i].base["observer"]["kind"]
+                          != "none")
+        self.futures = {i: self._thread.submit(_predicted_period, cases[i].base)
+                        for i in observed}
+
+    def close(self, *, finish: bool) -> None:
+        """Wait for every prediction (``finish``), or drop those not started."""
+        self._thread.shutdown(wait=finish, cancel_futures=not finish)
+
+
+def _predicted_period(config: dict) -> float:
+    from .sampled import predicted_period  # python-control: not for a report without a map
+    with between_forks():  # no worker is forked while this thread is inside a library
+        return predicted_period(config)
 
 
 def _limits(levels: list[dict]) -> dict[str, list[Limit]]:
@@ -272,29 +310,41 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
     the lattice cell of its predicted limit (or the grid), the bracket searches and
     bisections to ``tolerance`` and, with ``mesh_check``, the truth-plant cases
     again on the refined sequence until their limits converge (module docstring).  Every
-    round asks every case's next periods at once (the progress bar names the round).
-    Returns the results and the summary of every round together."""
+    round asks every case's next periods at once (the progress bar names the round); the
+    predictions are computed beside the runs (`_Predictions`), and a case that starts
+    from its prediction joins the round after it is known.  Returns the results and the
+    summary of every round together."""
     lattice = Lattice(GRID, tolerance)
-    searches = [_Search(case, _start(case, lattice)) for case in cases]
+    predictions = _Predictions(cases)
+    searches = [_Search(case, _start(case, lattice, predictions.futures[i]))
+                for i, case in enumerate(cases)]
     store = ResultStore(out)
     summary, round_ = None, 0
-    while summary is None or not summary.interrupted:
-        planned = {(i, s.at.level, Ts): _planned(s.at, Ts) for i, s in enumerate(searches)
-                   for Ts in sorted(s.next_points(lattice, mesh_check))}
-        if not planned and summary is not None:
-            break
-        round_ += 1
-        label = "stability: start" if round_ == 1 else \
-            f"stability: bisection {round_ - 1} (to {tolerance:.2g})"
-        more = run_planned(planned.values(), out, name="stability", export=False,
-                           description="sampled-data stability map", runner=runner,
-                           progress=progress, label=label)
-        summary = more if summary is None else summary + more
-        if more.interrupted:
-            break
-        rows = {r.run_id: r for r in store.rows()}
-        for (i, level, Ts), p in planned.items():
-            searches[i].levels[level][Ts] = outcome(rows[p.run_id])
+    try:
+        while summary is None or not summary.interrupted:
+            planned = {(i, s.at.level, Ts): _planned(s.at, Ts) for i, s in enumerate(searches)
+                       for Ts in sorted(s.next_points(lattice, mesh_check))}
+            if not planned:
+                waiting = [s.start for s in searches if s.waiting]
+                if waiting:  # nothing to run until a prediction says where to start
+                    wait(waiting, return_when=FIRST_COMPLETED)
+                    continue
+                if summary is not None:
+                    break
+            round_ += 1
+            label = "stability: start" if round_ == 1 else \
+                f"stability: bisection {round_ - 1} (to {tolerance:.2g})"
+            more = run_planned(planned.values(), out, name="stability", export=False,
+                               description="sampled-data stability map", runner=runner,
+                               progress=progress, label=label)
+            summary = more if summary is None else summary + more
+            if more.interrupted:
+                break
+            rows = {r.run_id: r for r in store.rows()}
+            for (i, level, Ts), p in planned.items():
+                searches[i].levels[level][Ts] = outcome(rows[p.run_id])
+    finally:  # every prediction is made before the results are read (their cache)
+        predictions.close(finish=summary is not None and not summary.interrupted)
     if summary.interrupted:
         return [], summary
     store.export()
