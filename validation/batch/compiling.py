@@ -25,16 +25,16 @@ __all__ = ["compile_groups", "compile_for", "REFERENCE_SECONDS", "COMPILE_NOTE"]
 COMPILE_NOTE = "once per checkout: numba keeps the machine code in its __pycache__ folders"
 
 #: Cold compile time [s] of each group, by the label `kernel_groups` gives it, measured
-#: on the reference machine (2 cores shared with other work: load average ~8); laws that
-#: share a compiled kernel with one compiled before them load in well under a second.  A
-#: group not listed counts as the mean of those that are.
+#: on the reference machine (2 quiet cores, 2026-11-28: 48 s for all 13 groups); laws
+#: that share a compiled kernel with one compiled before them load in well under a
+#: second.  A group not listed counts as the mean of those that are.
 REFERENCE_SECONDS = {
-    "arm model (M, C, RK4, kinematics)": 22.0,
-    "controller pbc": 8.0, "controller pbc-idealised": 0.5, "controller pd": 0.5,
-    "controller ct": 0.5, "controller lqr": 3.0,
-    "observer smo-paper": 8.0, "observer smo-bl": 0.5, "observer smo-pos": 0.5,
-    "observer ekf": 22.0, "observer ekf-pos": 0.5,
-    "closed loop on the exudyn plant": 8.0, "closed loop on the reduced plant": 8.0,
+    "arm model (M, C, RK4, kinematics)": 10.0,
+    "controller pbc": 6.0, "controller pbc-idealised": 0.5, "controller pd": 0.5,
+    "controller ct": 0.5, "controller lqr": 1.0,
+    "observer smo-paper": 2.0, "observer smo-bl": 0.5, "observer smo-pos": 0.5,
+    "observer ekf": 8.0, "observer ekf-pos": 0.5,
+    "closed loop on the exudyn plant": 7.0, "closed loop on the reduced plant": 15.0,
 }
 
 
@@ -70,7 +70,7 @@ def compile_groups(groups: list[tuple[str, Callable[[], object]]], *,
             continue
         if not announced:
             print(f"compiling the simulation kernels ({COMPILE_NOTE}): {len(groups)} groups, "
-                  f"about {_duration(sum(expected[i:]))} on a busy 2-core machine", file=stream,
+                  f"about {_duration(sum(expected[i:]))} on a quiet 2-core machine", file=stream,
                   flush=True)
             announced = True
         spent += taken[label]
