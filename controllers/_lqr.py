@@ -15,7 +15,6 @@ import math
 import numbers
 
 import numpy as np
-import scipy.linalg
 from numba import njit
 
 from reduced_model import ArmModel
@@ -43,6 +42,7 @@ __all__ = ["GainScheduledLQR"]
 
 def _zoh(A: np.ndarray, B: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation (A_d, B_d) of ẋ = A x + B u over Ts."""
+    import scipy.linalg  # 0.1 s to import: when a law is built, not on every command's start
     m, k = A.shape[0], B.shape[1]
     E = scipy.linalg.expm(np.block([[A, B], [np.zeros((k, m + k))]]) * Ts)
     return E[:m, :m], E[:m, m:]
@@ -165,6 +165,7 @@ class GainScheduledLQR:
     def _design(self, theta2: float, W: np.ndarray, R: np.ndarray) -> np.ndarray:
         Q0 = np.zeros(self.model.n)
         Q0[1] = theta2
+        import scipy.linalg  # as in `_zoh`
         A, B = self.model.linearize(Q0)
         Ad, Bd = _zoh(A, B, self.Ts)
         try:

@@ -10,7 +10,6 @@ import functools
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.linalg
 
 from . import _exact_kernels as exact_kern
 from . import _kernels as kern
@@ -335,6 +334,7 @@ class ArmModel:
         the n−2 non-zero frequencies of the free arm (the two rigid-body zeros are
         dropped).  ``Q`` defaults to the zero configuration.
         """
+        import scipy.linalg  # 0.13 s to import: not for a command that builds no model
         Q = np.zeros(self.n) if Q is None else self._vec(Q, self.n, "Q")
         M, K = self.mass_matrix(Q), self._elastic_matrices(Q)[0]
         if joints == "locked":

@@ -39,36 +39,32 @@ def _drawing_code() -> str:
 _KEY_COLUMNS = ("run_id", "sha256", "size", "status", "name", "sweep", "fingerprint")
 
 
-def _rows_digest(store: ResultStore, rows=None) -> str:
+def _rows_digest(store: ResultStore) -> str:
     """A hash of what the report reads of each stored run (its detail whole: swept values
-    included, never decoded); ``rows``: every row of ``store``, if already read
-    (`StoredRun`s), else they are read here."""
-    if rows is None:
-        if not store.exists():
-            return ""
-        store.rows(where="0")  # refuses an index it cannot read
-        entries = ((values, (controller, observer, plant), detail)
-                   for *values, controller, observer, plant, detail in store.columns(
-                       [*_KEY_COLUMNS, "controller", "observer", "plant", "detail"],
-                       where="1 ORDER BY run_id"))
-    else:
-        entries = (([getattr(r, c) for c in _KEY_COLUMNS], (r.controller, r.observer, r.plant),
-                    r.detail.blob) for r in sorted(rows, key=lambda r: r.run_id))
-    h, now = hashlib.sha256(), {}
-    for values, kinds, detail in entries:
+    included, never decoded), read in one query: ~0.25 s for 40,000 runs, against 0.4 s
+    from their `StoredRun` s."""
+    if not store.exists():
+        return ""
+    store.rows(where="0")  # refuses an index it cannot read
+    now, parts = {}, []
+    for run, sha, size, status, name, sweep, made_by, *kinds, detail in store.columns(
+            [*_KEY_COLUMNS, "controller", "observer", "plant", "detail"],
+            where="1 ORDER BY run_id"):
+        kinds = tuple(kinds)
         if kinds not in now:  # the fingerprint each kind of run gets from this code
             now[kinds] = fingerprint_of(*kinds)
-        h.update(f"{values}{values[-1] == now[kinds]}".encode() + detail)
-    return h.hexdigest()
+        parts.append(f"{run}\0{sha}\0{size}\0{status}\0{name}\0{sweep}\0{made_by}\0"
+                     f"{made_by == now[kinds]}\0".encode())
+        parts.append(detail)
+    return hashlib.sha256(b"".join(parts)).hexdigest()
 
 
-def content_key(results_dir, *, animate: bool, rows=None) -> str:
-    """The hash of everything a report of ``results_dir`` shows (module docstring);
-    ``rows``: every stored run of the folder, if already read (`ResultStore.rows`)."""
+def content_key(results_dir, *, animate: bool) -> str:
+    """The hash of everything a report of ``results_dir`` shows (module docstring)."""
     store = ResultStore(results_dir)
     validity = store.out / "validity" / "validity.json"
     calibration = store.out / "calibration.json"
-    parts = {"runs": _rows_digest(store, rows), "campaigns": store.campaigns(),
+    parts = {"runs": _rows_digest(store), "campaigns": store.campaigns(),
              "calibration": hashlib.sha256(calibration.read_bytes()).hexdigest()
              if calibration.is_file() else "",
              "stability": _rows_digest(ResultStore(store.out / "stability")),

@@ -32,7 +32,7 @@ from . import figures as fig
 from .sweep_figures import sweep_figures
 from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
-from .drawing import drawing
+from .drawing import drawing, out_of_collection
 from ..batch.fingerprint import fingerprint_of, is_fresh
 from ..batch.resimulate import every_signal
 from .render import fmt_number, folded_text, render
@@ -86,6 +86,7 @@ class ReportData:
     figures: list = field(default_factory=list)
     notes: dict = field(default_factory=dict)
     animation: dict | None = None
+    content_key: str = ""  # what it shows, hashed (`content_key`): the report's own key
     attribution: list = field(default_factory=list)
     validity: dict | None = None
     robust: dict | None = None
@@ -147,7 +148,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                 animation_path: Path | None = None, rows: list | None = None) -> ReportData:
     """Everything the report shows, as data (figures as PNG bytes); ``rows``: every row
     of the folder with the metrics the report reads (`report_rows`), if already read.
-    The figures are drawn while the tables are computed (`drawing.drawing`)."""
+    The figures are drawn while the tables and the content key are computed
+    (`drawing.drawing`)."""
     from ..verdicts.claims import CLAIMS, claim_columns
     from .summary import NOTE_MEANING, pairs_table, verdict_counts
     from .verdict_tables import claims_tables
@@ -268,6 +270,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         if many and data.many:  # a run's figures: `flexarm show`, e.g. of a worst run
             data.many["stopped"].append(f"no run's figures are drawn here: 'flexarm show "
                                         f"{store.out}/RUN' draws any run's")
+        data.content_key = content_key(results_dir, animate=animate)
         figures = drawn()
     for (section, caption, _), made in zip(tasks, figures):
         items = made if isinstance(made, list) else [(caption, made)]
@@ -332,9 +335,17 @@ def write_report(results_dir, *, animate: bool = True, progress: bool = True,
     html_path, md_path, key_path = paths(results_dir)
     if not force and report_is_current(results_dir, animate=animate):
         return html_path, md_path
+    rows = report_rows(store)
+    with out_of_collection():  # the rows read: no collector pass over them from here on
+        return _write(store, rows, animate=animate, progress=progress)
+
+
+def _write(store: ResultStore, rows: list, *, animate: bool, progress: bool
+           ) -> tuple[Path, Path]:
+    """`write_report` of the folder of ``store`` from its ``rows`` (`report_rows`)."""
+    results_dir = store.out
+    html_path, md_path, key_path = paths(results_dir)
     out = html_path.parent
-    rows = report_rows(store)  # read once: for the key and for the report
-    key = content_key(results_dir, animate=animate, rows=rows)
     created = not out.exists()
     try:
         own_folder(store.out, "report", "figures")
@@ -365,5 +376,5 @@ def write_report(results_dir, *, animate: bool = True, progress: bool = True,
     write_atomic(html_path, lambda fh: fh.write(page))
     text = render("report.md.j2", d=data, sections=SECTIONS)
     write_atomic(md_path, lambda fh: fh.write(text))
-    write_atomic(key_path, lambda fh: fh.write(key + "\n"))
+    write_atomic(key_path, lambda fh: fh.write(data.content_key + "\n"))
     return html_path, md_path

@@ -16,7 +16,6 @@ import math
 import types
 from typing import Any, Union, get_args, get_origin, get_type_hints
 
-from reduced_model import FieldError
 
 __all__ = ["ConfigError", "from_mapping", "to_mapping", "check", "check_label", "short_repr",
            "short_str"]
@@ -191,7 +190,10 @@ def from_mapping(cls, data: dict, path: str = ""):
         return cls(**kwargs)
     except ConfigError as exc:
         raise (exc.under(path) if path else exc) from None
-    except FieldError as exc:  # ArmParameters, Mesh, SensorConfig name their field
+    except ValueError as exc:  # ArmParameters, Mesh, SensorConfig name their field
+        from reduced_model import FieldError  # not on import: a report reads no model
+        if not isinstance(exc, FieldError):
+            raise
         raise ConfigError(f"{path}.{exc.field}" if path else exc.field, exc.reason) from None
 
 
