@@ -25,7 +25,7 @@ __all__ = ["compile_groups", "compile_for", "REFERENCE_SECONDS", "COMPILE_NOTE"]
 COMPILE_NOTE = "once per checkout: numba keeps the machine code in its __pycache__ folders"
 
 #: Cold compile time [s] of each group, by the label `kernel_groups` gives it, measured
-#: on the reference machine (2 quiet cores, 2026-11-28: 48 s for all 13 groups); laws
+#: on the reference machine (2 quiet cores, 2026-11-28: 40 s for all 13 groups); laws
 #: that share a compiled kernel with one compiled before them load in well under a
 #: second.  A group not listed counts as the mean of those that are.
 REFERENCE_SECONDS = {
@@ -34,7 +34,7 @@ REFERENCE_SECONDS = {
     "controller ct": 0.5, "controller lqr": 1.0,
     "observer smo-paper": 2.0, "observer smo-bl": 0.5, "observer smo-pos": 0.5,
     "observer ekf": 8.0, "observer ekf-pos": 0.5,
-    "closed loop on the exudyn plant": 7.0, "closed loop on the reduced plant": 15.0,
+    "closed loop on the exudyn plant": 7.0, "closed loop on the reduced plant": 6.0,
 }
 
 

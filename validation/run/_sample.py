@@ -33,8 +33,7 @@ from numba.experimental import structref
 
 from controllers import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, reference_into
 from reduced_model._joints import advance_joints_packed, motor_state_into
-from reduced_model._kernels import (rk4_advance, tip_kinematics_packed, unpack_model,
-                                    unpack_workspace)
+from reduced_model._kernels import rk4_advance_packed, tip_kinematics_packed
 from reduced_model._readout import modal_readout_into
 
 __all__ = ["SampleStatus", "status_message", "DisturbanceKind", "DisturbanceTarget", "Group",
@@ -406,7 +405,6 @@ def run_reduced(c, rows, h, nsteps, xp, pm_i, pm_r, p_wc, p_wr, basis, jp, js, j
     ``basis`` is its readout of the model's modal coordinates (`reduced_model._readout`);
     ``jp``, ``js``, ``jw`` are its joints' buffers (`reduced_model._joints`)."""
     tips = np.zeros(6)
-    model, work = unpack_model(pm_i, pm_r), unpack_workspace(pm_i, p_wc, p_wr)
     joints = False
     for i in range(jp.shape[0]):
         joints = joints or jp[i] != 0.0
@@ -421,7 +419,7 @@ def run_reduced(c, rows, h, nsteps, xp, pm_i, pm_r, p_wc, p_wr, basis, jp, js, j
             advance_joints_packed(pm_i, pm_r, p_wc, p_wr, xp, c.tau_plant[:c.counts[1]], ext, h,
                                   nsteps, jp, js, jw)
         else:
-            rk4_advance(model, xp, c.tau_plant[:c.counts[1]], h, nsteps, work)
+            rk4_advance_packed(pm_i, pm_r, p_wc, p_wr, xp, c.tau_plant[:c.counts[1]], h, nsteps)
     # the state after the last period is checked too (as the Python loop does)
     _reduced_truth(xp, basis, c.n, pm_i, pm_r, tips, c.truth, jp, js)
     return n_samples, check_bounds(c.truth, c.n, c.bounds, c.info)
