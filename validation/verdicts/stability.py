@@ -276,10 +276,10 @@ class _Predictions:
 
     def __init__(self, cases: list[StabilityCase]) -> None:
         self._thread = ThreadPoolExecutor(1, thread_name_prefix="stability-prediction")
-        observed = sorted(range(len(cases)), key=lambda i: cases[i].base["observer"]["kind"]
-                          != "none")
+        order = sorted(range(len(cases)), key=lambda i: cases[i].base["observer"]["kind"]
+                       != "none")  # fed the true state first
         self.futures = {i: self._thread.submit(_predicted_period, cases[i].base)
-                        for i in observed}
+                        for i in order}
 
     def close(self, *, finish: bool) -> None:
         """Wait for every prediction (``finish``), or drop those not started."""
