@@ -9,6 +9,7 @@ from validation.run.loop import run_scenario
 from validation.run.plants import with_plant
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 from validation.verdicts import stability
+from validation.verdicts.prediction_file import prediction_key
 from validation.verdicts.sampled import certificate, prediction
 
 #: Multiples of the prediction simulated below and above it: far enough from the limit
@@ -125,13 +126,12 @@ def test_a_case_and_its_stored_runs_share_one_linearisation():
     stored run (at another period and plant step): one key, so one linearisation per
     process (~1 s a case; reproduce-paper's report computed all 42 again, 35 s).  Known
     bad: another arm is another case."""
-    from validation.verdicts import sampled
     (c,) = stability.cases_from_scenarios([scenario_from_mapping({})], plants=["exudyn"],
                                           arms=["default"])
     run = stability._scenario_at(c, 2.5e-3)
     assert run["Ts"] != c.base["Ts"] and run["plant"]["step"] != c.base["plant"]["step"]
-    assert sampled._key(run) == sampled._key(c.base)
-    assert sampled._key(dict(c.base, arm="table1")) != sampled._key(c.base)
+    assert prediction_key(run) == prediction_key(c.base)
+    assert prediction_key(dict(c.base, arm="table1")) != prediction_key(c.base)
 
 
 def test_the_cases_of_one_controller_share_one_linearisation():
@@ -144,8 +144,8 @@ def test_the_cases_of_one_controller_share_one_linearisation():
                  for c, o in (("pbc", "none"), ("pbc", "smo-paper"), ("pd", "none"))]
     alone, observed, other = stability.cases_from_scenarios(scenarios, plants=["reduced"],
                                                             arms=["default"])
-    assert sampled._key(observed.base) == sampled._key(alone.base)
-    assert sampled._key(other.base) != sampled._key(alone.base)
+    assert prediction_key(observed.base) == prediction_key(alone.base)
+    assert prediction_key(other.base) != prediction_key(alone.base)
     assert sampled.prediction(alone.base).note == ""
     assert sampled.prediction(observed.base).note == \
         "the controller fed the true state (smo-paper not in the loop)"

@@ -353,3 +353,17 @@ def test_a_bad_tolerance_is_refused_in_one_line_writing_nothing(tmp_path, capsys
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1 and where in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_report_reads_the_maps_predictions_made_by_this_code(tmp_path, monkeypatch):
+    """The map keeps its predictions beside its runs (predictions.json): rebuilt from the
+    folder (as a report does) the map reads them, no case linearised again.  Known bad:
+    predictions made by other code are not read, the case is linearised again."""
+    from validation.verdicts import prediction_file, sampled
+    made = _reduced_pbc(tmp_path, 0.05)
+    monkeypatch.setattr(sampled, "predicted_period", lambda config: 42.0)  # if asked: 42 s
+    (again,) = stability.load_stability(tmp_path)
+    assert again.predicted == made.predicted == pytest.approx(3.051e-3, rel=1e-3)
+    monkeypatch.setattr(prediction_file, "_made_by", lambda: "other code")
+    (stale,) = stability.load_stability(tmp_path)
+    assert stale.predicted == 42.0

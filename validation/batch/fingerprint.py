@@ -34,7 +34,7 @@ from pathlib import Path
 
 from reduced_model._imports import walk
 
-__all__ = ["code_fingerprint", "run_fingerprint", "result_sources", "plugin_sources",
+__all__ = ["code_fingerprint", "source_fingerprint", "run_fingerprint", "result_sources", "plugin_sources",
            "plugin_kinds", "forget_plugins", "is_fresh", "fingerprint_of"]
 
 _ROOT = Path(__file__).resolve().parents[2]
@@ -119,6 +119,22 @@ def code_fingerprint() -> str:
     _hash_files(h, result_sources())
     _hash_packages(h, _project_walk().packages)
     return h.hexdigest()[:16]
+
+
+@functools.lru_cache(maxsize=8)
+def source_fingerprint(libraries: tuple[str, ...]) -> str:
+    """A hash of every source of the project's packages (and the report's templates) and
+    the versions of ``libraries``: what made a value computed from stored runs (a
+    report, a stability map's predictions), which ``code_fingerprint`` (the run path
+    alone) does not cover."""
+    h = hashlib.sha256()
+    for package in _PROJECT_PACKAGES:
+        for path in sorted((_ROOT / package).rglob("*")):
+            if path.suffix in (".py", ".j2") and "__pycache__" not in path.parts:
+                h.update(str(path.relative_to(_ROOT)).encode() + b"\0" + path.read_bytes())
+    for name in libraries:
+        h.update(f"{name}={distribution(name).version}".encode())
+    return h.hexdigest()
 
 
 @functools.lru_cache(maxsize=64)

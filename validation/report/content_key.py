@@ -5,12 +5,11 @@ library versions that draw it, and the options; an unchanged key leaves the repo
 is (`validation.report.report.write_report`)."""
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 from pathlib import Path
 
-from ..batch.fingerprint import fingerprint_of
+from ..batch.fingerprint import fingerprint_of, source_fingerprint
 from ..batch.store import ResultStore
 
 __all__ = ["content_key", "report_is_current", "paths"]
@@ -18,21 +17,10 @@ __all__ = ["content_key", "report_is_current", "paths"]
 _KEY_FILE = ".content-key"
 
 
-@functools.lru_cache(maxsize=1)
 def _drawing_code() -> str:
     """A hash of the code and libraries that turn stored runs into a report."""
-    from importlib.metadata import version
-
     from ..run.plants import ENGINE_PACKAGES
-    h = hashlib.sha256()
-    root = Path(__file__).resolve().parents[2]
-    for package in ("validation", "reduced_model", "plant_exudyn", "controllers"):
-        for path in sorted((root / package).rglob("*")):
-            if path.suffix in (".py", ".j2") and "__pycache__" not in path.parts:
-                h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes())
-    for name in ("matplotlib", "jinja2", "numpy", "scipy", *ENGINE_PACKAGES):
-        h.update(f"{name}={version(name)}".encode())
-    return h.hexdigest()
+    return source_fingerprint(("matplotlib", "jinja2", "numpy", "scipy", *ENGINE_PACKAGES))
 
 
 #: The columns of a stored run its content key hashes, with its detail whole.

@@ -48,6 +48,7 @@ from ..run.specs import ObserverSpec
 from .linear import (NotLinearisable, closed_loop_matrix, growth_rate, largest_stable_period,
                      law_gain, reduced_linear_model)
 from .nugap import FactorisationError, as_statespace, gap_detail, margin_detail
+from .prediction_file import PROBE_TS, prediction_key
 
 __all__ = ["POINTS", "Prediction", "CertificateRow", "predicted_period", "prediction",
            "certificate", "certified_period"]
@@ -57,10 +58,6 @@ POINTS = 5
 #: The scan of the predicted period [s]: 0.01 µs (the FE Table-1 arm's limits are µs)
 #: to 0.1 s.
 _SCAN = (1e-8, 0.1, 49)
-#: The period a case's law is first built at, to see whether it can be linearised and
-#: what it applies (the paper's period; the prediction then builds it at every period
-#: it scans).
-PROBE_TS = 1e-3
 _PREDICTION_RTOL = 1e-3
 
 
@@ -145,19 +142,6 @@ def _case(config_json: str) -> _Case:
     return _Case(json.loads(config_json))
 
 
-def _key(config: dict) -> str:
-    """A case's key: its mapping without what its linearisation does not depend on — the
-    period (the law is first built at `PROBE_TS`), the plant's step, the run's name, and
-    the observer (the loop linearised is the controller's fed the true state) — so that
-    the map's case and the same case rebuilt from any of its stored runs (the report's),
-    and the cases of one controller with each observer, share one linearisation, computed
-    once per process (~1 s a case: the paper's map has 42 cases and 18 linearisations)."""
-    plant = {k: v for k, v in config["plant"].items() if k != "step"}
-    data = {k: v for k, v in config.items() if k != "name"}
-    return json.dumps(dict(data, Ts=PROBE_TS, plant=plant, observer={"kind": "none"},
-                           feedback="auto"), sort_keys=True)
-
-
 def _observer(config: dict) -> str:
     """The observer of the case ``config`` (the one its key leaves out), read without
     checking the case (one that does not build has no prediction, which says why)."""
@@ -210,7 +194,7 @@ def _prediction(config_json: str) -> Prediction:
 def prediction(config: dict) -> Prediction:
     """The predicted largest stable period of a stability-map case on the linearisation
     of its own plant (module docstring), with the θ2 that limits it and a note."""
-    predicted = _prediction(_key(config))
+    predicted = _prediction(prediction_key(config))
     observer = _observer(config)
     if observer == "none" or predicted.note:
         return predicted
@@ -231,7 +215,7 @@ def certificate(config: dict, periods) -> list[CertificateRow]:
     observer in the loop, not linearisable, a truth plant without a linearisation)."""
     if _observer(config) != "none":
         return []
-    case = _case(_key(config))
+    case = _case(prediction_key(config))
     spec = truth_settings(config)
     reduced = [case.reduced_plant(i, nominal=True)[case.names, :]
                for i in range(len(case.points))]

@@ -62,6 +62,7 @@ from ..run.processes import between_forks
 from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import ResultStore, run_id
 from .bisection import GOOD, TOLERANCE, Lattice, Limit, limit_of, next_points
+from .prediction_file import prediction_key, read_predictions, write_predictions
 from .resolution import ResolvedLimit, resolve_limit
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "GROWTH_LIMIT", "MAX_LEVEL", "OUTCOMES",
@@ -285,6 +286,10 @@ class _Predictions:
         """Wait for every prediction (``finish``), or drop those not started."""
         self._thread.shutdown(wait=finish, cancel_futures=not finish)
 
+    def periods(self, cases: list[StabilityCase]) -> dict[str, float]:
+        """{`prediction_key`: predicted period} of ``cases`` (after `close`)."""
+        return {prediction_key(c.base): self.futures[i].result() for i, c in enumerate(cases)}
+
 
 def _predicted_period(config: dict) -> float:
     from .sampled import predicted_period  # python-control: not for a report without a map
@@ -347,6 +352,7 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
         predictions.close(finish=summary is not None and not summary.interrupted)
     if summary.interrupted:
         return [], summary
+    write_predictions(out, predictions.periods(cases))  # a report reads them
     store.export()
     return load_stability(out, cases=cases), summary
 
@@ -393,6 +399,7 @@ def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[Stabili
         cases = list(found.values())
     cases = sorted(cases, key=lambda c: (c.label, c.truth, c.plant, c.arm != "default",
                                          c.arm))
+    stored = read_predictions(out)  # the map's, if made by this code
     results = []
     for case in cases:
         levels, growth = [], {}
@@ -404,7 +411,7 @@ def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[Stabili
             levels.append({Ts: outcome(row) for Ts, row in rows.items()})
             growth = {Ts: row.metrics.get("growth_rate", math.nan) for Ts, row in rows.items()}
         if levels:
-            results.append(_result(case, levels, growth))
+            results.append(_result(case, levels, growth, stored.get(prediction_key(case.base))))
     return results
 
 
@@ -439,14 +446,14 @@ def _plain(value):
     return [_plain(v) for v in value] if isinstance(value, (list, tuple)) else value
 
 
-def _result(case: StabilityCase, levels: list[dict], growth: dict | None = None
-            ) -> StabilityResult:
+def _result(case: StabilityCase, levels: list[dict], growth: dict | None = None,
+            predicted: float | None = None) -> StabilityResult:
     """The limits of the finest of ``levels`` ({Ts: outcome} per level, coarsest first),
     each judged on the sequence, the divergence limit with the band of its outcome test
     (`_band`, from ``growth``: {Ts: growth rate} of the finest level's runs); the
     prediction on the case's own plant (its base mesh: the FE prediction has converged at
-    ANCF 4 el/link, and on a mesh 4× finer it costs minutes)."""
-    from .sampled import predicted_period  # python-control: not for a report without a map
+    ANCF 4 el/link, and on a mesh 4× finer it costs minutes): ``predicted``, or computed
+    here."""
     finest = len(levels) - 1
     tested = dict(sorted(levels[-1].items()))
     limits = _limits(levels)
@@ -457,7 +464,7 @@ def _result(case: StabilityCase, levels: list[dict], growth: dict | None = None
     at = StabilityCase(case.label, case.plant, case.arm, case.base, finest)
     return StabilityResult(
         at, tested, limits["divergence"][-1], limits["tracking"][-1],
-        predicted_period(case.base),
+        _predicted_period(case.base) if predicted is None else predicted,
         discretisation=_discretisation(case.base, finest) if case.truth else "",
         resolved=resolved, runs=sum(map(len, levels)))
 

@@ -1,0 +1,61 @@
+"""Where a stability map's predictions are kept: ``predictions.json`` in the map's folder,
+so that a report of the folder reads them instead of linearising every case again (the
+paper's 18 linearisations: 16 s of a 32 s report of its folder).
+
+A prediction is stored by its case's key (`prediction_key`) with the code that made it
+(`validation.batch.fingerprint.source_fingerprint`: the project's sources and the
+numerical libraries' versions); predictions made by other code are not read.  This
+module imports nothing heavy: a report that reads them does not load python-control.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from ..batch.fingerprint import source_fingerprint
+from ..run.plants import ENGINE_PACKAGES
+from ..run.results import write_atomic
+
+__all__ = ["PREDICTIONS", "PROBE_TS", "prediction_key", "write_predictions",
+           "read_predictions"]
+
+#: The file in a stability map's folder.
+PREDICTIONS = "predictions.json"
+#: The period a case's law is first built at, to see whether it can be linearised and
+#: what it applies (the paper's period; the prediction then builds it at every period
+#: it scans).
+PROBE_TS = 1e-3
+
+
+def prediction_key(config: dict) -> str:
+    """A case's key: its mapping without what its linearisation does not depend on — the
+    period (the law is first built at `PROBE_TS`), the plant's step, the run's name, and
+    the observer (the loop linearised is the controller's fed the true state) — so that
+    the map's case and the same case rebuilt from any of its stored runs (the report's),
+    and the cases of one controller with each observer, share one linearisation, computed
+    once per process (~1 s a case: the paper's map has 42 cases and 18 linearisations)."""
+    plant = {k: v for k, v in config["plant"].items() if k != "step"}
+    data = {k: v for k, v in config.items() if k != "name"}
+    return json.dumps(dict(data, Ts=PROBE_TS, plant=plant, observer={"kind": "none"},
+                           feedback="auto"), sort_keys=True)
+
+
+def _made_by() -> str:
+    return source_fingerprint(("numpy", "scipy", "control", *ENGINE_PACKAGES))
+
+
+def write_predictions(folder, periods: dict[str, float]) -> None:
+    """Keep ``periods`` ({`prediction_key`: predicted period [s]}) in ``folder``."""
+    text = json.dumps({"made_by": _made_by(), "periods": periods}, sort_keys=True)
+    write_atomic(Path(folder) / PREDICTIONS, lambda fh: fh.write(text))
+
+
+def read_predictions(folder) -> dict[str, float]:
+    """The periods kept in ``folder`` by this code ({} if none, if unreadable or if made
+    by other code)."""
+    try:
+        data = json.loads((Path(folder) / PREDICTIONS).read_text())
+        periods = data["periods"] if data["made_by"] == _made_by() else {}
+        return {str(k): float(v) for k, v in periods.items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
