@@ -163,9 +163,9 @@ class GainScheduledLQR:
 
     # --- design ------------------------------------------------------------------
     def _design(self, theta2: float, W: np.ndarray, R: np.ndarray) -> np.ndarray:
+        import scipy.linalg  # as in `_zoh`
         Q0 = np.zeros(self.model.n)
         Q0[1] = theta2
-        import scipy.linalg  # as in `_zoh`
         A, B = self.model.linearize(Q0)
         Ad, Bd = _zoh(A, B, self.Ts)
         try:

@@ -12,6 +12,7 @@ from . import _on_demand
 
 __all__ = ["load_exact_kernels", "exact_mass_bias_into", "exact_coriolis_matrix_into",
            "exact_elastic_into", "exact_tips_into"]
+
 _ENTRIES = "reduced_model._exact_entries"
 _MASS_BIAS, _CORIOLIS, _ELASTIC, _TIPS = (_on_demand.slot(_ENTRIES, name)
                                           for name in ("mass_bias", "coriolis", "elastic", "tips"))

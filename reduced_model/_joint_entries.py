@@ -1,5 +1,5 @@
 """`reduced_model._joints.advance_joints` as a C-callable entry point, which
-`reduced_model._joints.advance_joints_packed` calls through the pointers of
+`reduced_model._joint_pointers.advance_joints_packed` calls through the pointers of
 `reduced_model._on_demand`.
 
 Importing this module compiles it (or loads it from numba's cache): only
@@ -7,7 +7,7 @@ Importing this module compiles it (or loads it from numba's cache): only
 buffers of an arm with friction, a drive or a torque lag.  It takes the packed model and
 workspace (each array as a pointer and its length), the arm state (2n), the held
 commands (2, or n) and the external forces (n), the step and the step count, and the
-joints' buffers (`reduced_model._joints.new_joint_buffers`).
+joints' buffers (`reduced_model._joint_pointers.new_joint_buffers`).
 """
 from __future__ import annotations
 

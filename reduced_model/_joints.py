@@ -27,9 +27,10 @@ The torque lag: over each internal step the motor torque is the exact mean of th
 response to the held command, u(t) = c + (u0 − c) e^{−t/T}, so both plants apply the
 same piecewise-constant torque (second order in the step against the continuous lag).
 
-Buffers (allocated once per plant, `new_joint_buffers`): ``jp`` the parameters
-(`PARAMETERS` × 2 joints), ``js`` the state (`STATE`: the friction modes, the rotor
-angles and rates, the torques at the lag's output), ``jw`` scratch.
+Buffers (allocated once per plant, `reduced_model._joint_pointers.new_joint_buffers`):
+``jp`` the parameters (`PARAMETERS` × 2 joints), ``js`` the state (`STATE`: the friction
+modes, the rotor angles and rates, the torques at the lag's output), ``jw`` scratch.
+Plants and loops advance the joints through `reduced_model._joint_pointers`.
 """
 from __future__ import annotations
 
@@ -39,11 +40,10 @@ import numpy as np
 from numba import njit
 
 from . import _kernels as kern
-from . import _on_demand
 from ._cholesky import cholesky_factor_inplace, cholesky_solve_factored, cholesky_solve_inplace
 
-__all__ = ["PARAMETERS", "STATE", "new_joint_buffers", "work_length", "joints_active", "reset_joints",
-           "advance_joints", "advance_joints_packed", "motor_state_into", "lag_step"]
+__all__ = ["PARAMETERS", "STATE", "work_length", "joints_active", "reset_joints",
+           "advance_joints", "motor_state_into", "lag_step"]
 
 #: The joint fields of `ArmParameters` in ``jp`` (entry 2·field + joint).
 PARAMETERS = ("coulomb", "static", "stribeck_velocity", "viscous", "gear_stiffness",
@@ -53,21 +53,6 @@ _TC, _TS, _VS, _B, _K, _D, _J, _BL, _T = (2 * i for i in range(len(PARAMETERS)))
 # way), rotor angle, rotor rate, torque at the lag's output.
 _MODE, _ROT, _ROT_RATE, _APPLIED = 0, 2, 4, 6
 STATE = 8
-#: Where `advance_joints` is compiled as an entry point (`reduced_model._on_demand`).
-_ENTRIES = "reduced_model._joint_entries"
-_ADVANCE = _on_demand.slot(_ENTRIES, "advance")
-
-
-def new_joint_buffers(params, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(jp, js, jw) for the arm ``params`` (an `ArmParameters`) with ``n`` coordinates."""
-    jp = np.zeros(2 * len(PARAMETERS))
-    for f, name in enumerate(PARAMETERS):
-        for i in (1, 2):
-            jp[2 * f + i - 1] = (params.static_friction(i) if name == "static"
-                                 else getattr(params, f"{name}{i}"))
-    if joints_active(jp):  # `advance_joints_packed` will be called: compile or load it
-        _on_demand.load(_ENTRIES)
-    return jp, np.zeros(STATE), np.zeros(work_length(n))
 
 
 @njit(cache=True, inline="always")
@@ -327,13 +312,3 @@ def advance_joints(d, x, tau, ext, h, nsteps, ws, jp, js, jw):
         for i in range(2):
             js[_APPLIED + i] = u_end[i]
         _stop(d, x, rot, jp, js, jw, ws)
-
-
-@njit(cache=True)
-def advance_joints_packed(ints, reals, wc, wr, x, tau, ext, h, nsteps, jp, js, jw):
-    """`advance_joints` on the model's packed buffers, through the pointer of
-    `reduced_model._on_demand` (compiled only where some joint effect is on:
-    `new_joint_buffers` loads it), from Python and from compiled loops."""
-    _on_demand.call(_on_demand.entry(_ADVANCE), (
-        ints, ints.shape[0], reals, reals.shape[0], wc, wc.shape[0], wr, wr.shape[0], x,
-        x.shape[0], tau, tau.shape[0], ext, h, nsteps, jp, js, jw))

@@ -3,12 +3,14 @@ a process fills when it first builds a model that needs them.
 
 The paper's plants and laws have branches for what the paper's arm does not have: the
 exact kinematics (`reduced_model._exact_pointers`) and the joints' friction and drives
-(`reduced_model._joints`).  Called directly, numba compiled those kernels on a cold cache
-for every run, the paper's arm included, and LLVM optimised them again inside every
-caller that linked them (on the reference machine ≈ 19 s for the exact kinematics, 16 s
+(`reduced_model._joint_pointers`).  Called directly, numba compiled those kernels on a
+cold cache for every run, the paper's arm included, and LLVM optimised them again inside
+every caller that linked them (on the reference machine ≈ 19 s for the exact kinematics, 16 s
 for the joints, plus the callers' share).  Called through a pointer, a caller holds one
 indirect call; the kernels themselves are C-callable entry points (`ENTRIES`) compiled,
-or loaded from numba's cache, when their module is first imported by `load`.
+or loaded from numba's cache, when their module is first imported by `load`.  Each entry
+module imports the kernels it wraps, and nothing imports it but `load`: the modules
+that call through the pointers are not imported back (no import cycle).
 
 The pointers live in a small table in this process's memory, which this module makes
 known to LLVM under the symbol ``flexarm_on_demand_kernels``: compiled callers refer to

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _kernels as kern
-from ._joints import (advance_joints_packed, joints_active, motor_state_into,
-                      new_joint_buffers, reset_joints)
+from ._joint_pointers import advance_joints_packed, new_joint_buffers
+from ._joints import joints_active, motor_state_into, reset_joints
 from ._linear import reduced_linear_model
 from ._model import ArmModel, cached_model, validate_kinematics, validate_modes_per_link
 from ._inextensible import readout_matrix

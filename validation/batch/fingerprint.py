@@ -34,8 +34,8 @@ from pathlib import Path
 
 from reduced_model._imports import walk
 
-__all__ = ["code_fingerprint", "source_fingerprint", "run_fingerprint", "result_sources", "plugin_sources",
-           "plugin_kinds", "forget_plugins", "is_fresh", "fingerprint_of"]
+__all__ = ["code_fingerprint", "source_fingerprint", "run_fingerprint", "result_sources",
+           "plugin_sources", "plugin_kinds", "forget_plugins", "is_fresh", "fingerprint_of"]
 
 _ROOT = Path(__file__).resolve().parents[2]
 #: Where executing a run starts: everything it can import decides results.

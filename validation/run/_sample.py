@@ -32,7 +32,8 @@ from numba import njit, types
 from numba.experimental import structref
 
 from controllers import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, reference_into
-from reduced_model._joints import advance_joints_packed, motor_state_into
+from reduced_model._joint_pointers import advance_joints_packed
+from reduced_model._joints import motor_state_into
 from reduced_model._kernels import rk4_advance_packed, tip_kinematics_packed
 from reduced_model._readout import modal_readout_into
 
