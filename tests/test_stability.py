@@ -367,3 +367,17 @@ def test_a_report_reads_the_maps_predictions_made_by_this_code(tmp_path, monkeyp
     monkeypatch.setattr(prediction_file, "_made_by", lambda: "other code")
     (stale,) = stability.load_stability(tmp_path)
     assert stale.predicted == 42.0
+
+
+def test_maps_into_one_folder_keep_each_others_predictions(tmp_path, monkeypatch):
+    """A second map into the same folder adds its predictions to the first's (inf kept as
+    inf: the LQR's); predictions made by other code are dropped, not merged."""
+    from validation.verdicts import prediction_file
+    prediction_file.write_predictions(tmp_path, {"first": 3.051e-3})
+    prediction_file.write_predictions(tmp_path, {"second": math.inf})
+    assert prediction_file.read_predictions(tmp_path) == {"first": 3.051e-3,
+                                                          "second": math.inf}
+    monkeypatch.setattr(prediction_file, "_made_by", lambda: "other code")
+    assert prediction_file.read_predictions(tmp_path) == {}
+    prediction_file.write_predictions(tmp_path, {"third": 1e-3})
+    assert prediction_file.read_predictions(tmp_path) == {"third": 1e-3}

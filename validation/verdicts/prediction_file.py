@@ -45,8 +45,10 @@ def _made_by() -> str:
 
 
 def write_predictions(folder, periods: dict[str, float]) -> None:
-    """Keep ``periods`` ({`prediction_key`: predicted period [s]}) in ``folder``."""
-    text = json.dumps({"made_by": _made_by(), "periods": periods}, sort_keys=True)
+    """Keep ``periods`` ({`prediction_key`: predicted period [s]}) in ``folder``, beside
+    those kept there before by this code (a map of other cases into the same folder)."""
+    text = json.dumps({"made_by": _made_by(), "periods": {**read_predictions(folder),
+                                                          **periods}}, sort_keys=True)
     write_atomic(Path(folder) / PREDICTIONS, lambda fh: fh.write(text))
 
 
