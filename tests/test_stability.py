@@ -237,6 +237,64 @@ def test_a_limit_beyond_the_grid_is_not_bisected():
         assert rounds == 1 and len(tested) == len(stability.GRID)
 
 
+def _refined_search(thresholds):
+    """Run a truth-plant case's search on synthetic loops, one threshold per level
+    (`_threshold`), from the grid, to its end; (search, runs)."""
+    case = stability.StabilityCase("pbc", "exudyn", "table1", scenario_to_mapping(
+        scenario_from_mapping({"plant": {"kind": "exudyn"}})))
+    assert case.truth
+    lattice, search, runs = Lattice(stability.GRID, 0.01), stability._Search(
+        case, set(stability.GRID)), 0
+    while points := search.next_points(lattice, True):
+        search.levels[search.at.level] |= {Ts: _threshold(thresholds[search.at.level])(Ts)
+                                           for Ts in points}
+        runs += len(points)
+    return search, runs
+
+
+#: A limit moving as Table 1's with a sign SMO on the truth plant (ANCF 4, 8, 16): from
+#: 0.293 to 0.1286 ms, then below the grid's 0.1 ms.
+RUNS_OFF = (0.2933e-3, 0.1286e-3, 0.05e-3)
+
+
+def test_a_limit_running_off_the_grid_is_not_bisected_on_the_way(monkeypatch):
+    """Known good: a limit that moved from 0.293 to below 0.134 ms (by 2.2×, more than
+    its bracket's 34 % width) and would move past 0.1 ms by as much again is left as
+    (0.1, 0.134] ms on level 1; level 2 finds no bracket (below the grid) and the verdict
+    is "not converged" either way, in fewer runs.  Known bad (the rule off: every level
+    bisected to 1 %): the same verdict, level 1 at 1 %, more runs."""
+    search, runs = _refined_search(RUNS_OFF)
+    (_, low1, high1), (_, low2, high2) = [
+        (level, lim.largest, lim.first_bad) for level, lim in enumerate(
+            stability._limits(search.levels)["divergence"][1:], 1)]
+    assert low1 == 1e-4 and high1 / low1 - 1 > 0.3 and math.isnan(low2) and high2 == 1e-4
+    monkeypatch.setattr(Lattice, "runs_off", lambda self, limit, before: False)
+    bisected, all_runs = _refined_search(RUNS_OFF)
+    level1 = limit_of(bisected.levels[1], GOOD["divergence"])
+    assert level1.width <= 0.01 and level1.largest <= RUNS_OFF[1] < level1.first_bad
+    # Level 1: 10 runs instead of 16 (its bisection); level 2 from (0.1, 0.134]: 2 runs
+    # instead of 8 stepping down from 0.129 ms.  The real map took 38 per such case.
+    assert (runs, all_runs) == (26, 38)
+    for s in (search, bisected):
+        (lims,) = [v for k, v in stability._limits(s.levels).items() if k == "divergence"]
+        assert stability._resolve(s.case, lims, final=True).verdict == "not converged"
+
+
+def test_a_level_left_unbisected_is_bisected_when_the_finer_one_brackets_the_limit():
+    """Known good for the rule above: when level 2 brackets the limit after all (0.105
+    ms, inside the grid), level 1 is bisected then — every level ends within 1 %, with
+    the brackets of a search that bisected every level as it went, and a judged
+    verdict; the rule of `Lattice.runs_off` said no verdict reads an unbisected one."""
+    thresholds = RUNS_OFF[:2] + (0.105e-3,)
+    search, _ = _refined_search(thresholds)
+    # 38 runs; bisecting level 1 as it went took 42 (14, 16, 12: level 2 stepped down
+    # from 0.129 ms instead of bisecting (0.1, 0.134]).
+    assert [len(t) for t in search.levels] == [14, 16, 8]
+    for level, tested in enumerate(search.levels):
+        limit = limit_of(tested, GOOD["divergence"])
+        assert limit.width <= 0.01 and limit.largest <= thresholds[level] < limit.first_bad
+
+
 def test_table1_on_one_element_per_link_is_not_converged(tmp_path, monkeypatch):
     """Known bad mesh: Table 1's arm (no stator inertia: the joint-2 mobility grows as
     elements³) on ANCF 1 el/link, the PBC fed the true state.  Bisected to 1 % its limit
