@@ -9,7 +9,7 @@ from validation.run.loop import run_scenario
 from validation.run.plants import with_plant
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 from validation.verdicts import stability
-from validation.verdicts.prediction_file import prediction_key
+from validation.verdicts.predictions import prediction_key
 from validation.verdicts.sampled import certificate, prediction
 
 #: Multiples of the prediction simulated below and above it: far enough from the limit

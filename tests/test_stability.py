@@ -417,12 +417,12 @@ def test_a_report_reads_the_maps_predictions_made_by_this_code(tmp_path, monkeyp
     """The map keeps its predictions beside its runs (predictions.json): rebuilt from the
     folder (as a report does) the map reads them, no case linearised again.  Known bad:
     predictions made by other code are not read, the case is linearised again."""
-    from validation.verdicts import prediction_file, sampled
+    from validation.verdicts import predictions, sampled
     made = _reduced_pbc(tmp_path, 0.05)
     monkeypatch.setattr(sampled, "predicted_period", lambda config: 42.0)  # if asked: 42 s
     (again,) = stability.load_stability(tmp_path)
     assert again.predicted == made.predicted == pytest.approx(3.051e-3, rel=1e-3)
-    monkeypatch.setattr(prediction_file, "_made_by", lambda: "other code")
+    monkeypatch.setattr(predictions, "_made_by", lambda: "other code")
     (stale,) = stability.load_stability(tmp_path)
     assert stale.predicted == 42.0
 
@@ -430,12 +430,12 @@ def test_a_report_reads_the_maps_predictions_made_by_this_code(tmp_path, monkeyp
 def test_maps_into_one_folder_keep_each_others_predictions(tmp_path, monkeypatch):
     """A second map into the same folder adds its predictions to the first's (inf kept as
     inf: the LQR's); predictions made by other code are dropped, not merged."""
-    from validation.verdicts import prediction_file
-    prediction_file.write_predictions(tmp_path, {"first": 3.051e-3})
-    prediction_file.write_predictions(tmp_path, {"second": math.inf})
-    assert prediction_file.read_predictions(tmp_path) == {"first": 3.051e-3,
-                                                          "second": math.inf}
-    monkeypatch.setattr(prediction_file, "_made_by", lambda: "other code")
-    assert prediction_file.read_predictions(tmp_path) == {}
-    prediction_file.write_predictions(tmp_path, {"third": 1e-3})
-    assert prediction_file.read_predictions(tmp_path) == {"third": 1e-3}
+    from validation.verdicts import predictions
+    predictions.write_predictions(tmp_path, {"first": 3.051e-3})
+    predictions.write_predictions(tmp_path, {"second": math.inf})
+    assert predictions.read_predictions(tmp_path) == {"first": 3.051e-3,
+                                                      "second": math.inf}
+    monkeypatch.setattr(predictions, "_made_by", lambda: "other code")
+    assert predictions.read_predictions(tmp_path) == {}
+    predictions.write_predictions(tmp_path, {"third": 1e-3})
+    assert predictions.read_predictions(tmp_path) == {"third": 1e-3}

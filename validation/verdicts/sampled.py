@@ -48,7 +48,7 @@ from ..run.specs import ObserverSpec
 from .linear import (NotLinearisable, closed_loop_matrix, growth_rate, largest_stable_period,
                      law_gain, reduced_linear_model)
 from .nugap import FactorisationError, as_statespace, gap_detail, margin_detail
-from .prediction_file import PROBE_TS, prediction_key
+from .predictions import PROBE_TS, prediction_key
 
 __all__ = ["POINTS", "Prediction", "CertificateRow", "predicted_period", "prediction",
            "certificate", "certified_period"]

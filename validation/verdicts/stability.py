@@ -51,7 +51,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass, field
 
 from ..batch.campaign import PlannedRun
@@ -61,11 +61,10 @@ from ..batch.executor import Runner
 from ..batch.runfiles import KEEP_NONE
 from ..run.laws import applies_generalised_forces
 from ..run.plants import is_truth, plant_settings, with_plant
-from ..run.processes import between_forks
 from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import ResultStore, run_id
 from .bisection import GOOD, TOLERANCE, Lattice, Limit, limit_of, next_points
-from .prediction_file import prediction_key, read_predictions, write_predictions
+from .predictions import Predictions, prediction_key, read_predictions, write_predictions
 from .resolution import ResolvedLimit, resolve_limit
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "GROWTH_LIMIT", "MAX_LEVEL", "OUTCOMES",
@@ -297,38 +296,16 @@ def _start(case: StabilityCase, lattice: Lattice, prediction: Future) -> set[flo
     observer in the loop the prediction is the same law's without it, and the loop need
     not be monotone: the PBC with the position-only sign SMO on the default arm's reduced
     plant diverges at 2.51 ms and not at 3.05 ms, where its prediction lies.  The cell is
-    the ``prediction`` (a `Future` of the period, `_Predictions`) until it is known."""
+    the ``prediction`` (a `Future` of the period, `predictions.Predictions`) until it is
+    known."""
     if case.base["observer"]["kind"] != "none":
         return set(lattice.grid)
     return prediction
 
 
-class _Predictions:
-    """The predicted limit of every case (`validation.verdicts.sampled`: ~1 s of
-    python-control a linearisation, 18 for the paper's 42 cases), computed by a thread of
-    this process while the workers run the map: the cases fed the true state first, whose
-    searches start from their prediction, then the others (their results report it)."""
-
-    def __init__(self, cases: list[StabilityCase]) -> None:
-        self._thread = ThreadPoolExecutor(1, thread_name_prefix="stability-prediction")
-        order = sorted(range(len(cases)), key=lambda i: cases[i].base["observer"]["kind"]
-                       != "none")  # fed the true state first
-        self.futures = {i: self._thread.submit(_predicted_period, cases[i].base)
-                        for i in order}
-
-    def close(self, *, finish: bool) -> None:
-        """Wait for every prediction (``finish``), or drop those not started."""
-        self._thread.shutdown(wait=finish, cancel_futures=not finish)
-
-    def periods(self, cases: list[StabilityCase]) -> dict[str, float]:
-        """{`prediction_key`: predicted period} of ``cases`` (after `close`)."""
-        return {prediction_key(c.base): self.futures[i].result() for i, c in enumerate(cases)}
-
-
 def _predicted_period(config: dict) -> float:
     from .sampled import predicted_period  # python-control: not for a report without a map
-    with between_forks():  # no worker is forked while this thread is inside a library
-        return predicted_period(config)
+    return predicted_period(config)
 
 
 def _limits(levels: list[dict]) -> dict[str, list[Limit]]:
@@ -350,11 +327,13 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
     bisections to ``tolerance`` and, with ``mesh_check``, the truth-plant cases
     again on the refined sequence until their limits converge (module docstring).  Every
     round asks every case's next periods at once (the progress bar names the round); the
-    predictions are computed beside the runs (`_Predictions`), and a case that starts
+    predictions are computed beside the runs (`predictions.Predictions`), and a case that starts
     from its prediction joins the round after it is known.  Returns the results and the
     summary of every round together."""
     lattice = Lattice(GRID, tolerance)
-    predictions = _Predictions(cases)
+    predictions = Predictions([c.base for c in cases], sorted(
+        range(len(cases)), key=lambda i: cases[i].base["observer"]["kind"] != "none"),
+        _predicted_period)
     searches = [_Search(case, _start(case, lattice, predictions.futures[i]))
                 for i, case in enumerate(cases)]
     store = ResultStore(out)
@@ -386,7 +365,7 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
         predictions.close(finish=summary is not None and not summary.interrupted)
     if summary.interrupted:
         return [], summary
-    write_predictions(out, predictions.periods(cases))  # a report reads them
+    write_predictions(out, predictions.periods())  # a report reads them
     store.export()
     return load_stability(out, cases=cases), summary
 

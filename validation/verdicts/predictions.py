@@ -1,6 +1,10 @@
-"""Where a stability map's predictions are kept: ``predictions.json`` in the map's folder,
-so that a report of the folder reads them instead of linearising every case again (the
-paper's 18 linearisations: 16 s of a 32 s report of its folder).
+"""A stability map's predictions: computed beside its runs, kept in its folder.
+
+The predicted limit of every case (`validation.verdicts.sampled`: ~1 s of python-control
+a linearisation, 18 for the paper's 42 cases) is computed by a thread of the map's
+process while the workers run the map (`Predictions`), and kept in ``predictions.json``
+in the map's folder, so that a report of the folder reads them instead of linearising
+every case again (the paper's 18 linearisations: 16 s of a 32 s report of its folder).
 
 A prediction is stored by its case's key (`prediction_key`) with the code that made it
 (`validation.batch.fingerprint.source_fingerprint`: the project's sources and the
@@ -10,13 +14,15 @@ module imports nothing heavy: a report that reads them does not load python-cont
 from __future__ import annotations
 
 import json
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from ..batch.fingerprint import source_fingerprint
 from ..run.plants import ENGINE_PACKAGES
+from ..run.processes import between_forks
 from ..run.results import write_atomic
 
-__all__ = ["PREDICTIONS", "PROBE_TS", "prediction_key", "write_predictions",
+__all__ = ["PREDICTIONS", "PROBE_TS", "prediction_key", "Predictions", "write_predictions",
            "read_predictions"]
 
 #: The file in a stability map's folder.
@@ -61,3 +67,28 @@ def read_predictions(folder) -> dict[str, float]:
         return {str(k): float(v) for k, v in periods.items()}
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return {}
+
+
+class Predictions:
+    """The predicted limit of each of ``configs`` (cases' resolved mappings) by
+    ``predict`` (config → period), computed by a thread of this process in ``order``
+    (the map's: the cases fed the true state first, whose searches start from their
+    prediction); ``futures[i]`` is case i's.  No worker is forked while the thread is
+    inside ``predict`` (`validation.run.processes.between_forks`)."""
+
+    def __init__(self, configs: list[dict], order: list[int], predict) -> None:
+        def guarded(config):
+            with between_forks():  # no fork while this thread is inside a library
+                return predict(config)
+        self._thread = ThreadPoolExecutor(1, thread_name_prefix="stability-prediction")
+        self.futures = {i: self._thread.submit(guarded, configs[i]) for i in order}
+        self._keys = [prediction_key(c) for c in configs]
+
+    def close(self, *, finish: bool) -> None:
+        """Wait for every prediction (``finish``), or drop those not started."""
+        self._thread.shutdown(wait=finish, cancel_futures=not finish)
+
+    def periods(self) -> dict[str, float]:
+        """{`prediction_key`: predicted period} of every case (after `close`)."""
+        return {key: self.futures[i].result() for i, key in enumerate(self._keys)}
+
