@@ -24,7 +24,7 @@ import math
 import os
 from pathlib import Path
 
-__all__ = ["default_run_timeout", "default_memory_limit", "machine_memory",
+__all__ = ["expected_work", "default_run_timeout", "default_memory_limit", "machine_memory",
            "limit_memory", "MIN_MEMORY_MIB"]
 
 #: Wall time every run may take before its first sample (building the laws, Exudyn
@@ -43,15 +43,20 @@ MIN_MEMORY_MIB = 1024
 MEMORY_SHARE = 0.75
 
 
-def default_run_timeout(scenario) -> float:
-    """The default wall-time limit of one run [s], whole seconds (module docstring)."""
+def expected_work(scenario) -> float:
+    """The pessimistic wall time of one run past its start [s]: control samples ×
+    `SAMPLE_COST` + plant steps × the plant's cost per step (module docstring).  Also
+    what orders a batch's runs, the longest first (`validation.batch.queue.run_jobs`)."""
     plant = scenario.plant
     samples = scenario.duration / scenario.Ts
     # A plug-in plant's cost is per control period (it steps as it likes).
     steps = scenario.duration / getattr(plant, "step", scenario.Ts)
-    step_cost = plant.step_cost()
-    return float(math.ceil(RUN_TIMEOUT_BASE + RUN_TIMEOUT_FACTOR
-                           * (samples * SAMPLE_COST + steps * step_cost)))
+    return samples * SAMPLE_COST + steps * plant.step_cost()
+
+
+def default_run_timeout(scenario) -> float:
+    """The default wall-time limit of one run [s], whole seconds (module docstring)."""
+    return float(math.ceil(RUN_TIMEOUT_BASE + RUN_TIMEOUT_FACTOR * expected_work(scenario)))
 
 
 def machine_memory() -> int:

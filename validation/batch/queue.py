@@ -31,6 +31,7 @@ from .committing import Committer
 from .errors import NotARunFile
 from .index import dictionary_for
 from .interrupts import Interrupted
+from .limits import expected_work
 from .memory import MemoryStore
 from .progress import progress as progress_counter
 from .store import ResultStore, environment
@@ -284,10 +285,12 @@ def run_planned(planned, out: str | Path, *, name: str, description: str = "",
                 export: bool = True, rerun: bool = False) -> CampaignSummary:
     """Run the runs ``planned`` (`PlannedRun`: made by a verdict — checks, bisections,
     searches — or ``flexarm run``'s one run, not expanded from a campaign file) into
-    ``out`` under the campaign ``name``, as `run_campaign` runs a campaign's; ``rerun``:
-    all of them, whatever the folder holds."""
+    ``out`` under the campaign ``name``, as `run_campaign` runs a campaign's, the longest
+    first (`limits.expected_work`: the last runs to start are short, so the workers of a
+    round end together); ``rerun``: all of them, whatever the folder holds."""
     campaign = Campaign(name=name, base={}, sweeps=(), description=description)
-    return run_campaign(campaign, out, runner=runner, progress=progress, only=list(planned),
+    longest_first = sorted(planned, key=lambda r: -expected_work(r.scenario))  # ties: in order
+    return run_campaign(campaign, out, runner=runner, progress=progress, only=longest_first,
                         label=label, export=export, rerun=rerun)
 
 
