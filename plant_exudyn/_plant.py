@@ -152,6 +152,7 @@ class ExudynPlant(Plant):
         self.mesh = mesh
         basis = (model or cached_model(self.params, (2, 2))).mode_shapes
         self.modal_basis = basis
+        self._state_size = 2 * (2 + sum(m.n for m in basis))  # read every sample
         self.system = build_arm(self.params, mesh, step=step)
         self.fields = (LinkField(self.system, 0, basis[0]), LinkField(self.system, 1, basis[1]))
         p = self.params
@@ -172,6 +173,7 @@ class ExudynPlant(Plant):
         self._applied = np.zeros(4)  # the loads held now: τ1, τ2, Fx, Fy
         #: The current loops' time constants and outputs (`reduced_model._joints.lag_step`).
         self._lag = np.array([p.torque_time_constant1, p.torque_time_constant2])
+        self._lagging = bool(self._lag.any())
         self._lagged = np.zeros(2)
         self._read_motors = self.system.joints.motor_reader(self.system.mbs)
         self._index_state()
@@ -206,7 +208,7 @@ class ExudynPlant(Plant):
     @property
     def state_size(self) -> int:
         """Length of [θ, q, θ̇, q̇] with q in the modal basis (what `reset` takes)."""
-        return 2 * (2 + sum(m.n for m in self.modal_basis))
+        return self._state_size
 
     def _reset(self, x0: np.ndarray) -> None:
         """Place the FE nodes on the inextensible curve of ``x0``'s modal deflection (q in
@@ -240,7 +242,7 @@ class ExudynPlant(Plant):
         fx, fy = (0.0, 0.0) if tip_force is None else (float(tip_force[0]),
                                                        float(tip_force[1]))
         self._cache = self._truth = None
-        if not self._lag.any():
+        if not self._lagging:
             self.hold_loads(float(tau[0]), float(tau[1]), fx, fy)
             self._solve_to(self._steps + steps)
             return
@@ -300,7 +302,7 @@ class ExudynPlant(Plant):
         sd = self._system_data
         u, v = sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t()
         self._readout_into(self._readout, u, v, out)
-        self._read_motors(u, v, out, self.state_size // 2)
+        self._read_motors(u, v, out, self._state_size // 2)
 
     def _truth_now(self) -> np.ndarray:
         """The truth vector of the current step, read once (treat as read-only)."""
