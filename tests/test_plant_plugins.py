@@ -91,6 +91,26 @@ def test_a_plugin_plant_runs_in_a_campaign_and_in_verify(lab):
     assert verdict["simulations"]["truth"] >= 1  # counted by role, on the plug-in
 
 
+def test_a_stability_map_of_a_plugin_truth_plant(lab, monkeypatch):
+    """A plug-in truth plant is mapped at its own step: its table takes no ``step``
+    (known bad, before: every run failed on "plant.step"), and, declaring no
+    refinements, it has no refined sequence: one level, the bracket alone."""
+    from validation.run.scenario import scenario_from_mapping
+    from validation.verdicts import stability
+    monkeypatch.syspath_prepend(str(lab))
+    monkeypatch.setattr(stability, "GRID", (1e-3, 5e-3))  # multiples of its 0.25 ms step
+    monkeypatch.setattr(stability, "DURATION", 0.5)
+    s = scenario_from_mapping({"observer": {"kind": "none"}, "plant": {
+        "kind": "labplants:FineArm", "role": "truth", "options": {"modes": 3}}})
+    (case,) = stability.cases_from_scenarios([s])
+    assert case.truth and not case.refines
+    (r,), summary = stability.stability_map([case], lab / "map", progress=False,
+                                            tolerance=10.0)  # the grid alone
+    assert summary.failed == 0 and len(r.tested) == 2 and r.case.level == 0
+    assert r.resolved["divergence"].verdict == "" and r.discretisation == ""
+    assert r.divergence.largest == 1e-3 and r.divergence.first_bad == 5e-3
+
+
 @pytest.mark.parametrize("table, message", [
     ('kind = "labplants:Nope"\nrole = "truth"', "plant.kind: module 'labplants' has no 'Nope'"),
     ('kind = "json:JSONDecoder"\nrole = "truth"',

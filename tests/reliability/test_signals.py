@@ -225,3 +225,14 @@ def test_no_process_is_forked_while_another_thread_works_between_forks():
     assert order == ["work", "fork"]
     fork()  # no work between forks: straight through
     assert order == ["work", "fork", "fork"]
+    # The thread working between forks may start a process itself (known bad, before: a
+    # plug-in plant checked apart while the map's predictions built its case waited for
+    # itself for ever).
+    def work_and_fork():
+        with between_forks():
+            fork()
+
+    alone = threading.Thread(target=work_and_fork)
+    alone.start()
+    alone.join(5.0)  # a free lock takes microseconds; 5 s is a deadlock
+    assert not alone.is_alive() and order == ["work", "fork", "fork", "fork"]

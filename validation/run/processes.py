@@ -72,12 +72,14 @@ def die_with_parent(parent: int) -> None:
 _HELD = {signal.SIGINT, signal.SIGTERM}
 
 
-_fork_lock = threading.Lock()
+#: Reentrant: the thread working between forks may start a process itself (a plug-in
+#: checked apart while the map's predictions build its case) without waiting for itself.
+_fork_lock = threading.RLock()
 
 
 def _new_fork_lock() -> None:
     global _fork_lock
-    _fork_lock = threading.Lock()  # a child's own: the parent's is held while it forks
+    _fork_lock = threading.RLock()  # a child's own: the parent's is held while it forks
 
 
 os.register_at_fork(after_in_child=_new_fork_lock)

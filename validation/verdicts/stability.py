@@ -106,9 +106,15 @@ class StabilityCase:
 
     @property
     def truth(self) -> bool:
-        """Whether the case runs on a truth plant (its limits are checked on the refined
-        sequence)."""
+        """Whether the case runs on a truth plant."""
         return is_truth(self.base)
+
+    @property
+    def refines(self) -> bool:
+        """Whether its limits are judged on the refined sequence: a truth plant with a
+        discretisation to refine (the FE plant; a plug-in that declares no
+        refinements has none)."""
+        return self.truth and bool(plant_settings(self.base["plant"]).refinements())
 
 
 @dataclass
@@ -185,8 +191,11 @@ def _options_key(config: dict) -> str:
 
 def _scenario_at(case: StabilityCase, Ts: float) -> dict:
     data = dict(case.base, Ts=Ts)
-    steps = math.ceil(Ts / _MAX_PLANT_STEP - 1e-9) * 2 ** case.level
-    data["plant"] = dict(plant_settings(case.base["plant"]).refined(case.level), step=Ts / steps)
+    plant = plant_settings(case.base["plant"]).refined(case.level)
+    if "step" in plant:  # a plug-in plant steps as it likes within a control period
+        steps = math.ceil(Ts / _MAX_PLANT_STEP - 1e-9) * 2 ** case.level
+        plant = dict(plant, step=Ts / steps)
+    data["plant"] = plant
     return data
 
 
@@ -236,7 +245,7 @@ class _Search:
         the finest level brackets a limit, the bisection of a level before it left as it
         ran off the grid (`Lattice.runs_off`: no verdict reads a bracket that was not
         bisected); else nothing."""
-        deeper = refine and self.case.truth
+        deeper = refine and self.case.refines
         while True:
             finest = len(self.levels) - 1
             if self.level == 0 and isinstance(self.start, Future):
@@ -316,7 +325,7 @@ def _limits(levels: list[dict]) -> dict[str, list[Limit]]:
 def _resolve(case: StabilityCase, limits: list[Limit], *, final: bool) -> ResolvedLimit:
     levels = [(_discretisation(case.base, level), lim.largest, lim.first_bad)
               for level, lim in enumerate(limits)]
-    return resolve_limit(levels, final=final, refined=case.truth)
+    return resolve_limit(levels, final=final, refined=case.refines)
 
 
 def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = None,
@@ -416,7 +425,7 @@ def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[Stabili
     results = []
     for case in cases:
         levels, growth = [], {}
-        for level in range(MAX_LEVEL + 1 if case.truth else 1):
+        for level in range(MAX_LEVEL + 1 if case.refines else 1):
             rows = _rows_at(StabilityCase(case.label, case.plant, case.arm, case.base, level),
                             all_rows)
             if not rows:
@@ -478,7 +487,7 @@ def _result(case: StabilityCase, levels: list[dict], growth: dict | None = None,
     return StabilityResult(
         at, tested, limits["divergence"][-1], limits["tracking"][-1],
         _predicted_period(case.base) if predicted is None else predicted,
-        discretisation=_discretisation(case.base, finest) if case.truth else "",
+        discretisation=_discretisation(case.base, finest) if case.refines else "",
         resolved=resolved, runs=sum(map(len, levels)))
 
 
