@@ -264,25 +264,21 @@ class _Search:
             elif deeper and finest < MAX_LEVEL and self._unconverged():
                 self.levels.append({})
                 self.level += 1
-            else:
-                left = self._left_unbisected(lattice)
-                if left is None:
-                    return set()
+            elif (left := self._left_unbisected(lattice)) is not None:
                 self.level = left
+            else:
+                return set()
 
     def _limits_at(self, level: int) -> dict[str, Limit]:
-        """{limit name: `Limit`} of one level."""
         return {name: limit_of(self.levels[level], good) for name, good in GOOD.items()}
 
     def _unconverged(self) -> bool:
         """Whether a limit of the levels so far is not converged (and none ends at a
         failed run: a failure is no bracket to refine)."""
-        limits = _limits(self.levels)
-        if any(lim[-1].outcome == "failed" for lim in limits.values()):
-            return False
-        return any(_resolve(self.case, lim, final=False).verdict in ("not checked",
-                                                                     "not converged")
-                   for lim in limits.values())
+        limits = _limits(self.levels).values()
+        return not any(lim[-1].outcome == "failed" for lim in limits) and any(
+            _resolve(self.case, lim, final=False).verdict in ("not checked", "not converged")
+            for lim in limits)
 
     def _left_unbisected(self, lattice: Lattice) -> int | None:
         """The first level before the finest that has a bracket left as it ran off the
@@ -312,11 +308,6 @@ def _start(case: StabilityCase, lattice: Lattice, prediction: Future) -> set[flo
     return prediction
 
 
-def _predicted_period(config: dict) -> float:
-    from .sampled import predicted_period  # python-control: not for a report without a map
-    return predicted_period(config)
-
-
 def _limits(levels: list[dict]) -> dict[str, list[Limit]]:
     """Each limit's `Limit` per level."""
     return {name: [limit_of(tested, good) for tested in levels] for name, good in GOOD.items()}
@@ -340,9 +331,10 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
     from its prediction joins the round after it is known.  Returns the results and the
     summary of every round together."""
     lattice = Lattice(GRID, tolerance)
+    from .sampled import predicted_period  # python-control: not for a report without a map
     predictions = Predictions([c.base for c in cases], sorted(
         range(len(cases)), key=lambda i: cases[i].base["observer"]["kind"] != "none"),
-        _predicted_period)
+        predicted_period)
     searches = [_Search(case, _start(case, lattice, predictions.futures[i]))
                 for i, case in enumerate(cases)]
     store = ResultStore(out)
@@ -476,6 +468,9 @@ def _result(case: StabilityCase, levels: list[dict], growth: dict | None = None,
     prediction on the case's own plant (its base mesh: the FE prediction has converged at
     ANCF 4 el/link, and on a mesh 4× finer it costs minutes): ``predicted``, or computed
     here."""
+    if predicted is None:  # python-control: not imported where the map kept its predictions
+        from .sampled import predicted_period
+        predicted = predicted_period(case.base)
     finest = len(levels) - 1
     tested = dict(sorted(levels[-1].items()))
     limits = _limits(levels)
@@ -485,8 +480,7 @@ def _result(case: StabilityCase, levels: list[dict], growth: dict | None = None,
         resolved["divergence"], band=_band(limits["divergence"][-1], growth or {}))
     at = StabilityCase(case.label, case.plant, case.arm, case.base, finest)
     return StabilityResult(
-        at, tested, limits["divergence"][-1], limits["tracking"][-1],
-        _predicted_period(case.base) if predicted is None else predicted,
+        at, tested, limits["divergence"][-1], limits["tracking"][-1], predicted,
         discretisation=_discretisation(case.base, finest) if case.refines else "",
         resolved=resolved, runs=sum(map(len, levels)))
 
