@@ -46,7 +46,7 @@ MEMORY_SHARE = 0.75
 def expected_work(scenario) -> float:
     """The pessimistic wall time of one run past its start [s]: control samples ×
     `SAMPLE_COST` + plant steps × the plant's cost per step (module docstring).  Also
-    what orders a batch's runs, the longest first (`validation.batch.queue.run_jobs`)."""
+    what orders a verdict's runs, the longest first (`validation.batch.queue.run_planned`)."""
     plant = scenario.plant
     samples = scenario.duration / scenario.Ts
     # A plug-in plant's cost is per control period (it steps as it likes).

@@ -327,11 +327,11 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
     bisections to ``tolerance`` and, with ``mesh_check``, the truth-plant cases
     again on the refined sequence until their limits converge (module docstring).  Every
     round asks every case's next periods at once (the progress bar names the round); the
-    predictions are computed beside the runs (`predictions.Predictions`), and a case that starts
-    from its prediction joins the round after it is known.  Returns the results and the
-    summary of every round together."""
-    lattice = Lattice(GRID, tolerance)
+    predictions are computed beside the runs (`predictions.Predictions`), and a case that
+    starts from its prediction joins the round after it is known.  Returns the results
+    and the summary of every round together."""
     from .sampled import predicted_period  # python-control: not for a report without a map
+    lattice = Lattice(GRID, tolerance)
     predictions = Predictions([c.base for c in cases], sorted(
         range(len(cases)), key=lambda i: cases[i].base["observer"]["kind"] != "none"),
         predicted_period)
