@@ -15,6 +15,7 @@ import math
 import operator
 from dataclasses import dataclass, field
 
+from ..run.results import STATUSES
 from .index import decode_detail, is_run_id, json_table
 
 __all__ = ["StoredRun", "Detail", "records", "metric_matrix"]
@@ -131,7 +132,6 @@ class StoredRun:
     def check(self) -> None:
         """ValueError unless the row is what the store writes (its id, file, status,
         size and checksum; its detail is checked when decoded)."""
-        from ..run.results import STATUSES
         rid = self.run_id
         if not is_run_id(rid) or self.file not in ("", f"runs/{rid}.npz"):
             raise ValueError("its id must be 12 hex digits and its file runs/<id>.npz or none")

@@ -11,12 +11,16 @@ no run's scenario decoded), so the section's time grows linearly with the runs, 
 seconds at 10^5; every run's values are in ``metrics.csv``."""
 from __future__ import annotations
 
+from collections import Counter
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..batch.records import metric_matrix
 from .render import fmt_number
 
-__all__ = ["MANY", "is_many", "distributions", "histograms", "read_metrics", "windows_of"]
+__all__ = ["MANY", "is_many", "Completed", "completed", "distributions", "histograms",
+           "read_metrics", "windows_of"]
 
 #: More reported runs than this are summarised (a table row per run is no longer read).
 MANY = 2000
@@ -39,14 +43,35 @@ def is_many(runs) -> bool:
     return len(runs) > MANY
 
 
-def windows_of(runs) -> set:
+@dataclass(frozen=True)
+class Completed:
+    """The runs that completed and their metrics, read once from the rows' columns
+    (`validation.batch.records.metric_matrix`) for the summary's tables, its figure and
+    the windows of the report's scope."""
+
+    ok: list
+    #: (key, label, scale, unit, worse) of each metric shown (`_metrics`).
+    shown: list
+    #: (len(ok), len(shown) + 2): the metrics shown, then the transient and end time.
+    values: np.ndarray
+
+
+def completed(runs) -> Completed:
+    """`Completed` of ``runs``."""
+    ok = [r for r in runs if r.status == "ok"]
+    shown = _metrics(ok)
+    return Completed(ok, shown, metric_matrix(ok, [*(m[0] for m in shown),
+                                                   "transient_s", "end_time"]))
+
+
+def windows_of(runs, done: Completed | None = None) -> set:
     """(transient, duration) of ``runs``: from each run's scenario, or for many runs from
     the metrics that say them (the transient applied; the end time of a run that
-    completed) and the scenarios of the others."""
+    completed: ``done``, `completed` of ``runs``) and the scenarios of the others."""
     if not is_many(runs):
         return {(r.config["transient"], r.config["duration"]) for r in runs}
-    ok = [r for r in runs if r.status == "ok"]
-    pairs = {tuple(p) for p in metric_matrix(ok, ["transient_s", "end_time"]).tolist()}
+    done = done or completed(runs)
+    pairs = {tuple(p) for p in np.unique(done.values[:, -2:], axis=0).tolist()}
     return pairs | {(r.config["transient"], r.config["duration"])
                     for r in runs if r.status != "ok"}
 
@@ -65,7 +90,8 @@ def read_metrics(store) -> tuple[str, ...] | None:
 def _metrics(runs) -> list[tuple]:
     """The headline metrics and requirements' ρ that ``runs`` have: (key, label, scale,
     unit, worse)."""
-    names = {n for layout in {r.metric_names for r in runs} for n in layout}
+    layouts = {id(r.metric_names): r.metric_names for r in runs}  # shared tuples: no hash
+    names = {n for layout in layouts.values() for n in layout}
     rhos = sorted(n for n in names if n.startswith("rho_"))
     return [m for m in _HEADLINE if m[0] in names] + \
         [(n, f"ρ of {n[4:]}", 1, "", "min") for n in rhos]
@@ -76,17 +102,16 @@ def _who(run) -> str:
     return f"{run.run_id} ({swept})" if swept else f"{run.run_id} ({run.name})"
 
 
-def distributions(runs) -> dict | None:
-    """The summary of ``runs`` (rows that completed or not): counts, per metric its
-    quantiles over the runs that completed and the worst runs, per requirement the runs
-    that fail it and those nearest its boundary; None if no run completed."""
-    ok = [r for r in runs if r.status == "ok"]
-    wanted = _metrics(ok)
-    if not ok or not wanted:
+def distributions(runs, done: Completed) -> dict | None:
+    """The summary of ``runs`` (rows that completed or not; ``done``: `completed` of
+    them): counts, per metric its quantiles over the runs that completed and the worst
+    runs, per requirement the runs that fail it and those nearest its boundary; None if
+    no run completed."""
+    ok, values = done.ok, done.values
+    if not ok or not done.shown:
         return None
-    values = metric_matrix(ok, [m[0] for m in wanted])
     rows, worst, deciding = [], [], []
-    for j, (key, label, scale, unit, worse) in enumerate(wanted):
+    for j, (key, label, scale, unit, worse) in enumerate(done.shown):
         column = values[:, j]
         finite = np.isfinite(column)
         if not finite.any():
@@ -106,7 +131,8 @@ def distributions(runs) -> dict | None:
             deciding.append([label, f"{fails} of {int(finite.sum())}",
                              "; ".join(f"ρ = {fmt_number(column[i])} in {_who(ok[i])}"
                                        for i in near if np.isfinite(column[i]))])
-    counts = {s: sum(r.status == s for r in runs) for s in ("ok", "diverged", "failed")}
+    statuses = Counter(r.status for r in runs)
+    counts = {s: statuses[s] for s in ("ok", "diverged", "failed")}
     return {"count": len(runs), "counts": counts,
             "quantiles": {"head": ["metric", "runs", "min", "5 %", "median", "95 %", "max"],
                           "rows": rows, "classes": [""] * len(rows)},
@@ -124,20 +150,24 @@ def _stopped(runs) -> list[str]:
     return [f"{r.run_id} {r.status}: {r.message}" for r in bad]
 
 
-def histograms(runs) -> bytes | None:
+def histograms(done: Completed) -> bytes | None:
     """One figure: a histogram of each headline metric and ρ over the runs that
-    completed (PNG); None if none."""
+    completed (``done``, `completed`) (PNG); None if none."""
     from . import figures as fig
     import matplotlib.pyplot as plt
-    ok = [r for r in runs if r.status == "ok"]
-    wanted = _metrics(ok)
-    if not ok or not wanted:
+    wanted, values = done.shown, done.values
+    if not done.ok or not wanted:
         return None
-    values = metric_matrix(ok, [m[0] for m in wanted])
     columns = min(4, len(wanted))
     lines = -(-len(wanted) // columns)
-    figure, axes = plt.subplots(lines, columns, figsize=(3.2 * columns, 2.4 * lines),
-                                squeeze=False, constrained_layout=True)
+    width, height = 3.2 * columns, 2.4 * lines
+    # margins fixed in inches (room for 7-pt tick labels, an axis offset and a 9-pt
+    # title): a layout engine's passes over every tick label were half the figure's time
+    figure, axes = plt.subplots(lines, columns, figsize=(width, height), squeeze=False,
+                                gridspec_kw={"left": 0.5 / width, "right": 1 - 0.15 / width,
+                                             "bottom": 0.45 / height, "top": 1 - 0.3 / height,
+                                             "wspace": 0.55 / (3.2 - 0.55),
+                                             "hspace": 0.8 / (2.4 - 0.8)})
     for ax, (j, (key, label, scale, unit, _)) in zip(axes.flat, enumerate(wanted)):
         column = values[:, j]
         column = column[np.isfinite(column)] * scale

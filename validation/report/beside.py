@@ -1,10 +1,10 @@
-"""Draw a report's figures on every core: each figure is an independent task (load the
-stored runs it shows, draw, encode), so a report of many figures takes a fraction of the
-time one core needs.
+"""A report's work on every core: independent tasks (a figure: load the stored runs it
+shows, draw, encode; checking every stored run) run in worker processes beside this one,
+so a report of many figures takes a fraction of the time one core needs.
 
 Tasks are callables without arguments; on Linux they run in worker processes forked
-from this one (which inherit them: nothing is pickled but the PNG bytes coming back),
-while this one goes on with its own work (`drawing`: the report's tables); elsewhere or
+from this one (which inherit them: nothing is pickled but their results coming back),
+while this one goes on with its own work (`beside`: the report's tables); elsewhere or
 on one core, in this process.  The results folder's database connection is
 closed before forking: each worker opens its own (an SQLite connection must not cross a
 fork).
@@ -17,41 +17,34 @@ import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
-__all__ = ["drawing", "draw_all", "out_of_collection"]
+__all__ = ["beside", "out_of_collection"]
 
 _TASKS: list = []  # what the forked workers inherit
 
 
-def _draw(index: int):
+def _run_task(index: int):
     return _TASKS[index]()
 
 
 @contextlib.contextmanager
-def drawing(tasks: list, *, stores=(), progress: bool = True, label: str = "report figures"):
-    """Draw ``tasks`` while the body of the ``with`` statement runs (the report's tables):
+def beside(tasks: list, *, stores=(), progress: bool = True, label: str = "report figures"):
+    """Run ``tasks`` while the body of the ``with`` statement runs (the report's tables):
     yields a function that waits for the result of every task and returns them, in order,
     with progress on stderr (`validation.batch.progress`).  On several cores the workers
-    start drawing at once; on one, the tasks run in this process when it is called.
-    ``stores``: results folders whose connections to close before forking (they reopen
-    on their next use)."""
+    (one per task, as many as the cores) start at once; on one, the tasks run in this
+    process when it is called.  ``stores``: results folders whose connections to close
+    before forking (they reopen on their next use)."""
     from ..batch.executor import available_cores
-    workers = min(available_cores(), len(tasks))
-    if workers < 2 or "fork" not in multiprocessing.get_all_start_methods():
+    cores = available_cores()
+    if cores < 2 or not tasks or "fork" not in multiprocessing.get_all_start_methods():
         yield lambda: _collect(((i, make()) for i, make in enumerate(tasks)), len(tasks),
                                label, progress)
         return
     for store in stores:
         store.close()
-    with _in_workers(tasks, workers) as futures:
+    with _in_workers(tasks, min(cores, len(tasks))) as futures:
         yield lambda: _collect(((futures[f], f.result()) for f in as_completed(futures)),
                                len(tasks), label, progress)
-
-
-def draw_all(tasks: list, *, stores=(), progress: bool = True,
-             label: str = "report figures") -> list:
-    """The result of every task, in order (`drawing` with nothing to do meanwhile)."""
-    with drawing(tasks, stores=stores, progress=progress, label=label) as drawn:
-        return drawn()
 
 
 def _collect(done, n: int, label: str, progress: bool) -> list:
@@ -69,8 +62,8 @@ def _collect(done, n: int, label: str, progress: bool) -> list:
     return results
 
 
-def _start_drawer(parent: int) -> None:
-    """A drawing worker dies with the report's process and, once forked, receives
+def _start_worker(parent: int) -> None:
+    """A worker dies with the report's process and, once forked, receives
     signals again (`validation.run.processes.signals_held`)."""
     from ..run.processes import die_with_parent, release_signals
     die_with_parent(parent)
@@ -102,12 +95,12 @@ def _in_workers(tasks: list, workers: int):
     try:
         with out_of_collection(), ProcessPoolExecutor(
                 workers, mp_context=multiprocessing.get_context("fork"),
-                initializer=_start_drawer, initargs=(os.getpid(),)) as pool:  # ends with us
+                initializer=_start_worker, initargs=(os.getpid(),)) as pool:  # ends with us
             with signals_held():
                 started = pool.submit(int)  # every worker forked now, before any thread starts
             started.result()
             try:
-                yield {pool.submit(_draw, i): i for i in range(len(tasks))}
+                yield {pool.submit(_run_task, i): i for i in range(len(tasks))}
             except BaseException:  # the tables failed or were stopped: no figure more is begun
                 pool.shutdown(cancel_futures=True)
                 raise
