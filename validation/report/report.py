@@ -136,14 +136,17 @@ class _Included:
     warnings: list
     content_key: str
     drawn: dict  # arm → (its example, its validity map's PNG): drawn beside the checks
+    meanwhile: object  # what ``meanwhile`` returned
 
 
-def _included(store: ResultStore, all_rows: list, *, animate: bool) -> _Included:
+def _included(store: ResultStore, all_rows: list, *, animate: bool,
+              meanwhile=lambda: None) -> _Included:
     """Which of ``all_rows``, every row of ``store``, the report shows: the rows whose
     file verifies and that this code made.  The rows are verified in a worker (0.5 s at
-    40,000 runs) while this process asks which are fresh and computes the content key,
-    and another draws the validity map of each arm (1.2 s): its example is then the
-    first run of that arm, if that one verifies (`report_data` draws it otherwise)."""
+    40,000 runs) while this process asks which are fresh, computes the content key and
+    calls ``meanwhile``, and another draws the validity map of each arm (1.2 s): its
+    example is then the first run of that arm, if that one verifies (`report_data` draws
+    it otherwise)."""
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     roles = [_role(r) for r in all_rows]
@@ -157,9 +160,10 @@ def _included(store: ResultStore, all_rows: list, *, animate: bool) -> _Included
         now = {k: fingerprint_of(*k) for k in {(r.controller, r.observer, r.plant)
                                                for r in all_rows}}  # once per kind of run
         key = content_key(store.out, animate=animate, rows=all_rows)
+        result = meanwhile()
         damaged, *pngs = done()
     found = _Included([], [], [], [], key, {arm: (example, png) for (arm, (example, _)), png
-                                            in zip(maps.items(), pngs)})
+                                            in zip(maps.items(), pngs)}, result)
     stale = []
     lists = {"run": found.runs, "evaluation": found.evaluations, "check": found.checks}
     for r, role in zip(all_rows, roles):  # one pass (10^5 rows: ~20 ms a pass)
@@ -175,6 +179,14 @@ def _included(store: ResultStore, all_rows: list, *, animate: bool) -> _Included
             f"({', '.join(r.run_id for r in stale[:8])}{', …' if len(stale) > 8 else ''}); "
             "rerun the campaign to refresh them")
     return found
+
+
+def _stability_results(folder: Path) -> list:
+    """The fresh results of the stability map in ``folder``, if it holds one."""
+    if not ResultStore(folder).exists():
+        return []
+    from ..verdicts.stability import load_stability
+    return load_stability(folder, fresh_only=True)
 
 
 def _scope(runs, done=None) -> list[str]:
@@ -206,7 +218,9 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     from .summary import NOTE_MEANING, pairs_table, verdict_counts
     from .verdict_tables import claims_tables
     store = ResultStore(results_dir)
-    found = _included(store, report_rows(store) if rows is None else rows, animate=animate)
+    stability_dir = store.out / "stability"
+    found = _included(store, report_rows(store) if rows is None else rows, animate=animate,
+                      meanwhile=functools.partial(_stability_results, stability_dir))
     runs, evaluations, checks, warnings = found.runs, found.evaluations, found.checks, \
         found.warnings
     campaigns = store.campaigns()
@@ -221,28 +235,22 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       scope=[], warnings=warnings)
     bounds = claim_bounds()
 
-    signals = functools.partial(every_signal, store)
-    columns = claim_columns(runs + checks, signals)
-    data.mesh = mesh_table(runs + checks, signals)
-    stability_dir = store.out / "stability"
     tasks = []
-    if ResultStore(stability_dir).exists():
-        from ..verdicts.stability import load_stability
-        results = load_stability(stability_dir, fresh_only=True)
-        if results:
-            rows = stability_rows(results)
-            data.stability = {"table": table(
-                ["case", "plant", "arm", "no divergence up to [ms]", "first divergence [ms]",
-                 "width", "keeps tracking up to [ms]", "first loss [ms]", "predicted [ms]",
-                 "runs", "monotone?", "refined sequence", "why the first bad one is"],
-                [[r["case"], r["plant"], r["arm"], r["no_divergence"], r["first_divergence"],
-                  r["width_text"], r["tracking"], r["first_loss"], r["predicted"],
-                  str(r["runs"]), folded_text(r["notes"]),
-                  folded_text(f"at {r['discretisation']}: {r['mesh']}"),
-                  folded_text(r["reason"])] for r in rows],
-                ["failed" if "FAILED" in r["notes"] else "" for r in rows])}
-            tasks.append(("Stability map", "sampled-data stability map: tested control periods "
-                          "per case, plant and arm", lambda: stability_chart(results)))
+    results = found.meanwhile
+    if results:
+        rows = stability_rows(results)
+        data.stability = {"table": table(
+            ["case", "plant", "arm", "no divergence up to [ms]", "first divergence [ms]",
+             "width", "keeps tracking up to [ms]", "first loss [ms]", "predicted [ms]",
+             "runs", "monotone?", "refined sequence", "why the first bad one is"],
+            [[r["case"], r["plant"], r["arm"], r["no_divergence"], r["first_divergence"],
+              r["width_text"], r["tracking"], r["first_loss"], r["predicted"],
+              str(r["runs"]), folded_text(r["notes"]),
+              folded_text(f"at {r['discretisation']}: {r['mesh']}"),
+              folded_text(r["reason"])] for r in rows],
+            ["failed" if "FAILED" in r["notes"] else "" for r in rows])}
+        tasks.append(("Stability map", "sampled-data stability map: tested control periods "
+                      "per case, plant and arm", lambda: stability_chart(results)))
     for study, spec in campaigns.get("attribution", {}).get("studies", {}).items():
         from ..verdicts.attribution import attribution_from_store
         a = attribution_from_store(store.out, study, tuple(spec["factors"]))
@@ -291,10 +299,14 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                       f"validity map, {arm} arm: reduced model vs FE frequencies over θ₂ and "
                       "their relative gap", (lambda png=png: png) if early is example else draw))
     makes = [make for _, _, make in tasks]
-    if animate and groups and animation_path is not None:
-        makes.append(lambda: animation(store, groups[0], animation_path))
+    animated = bool(animate and groups and animation_path is not None)
+    if animated:  # the longest task (1.5 s): begun first, no core waits for it at the end
+        makes.insert(0, lambda: animation(store, groups[0], animation_path))
 
     with beside(makes, stores=[store], progress=progress) as drawn:  # the tables meanwhile
+        signals = functools.partial(every_signal, store)  # the claims: 3.5 s of the paper's
+        columns = claim_columns(runs + checks, signals)
+        data.mesh = mesh_table(runs + checks, signals)
         data.scope = _scope(counted, None if evaluations else done) if counted else []
         if columns:
             data.summary = verdict_counts(columns)
@@ -318,11 +330,12 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
             data.many["stopped"].append(f"no run's figures are drawn here: 'flexarm show "
                                         f"{store.out}/RUN' draws any run's")
         figures = drawn()
+    drawn_animation = figures.pop(0) if animated else None
     for (section, caption, _), made in zip(tasks, figures):
         items = made if isinstance(made, list) else [(caption, made)]
         data.figures += [Figure(section, c, p) for c, p in items]
-    if len(figures) > len(tasks) and figures[-1] is not None:
-        caption, poster = figures[-1]
+    if drawn_animation is not None:
+        caption, poster = drawn_animation
         data.animation = {"caption": caption, "file": animation_path.name,
                           "poster": Figure("Animation", caption, poster)}
     return data
