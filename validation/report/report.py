@@ -201,10 +201,11 @@ def _scope(runs, done=None) -> list[str]:
                                                      sorted({k[3] for k in kinds})))
     scope.append("initial conditions: " + ", ".join(sorted(
         {"at rest" if k[4] == "rest" else "moving with the reference" for k in kinds})))
-    windows = sorted(windows_of(runs, done))
-    scope.append("metrics after the transient: " + ", ".join(
-        f"{t:g} s of {d:g} s runs" for t, d in windows[:6]) + (", …" if len(windows) > 6 else "")
-        + " (maxima of deflection and torque, torque variation: the whole run)")
+    windows = list(dict.fromkeys(f"{t:g} s of {d:g} s runs"  # each as it reads, once
+                                 for t, d in sorted(windows_of(runs, done))))
+    scope.append("metrics after the transient: " + ", ".join(windows[:6])
+                 + (", …" if len(windows) > 6 else "")
+                 + " (maxima of deflection and torque, torque variation: the whole run)")
     return scope
 
 
