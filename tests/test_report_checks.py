@@ -2,6 +2,7 @@
 content key from the rows already read is the one read from the index, and each arm's
 validity map, drawn beside the check, is that of the first of its runs that verifies."""
 import dataclasses
+import sqlite3
 
 import pytest
 
@@ -58,3 +59,15 @@ def test_the_validity_map_is_that_of_the_first_run_of_its_arm_that_verifies(fold
     png, warnings = _drawn_map(folder)
     assert png == _map_of(second)
     assert any(first.run_id in w and "file missing" in w for w in warnings), warnings
+
+
+def test_an_unreadable_first_run_leaves_the_map_to_the_next(folder):
+    """Known-bad for drawing beside the check: the first run's detail is one byte (its
+    scenario cannot be read to draw its arm's map); the report still draws the map, the
+    second run's, and names the first as left out."""
+    first, second = ResultStore(folder).rows()
+    with sqlite3.connect(folder / "index.sqlite") as db:
+        db.execute("UPDATE runs SET detail = X'00' WHERE run_id = ?", (first.run_id,))
+    png, warnings = _drawn_map(folder)
+    assert png == _map_of(second)
+    assert any(first.run_id in w and "left out" in w for w in warnings), warnings

@@ -112,19 +112,20 @@ def _role(row) -> str:
     return "apart" if row.sweep in ("stability", FIT_SWEEP) else "run"
 
 
-def _validity_maps(runs) -> dict:
-    """arm → (the run whose arm it draws: the first of that arm among ``runs``, the
-    task drawing its validity map)."""
-    examples: dict = {}
+def _first_of_each_arm(runs) -> dict:
+    """arm → the first of ``runs`` of that arm (the run whose arm its validity map draws),
+    in the order of the arms."""
+    first: dict = {}
     for r in runs:
-        examples.setdefault(r.arm, r)
-    maps = {}
-    for arm in sorted(examples):
-        config = examples[arm].config
-        maps[arm] = (examples[arm], functools.partial(
-            validity_map, ArmParameters.from_mapping(config["true_params"]),
-            tuple(config["model"]["modes_per_link"]), f"{arm} arm"))
-    return maps
+        first.setdefault(r.arm, r)
+    return {arm: first[arm] for arm in sorted(first)}
+
+
+def _validity_task(example):
+    """The task drawing the validity map of the arm of the run ``example``."""
+    config = example.config
+    return functools.partial(validity_map, ArmParameters.from_mapping(config["true_params"]),
+                             tuple(config["model"]["modes_per_link"]), f"{example.arm} arm")
 
 
 @dataclass
@@ -150,10 +151,13 @@ def _included(store: ResultStore, all_rows: list, *, animate: bool,
     if not all_rows:
         raise StoreError(f"{store.out}: no stored runs")
     roles = [_role(r) for r in all_rows]
-    try:
-        maps = _validity_maps([r for r, role in zip(all_rows, roles) if role == "run"])
-    except ValueError:  # an example's scenario unreadable: damaged, the maps drawn after
-        maps = {}
+    maps = {}
+    for arm, example in _first_of_each_arm(
+            r for r, role in zip(all_rows, roles) if role == "run").items():
+        try:
+            maps[arm] = (example, _validity_task(example))
+        except (ValueError, KeyError, TypeError):  # damaged, or another code's scenario:
+            continue  # left out below, the map drawn after the check from a run that is not
     with beside([functools.partial(store.verify, all_rows),
                  *(draw for _, draw in maps.values())], stores=[store],
                 progress=False) as done:
@@ -294,11 +298,12 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                          "gaps": table(*gap_rows(validity))}
         tasks.append(("Validity of the reduced model", None,
                       lambda: linear_figures.validity_figures(validity)))
-    for arm, (example, draw) in _validity_maps(runs).items():
+    for arm, example in _first_of_each_arm(runs).items():
         early, png = found.drawn.get(arm, (None, None))
         tasks.append(("Validity of the reduced model",
                       f"validity map, {arm} arm: reduced model vs FE frequencies over θ₂ and "
-                      "their relative gap", (lambda png=png: png) if early is example else draw))
+                      "their relative gap",
+                      (lambda png=png: png) if early is example else _validity_task(example)))
     makes = [make for _, _, make in tasks]
     animated = bool(animate and groups and animation_path is not None)
     if animated:  # the longest task (1.5 s): begun first, no core waits for it at the end
