@@ -217,8 +217,9 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                 animation_path: Path | None = None, rows: list | None = None) -> ReportData:
     """Everything the report shows, as data (figures as PNG bytes); ``rows``: every row
     of the folder with the metrics the report reads (`report_rows`), if already read.
-    The figures are drawn while the tables and the content key are computed
-    (`beside.beside`)."""
+    Nothing waits that need not: the rows are checked and the arms' validity maps drawn
+    while the content key is computed and the stability map read (`_included`); the
+    other figures are drawn while the tables are computed (`beside.beside`)."""
     from ..verdicts.claims import CLAIMS, claim_columns
     from .summary import NOTE_MEANING, pairs_table, verdict_counts
     from .verdict_tables import claims_tables
