@@ -164,7 +164,7 @@ STARTS = {
                          "contained(int, timeout=30, during='a check')",
     "a run worker": "from validation.batch.executor import LocalPoolRunner; "
                     "LocalPoolRunner(1, scenarios=[]).close()",
-    "report drawers": "with __import__('validation.report.beside', fromlist=['_'])"
+    "report drawers": "with __import__('validation.batch.beside', fromlist=['_'])"
                       ".beside([int, int], progress=False) as done: done()",
 }
 

@@ -4,16 +4,22 @@ values, status, every metric) and ``manifest.json``, written from the index's co
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import operator
 from pathlib import Path
 
 from ..run.results import write_atomic
+from .beside import beside
 from .errors import ReadOnlyFolder, StoreError
+from .executor import available_cores
 from .index import axis_column, is_run_id, metric_column
 
 __all__ = ["export", "IDENTITY_COLUMNS"]
+
+#: Rows of metrics.csv a worker writes as text (`_csv_text`): fewer are written here.
+_ROWS_A_WORKER = 10_000
 
 #: The largest manifest read back (~0.3 KB a run: 10⁶ runs are ~300 MB).
 MAX_MANIFEST_BYTES = 1 << 30
@@ -75,20 +81,34 @@ def _export(store, allow_fewer: bool) -> tuple[Path, Path]:
         has = {f"axis:{a}" for a in a_names} | set(m_names) | set(IDENTITY_COLUMNS)
         pickers[set_id] = operator.itemgetter(*(at[c] if c in has else blank
                                                 for c in columns))
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(columns)
-    writer.writerows(pickers[row[12]]((*row, "")) for row in table)
-    write_atomic(csv_path, lambda fh: fh.write(buf.getvalue()))
-    # One run a line, each encoded by json's C encoder.
-    fields = [at[f] for f in _MANIFEST]
-    runs = ",\n".join(f"  {json.dumps(row[0])}: " + json.dumps(
-        {k: row[i] for k, i in zip(_MANIFEST, fields) if row[i] not in ("", 0)})
-        for row in table)
-    text = (f'{{"campaigns": {json.dumps(store.campaigns())},\n"runs": {{\n'
-            f'{runs}\n}}}}\n')
+    # The table as text in slices, each in a worker (writing a float is most of an
+    # export: 40,000 runs' 140 metrics), while this process writes the manifest.
+    slices = max(1, min(available_cores(), len(table) // _ROWS_A_WORKER))
+    bounds = [len(table) * k // slices for k in range(slices + 1)]
+    with beside([functools.partial(_csv_text, table, a, b, pickers)
+                 for a, b in zip(bounds, bounds[1:])], progress=False) as written:
+        # One run a line, each encoded by json's C encoder.
+        fields = [at[f] for f in _MANIFEST]
+        runs = ",\n".join(f"  {json.dumps(row[0])}: " + json.dumps(
+            {k: row[i] for k, i in zip(_MANIFEST, fields) if row[i] not in ("", 0)})
+            for row in table)
+        text = (f'{{"campaigns": {json.dumps(store.campaigns())},\n"runs": {{\n'
+                f'{runs}\n}}}}\n')
+        body = written()
+    head = io.StringIO()
+    csv.writer(head, lineterminator="\n").writerow(columns)
+    write_atomic(csv_path, lambda fh: fh.writelines([head.getvalue(), *body]))
     write_atomic(json_path, lambda fh: fh.write(text))
     return csv_path, json_path
+
+
+def _csv_text(table: list, start: int, stop: int, pickers: dict) -> str:
+    """Rows ``start`` to ``stop`` of ``table`` as metrics.csv's lines (each row's values
+    picked by its metric set's picker)."""
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(
+        pickers[row[12]]((*row, "")) for row in table[start:stop])
+    return buf.getvalue()
 
 
 def _previous_runs(manifest: Path) -> set[str]:

@@ -32,7 +32,7 @@ from . import figures as fig
 from .sweep_figures import sweep_figures
 from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
-from .beside import beside, out_of_collection
+from ..batch.beside import beside, out_of_collection
 from ..batch.fingerprint import fingerprint_of
 from ..batch.resimulate import every_signal
 from .render import fmt_number, folded_text, render

@@ -1,13 +1,14 @@
-"""A report's work on every core: independent tasks (a figure: load the stored runs it
-shows, draw, encode; checking every stored run) run in worker processes beside this one,
-so a report of many figures takes a fraction of the time one core needs.
+"""Work on every core beside this process's own: independent tasks (a report's figure:
+load the stored runs it shows, draw, encode; checking every stored run; a slice of an
+export's table written as text) run in worker processes while this one goes on with its
+own work, so that many tasks take a fraction of the time one core needs.
 
 Tasks are callables without arguments; on Linux they run in worker processes forked
 from this one (which inherit them: nothing is pickled but their results coming back),
-while this one goes on with its own work (`beside`: the report's tables); elsewhere or
-on one core, in this process.  The results folder's database connection is
-closed before forking: each worker opens its own (an SQLite connection must not cross a
-fork).
+while this one goes on (`beside`: a report's tables); elsewhere or on one core, in this
+process.  The connections of the results folders named are closed before forking: each
+worker opens its own (an SQLite connection must not be used across a fork); a task that
+reads no folder leaves a connection, and the lock it holds, to this process.
 """
 from __future__ import annotations
 
@@ -28,13 +29,13 @@ def _run_task(index: int):
 
 @contextlib.contextmanager
 def beside(tasks: list, *, stores=(), progress: bool = True, label: str = "report figures"):
-    """Run ``tasks`` while the body of the ``with`` statement runs (the report's tables):
+    """Run ``tasks`` while the body of the ``with`` statement runs (e.g. a report's tables):
     yields a function that waits for the result of every task and returns them, in order,
     with progress on stderr (`validation.batch.progress`).  On several cores the workers
     (one per task, as many as the cores) start at once; on one, the tasks run in this
     process when it is called.  ``stores``: results folders whose connections to close
     before forking (they reopen on their next use)."""
-    from ..batch.executor import available_cores
+    from .executor import available_cores
     cores = available_cores()
     if cores < 2 or not tasks or "fork" not in multiprocessing.get_all_start_methods():
         yield lambda: _collect(((i, make()) for i, make in enumerate(tasks)), len(tasks),
@@ -50,7 +51,7 @@ def beside(tasks: list, *, stores=(), progress: bool = True, label: str = "repor
 def _collect(done, n: int, label: str, progress: bool) -> list:
     """The results of ``done`` ((index, result) pairs, in any order) as a list, counted
     on a progress bar."""
-    from ..batch.progress import progress as progress_bar
+    from .progress import progress as progress_bar
     bar = progress_bar(n, label, unit="figure", enabled=progress)
     results = [None] * n
     try:
