@@ -2,6 +2,7 @@
 states its limits at the resolution they claim (bisected to a tolerance, judged on the
 refined sequence)."""
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -425,6 +426,20 @@ def test_a_report_reads_the_maps_predictions_made_by_this_code(tmp_path, monkeyp
     monkeypatch.setattr(predictions, "_made_by", lambda: "other code")
     (stale,) = stability.load_stability(tmp_path)
     assert stale.predicted == 42.0
+
+
+def test_stored_predictions_outlive_an_edit_of_a_report_not_of_their_code():
+    """Known-good: the report's modules are not code a prediction depends on (editing
+    one keeps the stored predictions); known-bad: the linearisation's module, the laws
+    and the reduced model are (editing one drops them)."""
+    import validation
+    from validation.batch.fingerprint import module_sources
+    from validation.verdicts.predictions import MADE_BY
+    root = Path(validation.__file__).resolve().parents[1]
+    files = {p.relative_to(root).as_posix() for p in module_sources(MADE_BY)}
+    assert not any(f.startswith(("validation/report/", "validation/cli/")) for f in files)
+    assert {"validation/verdicts/sampled.py", "validation/verdicts/linear.py",
+            "validation/run/laws.py", "reduced_model/_model.py"} <= files
 
 
 def test_maps_into_one_folder_keep_each_others_predictions(tmp_path, monkeypatch):

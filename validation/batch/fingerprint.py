@@ -35,7 +35,8 @@ from pathlib import Path
 from reduced_model._imports import walk
 
 __all__ = ["code_fingerprint", "source_fingerprint", "run_fingerprint", "result_sources",
-           "plugin_sources", "plugin_kinds", "forget_plugins", "is_fresh", "fingerprint_of"]
+           "module_sources", "computed_by", "plugin_sources", "plugin_kinds",
+           "forget_plugins", "is_fresh", "fingerprint_of"]
 
 _ROOT = Path(__file__).resolve().parents[2]
 #: Where executing a run starts: everything it can import decides results.
@@ -125,8 +126,7 @@ def code_fingerprint() -> str:
 def source_fingerprint(libraries: tuple[str, ...]) -> str:
     """A hash of every source of the project's packages (and the report's templates) and
     the versions of ``libraries``: what made a value computed from stored runs (a
-    report, a stability map's predictions), which ``code_fingerprint`` (the run path
-    alone) does not cover."""
+    report), which ``code_fingerprint`` (the run path alone) does not cover."""
     h = hashlib.sha256()
     for package in _PROJECT_PACKAGES:
         for path in sorted((_ROOT / package).rglob("*")):
@@ -134,6 +134,30 @@ def source_fingerprint(libraries: tuple[str, ...]) -> str:
                 h.update(str(path.relative_to(_ROOT)).encode() + b"\0" + path.read_bytes())
     for name in libraries:
         h.update(f"{name}={distribution(name).version}".encode())
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=8)
+def module_sources(modules: tuple[str, ...]) -> tuple[Path, ...]:
+    """The project files ``modules`` can import (a static walk, as `result_sources`'),
+    sorted."""
+    return tuple(sorted(set(_module_walk(modules).files.values())))
+
+
+@functools.lru_cache(maxsize=8)
+def _module_walk(modules: tuple[str, ...]):
+    return walk(list(modules), tuple(_ROOT / p for p in _PROJECT_PACKAGES), skip=PRESENTATION)
+
+
+@functools.lru_cache(maxsize=8)
+def computed_by(modules: tuple[str, ...]) -> str:
+    """A hash of the code a value that only ``modules`` compute depends on (a stability
+    map's predictions): the project files they can import (`module_sources`) and the
+    installed packages they reach, as `code_fingerprint` hashes the run path's; editing
+    another module (a report's) leaves the value valid."""
+    h = hashlib.sha256("\0".join(modules).encode())
+    _hash_files(h, module_sources(modules))
+    _hash_packages(h, _module_walk(modules).packages)
     return h.hexdigest()
 
 

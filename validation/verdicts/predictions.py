@@ -7,9 +7,10 @@ in the map's folder, so that a report of the folder reads them instead of linear
 every case again (the paper's 18 linearisations: 16 s of a 32 s report of its folder).
 
 A prediction is stored by its case's key (`prediction_key`) with the code that made it
-(`validation.batch.fingerprint.source_fingerprint`: the project's sources and the
-numerical libraries' versions); predictions made by other code are not read.  This
-module imports nothing heavy: a report that reads them does not load python-control.
+(`validation.batch.fingerprint.computed_by`: the project files `MADE_BY` can import and
+the installed packages they reach, not the reports': editing a report keeps them);
+predictions made by other code are not read.  This module imports nothing heavy: a
+report that reads them does not load python-control.
 """
 from __future__ import annotations
 
@@ -17,16 +18,17 @@ import json
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from ..batch.fingerprint import source_fingerprint
-from ..run.plants import ENGINE_PACKAGES
+from ..batch.fingerprint import computed_by
 from ..run.processes import between_forks
 from ..run.results import write_atomic
 
-__all__ = ["PREDICTIONS", "PROBE_TS", "prediction_key", "Predictions", "write_predictions",
-           "read_predictions"]
+__all__ = ["PREDICTIONS", "PROBE_TS", "MADE_BY", "prediction_key", "Predictions",
+           "write_predictions", "read_predictions"]
 
 #: The file in a stability map's folder.
 PREDICTIONS = "predictions.json"
+#: The modules that compute a prediction and key it: the code a stored one depends on.
+MADE_BY = ("validation.verdicts.sampled", "validation.verdicts.predictions")
 #: The period a case's law is first built at, to see whether it can be linearised and
 #: what it applies (the paper's period; the prediction then builds it at every period
 #: it scans).
@@ -47,7 +49,7 @@ def prediction_key(config: dict) -> str:
 
 
 def _made_by() -> str:
-    return source_fingerprint(("numpy", "scipy", "control", *ENGINE_PACKAGES))
+    return computed_by(MADE_BY)
 
 
 def write_predictions(folder, periods: dict[str, float]) -> None:
