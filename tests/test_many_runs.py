@@ -57,3 +57,15 @@ def test_a_few_runs_keep_their_table(folder):
     data = report_data(folder, animate=False, progress=False)
     assert data.many is None and len(data.runs["rows"]) == 5
     assert len(data.metrics["rows"]) == 5
+
+
+def test_a_figure_not_drawn_is_left_out(folder, monkeypatch):
+    """Known-bad for the figures: the histograms return None (no run completed, no
+    headline metric); the report leaves that figure out instead of writing None."""
+    from validation.report import report
+    monkeypatch.setattr(many, "MANY", 3)
+    monkeypatch.setattr(report, "histograms", lambda done: None)
+    data = report_data(folder, animate=False, progress=False)
+    assert data.many["count"] == 5 and data.figures
+    assert all(f.png is not None for f in data.figures)
+    assert not any(f.section == "Distributions" for f in data.figures)

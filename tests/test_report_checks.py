@@ -32,7 +32,7 @@ def _map_of(run) -> bytes:
                         tuple(run.config["model"]["modes_per_link"]), f"{run.arm} arm")
 
 
-def _drawn_map(folder) -> bytes:
+def _drawn_map(folder) -> tuple[bytes, list]:
     data = report_data(folder, animate=False, progress=False)
     (png,) = [f.png for f in data.figures if f.caption.startswith("validity map")]
     return png, data.warnings
@@ -43,6 +43,8 @@ def test_the_content_key_of_rows_read_is_the_key_read_from_the_index(folder):
     the key of the rows read."""
     rows = ResultStore(folder).rows()
     assert content_key(folder, animate=True, rows=rows) == content_key(folder, animate=True)
+    assert content_key(folder, animate=True, rows=rows[::-1]) == content_key(folder,
+                                                                             animate=True)
     changed = [dataclasses.replace(rows[0], status="failed"), *rows[1:]]
     assert content_key(folder, animate=True, rows=changed) != content_key(folder, animate=True)
 
@@ -71,3 +73,23 @@ def test_an_unreadable_first_run_leaves_the_map_to_the_next(folder):
     png, warnings = _drawn_map(folder)
     assert png == _map_of(second)
     assert any(first.run_id in w and "left out" in w for w in warnings), warnings
+
+
+def test_a_map_that_fails_before_the_check_is_drawn_after_it(folder, monkeypatch):
+    """Known-bad for drawing beside the check: the first run's map fails (its run, left
+    out by the check, is one the map cannot be drawn for); the report still draws the
+    map, the second run's, instead of stopping."""
+    from validation.report import report
+    first, second = ResultStore(folder).rows()
+    bad = first.config["true_params"]["Mp"]
+
+    def failing(params, *args):
+        if params.Mp == bad:
+            raise RuntimeError("not drawable")
+        return validity_map(params, *args)
+
+    monkeypatch.setattr(report, "validity_map", failing)
+    (folder / first.file).unlink()
+    png, warnings = _drawn_map(folder)
+    assert png == _map_of(second)
+    assert any(first.run_id in w for w in warnings), warnings

@@ -321,8 +321,8 @@ class ResultStore(BaseStore):
             raise self.error(exc) from None
 
     def rows(self, *, where: str = "", params: tuple = (), metrics=None) -> list[StoredRun]:
-        """Index rows (``where`` is an SQL condition on the columns: `index.metric_column`
-        names a metric's), sorted by name; with only the ``metrics`` named (None: every
+        """Index rows (``where`` is an SQL condition on the columns, nothing after it:
+        `index.metric_column` names a metric's), sorted by name and id; with only the ``metrics`` named (None: every
         one; reading 10^5 runs' ~140 metrics each is most of reading their rows).  A row
         whose id or file could name a path outside runs/, or whose contents are not what
         the store writes, is refused (StoreError naming it and the cure)."""

@@ -118,7 +118,17 @@ def _first_of_each_arm(runs) -> dict:
     first: dict = {}
     for r in runs:
         first.setdefault(r.arm, r)
-    return {arm: first[arm] for arm in sorted(first)}
+    return {arm: first[arm] for arm in sorted(first, key=str)}  # a stale row's arm: any
+
+
+def _drawn_or_none(draw):
+    """``draw()``, or None if it fails: drawn before its run is checked, a map of a run
+    then left out must not stop the report (`report_data` draws the map again from the
+    first run that is fresh and verifies, where a failure is the report's)."""
+    try:
+        return draw()
+    except Exception:  # noqa: BLE001 - any failure: the map is drawn again after the check
+        return None
 
 
 def _validity_task(example):
@@ -131,7 +141,7 @@ def _validity_task(example):
 @dataclass
 class _Included:
     """What `_included` finds of a folder's rows."""
-    runs: list  # to report: fresh, verified, neither checks nor evaluations
+    runs: list  # to report: fresh, verified, neither checks, evaluations nor apart
     evaluations: list  # of `flexarm verify`
     checks: list  # fresh, verified mesh/step checks of the runs
     warnings: list
@@ -155,7 +165,7 @@ def _included(store: ResultStore, all_rows: list, *, animate: bool,
     for arm, example in _first_of_each_arm(
             r for r, role in zip(all_rows, roles) if role == "run").items():
         try:
-            maps[arm] = (example, _validity_task(example))
+            maps[arm] = (example, functools.partial(_drawn_or_none, _validity_task(example)))
         except (ValueError, KeyError, TypeError):  # damaged, or another code's scenario:
             continue  # left out below, the map drawn after the check from a run that is not
     with beside([functools.partial(store.verify, all_rows),
@@ -304,7 +314,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         tasks.append(("Validity of the reduced model",
                       f"validity map, {arm} arm: reduced model vs FE frequencies over θ₂ and "
                       "their relative gap",
-                      (lambda png=png: png) if early is example else _validity_task(example)))
+                      (lambda png=png: png) if early is example and png is not None
+                      else _validity_task(example)))
     makes = [make for _, _, make in tasks]
     animated = bool(animate and groups and animation_path is not None)
     if animated:  # the longest task (1.5 s): begun first, no core waits for it at the end
@@ -340,7 +351,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     drawn_animation = figures.pop(0) if animated else None
     for (section, caption, _), made in zip(tasks, figures):
         items = made if isinstance(made, list) else [(caption, made)]
-        data.figures += [Figure(section, c, p) for c, p in items]
+        data.figures += [Figure(section, c, p) for c, p in items if p is not None]
     if drawn_animation is not None:
         caption, poster = drawn_animation
         data.animation = {"caption": caption, "file": animation_path.name,
