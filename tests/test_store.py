@@ -425,13 +425,13 @@ def test_export_never_writes_fewer_runs_than_the_last_export_without_saying_so(f
 def test_an_export_written_in_slices_is_the_export_written_whole(folder, monkeypatch):
     """Known-good: the 3 runs' metrics.csv written by 3 workers, a row each, is the one
     written in one piece; known-bad: the slices out of order give other bytes."""
-    from validation.batch import export
+    from validation.batch import executor, export
     out, c, metrics = folder
     monkeypatch.setattr(export, "_ROWS_A_WORKER", 10**9)  # one slice
     ResultStore(out).export()
     whole = (out / "metrics.csv").read_bytes()
     monkeypatch.setattr(export, "_ROWS_A_WORKER", 1)
-    monkeypatch.setattr(export, "available_cores", lambda: 3)
+    monkeypatch.setattr(executor, "available_cores", lambda: 3)
     ResultStore(out).export()
     assert (out / "metrics.csv").read_bytes() == whole
     head, *lines = whole.decode().splitlines(keepends=True)

@@ -13,7 +13,6 @@ from pathlib import Path
 from ..run.results import write_atomic
 from .beside import beside
 from .errors import ReadOnlyFolder, StoreError
-from .executor import available_cores
 from .index import axis_column, is_run_id, metric_column
 
 __all__ = ["export", "IDENTITY_COLUMNS"]
@@ -83,6 +82,7 @@ def _export(store, allow_fewer: bool) -> tuple[Path, Path]:
                                                 for c in columns))
     # The table as text in slices, each in a worker (writing a float is most of an
     # export: 40,000 runs' 140 metrics), while this process writes the manifest.
+    from .executor import available_cores  # the run path: not for reading a folder
     slices = max(1, min(available_cores(), len(table) // _ROWS_A_WORKER))
     bounds = [len(table) * k // slices for k in range(slices + 1)]
     with beside([functools.partial(_csv_text, table, a, b, pickers)

@@ -50,15 +50,28 @@ _PROJECT_PACKAGES = ("reduced_model", "plant_exudyn", "controllers", "validation
 _REQUIREMENT = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 
 
-@functools.lru_cache(maxsize=1)
-def _project_walk():
-    return walk([RUN_ENTRY], tuple(_ROOT / p for p in _PROJECT_PACKAGES), skip=PRESENTATION)
+@functools.lru_cache(maxsize=8)
+def _module_walk(modules: tuple[str, ...]):
+    return walk(list(modules), tuple(_ROOT / p for p in _PROJECT_PACKAGES), skip=PRESENTATION)
 
 
-@functools.lru_cache(maxsize=1)
+@functools.lru_cache(maxsize=8)
+def module_sources(modules: tuple[str, ...]) -> tuple[Path, ...]:
+    """The project files ``modules`` can import (module docstring: a static walk),
+    sorted."""
+    return tuple(sorted(set(_module_walk(modules).files.values())))
+
+
 def result_sources() -> tuple[Path, ...]:
     """The project files the run path can import (module docstring), sorted."""
-    return tuple(sorted(set(_project_walk().files.values())))
+    return module_sources((RUN_ENTRY,))
+
+
+def _hash_code(h, modules: tuple[str, ...]) -> None:
+    """Hash into ``h`` the project files ``modules`` can import and the installed
+    packages they reach."""
+    _hash_files(h, module_sources(modules))
+    _hash_packages(h, _module_walk(modules).packages)
 
 
 @functools.cache
@@ -117,8 +130,7 @@ def _hash_packages(h, tops) -> None:
 def code_fingerprint() -> str:
     """16 hex digits identifying the result-deciding code of this installation."""
     h = hashlib.sha256(b"flexarm-validation\0")
-    _hash_files(h, result_sources())
-    _hash_packages(h, _project_walk().packages)
+    _hash_code(h, (RUN_ENTRY,))
     return h.hexdigest()[:16]
 
 
@@ -138,26 +150,13 @@ def source_fingerprint(libraries: tuple[str, ...]) -> str:
 
 
 @functools.lru_cache(maxsize=8)
-def module_sources(modules: tuple[str, ...]) -> tuple[Path, ...]:
-    """The project files ``modules`` can import (a static walk, as `result_sources`'),
-    sorted."""
-    return tuple(sorted(set(_module_walk(modules).files.values())))
-
-
-@functools.lru_cache(maxsize=8)
-def _module_walk(modules: tuple[str, ...]):
-    return walk(list(modules), tuple(_ROOT / p for p in _PROJECT_PACKAGES), skip=PRESENTATION)
-
-
-@functools.lru_cache(maxsize=8)
 def computed_by(modules: tuple[str, ...]) -> str:
     """A hash of the code a value that only ``modules`` compute depends on (a stability
     map's predictions): the project files they can import (`module_sources`) and the
     installed packages they reach, as `code_fingerprint` hashes the run path's; editing
     another module (a report's) leaves the value valid."""
     h = hashlib.sha256("\0".join(modules).encode())
-    _hash_files(h, module_sources(modules))
-    _hash_packages(h, _module_walk(modules).packages)
+    _hash_code(h, modules)
     return h.hexdigest()
 
 
