@@ -10,14 +10,22 @@ when that holding torque exceeds the breakaway level, and sticks again when the 
 reverses (a post-Newton switch, the step repeated).  The viscous part is the connector's
 linear damping.  The bristle is resolved by the integration step h: on the inertia J it
 holds its natural frequency is 1/h and its damping ratio `BRISTLE_DAMPING_RATIO`
-(stiffness J/h², damping 2ζJ/h).  Unresolved (stiffer), it breaks loose below the
-breakaway level: the exact hold (`_hold`) restarts a step with the acceleration jump of
-the new torque, as a finite spring must, and the bristle's damping reads that velocity as
-a large force.  ζ = 2 keeps the force a torque step puts on the bristle within 4.8 % of
-the torque (ζ = 1: 13.5 %, a break-loose at 0.88 τs where the exact stick holds) while
-its fast pole, −(2 + √3)/h, stays within what the step resolves.  Its deflection at
-breakaway, τs h²/J, vanishes as the step is refined: the bristle tends to the reduced
-plant's exact stick (docs/theory/joints.rst).
+(stiffness J/h², damping 2ζJ/h).
+
+A spring-damper behind an inertia always overshoots a force step (the inertia must
+decelerate again), by 4.8 % at ζ = 2 (13.5 % at ζ = 1), and the switch compares the
+bristle's whole force, spring and damper, with the breakaway level: left to find a torque
+step through its own transient, a stuck joint would break loose below breakaway.  So the
+exact hold (`_hold`) treats a stuck bristle at a load jump as the constraint it stands
+for: the step restarts with the accelerations of the arm with that joint held and the
+bristle's sticking position moved so that it carries the new holding torque from the
+step's start (`Joints.sticks` tells the hold where the bristles are); a joint whose new
+holding torque exceeds breakaway is left to slip.  A constant torque then holds up to
+breakaway itself.  What still loads the bristle smoothly (the arm's motion), and the
+switch from slip to stick, it follows through its own dynamics: ζ = 2 keeps that overshoot
+small while its fast pole, −(2 + √3)/h, stays within what the step resolves.  Its
+deflection under such loads, of order τs h²/J, vanishes as the step is refined: the
+bristle tends to the reduced plant's exact stick (docs/theory/joints.rst).
 """
 from __future__ import annotations
 
@@ -81,6 +89,20 @@ class Joints:
                     rate -= v[stator[0]]
                 truth[-4 + i], truth[-2 + i] = angle, rate
         return read
+
+    def sticks(self, mbs) -> list[tuple]:
+        """The friction bristles of the assembled ``mbs`` as `ExactHold` keeps them stuck
+        across a load jump: (base, moving, mode, position, stiffness, damping, level)."""
+        sd = mbs.systemData
+        rows = []
+        for node, base, moving, _, connector in self.friction:
+            index = [-1 if side[0] == self.ground else sd.GetNodeLTGODE2(side[0])[side[1]]
+                     for side in (base, moving)]
+            get = lambda name: mbs.GetObjectParameter(connector, name)  # noqa: E731
+            rows.append((*index, *sd.GetNodeLTGData(node)[:2], get("stickingStiffness"),
+                         get("stickingDamping"),
+                         get("dynamicFrictionForce") + get("staticFrictionOffsetForce")))
+        return rows
 
     def initial_data(self, mbs, u, v) -> np.ndarray:
         """The data coordinates at the ODE2 displacements ``u`` and rates ``v``: every

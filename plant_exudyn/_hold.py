@@ -25,6 +25,16 @@ node: its rotation is atan2(s_y, s_x), whose gradient (−s_y, s_x)/|s|² follow
 slope.  Those entries of C (clamps) and of the load matrix (a torque on such a marker)
 are rescaled from the current slope; everything else is read once from Exudyn.  The
 compiled update costs ~2 µs; with the state read and written back, ~10 µs per period.
+
+A stuck friction joint (`_drives`: a stiff bristle spring-damper about its last sticking
+position) is, for the hold, what it stands for: a constraint D Δq̈ = 0 on its relative
+coordinate.  A load jump then changes the holding torque by the constraint's multiplier
+μ = (D W Dᵀ)⁻¹ D W Δf at once, and the arm's accelerations by W Δf − W Dᵀ μ.  The hold
+moves the bristle's sticking position by −μ/k, so the bristle carries the new holding
+torque from the step's start instead of finding it through a transient of its own (which
+overshoots a torque step: the break-loose below breakaway the exact stick never makes).
+A joint whose new holding torque would exceed its breakaway level is left free (it slips
+in that step, as the reduced plant's joint does); the others are solved for again.
 """
 from __future__ import annotations
 
@@ -83,9 +93,15 @@ class ExactHold:
         "loadVector", (0, 0, -1))]; a coordinate load: (load, "load", 1.0)).
     slope_nodes : list of int
         The ANCF nodes (``NodePoint2DSlope1``) that carry rigid markers (clamps, torques).
+    sticks : list of tuple, optional
+        The friction bristles kept stuck across a load jump (module docstring), each
+        (base, moving, mode, position, stiffness, damping, level): the ODE2 indices of
+        its base (−1: ground) and moving coordinate, the data indices of its friction
+        mode (0: stuck) and last sticking position, its stiffness, damping and
+        breakaway level.
     """
 
-    def __init__(self, mbs, settings, step: float, loads, slope_nodes) -> None:
+    def __init__(self, mbs, settings, step: float, loads, slope_nodes, sticks=()) -> None:
         ga = settings.timeIntegration.generalizedAlpha
         if ga.useNewmark or ga.spectralRadius <= 0.0:
             raise ValueError("the exact hold is written for generalised-alpha with a "
@@ -137,12 +153,17 @@ class ExactHold:
         #: What Δq̈ = 1 does to (q_n, q̇_n, q̈_n) (module docstring).
         factors = np.array([h * h * (0.5 - beta), h * (1 - gamma), (af - am) / af])
         m = C.shape[0]
+        sticks = np.array(sticks, dtype=float).reshape(-1, 7)
         self.data = new_hold_data(
             minv, np.ascontiguousarray(C), _pattern(C, c_rows, slopes),
             np.ascontiguousarray(B.T), _pattern(B.T, b_rows, slopes), c_rows, b_rows,
             slopes, slope_ref, factors, np.empty(n), np.empty((m, n)),
-            np.empty((m, m)), np.empty(m), np.empty(n), np.empty(len(loads)))
+            np.empty((m, m)), np.empty(m), np.empty(n), np.empty(len(loads)),
+            np.ascontiguousarray(sticks[:, :4].astype(np.int64)),
+            np.ascontiguousarray(sticks[:, 4:]), np.empty((len(sticks), n)))
         self._change = self.data.change  # the structure's own array: written in place
+        self._sticking = len(sticks) > 0
+        self._no_data = np.empty(0)
         self.sd = sd
 
     def apply(self, change) -> None:
@@ -152,7 +173,12 @@ class ExactHold:
         q, v, a = (sd.GetODE2Coordinates(cur), sd.GetODE2Coordinates_t(cur),
                    sd.GetODE2Coordinates_tt(cur))
         self._change[:] = change
-        restart(self.data, q, v, a)
+        if self._sticking:
+            data = sd.GetDataCoordinates(cur)
+            restart(self.data, q, v, a, data)
+            sd.SetDataCoordinates(data, cur)
+        else:
+            restart(self.data, q, v, a, self._no_data)
         sd.SetODE2Coordinates(q, cur)
         sd.SetODE2Coordinates_t(v, cur)
         sd.SetODE2Coordinates_tt(a, cur)
@@ -189,7 +215,7 @@ _MI = types.Array(types.int64, 2, "C")
 _FIELDS = (("minv", _M), ("C", _M), ("c_cols", _MI), ("Bt", _M), ("b_cols", _MI),
            ("c_rows", _M), ("b_rows", _M), ("slopes", _MI), ("slope_ref", _M),
            ("factors", _V), ("y", _V), ("G", _M), ("S", _M), ("z", _V), ("delta", _V),
-           ("change", _V))
+           ("change", _V), ("sticks", _MI), ("stick_law", _M), ("stick_response", _M))
 
 
 @structref.register
@@ -200,8 +226,9 @@ class _HoldDataType(types.StructRef):
 
 class HoldData(structref.StructRefProxy):
     """What `restart` works with: M⁻¹, C and the load matrix with their patterns and
-    slope-dependent entries, the step's factors and the work arrays (one structure passed
-    by reference: 16 separate arrays cost ~4 µs a call to unbox)."""
+    slope-dependent entries, the step's factors, the friction bristles (`ExactHold`'s
+    ``sticks``: indices, then stiffness, damping, level) and the work arrays (one
+    structure passed by reference: 19 separate arrays cost ~5 µs a call to unbox)."""
 
     @property
     def change(self):
@@ -219,13 +246,14 @@ _HOLD = _HoldDataType(_FIELDS)
 
 @njit(cache=True)
 def new_hold_data(minv, C, c_cols, Bt, b_cols, c_rows, b_rows, slopes, slope_ref, factors,
-                  y, G, S, z, delta, change):
+                  y, G, S, z, delta, change, sticks, stick_law, stick_response):
     """A `HoldData` of these arrays (shared, not copied)."""
     d = structref.new(_HOLD)
     d.minv, d.C, d.c_cols, d.Bt, d.b_cols = minv, C, c_cols, Bt, b_cols
     d.c_rows, d.b_rows, d.slopes, d.slope_ref, d.factors = (c_rows, b_rows, slopes,
                                                             slope_ref, factors)
     d.y, d.G, d.S, d.z, d.delta, d.change = y, G, S, z, delta, change
+    d.sticks, d.stick_law, d.stick_response = sticks, stick_law, stick_response
     return d
 
 
@@ -242,42 +270,44 @@ def _set_slope_entries(matrix, rows, slopes, slope_ref, q):
 
 
 @njit(cache=True)
-def constrained_response(d, out):
-    """``out`` = W B ``d.change`` (module docstring), C and B as last set."""
-    minv, C, c_cols, Bt, b_cols, change = d.minv, d.C, d.c_cols, d.Bt, d.b_cols, d.change
-    y, G, S, z = d.y, d.G, d.S, d.z
+def _factor(d):
+    """G = C M⁻¹ and S = C M⁻¹ Cᵀ = L Lᵀ (L in S's lower triangle), C as last set."""
+    minv, C, c_cols, G, S = d.minv, d.C, d.c_cols, d.G, d.S
     n, m = minv.shape[0], C.shape[0]
-    y[:] = 0.0  # y = M⁻¹ B change, from B's few non-zero entries (M⁻¹ symmetric)
-    for j in range(Bt.shape[0]):
-        if change[j] != 0.0:
-            for c in b_cols[j]:
-                if c >= 0:
-                    w = Bt[j, c] * change[j]
-                    for i in range(n):
-                        y[i] += w * minv[c, i]
-    for r in range(m):  # G = C M⁻¹ (row r: C's few entries of row r), z = C y
+    for r in range(m):  # row r of G: C's few entries of row r
         G[r, :] = 0.0
-        acc = 0.0
         for c in c_cols[r]:
             if c >= 0:
                 w = C[r, c]
-                acc += w * y[c]
                 for i in range(n):
                     G[r, i] += w * minv[c, i]
-        z[r] = acc
-    for r in range(m):  # S = G Cᵀ = C M⁻¹ Cᵀ (symmetric positive definite)
+    for r in range(m):  # S = G Cᵀ (symmetric positive definite)
         for t in range(r + 1):
             acc = 0.0
             for c in c_cols[t]:
                 if c >= 0:
                     acc += G[r, c] * C[t, c]
             S[r, t] = acc
-    for r in range(m):  # S = L Lᵀ in its lower triangle, then z = S⁻¹ z
+    for r in range(m):
         for t in range(r + 1):
             acc = S[r, t]
             for k in range(t):
                 acc -= S[r, k] * S[t, k]
             S[r, t] = np.sqrt(acc) if t == r else acc / S[t, t]
+
+
+@njit(cache=True)
+def _project(d, y, out):
+    """``out`` = y − Gᵀ S⁻¹ C y: the constrained response to the load whose unconstrained
+    response is y = M⁻¹ f (`_factor` done)."""
+    C, c_cols, G, S, z = d.C, d.c_cols, d.G, d.S, d.z
+    n, m = y.shape[0], C.shape[0]
+    for r in range(m):  # z = C y, then S⁻¹ z
+        acc = 0.0
+        for c in c_cols[r]:
+            if c >= 0:
+                acc += C[r, c] * y[c]
+        z[r] = acc
     for r in range(m):
         acc = z[r]
         for k in range(r):
@@ -288,11 +318,28 @@ def constrained_response(d, out):
         for k in range(r + 1, m):
             acc -= S[k, r] * z[k]
         z[r] = acc / S[r, r]
-    for i in range(n):  # Δq̈ = y − Gᵀ z
+    for i in range(n):
         out[i] = y[i]
     for r in range(m):
         for i in range(n):
             out[i] -= G[r, i] * z[r]
+
+
+@njit(cache=True)
+def constrained_response(d, out):
+    """``out`` = W B ``d.change`` (module docstring), C and B as last set."""
+    minv, Bt, b_cols, change, y = d.minv, d.Bt, d.b_cols, d.change, d.y
+    n = minv.shape[0]
+    y[:] = 0.0  # y = M⁻¹ B change, from B's few non-zero entries (M⁻¹ symmetric)
+    for j in range(Bt.shape[0]):
+        if change[j] != 0.0:
+            for c in b_cols[j]:
+                if c >= 0:
+                    w = Bt[j, c] * change[j]
+                    for i in range(n):
+                        y[i] += w * minv[c, i]
+    _factor(d)
+    _project(d, y, out)
 
 
 @njit(cache=True)
@@ -305,11 +352,69 @@ def response_into(d, q, out):
 
 
 @njit(cache=True)
-def restart(d, q, v, a):
-    """Move the step's start (q, q̇, q̈; in place) as the loads changed by ``d.change``
-    demand: Δq̈ = W B(q) change, then the shifts of `ExactHold` (module docstring)."""
+def _relative(x, base, moving):
+    """A bristle's relative coordinate in ``x`` (base −1: the ground)."""
+    return x[moving] - (x[base] if base >= 0 else 0.0)
+
+
+@njit(cache=True)
+def hold_sticks(d, q, v, data, delta):
+    """Keep the stuck bristles stuck across the load change whose free response is
+    ``delta`` (module docstring): ``delta`` becomes the response with them as
+    constraints, each one's sticking position in ``data`` moves by −μ/k; a bristle whose
+    holding force would exceed its level is left free (the largest excess first)."""
+    sticks, law, response, y = d.sticks, d.stick_law, d.stick_response, d.y
+    minv = d.minv
+    count, n = sticks.shape[0], minv.shape[0]
+    stuck = np.zeros(count, np.bool_)
+    force = np.zeros(count)
+    for j in range(count):
+        base, moving, mode, position = sticks[j, 0], sticks[j, 1], sticks[j, 2], sticks[j, 3]
+        if data[mode] != 0.0:  # slipping
+            continue
+        stuck[j] = True
+        force[j] = (law[j, 0] * (_relative(q, base, moving) - data[position])
+                    + law[j, 1] * _relative(v, base, moving))
+        for i in range(n):  # M⁻¹ Dⱼᵀ (M⁻¹ symmetric)
+            y[i] = minv[moving, i] - (minv[base, i] if base >= 0 else 0.0)
+        _project(d, y, response[j])
+    while True:
+        held = np.flatnonzero(stuck)
+        k = held.shape[0]
+        if k == 0:
+            return
+        A, rhs = np.empty((k, k)), np.empty(k)
+        for r in range(k):
+            base, moving = sticks[held[r], 0], sticks[held[r], 1]
+            rhs[r] = _relative(delta, base, moving)
+            for t in range(k):
+                A[r, t] = _relative(response[held[t]], base, moving)
+        mu = np.linalg.solve(A, rhs)
+        worst, excess = -1, 1.0
+        for r in range(k):
+            ratio = abs(force[held[r]] + mu[r]) / law[held[r], 2]
+            if ratio > excess:
+                worst, excess = held[r], ratio
+        if worst < 0:
+            break
+        stuck[worst] = False
+    for r in range(k):
+        j = held[r]
+        for i in range(n):
+            delta[i] -= mu[r] * response[j, i]
+        data[sticks[j, 3]] -= mu[r] / law[j, 0]
+
+
+@njit(cache=True)
+def restart(d, q, v, a, data):
+    """Move the step's start (q, q̇, q̈ and the bristles' sticking positions in ``data``;
+    in place) as the loads changed by ``d.change`` demand: Δq̈ = W B(q) change, with the
+    stuck bristles held (`hold_sticks`), then the shifts of `ExactHold` (module
+    docstring)."""
     delta = d.delta
     response_into(d, q, delta)
+    if d.sticks.shape[0] > 0:
+        hold_sticks(d, q, v, data, delta)
     fq, fv, fa = d.factors[0], d.factors[1], d.factors[2]
     for i in range(q.shape[0]):
         q[i] += fq * delta[i]

@@ -169,7 +169,8 @@ class ExudynPlant(Plant):
             [*self._inputs, [(tip, "loadVector", (1.0, 0.0, 0.0))],
              [(tip, "loadVector", (0.0, 1.0, 0.0))]],
             [n for link in self.system.links for n in link.nodes]
-            if self.system.element == "ancf" else []) if exact_hold else None
+            if self.system.element == "ancf" else [],
+            self.system.joints.sticks(self.system.mbs)) if exact_hold else None
         self._applied = np.zeros(4)  # the loads held now: τ1, τ2, Fx, Fy
         #: The current loops' time constants and outputs (`reduced_model._joints.lag_step`).
         self._lag = np.array([p.torque_time_constant1, p.torque_time_constant2])
