@@ -146,7 +146,8 @@ def test_the_response_to_a_load_change_is_the_constrained_one(params, mesh):
 
 @pytest.mark.parametrize("breakaway, stuck", [((50.0, 50.0), (True, True)),
                                               ((0.5, 50.0), (False, True)),
-                                              ((0.5, 0.5), (False, False))])
+                                              ((0.5, 0.5), (False, False))],
+                         ids=["both-stuck", "joint1-breaks", "both-break"])
 def test_a_stuck_joint_takes_the_load_change_as_its_constraint_would(breakaway, stuck):
     """Both joints stuck by dry friction, the links ringing, then a load change (0.8 N m
     on joint 1, 0.6 on joint 2, a tip force): the hold restarts the step with the
