@@ -12,6 +12,10 @@ process.
   lab arm's friction (no drive), replayed on the truth plant at steps Ts, Ts/2, Ts/4
   against Ts/64: max |θ − θ_ref| before the first stick–slip transition of the reference
   run (a joint's velocity through zero) and over the whole run, and the observed orders.
+- **Stiction band** (issue 59): with the lab arm's friction, a constant torque of
+  ``BAND`` × breakaway on one joint for 5 s from rest, each plant at its default step: how
+  far the joint moves.  Target: the truth plant holds (≤ 1e-6 rad) wherever the reduced
+  plant's exact stick does, and slides wherever it slides.
 """
 from __future__ import annotations
 
@@ -22,13 +26,15 @@ import sys
 import numpy as np
 
 from _report import report, target
-from reduced_model import ArmParameters
+from plant_exudyn import ExudynPlant
+from reduced_model import ArmParameters, ReducedPlant
 from validation.run.loop import run_scenario
 from validation.run.replay import bare_replay
 from validation.run.scenario import scenario_from_mapping
 
 REPEATS = 3
 TS = 1e-3
+BAND = (0.99, 0.998, 0.999, 0.9999, 0.99999, 1.00001, 1.0001, 1.01)
 LOOP = {"duration": 5.0, "initial_state": "reference", "observer": {"kind": "smo-paper"},
         "sensors": {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}}
 _LAB = ArmParameters.lab()
@@ -89,6 +95,31 @@ def order_rows() -> list[dict]:
     return rows
 
 
+def band_rows() -> list[dict]:
+    params = ArmParameters(**_FRICTION)
+    rows = []
+    for joint in (1, 2):
+        for fraction in BAND:
+            torque = np.zeros(2)
+            torque[joint - 1] = fraction * params.static_friction(joint)
+            moved = {}
+            for kind, plant in (("reduced", ReducedPlant(params)),
+                                ("truth", ExudynPlant(params))):
+                plant.reset()
+                start = plant.truth_vector()[joint - 1]
+                largest = 0.0
+                for _ in range(int(round(5.0 / TS))):
+                    plant.advance(torque, TS)
+                    largest = max(largest, abs(plant.truth_vector()[joint - 1] - start))
+                moved[kind] = largest
+            holds = {kind: value <= 1e-6 for kind, value in moved.items()}
+            rows.append({"joint": joint, "x breakaway": f"{fraction:g}",
+                         "reduced (rad)": moved["reduced"], "truth (rad)": moved["truth"],
+                         "target": "as reduced",
+                         "met": "yes" if holds["truth"] == holds["reduced"] else "MISSED"})
+    return rows
+
+
 def main(repeats: int = REPEATS, order: bool = True) -> None:
     report("joints_cost", cost_rows(repeats),
            title=f"5 s closed loop (PBC + smo-paper), medians of {repeats} interleaved "
@@ -99,6 +130,11 @@ def main(repeats: int = REPEATS, order: bool = True) -> None:
                title="Replay error with the lab arm's friction against Ts/64 (max |theta - "
                      "theta_ref|, rad), truth plant ANCF 4 el/link, Ts = 1 ms",
                columns=["window", "err_Ts", "err_Ts/2", "err_Ts/4", "order", "target",
+                        "met"])
+        report("joints_stiction_band", band_rows(),
+               title="Largest joint motion in 5 s under a constant torque near breakaway, "
+                     "lab arm's friction, default steps",
+               columns=["joint", "x breakaway", "reduced (rad)", "truth (rad)", "target",
                         "met"])
 
 
