@@ -16,9 +16,10 @@ from ..batch.interrupts import Interrupted
 from ..batch.queue import run_planned
 from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore, StoreError, run_id
-from ..run.config import ConfigError, check_label
+from ..run.config import ConfigError, check_label, to_mapping
 from ..run.plants import is_truth
-from ..run.scenario import Scenario, default_transient, scenario_from_mapping
+from ..run.scenario import (PARAMETER_TABLES, Scenario, arm_parameters, default_transient,
+                            own_parameters, scenario_from_mapping)
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
 from ..verdicts.mesh import is_check
 
@@ -109,7 +110,7 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
         check_label(given, "name")
     if like:
         store, row = stored_run(like, "--like")
-        data = copy.deepcopy(row.config)
+        data = own_parameters(copy.deepcopy(row.config))  # over whichever arm is named
     elif args.config:
         study = load_study(args.config, name=given)
         data = deep_merge({}, study.base) | own_name(study)
@@ -137,17 +138,31 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
         from ..batch.fingerprint import run_fingerprint
         from ..run.scenario import scenario_to_mapping
         old, new = flatten(row.config), flatten(scenario_to_mapping(scenario))
-        changed = [f"{k} = {new.get(k)!r} (was {old.get(k)!r})" for k in sorted(old | new)
-                   if old.get(k) != new.get(k)]
+        changed = [k for k in sorted(old | new) if old.get(k) != new.get(k)]
+        followed = _following_the_arm(changed, new, row.config.get("arm"), scenario.arm)
+        changed = [f"{k} = {new.get(k)!r} (was {old.get(k)!r})" for k in changed
+                   if k not in followed]
+        follow = (f"; {len(followed)} value(s) of {' and '.join(PARAMETER_TABLES)} follow "
+                  f"the {scenario.arm} arm (those the stored run set itself are kept)"
+                  if followed else "")
         head = f"rerunning {row.run_id} ({row.name}, stored in {store.out}" \
                f"{_checks_note(store, row) if not is_check(row) else ''})"
         notes.append(head + (" exactly" if not changed else
-                             f" with {len(changed)} change(s): " + "; ".join(changed)))
+                             f" with {len(changed)} change(s): " + "; ".join(changed)) + follow)
         if row.fingerprint != run_fingerprint(row.config):
             notes.append("  it was stored by other code (its fingerprint differs): the "
                          "numbers may differ")
         args.like_row = None if changed else row
     return scenario, notes
+
+
+def _following_the_arm(changed: list[str], new: dict, old_arm: str, arm: str) -> set[str]:
+    """Of the dotted keys ``changed`` by a rerun with another arm, the parameter values
+    that are now the new arm's own (the physics that follows ``arm``)."""
+    if arm == old_arm:
+        return set()
+    values = flatten({t: to_mapping(arm_parameters(arm)) for t in PARAMETER_TABLES})
+    return {k for k in changed if k in values and new.get(k) == values[k]}
 
 
 _TABLE = [("status", "status", "{}"),
