@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run.config import ConfigError, check, check_label
+from ..run.config import ConfigError, check, check_known, check_label
 from ..run.scenario import (Scenario, check_scales_on_arm, scenario_from_mapping,
                             scenario_to_mapping)
 from .axes import draw_points, flatten_axes, numeric_field, random_axis
@@ -193,7 +193,7 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
         The campaign, its structure checked (its runs are checked by `expand`).
     """
     for key in data:
-        check(key in _TOP_KEYS, key, f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})")
+        check_known(key, _TOP_KEYS, key)
     name = data.get("name", Path(source).stem)
     check_label(name, "name")
     base = data.get("scenario", {})
@@ -213,21 +213,20 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
         where = f"sweep[{i}]"
         check(isinstance(sweep, dict), where, "must be a table")
         for key in sweep:
-            check(key in _SWEEP_KEYS, f"{where}.{key}",
-                  f"unknown key (allowed: {', '.join(sorted(_SWEEP_KEYS))})")
+            check_known(key, _SWEEP_KEYS, f"{where}.{key}")
         if "name" in sweep:
             check_label(sweep["name"], f"{where}.name")
     report = data.get("report", {})
     check(isinstance(report, dict), "report", "must be a table")
     for key in report:
-        check(key == "figures", f"report.{key}", "unknown key (allowed: figures)")
+        check_known(key, ("figures",), f"report.{key}")
     figures = report.get("figures", [])
     check(isinstance(figures, list) and all(isinstance(f, str) for f in figures),
           "report.figures", "must be a list of run names")
     attribution = data.get("attribution", {})
     check(isinstance(attribution, dict), "attribution", "must be a table")
     for key in attribution:
-        check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
+        check_known(key, ("factors",), f"attribution.{key}")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
                     description=str(data.get("description", "")), attribution=attribution,
                     uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}),
@@ -288,7 +287,8 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
     check(size <= MAX_RUNS, where, f"expands to {size} runs (at most {MAX_RUNS})")
     points = [dict(itertools.chain.from_iterable(d.items() for d in combo))
               for combo in itertools.product(*parts)]
-    check_scales_on_arm(scaled, {p["arm"] for p in points if isinstance(p.get("arm"), str)}, resolved_base)
+    arms = {p["arm"] for p in points if isinstance(p.get("arm"), str)}
+    check_scales_on_arm(scaled, arms, resolved_base)
     return points
 
 

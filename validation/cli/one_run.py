@@ -7,6 +7,7 @@ import copy
 import dataclasses
 import functools
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -85,10 +86,13 @@ def _checks_note(store, row) -> str:
 
 def auto_name(s: Scenario) -> str:
     """A run's name from what it is: controller (+ observer) @ plant, e.g.
-    "pbc+smo-paper@exudyn" (a plug-in by its class name)."""
-    law = lambda kind: kind.rsplit(":", 1)[-1]  # noqa: E731
-    observer = "" if s.observer.kind == "none" else "+" + law(s.observer.kind)
-    return f"{law(s.controller.kind)}{observer}@{law(s.plant.kind)}"
+    "pbc+smo-paper@exudyn": a law by its name (`laws.law_name`: a plug-in's own ``name``,
+    the one its failures give), a plug-in plant by its class name; what a name may not
+    hold (`check_label`) becomes "-"."""
+    from ..run.laws import law_name
+    observer = "" if s.observer.kind == "none" else "+" + law_name(s, "observer")
+    name = f"{law_name(s, 'controller')}{observer}@{s.plant.kind.rsplit(':', 1)[-1]}"
+    return re.sub(r"[^A-Za-z0-9._+@-]", "-", name).lstrip(".")[:100]
 
 
 def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
@@ -278,25 +282,27 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"{s.duration:g} s at Ts = {s.Ts:g} s, from {s.initial_state}")
     if s.true_params.joints_text():
         print(f"  the true arm's joints: {s.true_params.joints_text()}")
-    if result.message:
-        print(f"  {result.status}: {result.message}")
-    if result.status == "failed":
+    failed = result.status == "failed"
+    if result.message:  # a failure is the command's error: on stderr, like show's
+        print(f"  {result.status}: {result.message}", file=sys.stderr if failed else sys.stdout)
+    if failed:
         if frames := failure_frames(store, rid):
-            print(frames)
+            print(frames, file=sys.stderr)
         print(f"  no metrics: the run failed after {result.end_time or 0:g} of {s.duration:g} s "
-              "(a run that failed measures nothing)")
+              "(a run that failed measures nothing)", file=sys.stderr)
     else:
         units = {r.metric: r for r in s.requirement}
         print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS},
                              units))
     if getattr(args, "like_row", None) is not None and result.status == "ok":
         print(_compare_with_stored(args.like_row, metrics))
-    if truth and refinable:
+    # A run that failed has no numbers whose convergence a mesh check could tell.
+    if truth and refinable and (args.mesh_check or not failed):
         print("  " + (convergence_line(store, rid) if args.mesh_check else
                       f"convergence not checked: these are the FE model's numbers on "
                       f"{scenario.plant.discretisation()}; --mesh-check runs the same loop on "
                       "refined meshes and steps"))
-    elif truth:
+    elif truth and not failed:
         print(f"  convergence not checked: the {scenario.plant.label} declares no refinements "
               "(check its convergence yourself)")
     print(f"results: {path} (index and metrics.csv in {store.out})" + (

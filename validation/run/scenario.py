@@ -354,7 +354,8 @@ def scenario_from_mapping(data: dict) -> Scenario:
     >>> scenario_from_mapping({"plant": {"kind": "exudyn", "stepp": 1e-3}})
     Traceback (most recent call last):
         ...
-    validation.run.config.ConfigError: plant.stepp: unknown key for kind 'exudyn' (...)
+    validation.run.config.ConfigError: plant.stepp: unknown key for kind 'exudyn'; did you
+    mean plant.step? (...)
     """
     base = to_mapping(arm_parameters(data.get("arm", "default")))
     data = dict(data)

@@ -49,7 +49,7 @@ import numpy as np
 
 from ..batch.axes import RandomAxis, draw_points, flatten_axes, random_axis
 from ..batch.campaign import expand, load_study
-from ..run.config import ConfigError, check
+from ..run.config import ConfigError, check, check_known
 from ..run.plants import ROLES, plant_for_role
 from ..run.requirements import Requirement
 from ..run.scenario import (Scenario, check_scales_on_arm, own_parameters,
@@ -183,8 +183,7 @@ def _caveat(table: dict) -> str:
 
 def _settings(table: dict) -> VerifySettings:
     for key in table:
-        check(key in _SETTINGS, f"verify.{key}", f"unknown key (allowed: "
-                                                 f"{', '.join(sorted(_SETTINGS))})")
+        check_known(key, _SETTINGS, f"verify.{key}")
     numbers = {k: table[k] for k in ("level", "p0", "indifference", "alpha", "beta")
                if k in table}
     for key, value in numbers.items():
