@@ -114,7 +114,8 @@ def reading(db: sqlite3.Connection, metrics=None) -> tuple[str, dict]:
     have = [c[1] for c in db.execute("PRAGMA table_info(runs)")]
     if metrics is None:
         return f"*, {mistyped(have)} AS mistyped", sets
-    wanted = [m for m in dict.fromkeys(metrics) if "m:" + m in set(have)]
+    present = set(have)
+    wanted = [m for m in dict.fromkeys(metrics) if "m:" + m in present]
     sets = {i: s if isinstance(s, str) else tuple(n for n in s if n in wanted)
             for i, s in sets.items()}
     columns = [*FIXED, "metric_set", *map(metric_column, wanted)]
