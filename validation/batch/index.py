@@ -76,8 +76,9 @@ BUSY_TIMEOUT = 120.0
 RUN_ID = re.compile(r"[0-9a-f]{12}")
 
 
-#: The columns of a row that hold numbers (`mistyped`): the control period, the time the run
-#: ended (NULL: not known), and every metric's but those of `TEXT_METRICS` (NULL: NaN).
+#: The columns of a row that hold numbers or NULL (`mistyped`): the control period (NULL: a
+#: scenario without one), the time the run ended (NULL: not known), and every metric's but
+#: those of `TEXT_METRICS` (NULL: NaN).
 NUMBER_COLUMNS = ("Ts", "end_time")
 #: The metrics whose value is text (`validation.run.metrics.all_metrics`); every other
 #: metric is a number.
@@ -88,16 +89,16 @@ def mistyped(columns, *, value: bool = False) -> str:
     """The one check of the columns of a row that hold numbers: an SQL expression that
     every reader of them selects beside them — the name (or with ``value``, the value) of
     the first of those among ``columns`` (names, unquoted: `NUMBER_COLUMNS` and the
-    metrics' ``m:<name>``) whose value is not a number (NULL is one where a number may be
-    missing: all but ``Ts``), else NULL (`not_a_number` says it).  SQLite keeps whatever
+    metrics' ``m:<name>``) whose value is neither a number nor NULL (none given: a NaN, a
+    scenario without ``Ts``), else NULL (`not_a_number` says it).  SQLite keeps whatever
     it is given in a column: text in a metric's column is a damaged row, never a metric."""
     whens = []
     for name in columns:
         if name in NUMBER_COLUMNS or (name[:2] == "m:" and name[2:] not in TEXT_METRICS):
-            types = "'integer', 'real'" + ("" if name == "Ts" else ", 'null'")
             quoted, text = '"' + name.replace('"', '""') + '"', name.replace("'", "''")
             then = quoted if value else f"'{text}'"
-            whens.append(f"WHEN typeof({quoted}) NOT IN ({types}) THEN {then}")
+            whens.append(f"WHEN typeof({quoted}) NOT IN ('integer', 'real', 'null') "
+                         f"THEN {then}")
     return f"CASE {' '.join(whens)} END" if whens else "NULL"
 
 
