@@ -90,6 +90,7 @@ def _index_sound(store) -> bool:
         return False
     return sound
 
+
 def _unlike_their_files(store, rows) -> dict[str, str]:
     """Run id → the columns in which its index row differs from its run file, of ``rows``
     (rows whose file verifies): a reader takes from the row what the file says, or the
@@ -97,10 +98,11 @@ def _unlike_their_files(store, rows) -> dict[str, str]:
     names, layouts, unlike = store.column_names(), store.layouts(), {}
     for row in rows:
         try:
-            built, (fixed, m_names, m_values, a_names, a_values) = _file_row(store.out / row.file)
+            built, encoded = _file_row(store.out / row.file)
         except NotARunFile as exc:
             unlike[row.run_id] = str(exc)
             continue
+        fixed, m_names, m_values, a_names, a_values = encoded
         (held,) = store.columns(["*"], where="run_id = ?", params=(row.run_id,))
         held = dict(zip(names, held))
         want = {**dict(zip(FIXED, fixed)), **{"m:" + n: v for n, v in zip(m_names, m_values)},

@@ -27,8 +27,7 @@ __all__ = [
     "Scenario", "PlantTable", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
     "SensorSpec", "DisturbanceSpec", "DivergenceSpec", "check_scenario",
     "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "own_parameters",
-    "check_scales_on_arm",
-    "PLANT_KINDS", "ARMS",
+    "check_scales_on_arm", "PARAMETER_TABLES", "PLANT_KINDS", "ARMS",
     "PAPER_ARMS",
     "DEFAULT_TRANSIENT", "default_transient",
 ]
