@@ -177,9 +177,42 @@ def test_a_failed_run_names_no_window_and_no_figures(tmp_path, capsys, plugin_la
                                "        return np.zeros(3)\n"})
     assert main(["run", "--controller", "wronglab:Wrong", "--duration", "1",
                  "--out", str(tmp_path)]) == 1
-    out = capsys.readouterr().out
-    assert "no metrics: the run failed after 0 of 1 s" in out
+    printed = capsys.readouterr()
+    out = printed.out + printed.err
+    assert "no metrics: the run failed after 0 of 1 s" in printed.err
     assert "0.5–0 s" not in out and "real-time factor" not in out and "flexarm show" not in out
+
+
+RAISING = """import numpy as np
+
+
+class JointPD:
+    name = "mypd"
+
+    def __init__(self, model, *, Ts):
+        pass
+
+    def __call__(self, t, x, ref):
+        raise RuntimeError("gain table missing")
+"""
+
+
+def test_a_failing_plugin_is_named_as_written_and_said_on_stderr(tmp_path, capsys,
+                                                                   plugin_lab):
+    """Issue 58: the failure went to stdout only (stderr empty), the run was labelled
+    "JointPD@exudyn" while the error said "mypd", and a failed truth-plant run was still
+    advised to check its convergence (--mesh-check)."""
+    from validation.batch.store import ResultStore
+    plugin_lab({"mypdlab.py": RAISING})
+    assert main(["run", "--controller", "mypdlab:JointPD", "--plant", "exudyn",
+                 "--duration", "0.05", "--out", str(tmp_path)]) == 1
+    printed = capsys.readouterr()
+    assert "failed: mypd raised RuntimeError: gain table missing at t = 0 s" in printed.err
+    assert "mypdlab.py:11 in __call__" in printed.err and "failed" not in printed.out
+    assert printed.out.startswith("mypd@exudyn: mypdlab:JointPD on the exudyn plant")
+    assert "convergence" not in printed.out + printed.err
+    (row,) = ResultStore(tmp_path).rows()
+    assert row.name == "mypd@exudyn"
 
 
 def test_run_config_takes_a_campaigns_scenario_base(tmp_path, capsys):

@@ -254,8 +254,9 @@ def test_flexarm_run_and_show_print_where_a_plugin_raised(plugin_dir):
                    "--out", str(out))
     assert proc.returncode == 1, proc.stderr
     where = f'File "{plugin_dir / "mylab_plugins.py"}", line {line}, in __call__'
-    assert where in proc.stdout and f"mylab_plugins.py:{line} in __call__" in proc.stdout
-    assert "no metrics: the run failed after 0.5 of 1 s" in proc.stdout
+    # The failure is the command's error: on stderr, as show prints it (issue 58).
+    assert where in proc.stderr and f"mylab_plugins.py:{line} in __call__" in proc.stderr
+    assert "no metrics: the run failed after 0.5 of 1 s" in proc.stderr
     assert "max |θ1 − θ1d|" not in proc.stdout  # no table measured over 1 ms of a failure
     (row,) = ResultStore(out).rows()
     assert f"mylab_plugins.py:{line} in __call__" in row.message

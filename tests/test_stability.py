@@ -401,6 +401,9 @@ def test_a_growing_run_is_diverging_before_it_leaves_the_bounds():
     ("[stability]\ntolerance = 0.9\n", [], "stability.tolerance"),
     ('[stability]\ntolerance = "1 %"\n', [], "stability.tolerance"),
     ("[stability]\ntol = 0.01\n", [], "stability.tol: unknown key"),
+    # the file's value is checked when the flag wins too (issue 59: it was ignored, exit 0)
+    ("[stability]\ntolerance = 7\n", ["--tolerance", "0.05"], "stability.tolerance"),
+    ("[stability]\ntolerance = 0.05\n", ["--tolerance", "7"], "--tolerance"),
 ])
 def test_a_bad_tolerance_is_refused_in_one_line_writing_nothing(tmp_path, capsys, text,
                                                                  flag, where):

@@ -464,7 +464,8 @@ def test_run_ids_read_from_the_index_never_name_a_path(folder):
                        "flexarm repair")
     done = flexarm("repair", out)
     assert done.returncode == 0, done.stderr
-    assert f"dropped: 1 ({crafted!r} (not a stored run))" in done.stdout
+    assert f"dropped: 1 ({crafted!r} (not a stored run: its id must be 12 hex digits" \
+        in done.stdout
     assert (victim_dir / "precious.npz").read_text() == "precious"  # untouched
     assert sorted(p.name for p in victim_dir.iterdir()) == ["precious.npz"]
     assert {r.run_id for r in ResultStore(out).rows()} == set(metrics)  # re-adopted

@@ -181,6 +181,25 @@ CASES = [
                  marks=pytest.mark.slow),
     (["run", "--set", "disturbances=[{kind = 'step', start = inf}]"],
      "disturbances[0].start: must be finite, got inf"),
+    # Issue 58: typos got no suggestion (config.did_you_mean, difflib's closest match).
+    (["run", "--set", "true_params.coulom1=0.1"],
+     "true_params.coulom1: unknown key; did you mean true_params.coulomb1?"),
+    (["run", "--set", "durration=1"], "durration: unknown key; did you mean duration?"),
+    (["run", "--set", "plant.stepp=1e-4"], "did you mean plant.step?"),
+    (["run", "--set", 'plant.kind="exudin"'], "got 'exudin'; did you mean 'exudyn'?"),
+    (["run", "--set", 'arm="lba"'], ("arm: must be one of", "did you mean 'lab'?")),
+    (["run", "--arm", "lba"], ("--arm: invalid choice: 'lba'", "did you mean 'lab'?")),
+    (["reproduce-paper", "--no-stabilty"],
+     "unrecognized arguments: --no-stabilty; did you mean --no-stability?"),
+    (["run", "--duraton", "3"], "unrecognized arguments: --duraton 3; did you mean --duration?"),
+    (["stability", "{tmp}/ok.toml", "--tolerance", "5%"],
+     "--tolerance: expected a number, got '5%'; did you mean 0.05?"),
+    (["stability", "{tmp}/tolerance-percent.toml"],
+     ("stability.tolerance: must be a relative width", "not '5 %'; did you mean 0.05?")),
+    (["campaign", "{tmp}/sweep-typo.toml"], "sweep[0].grdi: unknown key; did you mean "
+                                            "sweep[0].grid?"),
+    (["run", "--set", 'requirement=[{name = "r", claim = "trackin"}]'],
+     ("unknown claim 'trackin'", "did you mean 'tracking'?")),
 ]
 
 
@@ -195,7 +214,9 @@ def scratch(tmp_path):
              "loguniform-inf.toml": RANDOM.format("loguniform = [1.0, inf]"),
              "axis-name.toml": CAMPAIGN_AXIS_NAME, "baseline-no-op.toml": BASELINE_NO_OP,
              "a-file": "not a folder", "slash-name.toml": SLASH_NAME,
-             "nameless-requirement.toml": NAMELESS_REQUIREMENT}
+             "nameless-requirement.toml": NAMELESS_REQUIREMENT,
+             "tolerance-percent.toml": '[stability]\ntolerance = "5 %"\n',
+             "sweep-typo.toml": 'name = "x"\n[[sweep]]\ngrdi.seed = [1]\n'}
     for name, text in files.items():
         (tmp_path / name).write_text(text)
     return tmp_path

@@ -200,7 +200,7 @@ def test_sys_exit_in_the_plugin_run_by_flexarm_run_is_not_success(lab, tmp_path)
                    "transient=0.1", "--out", str(tmp_path / "out"))
     stdout, stderr = proc.communicate(timeout=300)
     assert proc.returncode == 1 and "Traceback" not in stderr, stderr
-    assert "failed: the run called sys.exit(0)" in stdout
+    assert "failed: the run called sys.exit(0)" in stderr  # a failure: on stderr
     (row,) = ResultStore(tmp_path / "out").rows()
     assert row.status == "failed" and "sys.exit(0)" in row.message
     assert wait_gone(proc.pid)
@@ -331,7 +331,7 @@ def test_a_helper_process_of_a_stopped_run_is_stopped_with_it(tmp_path):
                    "--run-timeout", str(run_timeout()))
     stdout, stderr = proc.communicate(timeout=300)
     assert proc.returncode == 1, stderr
-    assert "no result after" in stdout
+    assert "no result after" in stderr
     helper = int((tmp_path / "helper.pid").read_text())
     deadline = time.time() + 10
     while time.time() < deadline and os.path.exists(f"/proc/{helper}"):

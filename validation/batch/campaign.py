@@ -36,16 +36,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run.config import ConfigError, check, check_label
-from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
+from ..run.config import ConfigError, check, check_known, check_label
+from ..run.scenario import (Scenario, check_scales_on_arm, scenario_from_mapping,
+                            scenario_to_mapping)
+from .axes import draw_points, flatten_axes, numeric_field, random_axis
 from .runfiles import KEEP_ALL, Keep, keep_from_mapping
 from .store import run_id
-from ..run.tomlfiles import deep_merge, flatten, get_dotted, load_toml, set_dotted
+from ..run.tomlfiles import deep_merge, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "own_name", "is_campaign",
            "CAMPAIGN_KEYS", "campaign_from_mapping", "expand", "MAX_RUNS", "run_name",
-           "check_run_name", "RandomAxis", "random_axis", "draw_points", "flatten_axes",
-           "campaign_keep"]
+           "check_run_name", "campaign_keep"]
 
 #: The most runs one campaign may expand to (a typo in a random sweep should not hang the
 #: machine listing a million runs).
@@ -54,7 +55,6 @@ MAX_RUNS = 100_000
 _TOP_KEYS = {"name", "description", "include", "scenario", "sweep", "report", "attribution",
              "requirement", "uncertainty", "verify", "calibrate", "keep", "stability"}
 _SWEEP_KEYS = {"name", "grid", "zip", "random"}
-_SPEC_KEYS = {"scale", "uniform", "loguniform", "choices", "also"}
 #: Sections a scenario file may have too (``flexarm verify`` reads ``[uncertainty]`` and
 #: ``[verify]``, ``calibrate`` ``[calibrate]``, ``stability`` ``[stability]``).
 _VERIFY_KEYS = ("uncertainty", "verify", "calibrate", "stability")
@@ -193,7 +193,7 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
         The campaign, its structure checked (its runs are checked by `expand`).
     """
     for key in data:
-        check(key in _TOP_KEYS, key, f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})")
+        check_known(key, _TOP_KEYS, key)
     name = data.get("name", Path(source).stem)
     check_label(name, "name")
     base = data.get("scenario", {})
@@ -213,21 +213,20 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
         where = f"sweep[{i}]"
         check(isinstance(sweep, dict), where, "must be a table")
         for key in sweep:
-            check(key in _SWEEP_KEYS, f"{where}.{key}",
-                  f"unknown key (allowed: {', '.join(sorted(_SWEEP_KEYS))})")
+            check_known(key, _SWEEP_KEYS, f"{where}.{key}")
         if "name" in sweep:
             check_label(sweep["name"], f"{where}.name")
     report = data.get("report", {})
     check(isinstance(report, dict), "report", "must be a table")
     for key in report:
-        check(key == "figures", f"report.{key}", "unknown key (allowed: figures)")
+        check_known(key, ("figures",), f"report.{key}")
     figures = report.get("figures", [])
     check(isinstance(figures, list) and all(isinstance(f, str) for f in figures),
           "report.figures", "must be a list of run names")
     attribution = data.get("attribution", {})
     check(isinstance(attribution, dict), "attribution", "must be a table")
     for key in attribution:
-        check(key == "factors", f"attribution.{key}", "unknown key (allowed: factors)")
+        check_known(key, ("factors",), f"attribution.{key}")
     return Campaign(name=name, base=base, sweeps=tuple(sweeps), report=report,
                     description=str(data.get("description", "")), attribution=attribution,
                     uncertainty=data.get("uncertainty", {}), verify=data.get("verify", {}),
@@ -236,28 +235,11 @@ def campaign_from_mapping(data: dict, *, source: str = "campaign") -> Campaign:
 
 
 # --- expansion --------------------------------------------------------------------------------
-def flatten_axes(table: dict) -> dict[str, object]:
-    """Sweep (or uncertainty) axes by dotted key; a table whose keys are a value spec
-    (scale, uniform, …) is one axis."""
-    return flatten(table, leaf=lambda value: bool(set(value) & _SPEC_KEYS))
-
-
-def _numeric_field(resolved_base: dict, path: str, where: str):
-    """The base scenario's value at ``path``, which a ``scale`` axis multiplies: a number."""
-    try:
-        value = get_dotted(resolved_base, path)
-    except KeyError:
-        raise ConfigError(where, f"{path} is not a scenario field") from None
-    check(isinstance(value, (int, float)) and not isinstance(value, bool), where,
-          f"scale needs a numeric field, {path} is {value!r}")
-    return value
-
-
 def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
     """The list of values of a grid or zip axis."""
     if isinstance(spec, dict):
         check(set(spec) == {"scale"}, where, "a grid/zip axis is a list or {scale = [...]}")
-        base_value = _numeric_field(resolved_base, path, where)
+        base_value = numeric_field(resolved_base, path, where)
         factors = spec["scale"]
         check(isinstance(factors, list) and factors and all(
             isinstance(f, (int, float)) and not isinstance(f, bool) for f in factors), where,
@@ -268,113 +250,13 @@ def _axis_values(path: str, spec, resolved_base: dict, where: str) -> list:
     return list(spec)
 
 
-@dataclass(frozen=True)
-class RandomAxis:
-    """A random axis of a sweep or of an uncertainty set (`validation.verdicts.uncertainty`):
-    ``{uniform = [lo, hi]}``, ``{loguniform = [lo, hi]}`` or ``{choices = [...]}``; a
-    distribution under ``scale`` (``{scale = {uniform = [0.7, 1.3]}}``) draws a factor of
-    each field's base value; ``also = ["other.field", ...]`` gives the same draw to
-    other fields (one noise level for every sensor).  `sample` draws seeded values,
-    `from_unit` maps u ∈ [0, 1] onto the distribution (the searches), `assign` turns
-    one draw into field values."""
-
-    path: str
-    kind: str  # "uniform" | "loguniform" | "choices"
-    arg: tuple  # (low, high), or the choices
-    also: tuple[str, ...] = ()
-    base: tuple | None = None  # the fields' base values when the draw is a factor
-
-    @property
-    def paths(self) -> tuple[str, ...]:
-        return (self.path, *self.also)
-
-    def sample(self, rng: np.random.Generator, n: int) -> list:
-        """``n`` draws (the campaign's random sweeps have always drawn exactly these)."""
-        if self.kind == "choices":
-            return [self.arg[i] for i in rng.integers(0, len(self.arg), n)]
-        lo, hi = self.arg
-        if self.kind == "uniform":
-            return [float(v) for v in rng.uniform(lo, hi, n)]
-        return [float(v) for v in np.exp(rng.uniform(math.log(lo), math.log(hi), n))]
-
-    def from_unit(self, u: float):
-        """The draw at quantile-like position ``u`` ∈ [0, 1] (uniform in the axis's own
-        measure: linear, logarithmic, or equal shares of the choices)."""
-        u = min(max(float(u), 0.0), 1.0)
-        if self.kind == "choices":
-            return self.arg[min(int(u * len(self.arg)), len(self.arg) - 1)]
-        lo, hi = self.arg
-        if self.kind == "uniform":
-            return lo + (hi - lo) * u
-        return math.exp(math.log(lo) + (math.log(hi) - math.log(lo)) * u)
-
-    def assign(self, draw) -> dict:
-        """{field path: value} of one draw."""
-        if self.base is None:
-            return {p: draw for p in self.paths}
-        return {p: b * draw for p, b in zip(self.paths, self.base)}
-
-    def describe(self) -> str:
-        dist = (f"one of {list(self.arg)}" if self.kind == "choices" else
-                f"{self.kind} [{self.arg[0]:g}, {self.arg[1]:g}]")
-        what = ", ".join(self.paths)
-        return f"{what}: {'× ' if self.base is not None else ''}{dist}"
-
-
-def random_axis(path: str, spec, resolved_base: dict, where: str) -> RandomAxis:
-    """Parse one random axis (`RandomAxis`); ConfigError naming ``where``."""
-    check(isinstance(spec, dict), where, "a random axis is {uniform = [lo, hi]}, "
-                                         "{loguniform = [lo, hi]} or {choices = [...]}")
-    spec = dict(spec)
-    also = spec.pop("also", [])
-    check(isinstance(also, list) and all(isinstance(a, str) for a in also), f"{where}.also",
-          "must be a list of scenario fields")
-    scaled = "scale" in spec
-    if scaled:
-        check(set(spec) == {"scale"} and isinstance(spec["scale"], dict), where,
-              "a scaled random axis is {scale = {uniform = [lo, hi]}} (or loguniform, choices)")
-        spec = spec["scale"]
-    check(len(spec) == 1 and set(spec) <= {"uniform", "loguniform", "choices"}, where,
-          "a random axis is {uniform = [lo, hi]}, {loguniform = [lo, hi]} or {choices = [...]}")
-    (kind, arg), = spec.items()
-    if kind == "choices":
-        check(isinstance(arg, list) and arg, where, "choices must be a non-empty list")
-    else:
-        check(isinstance(arg, list) and len(arg) == 2 and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in arg)
-            and arg[0] <= arg[1], where, f"{kind} needs [low, high] with low <= high")
-        check(math.isfinite(arg[0]) and math.isfinite(arg[1])
-              and math.isfinite(arg[1] - arg[0]), where,
-              f"{kind} needs finite bounds less than 1.8e308 apart, got {arg!r}")
-        check(kind == "uniform" or arg[0] > 0, where, "loguniform needs low > 0")
-    base = None
-    if scaled:
-        base = []
-        for p in (path, *also):
-            base.append(_numeric_field(resolved_base, p, where))
-        check(kind != "choices" or all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                       for v in arg), where, "scale choices must be numbers")
-        base = tuple(base)
-    return RandomAxis(path, kind, tuple(arg), tuple(also), base)
-
-
-def draw_points(axes: list[RandomAxis], samples: int, rng: np.random.Generator) -> list[dict]:
-    """``samples`` points {field path: value} drawn from ``rng``, axis by axis in order."""
-    columns = [axis.sample(rng, samples) for axis in axes]
-    points = []
-    for i in range(samples):
-        point = {}
-        for axis, column in zip(axes, columns):
-            point |= axis.assign(column[i])
-        points.append(point)
-    return points
-
-
 def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
     """Every combination of one sweep's axes: list of {path: value}."""
     grid = flatten_axes(sweep.get("grid", {}))
     zipped = flatten_axes(sweep.get("zip", {}))
     random = dict(sweep.get("random", {}))
+    scaled = {p: f"{where}.{part}.{p}" for part, axes in (("grid", grid), ("zip", zipped))
+              for p, v in axes.items() if isinstance(v, dict)}
     grid_axes = [(p, _axis_values(p, v, resolved_base, f"{where}.grid.{p}"))
                  for p, v in grid.items()]
     size = math.prod(len(vals) for _, vals in grid_axes)
@@ -400,10 +282,14 @@ def _sweep_points(sweep: dict, resolved_base: dict, where: str) -> list[dict]:
         parsed = [random_axis(p, v, resolved_base, f"{where}.random.{p}")
                   for p, v in sorted(axes.items())]
         parts.append(draw_points(parsed, samples, np.random.default_rng(seed)))
+        scaled |= {p: f"{where}.random.{a.path}" for a in parsed if a.base for p in a.paths}
     size = math.prod(len(p) for p in parts)
     check(size <= MAX_RUNS, where, f"expands to {size} runs (at most {MAX_RUNS})")
-    return [dict(itertools.chain.from_iterable(d.items() for d in combo))
-            for combo in itertools.product(*parts)]
+    points = [dict(itertools.chain.from_iterable(d.items() for d in combo))
+              for combo in itertools.product(*parts)]
+    arms = {p["arm"] for p in points if isinstance(p.get("arm"), str)}
+    check_scales_on_arm(scaled, arms, resolved_base)
+    return points
 
 
 def expand(campaign: Campaign) -> list[PlannedRun]:

@@ -32,7 +32,9 @@ __all__ = ["INDEX_NAME", "SCHEMA", "SCHEMA_VERSION", "FIXED", "BUSY_TIMEOUT", "r
            "is_run_id", "set_wal", "transaction", "insert_rows", "row_values",
            "finite_or_none", "metric_values", "RUN_ID", "set_aside", "metric_column",
            "axis_column", "encode_detail", "decode_detail", "dictionary_key", "json_table",
-           "STATUS", "scenario_columns", "MAX_COLUMNS", "open_read_only"]
+           "STATUS", "scenario_columns", "MAX_COLUMNS", "open_read_only", "NUMBER_COLUMNS",
+           "TEXT_METRICS", "mistyped", "not_a_number", "detail_rest", "layout", "metric_sets",
+           "reading"]
 
 INDEX_NAME = "index.sqlite"
 SCHEMA_VERSION = 2
@@ -72,6 +74,79 @@ MAX_COLUMNS = 1900
 BUSY_TIMEOUT = 120.0
 #: What `run_id` makes: 12 lowercase hex digits.
 RUN_ID = re.compile(r"[0-9a-f]{12}")
+
+
+#: The columns of a row that hold numbers or NULL (`mistyped`): the control period (NULL: a
+#: scenario without one), the time the run ended (NULL: not known), and every metric's but
+#: those of `TEXT_METRICS` (NULL: NaN).
+NUMBER_COLUMNS = ("Ts", "end_time")
+#: The metrics whose value is text (`validation.run.metrics.all_metrics`); every other
+#: metric is a number.
+TEXT_METRICS = frozenset({"status", "est_worse", "est_worse_zero"})
+
+
+def mistyped(columns, *, value: bool = False) -> str:
+    """The one check of the columns of a row that hold numbers: an SQL expression that
+    every reader of them selects beside them — the name (or with ``value``, the value) of
+    the first of those among ``columns`` (names, unquoted: `NUMBER_COLUMNS` and the
+    metrics' ``m:<name>``) whose value is neither a number nor NULL (none given: a NaN, a
+    scenario without ``Ts``), else NULL (`not_a_number` says it).  SQLite keeps whatever
+    it is given in a column: text in a metric's column is a damaged row, never a metric."""
+    whens = []
+    for name in columns:
+        if name in NUMBER_COLUMNS or (name[:2] == "m:" and name[2:] not in TEXT_METRICS):
+            quoted, text = '"' + name.replace('"', '""') + '"', name.replace("'", "''")
+            then = quoted if value else f"'{text}'"
+            whens.append(f"WHEN typeof({quoted}) NOT IN ('integer', 'real', 'null') "
+                         f"THEN {then}")
+    return f"CASE {' '.join(whens)} END" if whens else "NULL"
+
+
+def not_a_number(column: str, value) -> str:
+    """Why a row whose ``column`` holds ``value`` (`mistyped`) is not a stored run."""
+    return f"its {column} holds {str(value)[:20]!r}, not a number"
+
+
+def reading(db: sqlite3.Connection, metrics=None) -> tuple[str, dict]:
+    """What a reader of whole rows selects: (the columns — every one, or the fixed ones
+    and the ``metrics`` named — then their `mistyped` as ``mistyped``, as SQL; metric set
+    id → the metric names of its layout among those read, or why the set is damaged)."""
+    sets = {i: s if isinstance(s, str) else s[1] for i, s in metric_sets(db).items()}
+    have = [c[1] for c in db.execute("PRAGMA table_info(runs)")]
+    if metrics is None:
+        return f"*, {mistyped(have)} AS mistyped", sets
+    present = set(have)
+    wanted = [m for m in dict.fromkeys(metrics) if "m:" + m in present]
+    sets = {i: s if isinstance(s, str) else tuple(n for n in s if n in wanted)
+            for i, s in sets.items()}
+    columns = [*FIXED, "metric_set", *map(metric_column, wanted)]
+    return f"{', '.join(columns)}, {mistyped([*FIXED, *('m:' + m for m in wanted)])} " \
+           "AS mistyped", sets
+
+
+def layout(names) -> tuple[tuple, tuple]:
+    """(swept names, metric names) of a ``metric_sets`` row's ``names``; ValueError unless
+    it is what the store writes there: ``[[names...], [names...]]``."""
+    try:
+        value = json.loads(names)
+    except (TypeError, ValueError):
+        value = None
+    if not (isinstance(value, list) and len(value) == 2 and all(
+            isinstance(part, list) and all(isinstance(n, str) for n in part) for part in value)):
+        raise ValueError(f"names {str(names)[:40]!r} is not [[swept names], [metric names]]")
+    return tuple(value[0]), tuple(value[1])
+
+
+def metric_sets(db: sqlite3.Connection) -> dict[int, tuple[tuple, tuple] | str]:
+    """Each row of table ``metric_sets``: its id → its layout (`layout`), or why it is
+    damaged (naming the table and the row)."""
+    out = {}
+    for i, names in db.execute("SELECT id, names FROM metric_sets"):
+        try:
+            out[i] = layout(names)
+        except ValueError as exc:
+            out[i] = f"table metric_sets, row {i}: {exc}"
+    return out
 
 
 def is_run_id(text) -> bool:
@@ -161,10 +236,7 @@ def row_values(row: dict, dictionary: bytes = b"") -> tuple:
     """A run's row as the index stores it (done where the run was made: the process
     inserting rows only inserts them): (`FIXED` values, metric names, metric values,
     swept names, swept values)."""
-    rest = {"axes": row["axes"], "timings": row["timings"], "environment": row["environment"]}
-    if row.get("kept"):
-        rest["kept"] = row["kept"]
-    detail = encode_detail(row["scenario"], rest, dictionary)
+    detail = encode_detail(row["scenario"], detail_rest(row), dictionary)
     fixed = (row["run_id"], row["name"], row["campaign"], row["sweep"], row["status"],
              row["message"], row["end_time"], row["fingerprint"],
              *scenario_columns(row["scenario"]), dictionary_key(dictionary), detail,
@@ -177,6 +249,14 @@ def row_values(row: dict, dictionary: bytes = b"") -> tuple:
     axes = {k: json.dumps(v) if isinstance(v, (list, dict)) else str(v)
             if isinstance(v, bool) else v for k, v in row["axes"].items()}
     return fixed, tuple(metrics), tuple(metrics.values()), tuple(axes), tuple(axes.values())
+
+
+def detail_rest(row: dict) -> dict:
+    """What a run's detail holds beside its scenario (`encode_detail`'s ``rest``)."""
+    rest = {"axes": row["axes"], "timings": row["timings"], "environment": row["environment"]}
+    if row.get("kept"):
+        rest["kept"] = row["kept"]
+    return rest
 
 
 def _columns(db: sqlite3.Connection) -> set[str]:

@@ -16,7 +16,7 @@ import operator
 from dataclasses import dataclass, field
 
 from ..run.results import STATUSES
-from .index import decode_detail, is_run_id, json_table
+from .index import decode_detail, is_run_id, json_table, not_a_number
 
 __all__ = ["StoredRun", "Detail", "records", "metric_matrix"]
 
@@ -158,17 +158,21 @@ def _picker(index: list[int]):
 
 
 def records(cursor, sets: dict, dictionary):
-    """(run id, `StoredRun` or why the row is not one) of each row of ``cursor`` (a
-    ``SELECT *`` of the index's runs); ``sets``: metric set id → metric names;
-    ``dictionary``: key → the preset dictionary of a detail."""
+    """(run id, `StoredRun` or why the row is not one) of each row of ``cursor`` (what
+    `index.reading` selects of the index's runs); ``sets``: metric set id → metric names,
+    or why the set is damaged; ``dictionary``: key → the preset dictionary of a detail."""
     columns = [d[0] for d in cursor.description]
     position = {c: i for i, c in enumerate(columns)}
     record = operator.itemgetter(*(position[f] for f in _RECORD_FIELDS))
-    at = {f: position[f] for f in ("metric_set", "dictionary", "detail")}
+    at = {f: position[f] for f in ("metric_set", "dictionary", "detail", "mistyped")}
     pickers: dict = {}
     for values in cursor:
         try:
-            names = sets[values[at["metric_set"]]]
+            names, wrong = sets[values[at["metric_set"]]], values[at["mistyped"]]
+            if isinstance(names, str):
+                raise ValueError(f"its metric set is damaged: {names}")
+            if wrong is not None:
+                raise ValueError(not_a_number(wrong, values[position[wrong]]))
             if names not in pickers:
                 pickers[names] = _picker([position["m:" + n] for n in names])
             row = object.__new__(StoredRun)  # frozen: no __setattr__ per field (3x faster)

@@ -4,13 +4,14 @@ only the store's public methods."""
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 from pathlib import Path
 
 from ..run.results import RunResult
 from .errors import NotARunFile, StoreError
-from .index import (FIXED, INDEX_NAME, decode_detail, is_run_id, row_values, run_id,
-                    set_aside)
+from .index import (FIXED, INDEX_NAME, decode_detail, detail_rest, is_run_id, metric_sets,
+                    row_values, run_id, set_aside)
 from .runfiles import run_row
 
 __all__ = ["repair", "adopt", "MAX_RUN_BYTES"]
@@ -47,10 +48,13 @@ def repair(store) -> dict[str, list[str]]:
         if not odd:
             report["salvaged"] = _salvage(store, kept)
     store.prepare()
-    bad = [rid for rid, row in store.scan() if isinstance(row, str)]
+    bad = {rid: row for rid, row in store.scan() if isinstance(row, str)}
     store.discard(bad)  # no path is built from them: their ids may be anything
-    report["dropped"] += [f"{str(rid)[:40]!r} (not a stored run)" for rid in bad]
+    report["dropped"] += [f"{str(rid)[:40]!r} (not a stored run: {why})"
+                          for rid, why in bad.items()]
     damaged = store.verify()
+    damaged |= _unlike_their_files(store, [r for r in store.rows()
+                                           if r.has_file and r.run_id not in damaged])
     store.discard(damaged)  # the file, if intact, is adopted below
     report["dropped"] += [f"{rid} ({why})" for rid, why in damaged.items()]
     for path in store.run_files():
@@ -86,10 +90,48 @@ def _index_sound(store) -> bool:
         return False
     return sound
 
-def adopt(store, path: Path):
-    """Index a run file that has no row (its metadata holds everything); `NotARunFile` if
-    it is not a readable run file, or its scenario does not hash to its name."""
-    path = Path(path)
+
+def _unlike_their_files(store, rows) -> dict[str, str]:
+    """Run id → the columns in which its index row differs from its run file, of ``rows``
+    (rows whose file verifies): a reader takes from the row what the file says, or the
+    row is rebuilt from the file."""
+    names, layouts, unlike = store.column_names(), store.layouts(), {}
+    for row in rows:
+        try:
+            built, encoded = _file_row(store.out / row.file)
+        except NotARunFile as exc:
+            unlike[row.run_id] = str(exc)
+            continue
+        fixed, m_names, m_values, a_names, a_values = encoded
+        (held,) = store.columns(["*"], where="run_id = ?", params=(row.run_id,))
+        held = dict(zip(names, held))
+        want = {**dict(zip(FIXED, fixed)), **{"m:" + n: v for n, v in zip(m_names, m_values)},
+                **{"a:" + n: v for n, v in zip(a_names, a_values)}}
+        wrong = [c for c, v in want.items() if c not in ("dictionary", "detail")
+                 and not _same(held.get(c, ...), v)]
+        if layouts.get(held["metric_set"]) != (a_names, m_names):
+            wrong.append("metric_set")
+        try:
+            rest = row.detail.decoded()[1]
+        except ValueError:
+            rest = None
+        if rest != json.loads(json.dumps(detail_rest(built))):
+            wrong.append("detail")
+        if wrong:
+            unlike[row.run_id] = f"its row differs from its file: {', '.join(wrong[:4])}" \
+                                 f"{', ...' if len(wrong) > 4 else ''}"
+    return unlike
+
+
+def _same(held, value) -> bool:
+    """Whether an index column holds ``value`` (NULL for a NaN, which SQLite cannot hold)."""
+    return held == value or (held is None and isinstance(value, float) and math.isnan(value))
+
+
+def _file_row(path: Path) -> tuple[dict, tuple]:
+    """(the index row, its encoding: `row_values`) that run file ``path`` makes;
+    `NotARunFile` if it is not a readable run file, or its scenario does not hash to its
+    name."""
     if not is_run_id(path.stem):
         raise NotARunFile(f"{path.name} is not named by a run id")
     try:  # a FIFO, a device or a sparse giant is never read
@@ -107,7 +149,14 @@ def adopt(store, path: Path):
     if not isinstance(result.config, dict) or run_id(result.config) != path.stem:
         raise NotARunFile(f"its scenario does not hash to its name {path.stem} (a copy of "
                           "another run's file?)")
-    store.insert([values])
+    return row, values
+
+
+def adopt(store, path: Path):
+    """Index a run file that has no row (its metadata holds everything); `NotARunFile` if
+    it is not a readable run file, or its scenario does not hash to its name."""
+    path = Path(path)
+    store.insert([_file_row(path)[1]])
     return store.row(path.stem)
 
 
@@ -118,7 +167,7 @@ def _salvage(store, damaged: Path) -> list[str]:
     try:
         db = sqlite3.connect(f"{damaged.resolve().as_uri()}?mode=ro", uri=True)
         try:
-            sets = {i: json.loads(n) for i, n in db.execute("SELECT * FROM metric_sets")}
+            sets = {i: s for i, s in metric_sets(db).items() if not isinstance(s, str)}
             dictionaries = dict(db.execute("SELECT key, data FROM dictionaries"))
             cursor = db.execute("SELECT * FROM runs WHERE file = ''")
             names = [d[0] for d in cursor.description]
@@ -127,7 +176,7 @@ def _salvage(store, damaged: Path) -> list[str]:
                 try:
                     scenario, _ = decode_detail(row["detail"], dictionaries[row["dictionary"]]
                                                 if row["dictionary"] else b"")
-                    a_names, m_names = (tuple(part) for part in sets[row["metric_set"]])
+                    a_names, m_names = sets[row["metric_set"]]
                 except (KeyError, ValueError):
                     continue
                 if not is_run_id(row["run_id"]) or run_id(json.loads(scenario)) != row["run_id"]:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run.config import check
+from ..run.config import check, check_known, did_you_mean
 from ..run.results import RunResult, write_atomic
 from .fingerprint import run_fingerprint
 from .index import finite_or_none, set_aside
@@ -86,14 +86,15 @@ def keep_from_mapping(table: dict, known: tuple[str, ...]) -> Keep:
     (a name none of its runs records is refused).  ConfigError naming the key."""
     check(isinstance(table, dict), "keep", "must be a table")
     for key in table:
-        check(key in KEEP_KEYS, f"keep.{key}", f"unknown key (allowed: {', '.join(KEEP_KEYS)})")
+        check_known(key, KEEP_KEYS, f"keep.{key}")
     signals = table.get("signals", "all")
     if isinstance(signals, list):
         check(all(isinstance(n, str) for n in signals), "keep.signals",
               "must be \"all\", \"none\" or a list of signal names")
         for name in signals:
             check(name in known, "keep.signals", f"no signal {name!r} in the runs (signals: "
-                                                 f"{', '.join(known)})")
+                                                 f"{', '.join(known)})"
+                                                 f"{did_you_mean(name, known, quote=True)}")
         names = tuple(dict.fromkeys(signals))
     else:
         check(signals in ("all", "none"), "keep.signals",

@@ -50,9 +50,9 @@ from ..run.results import STATUSES, LinkedFolder, RunResult, own_folder
 from . import export, repair
 from .base import BaseStore
 from .errors import IndexBusy, IndexDamaged, ReadOnlyFolder, StoreError
-from .index import (BUSY_TIMEOUT, FIXED, INDEX_NAME, SCHEMA, SCHEMA_VERSION, dictionary_key,
-                    insert_rows, is_run_id, json_table, metric_column, open_read_only,
-                    row_values, run_id, set_wal, transaction)
+from .index import (BUSY_TIMEOUT, INDEX_NAME, SCHEMA, SCHEMA_VERSION, dictionary_key,
+                    insert_rows, is_run_id, json_table, metric_sets, mistyped, not_a_number,
+                    open_read_only, reading, row_values, run_id, set_wal, transaction)
 from .provenance import environment
 from .records import StoredRun, records
 from .runfiles import write_run
@@ -273,9 +273,11 @@ class ResultStore(BaseStore):
 
     @_sqlite_errors
     def discard(self, ids) -> None:
-        """Delete the rows of ``ids`` (their files, if any, are left where they are)."""
+        """Delete the rows of ``ids`` (their files, if any, are left where they are), and
+        the metric sets no row has any more."""
         with transaction(self.connection(create=True)) as db:
             db.executemany("DELETE FROM runs WHERE run_id = ?", [(i,) for i in ids])
+            db.execute("DELETE FROM metric_sets WHERE id NOT IN (SELECT metric_set FROM runs)")
 
     def remove_stale_temporaries(self, older_than: float = 3600.0) -> int:
         """Delete temporary files a killed writer left behind more than ``older_than``
@@ -305,14 +307,7 @@ class ResultStore(BaseStore):
         ``metrics``: as `rows`'."""
         db = self.connection(create=False)
         try:
-            sets = {i: tuple(json.loads(names)[1]) for i, names in
-                    db.execute("SELECT id, names FROM metric_sets")}
-            columns = "*"
-            if metrics is not None:  # only these metric columns are read
-                have = {c[1] for c in db.execute("PRAGMA table_info(runs)")}
-                wanted = [m for m in dict.fromkeys(metrics) if "m:" + m in have]
-                sets = {i: tuple(n for n in names if n in wanted) for i, names in sets.items()}
-                columns = ", ".join([*FIXED, "metric_set", *map(metric_column, wanted)])
+            columns, sets = reading(db, metrics)
             cursor = db.execute(f"SELECT {columns} FROM runs "
                                 f"{'WHERE ' + where if where else ''}"
                                 f"{' ORDER BY ' + order if order else ''}", params)
@@ -334,8 +329,7 @@ class ResultStore(BaseStore):
             for rid, row in self.scan(where=where, params=params, metrics=metrics,
                                       order="name, run_id"):
                 if isinstance(row, str):
-                    raise IndexDamaged(f"{self.index_path}: row {str(rid)[:40]!r} is not a "
-                                       f"stored run ({row}); 'flexarm repair {self.out}' drops it")
+                    raise self._not_a_stored_run(rid, row)
                 out.append(row)
         finally:
             if collecting:
@@ -355,16 +349,20 @@ class ResultStore(BaseStore):
     def refuse_malformed(self) -> None:
         """`IndexDamaged` naming the first row that is not a stored run, checked in SQL
         (what `StoredRun.check` checks of every row, without reading them into Python)."""
-        statuses = ", ".join(f"'{s}'" for s in STATUSES)
-        bad = self.columns(["run_id"], where=(
+        statuses, typed = ", ".join(f"'{s}'" for s in STATUSES), mistyped(self.column_names())
+        bad = self.columns(["run_id", typed, mistyped(self.column_names(), value=True)], where=(
             "typeof(run_id) != 'text' OR length(run_id) != 12 OR run_id GLOB '*[^0-9a-f]*' "
             f"OR status NOT IN ({statuses}) OR (file != '' AND (file != 'runs/' || run_id "
             "|| '.npz' OR typeof(size) != 'integer' OR size <= 0 OR length(sha256) != 64)) "
-            "OR metric_set NOT IN (SELECT id FROM metric_sets) LIMIT 1"))
+            f"OR metric_set NOT IN (SELECT id FROM metric_sets) OR {typed} IS NOT NULL LIMIT 1"))
         if bad:
-            rid = bad[0][0]
-            raise IndexDamaged(f"{self.index_path}: row {str(rid)[:40]!r} is not a stored run; "
-                               f"'flexarm repair {self.out}' drops it")
+            (rid, column, value), = bad
+            raise self._not_a_stored_run(rid, column and not_a_number(column, value))
+
+    def _not_a_stored_run(self, rid, why: str | None) -> IndexDamaged:
+        return IndexDamaged(f"{self.index_path}: row {str(rid)[:40]!r} is not a stored run"
+                            f"{f' ({why})' if why else ''}; 'flexarm repair {self.out}' drops "
+                            "it (and indexes its run file again, if intact)")
 
     def rows_of(self, ids) -> list[StoredRun]:
         """The rows of the runs ``ids`` that the index holds (queried by id, in chunks: a
@@ -388,8 +386,11 @@ class ResultStore(BaseStore):
     @_sqlite_errors
     def layouts(self) -> dict[int, tuple[tuple, tuple]]:
         """``metric_set`` id → (swept names, metric names), each in its runs' order."""
-        return {i: tuple(tuple(part) for part in json.loads(names)) for i, names in
-                self.connection(create=False).execute("SELECT id, names FROM metric_sets")}
+        found = metric_sets(self.connection(create=False))
+        for why in (s for s in found.values() if isinstance(s, str)):
+            raise IndexDamaged(f"{self.index_path}: {why}; 'flexarm repair {self.out}' "
+                               "rebuilds the index from the run files")
+        return found
 
     @_sqlite_errors
     def column_names(self) -> list[str]:

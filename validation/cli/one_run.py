@@ -7,6 +7,7 @@ import copy
 import dataclasses
 import functools
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -16,9 +17,10 @@ from ..batch.interrupts import Interrupted
 from ..batch.queue import run_planned
 from ..batch.resimulate import every_signal
 from ..batch.store import ResultStore, StoreError, run_id
-from ..run.config import ConfigError, check_label
+from ..run.config import ConfigError, check_label, to_mapping
 from ..run.plants import is_truth
-from ..run.scenario import Scenario, default_transient, scenario_from_mapping
+from ..run.scenario import (PARAMETER_TABLES, Scenario, arm_parameters, default_transient,
+                            own_parameters, scenario_from_mapping)
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
 from ..verdicts.mesh import is_check
 
@@ -84,10 +86,13 @@ def _checks_note(store, row) -> str:
 
 def auto_name(s: Scenario) -> str:
     """A run's name from what it is: controller (+ observer) @ plant, e.g.
-    "pbc+smo-paper@exudyn" (a plug-in by its class name)."""
-    law = lambda kind: kind.rsplit(":", 1)[-1]  # noqa: E731
-    observer = "" if s.observer.kind == "none" else "+" + law(s.observer.kind)
-    return f"{law(s.controller.kind)}{observer}@{law(s.plant.kind)}"
+    "pbc+smo-paper@exudyn": a law by its name (`laws.law_name`: a plug-in's own ``name``,
+    the one its failures give), a plug-in plant by its class name; what a name may not
+    hold (`check_label`) becomes "-"."""
+    from ..run.laws import law_name
+    observer = "" if s.observer.kind == "none" else "+" + law_name(s, "observer")
+    name = f"{law_name(s, 'controller')}{observer}@{s.plant.kind.rsplit(':', 1)[-1]}"
+    return re.sub(r"[^A-Za-z0-9._+@-]", "-", name).lstrip(".")[:100]
 
 
 def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
@@ -109,7 +114,7 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
         check_label(given, "name")
     if like:
         store, row = stored_run(like, "--like")
-        data = copy.deepcopy(row.config)
+        data = own_parameters(copy.deepcopy(row.config))  # over whichever arm is named
     elif args.config:
         study = load_study(args.config, name=given)
         data = deep_merge({}, study.base) | own_name(study)
@@ -137,17 +142,31 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
         from ..batch.fingerprint import run_fingerprint
         from ..run.scenario import scenario_to_mapping
         old, new = flatten(row.config), flatten(scenario_to_mapping(scenario))
-        changed = [f"{k} = {new.get(k)!r} (was {old.get(k)!r})" for k in sorted(old | new)
-                   if old.get(k) != new.get(k)]
+        changed = [k for k in sorted(old | new) if old.get(k) != new.get(k)]
+        followed = _following_the_arm(changed, new, row.config.get("arm"), scenario.arm)
+        changed = [f"{k} = {new.get(k)!r} (was {old.get(k)!r})" for k in changed
+                   if k not in followed]
+        follow = (f"; {len(followed)} value(s) of {' and '.join(PARAMETER_TABLES)} follow "
+                  f"the {scenario.arm} arm (those the stored run set itself are kept)"
+                  if followed else "")
         head = f"rerunning {row.run_id} ({row.name}, stored in {store.out}" \
                f"{_checks_note(store, row) if not is_check(row) else ''})"
         notes.append(head + (" exactly" if not changed else
-                             f" with {len(changed)} change(s): " + "; ".join(changed)))
+                             f" with {len(changed)} change(s): " + "; ".join(changed)) + follow)
         if row.fingerprint != run_fingerprint(row.config):
             notes.append("  it was stored by other code (its fingerprint differs): the "
                          "numbers may differ")
         args.like_row = None if changed else row
     return scenario, notes
+
+
+def _following_the_arm(changed: list[str], new: dict, old_arm: str, arm: str) -> set[str]:
+    """Of the dotted keys ``changed`` by a rerun with another arm, the parameter values
+    that are now the new arm's own (the physics that follows ``arm``)."""
+    if arm == old_arm:
+        return set()
+    values = flatten({t: to_mapping(arm_parameters(arm)) for t in PARAMETER_TABLES})
+    return {k for k in changed if k in values and new.get(k) == values[k]}
 
 
 _TABLE = [("status", "status", "{}"),
@@ -263,25 +282,27 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"{s.duration:g} s at Ts = {s.Ts:g} s, from {s.initial_state}")
     if s.true_params.joints_text():
         print(f"  the true arm's joints: {s.true_params.joints_text()}")
-    if result.message:
-        print(f"  {result.status}: {result.message}")
-    if result.status == "failed":
+    failed = result.status == "failed"
+    if result.message:  # a failure is the command's error: on stderr, like show's
+        print(f"  {result.status}: {result.message}", file=sys.stderr if failed else sys.stdout)
+    if failed:
         if frames := failure_frames(store, rid):
-            print(frames)
+            print(frames, file=sys.stderr)
         print(f"  no metrics: the run failed after {result.end_time or 0:g} of {s.duration:g} s "
-              "(a run that failed measures nothing)")
+              "(a run that failed measures nothing)", file=sys.stderr)
     else:
         units = {r.metric: r for r in s.requirement}
         print(format_metrics(metrics | {k: result.timings.get(k, math.nan) for k in _TIMINGS},
                              units))
     if getattr(args, "like_row", None) is not None and result.status == "ok":
         print(_compare_with_stored(args.like_row, metrics))
-    if truth and refinable:
+    # A run that failed has no numbers whose convergence a mesh check could tell.
+    if truth and refinable and (args.mesh_check or not failed):
         print("  " + (convergence_line(store, rid) if args.mesh_check else
                       f"convergence not checked: these are the FE model's numbers on "
                       f"{scenario.plant.discretisation()}; --mesh-check runs the same loop on "
                       "refined meshes and steps"))
-    elif truth:
+    elif truth and not failed:
         print(f"  convergence not checked: the {scenario.plant.label} declares no refinements "
               "(check its convergence yourself)")
     print(f"results: {path} (index and metrics.csv in {store.out})" + (

@@ -8,6 +8,7 @@ from importlib.metadata import version
 from controllers import CONTROLLERS, OBSERVERS
 
 from ..batch.executor import available_cores
+from ..run.config import did_you_mean, fraction_hint
 from ..run.scenario import ARMS, DEFAULT_TRANSIENT, PLANT_KINDS, Scenario
 
 from .calibrate import cmd_calibrate
@@ -22,6 +23,42 @@ from .verdicts import (cmd_attribute, cmd_baseline_add, cmd_baseline_check,
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, status 2 (argparse's own convention)
         self.exit(EXIT_USAGE, f"flexarm: error: {message}\n")
+
+    def parse_args(self, args=None, namespace=None):
+        """argparse's, with the closest flag suggested for each unknown one (`did_you_mean`
+        over the flags of the command given)."""
+        namespace, extras = self.parse_known_args(args, namespace)
+        if extras:
+            flags = list(_chosen(self, namespace)._option_string_actions)
+            self.error("unrecognized arguments: " + " ".join(extras) + "".join(
+                did_you_mean(e.partition("=")[0], flags) for e in extras if e.startswith("-")))
+        return namespace
+
+    def _check_value(self, action, value):
+        """argparse's, with the closest choice suggested (`did_you_mean`)."""
+        if action.choices is not None and value not in action.choices:
+            hint = did_you_mean(value, action.choices, quote=True)
+            raise argparse.ArgumentError(action, f"invalid choice: {value!r} (choose from "
+                                                 f"{', '.join(map(repr, action.choices))})"
+                                                 f"{hint}")
+
+
+def _chosen(parser: argparse.ArgumentParser, namespace) -> argparse.ArgumentParser:
+    """The (sub)parser of the command ``namespace`` was parsed for."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction) and getattr(namespace, action.dest,
+                                                                       None) in action.choices:
+            return _chosen(action.choices[getattr(namespace, action.dest)], namespace)
+    return parser
+
+
+def _fraction(text: str) -> float:
+    """argparse type: a number; a percentage ("5%") is told to give its fraction."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}"
+                                         f"{fraction_hint(text)}") from None
 
 
 def _int_in(lo: int, hi: int):
@@ -99,7 +136,7 @@ def _add_cases(p) -> None:
 
 def _add_tolerance(p) -> None:
     """--tolerance of the commands that map stability limits."""
-    p.add_argument("--tolerance", type=float, metavar="REL",
+    p.add_argument("--tolerance", type=_fraction, metavar="REL",
                    help="relative width each stability limit is bisected to (default: the "
                         "file's [stability] tolerance, else 0.01 = 1 %%)")
 

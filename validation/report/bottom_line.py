@@ -34,7 +34,8 @@ def _places(runs) -> list[tuple[int, str]]:
     out = []
     for (arm, Ts), n in counts.most_common():
         plants = sorted({r.plant_label for r in runs if (r.arm, r.Ts) == (arm, Ts)})
-        out.append((n, f"the {arm} arm at Ts = {1e3 * Ts:g} ms, {' and '.join(plants)}"))
+        period = f"at Ts = {1e3 * Ts:g} ms" if Ts is not None else "(Ts not given)"
+        out.append((n, f"the {arm} arm {period}, {' and '.join(plants)}"))
     return out
 
 

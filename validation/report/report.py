@@ -211,8 +211,9 @@ def _scope(runs, done=None) -> list[str]:
         kinds.setdefault((r.arm, r.plant, r.role, r.Ts, r.initial_state), r)
     scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in sorted({k[0] for k in kinds})]
     scope.append("plants: " + ", ".join(sorted({r.plant_label for r in kinds.values()})))
-    scope.append("control periods Ts: " + ", ".join(f"{1e3 * t:g} ms" for t in
-                                                     sorted({k[3] for k in kinds})))
+    scope.append("control periods Ts: " + ", ".join(
+        f"{1e3 * t:g} ms" if t is not None else "not given"  # a scenario without Ts
+        for t in sorted({k[3] for k in kinds}, key=lambda t: (t is None, t or 0))))
     scope.append("initial conditions: " + ", ".join(sorted(
         {"at rest" if k[4] == "rest" else "moving with the reference" for k in kinds})))
     windows = list(dict.fromkeys(f"{t:g} s of {d:g} s runs"  # each as it reads, once

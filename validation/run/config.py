@@ -11,6 +11,7 @@ rejected; the dataclasses' own ``__post_init__`` checks ranges.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import functools
 import math
 import types
@@ -18,7 +19,7 @@ from typing import Any, Union, get_args, get_origin, get_type_hints
 
 
 __all__ = ["ConfigError", "from_mapping", "to_mapping", "check", "check_label", "short_repr",
-           "short_str"]
+           "short_str", "did_you_mean", "check_known", "fraction_hint"]
 
 
 class ConfigError(ValueError):
@@ -45,6 +46,38 @@ def check(condition: bool, path: str, message: str) -> None:
     """Raise `ConfigError(path, message)` unless ``condition``."""
     if not condition:
         raise ConfigError(path, message)
+
+
+def did_you_mean(given: Any, choices, prefix: str = "", *, quote: bool = False) -> str:
+    """"; did you mean X?" for a misspelt ``given`` (a key, a flag, a value) closest to one
+    of ``choices`` (`difflib.get_close_matches`), named with ``prefix`` (a dotted key's
+    table) or ``quote``d (a value), else "": the one place a check of a key, flag or value
+    suggests one."""
+    if not isinstance(given, str):
+        return ""
+    found = difflib.get_close_matches(given, [str(c) for c in choices], n=1)
+    if not found:
+        return ""
+    return f"; did you mean {found[0]!r}?" if quote else f"; did you mean {prefix}{found[0]}?"
+
+
+def check_known(key: Any, allowed, path: str, what: str = "unknown key") -> None:
+    """`ConfigError` at ``path`` (the dotted key) unless ``key`` is one of ``allowed``:
+    ``what``, the closest allowed key (`did_you_mean`), then every allowed key."""
+    if key not in allowed:
+        table = path.rpartition(".")[0]
+        raise ConfigError(path, f"{what}{did_you_mean(key, allowed, table + '.' if table else '')}"
+                                f" (allowed: {', '.join(sorted(map(str, allowed)))})")
+
+
+def fraction_hint(value: Any) -> str:
+    """"; did you mean 0.05?" for a share written as a percentage ("5%", "5 %"), else ""."""
+    text = value.strip() if isinstance(value, str) else ""
+    try:
+        share = float(text[:-1]) / 100 if text.endswith("%") else math.nan
+    except ValueError:
+        return ""
+    return f"; did you mean {share:g}?" if math.isfinite(share) else ""
 
 
 def check_label(name: Any, path: str) -> None:
@@ -141,16 +174,15 @@ def _tagged(members: list, value: Any, path: str) -> Any:
         named = [k for k in kinds if k]
         plugin = ' or a plug-in "package.module:Class"' if "" in kinds else ""
         raise ConfigError(f"{path}.kind", f"must be one of {', '.join(map(repr, named))}"
-                                          f"{plugin}, got {short_repr(kind)}")
+                                          f"{plugin}, got {short_repr(kind)}"
+                                          f"{did_you_mean(kind, named, quote=True)}")
     kinds = {**kinds, kind: chosen}
     takes = {f.name for f in dataclasses.fields(chosen)}
     for key in value:
-        if key not in takes:
-            owners = [k for k, m in kinds.items() if k and key in m.__dataclass_fields__]
-            what = (f"a setting of kind {owners[0]!r}, not of kind {kind!r}" if owners
-                    else f"unknown key for kind {kind!r}")
-            raise ConfigError(f"{path}.{key}", f"{what} (kind {kind!r} takes: "
-                                               f"{', '.join(sorted(takes))})")
+        owners = [k for k, m in kinds.items() if k and key in m.__dataclass_fields__]
+        check_known(key, takes, f"{path}.{key}", f"a setting of kind {owners[0]!r}, not of "
+                                                 f"kind {kind!r}" if owners else
+                    f"unknown key for kind {kind!r}")
     return from_mapping(chosen, value, path)
 
 
@@ -179,8 +211,7 @@ def from_mapping(cls, data: dict, path: str = ""):
     kwargs = {}
     for key, value in data.items():
         sub = f"{path}.{key}" if path else key
-        if key not in fields:
-            raise ConfigError(sub, f"unknown key (allowed: {', '.join(sorted(fields))})")
+        check_known(key, fields, sub)
         kwargs[key] = _convert(hints[key], value, sub)
     for name, f in fields.items():
         if name not in kwargs and f.default is dataclasses.MISSING and \

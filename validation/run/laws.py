@@ -22,11 +22,12 @@ import json
 from controllers import CONTROLLERS, OBSERVERS, PluginError, accepted_options, resolve
 from reduced_model import ArmModel, ArmParameters, cached_model, measured_names
 
-from .config import ConfigError, check
+from .config import ConfigError, check, did_you_mean
 from .processes import checked_apart
 
 __all__ = ["check_laws", "build_controller", "build_observer", "nominal_model",
-           "measurement_names", "applies_generalised_forces"]
+           "measurement_names", "applies_generalised_forces", "law_name",
+           "name_of"]
 
 #: Options of the realisable PBC that eq. (20) puts only in the unactuated rows.
 _IDEALISED_ONLY = {"kv_flex", "compensate_damping"}
@@ -73,7 +74,8 @@ def _construct(role: str, kind: str, cls: type, options: dict, model: ArmModel, 
                 hint = ("; it enters only the unactuated rows of eq. (20), so it cannot change "
                         "the realisable PBC's torque (kind = \"pbc-idealised\" applies them)")
             raise ConfigError(f"{role}.options.{key}", f"not an option of {kind} (options: "
-                                                       f"{', '.join(own) or 'none'}){hint}")
+                                                       f"{', '.join(own) or 'none'}){hint}"
+                                                       f"{did_you_mean(key, own)}")
         missing = [k for k in own if accepted[k] is inspect.Parameter.empty
                    and k not in options]
         if missing:
@@ -110,16 +112,24 @@ def _check_interface(role: str, kind: str, law) -> None:
 
 def _check_here(role: str, kind: str, options_json: str, Ts: float, params: ArmParameters,
                 modes: tuple[int, int]) -> tuple[str, ...]:
-    """Construct and check; returns the observer's measured names, or for a controller
-    ("generalised forces",) if it applies forces to every coordinate (its class says so:
-    ``generalised_forces = True``), else ()."""
+    """Construct and check; returns the law's name (`law_name`), then the observer's
+    measured names, or for a controller "generalised forces" if it applies forces to every
+    coordinate (its class says so: ``generalised_forces = True``)."""
     cls = _class(role, kind)
     law = _construct(role, kind, cls, json.loads(options_json), nominal_model(params, modes),
                      Ts)
     _check_interface(role, kind, law)
     if role == "observer":
-        return tuple(law.measured)
-    return (_GENERALISED,) if getattr(law, "generalised_forces", False) is True else ()
+        return (name_of(law), *law.measured)
+    return (name_of(law), _GENERALISED) if getattr(law, "generalised_forces", False) is True \
+        else (name_of(law),)
+
+
+def name_of(law) -> str:
+    """What a law is called: its ``name`` (a plug-in's own, as its class declares it; a
+    built-in's is its kind), else its class's name."""
+    name = getattr(law, "name", None)
+    return name if isinstance(name, str) and name.strip() else type(law).__name__
 
 
 #: What `_check_here` says of a controller that applies forces to every coordinate.
@@ -150,7 +160,7 @@ def check_laws(scenario) -> None:
                                                           "(observer.kind = 'none')")
         return
     measured = _checked("observer", s.observer.kind,
-                        json.dumps(s.observer.options, sort_keys=True), *key)
+                        json.dumps(s.observer.options, sort_keys=True), *key)[1:]
     available = measurement_names(s, nominal_model(s.nominal_params, s.model.modes_per_link))
     missing = [m for m in measured if m not in available]
     check(not missing, "observer.kind",
@@ -163,10 +173,20 @@ def applies_generalised_forces(scenario) -> bool:
     """Whether the scenario's controller applies forces to every coordinate, not only the
     two joint torques (a property of its class, ``generalised_forces``; the law is checked
     once, a plug-in apart from the command)."""
-    s = scenario
-    return _GENERALISED in _checked("controller", s.controller.kind,
-                                    json.dumps(s.controller.options, sort_keys=True), s.Ts,
-                                    s.nominal_params, s.model.modes_per_link)
+    return _GENERALISED in _law_checked(scenario, "controller")[1:]
+
+
+def law_name(scenario, role: str) -> str:
+    """The name of the scenario's controller or observer (``role``, `name_of`): what a run
+    that raises in it says (`validation.run.loop`) and what ``flexarm run`` names the run
+    after."""
+    return _law_checked(scenario, role)[0]
+
+
+def _law_checked(scenario, role: str) -> tuple[str, ...]:
+    s, spec = scenario, getattr(scenario, role)
+    return _checked(role, spec.kind, json.dumps(spec.options, sort_keys=True), s.Ts,
+                    s.nominal_params, s.model.modes_per_link)
 
 
 def build_controller(scenario, model: ArmModel):

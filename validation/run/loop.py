@@ -28,7 +28,7 @@ from .config import short_repr, short_str
 from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
                       check_bounds, context, law_fields, noise_stream, post_sample, pre_sample,
                       run_reduced, sample_laws, signal_layout, status_message)
-from .laws import build_controller, build_observer, nominal_model
+from .laws import build_controller, build_observer, name_of, nominal_model
 from .results import RunResult
 from .scenario import Scenario, check_scenario, scenario_to_mapping
 from .threads import one_thread
@@ -269,7 +269,7 @@ def _compiled_laws(controller, observer, model: ArmModel):
     o = absent("observer", model) if observer is None else compiled_form(observer, "observer")
     if c is None or o is None:
         return None
-    label = getattr(observer, "name", type(observer).__name__)
+    label = name_of(observer)
     return (c, o), (f"{label}: {o.failure}" if o.failure else "")
 
 
@@ -383,14 +383,14 @@ class _PythonLaws:
                                               ((self.s_res.stop - self.s_res.start,),),
                                               "a residual")
         except ObserverFailure as exc:
-            label = getattr(calling, "name", type(calling).__name__)
+            label = name_of(calling)
             raise _LawRaised("diverged", status_message(
                 SampleStatus.OBSERVER_FAILED, 0.0, self.divergence, t, f"{label}: {exc}")) from None
         except _NotReal as exc:
-            label = getattr(calling, "name", type(calling).__name__)
+            label = name_of(calling)
             raise _LawRaised("failed", f"{label} returned {exc} at t = {t:.4g} s") from None
         except Exception as exc:  # noqa: BLE001 - recorded as the run's failure
-            label = getattr(calling, "name", type(calling).__name__)
+            label = name_of(calling)
             where, r.traceback = own_frames(exc, [c.__module__ for c in type(calling).__mro__])
             raise _LawRaised("failed", f"{label} raised {short_str(exc)} at t = {t:.4g} s "
                                        f"({where})") from None

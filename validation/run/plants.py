@@ -22,7 +22,7 @@ from controllers import PluginError, accepted_options, resolve
 from plant_exudyn import ExudynPlant
 from reduced_model import LEVELS, ROLES, Plant, PlantSettings, ReducedPlant, Refinement
 
-from .config import ConfigError, check
+from .config import ConfigError, check, did_you_mean
 from .processes import checked_apart
 
 __all__ = ["PluginSettings", "PlantTable", "PLANTS", "ROLES", "LEVELS", "DEFAULT_TRUTH",
@@ -89,7 +89,8 @@ class PluginSettings(PlantSettings):
             own = [k for k in accepted if k not in ("params", "model", "sensors")]
             for key in self.options:
                 check(key in own, f"plant.options.{key}",
-                      f"not an option of {self.kind} (options: {', '.join(own) or 'none'})")
+                      f"not an option of {self.kind} (options: {', '.join(own) or 'none'})"
+                      f"{did_you_mean(key, own)}")
         return cls
 
     def build(self, params, model, sensors):

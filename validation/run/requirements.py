@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import ConfigError, check, check_label, short_repr
+from .config import ConfigError, check, check_label, did_you_mean, short_repr
 from .claim_measures import CLAIMS, claim_by_key
 
 __all__ = ["Requirement", "check_requirements", "requirement_metrics", "robustness",
@@ -75,7 +75,8 @@ class Requirement:
         if self.claim:
             keys = [c.key for c in CLAIMS]
             check(self.claim in keys, "claim", f"unknown claim {self.claim!r} (claims: "
-                                               f"{', '.join(keys)})")
+                                               f"{', '.join(keys)})"
+                                               f"{did_you_mean(self.claim, keys, quote=True)}")
         else:
             _parse(self.formula, ())  # syntax only: the signals are checked per scenario
 
@@ -327,7 +328,9 @@ def check_requirements(scenario) -> None:
         except KeyError as exc:
             raise ConfigError(f"{where}.formula", f"unknown signal {exc.args[0]!r} in "
                                                   f"{req.formula!r} (signals: "
-                                                  f"{', '.join(signals)})") from None
+                                                  f"{', '.join(signals)})"
+                                                  f"{did_you_mean(exc.args[0], signals)}") \
+                from None
         except ConfigError as exc:
             raise exc.under(where) from None
         for begin, end in _time_bounds(spec.ast.specs[0]):

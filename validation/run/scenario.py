@@ -26,7 +26,8 @@ from .specs import (ControllerSpec, DisturbanceSpec, DivergenceSpec, ModelSpec, 
 __all__ = [
     "Scenario", "PlantTable", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
     "SensorSpec", "DisturbanceSpec", "DivergenceSpec", "check_scenario",
-    "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "PLANT_KINDS", "ARMS",
+    "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "own_parameters",
+    "check_scales_on_arm", "PARAMETER_TABLES", "PLANT_KINDS", "ARMS",
     "PAPER_ARMS",
     "DEFAULT_TRANSIENT", "default_transient",
 ]
@@ -41,6 +42,8 @@ ARMS = {"default": "practical default arm (Table 1 + stator inertia 0.01 kg m² 
                "stiction, gear compliance, rotor inertia, backlash, a 500 Hz current loop"}
 #: The arms a single scenario's stability map and validity are judged on (unless --arm).
 PAPER_ARMS = ("default", "table1")
+#: The scenario's tables that start from the parameters of its ``arm`` (`arm_parameters`).
+PARAMETER_TABLES = ("true_params", "nominal_params")
 FEEDBACK = ("auto", "true", "estimate")
 #: Caps that keep a typo from exhausting memory or hanging a run: samples held in memory
 #: (5e6 = 83 min at 1 kHz, ~3 GB of signals) and internal plant steps per run.
@@ -209,7 +212,7 @@ def check_scenario(s: Scenario) -> None:
               f"nominal_params.{name}", f"must equal true_params.{name}: the modal "
                                         "coordinates of links of different lengths "
                                         "cannot be compared")
-    for key in ("true_params", "nominal_params"):
+    for key in PARAMETER_TABLES:
         _check_modelable(getattr(s, key), s.model.modes_per_link, key)
     check_laws(s)
     n = 2 + sum(s.model.modes_per_link)
@@ -239,6 +242,65 @@ def arm_parameters(arm: str) -> ArmParameters:
     """The parameters of a named arm (`ARMS`)."""
     one_of(arm, tuple(ARMS), "arm")
     return {"table1": ArmParameters.table1, "lab": ArmParameters.lab}.get(arm, ArmParameters)()
+
+
+def own_parameters(data: dict) -> dict:
+    """A scenario mapping (a stored run's resolved one) with each parameter table
+    (`PARAMETER_TABLES`) reduced to the user's own layer: the values that differ from the
+    parameters of its ``arm``.  `scenario_from_mapping` merges that layer over whichever
+    arm is named then, so a rerun with another ``arm`` takes that arm's physics and keeps
+    the user's own values.  A value equal to the old arm's cannot be told from it: it
+    follows the new arm.
+
+    Parameters
+    ----------
+    data : dict
+        A scenario mapping; not changed.
+
+    Returns
+    -------
+    dict
+        A copy of ``data`` whose parameter tables hold only the user's own values (a table
+        that is not a table is left for `scenario_from_mapping` to refuse).
+    """
+    base = to_mapping(arm_parameters(data.get("arm", "default")))
+    out = dict(data)
+    for key in PARAMETER_TABLES:
+        table = data.get(key, {})
+        if isinstance(table, dict):
+            out[key] = {k: v for k, v in table.items() if k not in base or base[k] != v}
+    return out
+
+
+def check_scales_on_arm(scaled: dict[str, str], arms, base: dict) -> None:
+    """A scale axis multiplies the base scenario's value, resolved on the base's arm.  On
+    a parameter (`PARAMETER_TABLES`) that the base leaves to its arm, beside an axis that
+    runs an arm whose value differs, it would give that arm the base arm's value: refused
+    (`ConfigError` naming the axis).
+
+    Parameters
+    ----------
+    scaled : dict
+        The dotted fields scaled, each with the axis that scales it (for the error).
+    arms : iterable of str
+        The arms the axes run (an arm that is not one is left to the run's own check).
+    base : dict
+        The resolved base scenario (`scenario_to_mapping`).
+    """
+    own = own_parameters(base)
+    for path, where in scaled.items():
+        table, _, key = path.partition(".")
+        if table not in PARAMETER_TABLES or key in own[table]:
+            continue  # not the arm's, or the base's own value: the same on every arm
+        for arm in sorted(set(arms) - {base["arm"]}):
+            try:
+                value = to_mapping(arm_parameters(arm)).get(key)
+            except ConfigError:
+                continue
+            check(value == base[table].get(key), where,
+                  f"scales {path} of the {base['arm']} arm ({base[table].get(key)!r}), but "
+                  f"the axes also run the {arm} arm, whose value is {value!r}: give values, "
+                  f"not factors, or set arm = {arm!r} in the base scenario")
 
 
 def _check_modelable(params: ArmParameters, modes, key: str) -> None:
@@ -291,7 +353,8 @@ def scenario_from_mapping(data: dict) -> Scenario:
     >>> scenario_from_mapping({"plant": {"kind": "exudyn", "stepp": 1e-3}})
     Traceback (most recent call last):
         ...
-    validation.run.config.ConfigError: plant.stepp: unknown key for kind 'exudyn' (...)
+    validation.run.config.ConfigError: plant.stepp: unknown key for kind 'exudyn'; did you
+    mean plant.step? (...)
     """
     base = to_mapping(arm_parameters(data.get("arm", "default")))
     data = dict(data)
@@ -299,7 +362,7 @@ def scenario_from_mapping(data: dict) -> Scenario:
         spec = data.get(role)
         if isinstance(spec, dict) and "kind" in spec and not isinstance(spec["kind"], str):
             data[role] = dict(spec, kind=class_path(spec["kind"], f"{role}.kind"))
-    for key in ("true_params", "nominal_params"):
+    for key in PARAMETER_TABLES:
         given = data.get(key, {})
         data[key] = {**base, **given} if isinstance(given, dict) else given
     scenario = from_mapping(Scenario, data)

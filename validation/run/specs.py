@@ -14,7 +14,7 @@ from controllers import ReferenceKind
 from reduced_model import KINEMATICS, STRAIN_QUANTITIES, validate_modes_per_link
 
 from ._sample import DisturbanceKind, DisturbanceTarget
-from .config import ConfigError, check
+from .config import ConfigError, check, did_you_mean
 
 __all__ = ["ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec", "SensorSpec",
            "DisturbanceSpec", "DivergenceSpec", "class_path", "one_of", "positive",
@@ -32,7 +32,7 @@ MAX_NOISE = 1e3
 
 def one_of(value, allowed, name) -> None:
     check(value in allowed, name, f"must be one of {', '.join(map(repr, allowed))}, "
-                                  f"got {value!r}")
+                                  f"got {value!r}{did_you_mean(value, allowed, quote=True)}")
 
 
 def positive(value, name, *, allow_zero=False) -> None:

@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 
 from reduced_model._parameters import JOINT_EFFECTS
 
-from ..run.config import ConfigError, check
+from ..run.config import ConfigError, check, did_you_mean
 from ..batch.campaign import PlannedRun
 from ..batch.queue import run_planned
 from ..run.plants import with_plant
@@ -120,7 +120,8 @@ def parse_factors(names, scenario: Scenario) -> tuple[str, ...]:
     names = list(dict.fromkeys(names))
     check(len(names) > 0, "--factors", "needs at least one factor")
     for f in names:
-        check(f in FACTORS, "--factors", f"unknown factor {f!r} (factors: {', '.join(FACTORS)})")
+        check(f in FACTORS, "--factors", f"unknown factor {f!r} (factors: {', '.join(FACTORS)})"
+                                         f"{did_you_mean(f, FACTORS, quote=True)}")
     check("truncation" not in names or "plant" in names, "--factors",
           "'truncation' splits the 'plant' factor: list 'plant' too")
     shapley_factors = [f for f in names if f != "truncation"]

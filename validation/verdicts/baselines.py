@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..run.config import ConfigError, check, check_label
+from ..run.config import ConfigError, check, check_known, check_label
 from ..batch.campaign import expand, load_campaign
 from ..batch.worker import execute_run
 from ..batch.fingerprint import run_fingerprint
@@ -115,8 +115,7 @@ def load_baselines(path: str | Path = DEFAULT_FILE) -> Baselines:
     path = Path(path)
     data = load_toml(path)
     for key in data:
-        check(key in {"policy", "scenarios", "check"}, key,
-              "unknown key (allowed: check, policy, scenarios)")
+        check_known(key, ("policy", "scenarios", "check"), key)
     policy = data.get("policy", {})
     rel, absolute = policy.get("relative", 0.25), policy.get("absolute", 0.0)
     check(isinstance(rel, (int, float)) and rel >= 0, "policy.relative", "must be >= 0")
@@ -132,8 +131,7 @@ def load_baselines(path: str | Path = DEFAULT_FILE) -> Baselines:
         where = f"check[{i}]"
         check(isinstance(raw, dict), where, "must be a table ([[check]])")
         for key in raw:
-            check(key in _CHECK_KEYS, f"{where}.{key}",
-                  f"unknown key (allowed: {', '.join(sorted(_CHECK_KEYS))})")
+            check_known(key, _CHECK_KEYS, f"{where}.{key}")
         for key in ("name", "op", "bound"):
             check(key in raw, f"{where}.{key}", "missing (a check needs name, op and bound)")
         check(isinstance(raw["bound"], (int, float)) and not isinstance(raw["bound"], bool),

@@ -31,7 +31,7 @@ import bisect
 import math
 from dataclasses import dataclass
 
-from ..run.config import ConfigError, check
+from ..run.config import ConfigError, check_known, fraction_hint
 
 __all__ = ["TOLERANCE", "MIN_TOLERANCE", "MAX_TOLERANCE", "GOOD", "Limit", "limit_of",
            "Lattice", "next_points", "tolerance_from"]
@@ -183,13 +183,15 @@ def tolerance_from(table: dict, flag: float | None = None) -> float:
     """The tolerance of a map: ``flag`` (``--tolerance``) if given, else a file's
     ``[stability]`` table's ``tolerance``, else `TOLERANCE`; ConfigError naming the key
     (or the flag) for an unknown key or a value outside [`MIN_TOLERANCE`,
-    `MAX_TOLERANCE`]."""
+    `MAX_TOLERANCE`] — every value given is checked, whichever one is used."""
     for key in table:
-        check(key == "tolerance", f"stability.{key}", "unknown key (allowed: tolerance)")
-    where, value = ("--tolerance", flag) if flag is not None else \
-        ("stability.tolerance", table.get("tolerance", TOLERANCE))
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not MIN_TOLERANCE <= value <= MAX_TOLERANCE:
-        raise ConfigError(where, f"must be a relative width between {MIN_TOLERANCE:g} and "
-                                 f"{MAX_TOLERANCE:g} (0.01 = 1 %), not {value!r}")
-    return float(value)
+        check_known(key, ("tolerance",), f"stability.{key}")
+    given = [("stability.tolerance", table["tolerance"])] if "tolerance" in table else []
+    given += [("--tolerance", flag)] if flag is not None else []
+    for where, value in given:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not MIN_TOLERANCE <= value <= MAX_TOLERANCE:
+            raise ConfigError(where, f"must be a relative width between {MIN_TOLERANCE:g} "
+                                     f"and {MAX_TOLERANCE:g} (0.01 = 1 %), not {value!r}"
+                                     f"{fraction_hint(value)}")
+    return float(given[-1][1]) if given else TOLERANCE

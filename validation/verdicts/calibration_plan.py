@@ -15,7 +15,7 @@ from ..run.config import ConfigError, check
 from ..run.experiments import Experiment, FrequencyResponse, check_experiment
 from ..run.laws import measurement_names, nominal_model
 from ..run.loop import measurement_noise
-from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
+from ..run.scenario import Scenario, own_parameters, scenario_from_mapping, scenario_to_mapping
 from ..run.tomlfiles import set_dotted
 from .calibration_settings import CalibrationSettings
 
@@ -56,7 +56,7 @@ def _experiment_mapping(base: dict, exp: Experiment, own: dict | None,
                         overrides: dict, settings: CalibrationSettings) -> dict:
     """The scenario of one experiment: the base (the arm and its start values), a stored
     run's own experiment settings, ``[calibrate.experiment.NAME]``, its length."""
-    data = copy.deepcopy(base)
+    data = own_parameters(copy.deepcopy(base))  # over the experiment's arm
     for key in _EXPERIMENT_KEYS if own is not None else ():
         data[key] = copy.deepcopy(own[key])
     for key, value in overrides.items():

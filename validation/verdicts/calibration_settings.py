@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 from reduced_model import ArmParameters
 
-from ..run.config import ConfigError, check
+from ..run.config import ConfigError, check, check_known, did_you_mean
 from ..run.scenario import Scenario, scenario_from_mapping
 from ..run.tomlfiles import flatten
 from .calibration_joints import check_overlap, check_start_arm, joint_bounds
@@ -132,8 +132,7 @@ def calibration_settings(table: dict, fit: list[str] | None, base: Scenario) -> 
     """
     check(isinstance(table, dict), "calibrate", "must be a table")
     for key in table:
-        check(key in _SETTINGS, f"calibrate.{key}", f"unknown key (allowed: "
-                                                    f"{', '.join(sorted(_SETTINGS))})")
+        check_known(key, _SETTINGS, f"calibrate.{key}")
     table = dict(table)
     for key in ("start", "bounds", "noise"):
         check(isinstance(table.get(key, {}), dict), f"calibrate.{key}", "must be a table")
@@ -146,7 +145,8 @@ def calibration_settings(table: dict, fit: list[str] | None, base: Scenario) -> 
     check(not twice, "--fit", f"{', '.join(twice)} named more than once")
     for key in ("start", "bounds"):
         for name in table[key]:
-            check(name in names, f"calibrate.{key}.{name}", "not a fitted field (--fit)")
+            check(name in names, f"calibrate.{key}.{name}", "not a fitted field (--fit)"
+                                                            f"{did_you_mean(name, names)}")
     starts = {n.partition(".")[2]: _start(n, table, base) for n in names}
     parameters = tuple(_parameter(n, table, base, starts) for n in names)
     check_overlap({p.name.partition(".")[2]: (p.name, p.lower, p.upper) for p in parameters})

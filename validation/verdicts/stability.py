@@ -61,7 +61,7 @@ from ..batch.executor import Runner
 from ..batch.runfiles import KEEP_NONE
 from ..run.laws import applies_generalised_forces
 from ..run.plants import is_truth, plant_settings, with_plant
-from ..run.scenario import arm_parameters, scenario_from_mapping, scenario_to_mapping
+from ..run.scenario import own_parameters, scenario_from_mapping, scenario_to_mapping
 from ..batch.store import ResultStore, run_id
 from .bisection import GOOD, TOLERANCE, Lattice, Limit, limit_of, next_points
 from .predictions import Predictions, prediction_key, read_predictions, write_predictions
@@ -164,15 +164,13 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
     cases: dict[tuple, StabilityCase] = {}
     for s in scenarios:
         data = scenario_to_mapping(s)
+        own = own_parameters(data)  # the scenario's own values, over whichever arm
         for plant in plants or (data["plant"]["kind"],):
             for arm in arms or (data["arm"],):
-                base = dict(data, disturbances=[], initial_state="reference",
+                base = dict(own, disturbances=[], initial_state="reference",
                             duration=DURATION, transient=DURATION / 2, requirement=[])
                 base["plant"] = with_plant(base["plant"], plant)
                 base["arm"] = arm
-                params = scenario_to_mapping(arm_parameters(arm))
-                if arm != data["arm"]:  # start the parameter tables from the other arm
-                    base["true_params"] = base["nominal_params"] = params
                 if plant_settings(base["plant"]).actuated == 2 and \
                         applies_generalised_forces(s):
                     continue  # two actuators: a law of forces on every coordinate cannot run

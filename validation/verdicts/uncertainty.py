@@ -47,12 +47,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..batch.campaign import (RandomAxis, draw_points, expand, flatten_axes, load_study,
-                              random_axis)
-from ..run.config import ConfigError, check
+from ..batch.axes import RandomAxis, draw_points, flatten_axes, random_axis
+from ..batch.campaign import expand, load_study
+from ..run.config import ConfigError, check, check_known
 from ..run.plants import ROLES, plant_for_role
 from ..run.requirements import Requirement
-from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
+from ..run.scenario import (Scenario, check_scales_on_arm, own_parameters,
+                            scenario_from_mapping, scenario_to_mapping)
 from ..run.tomlfiles import set_dotted
 from .calibration_outputs import CALIBRATION_VERDICTS
 from .statistics import SequentialTest
@@ -143,7 +144,7 @@ class System:
         """The scenario mapping at ``point`` on the nominal plant (``plant`` None) or on
         the plant of the role "reduced" or "truth" (`plant_for_role`); ``seed`` replaces
         the noise seed."""
-        data = copy.deepcopy(self.nominal)
+        data = own_parameters(copy.deepcopy(self.nominal))  # over the point's arm
         for path, value in point.items():
             try:
                 set_dotted(data, path, value)
@@ -182,8 +183,7 @@ def _caveat(table: dict) -> str:
 
 def _settings(table: dict) -> VerifySettings:
     for key in table:
-        check(key in _SETTINGS, f"verify.{key}", f"unknown key (allowed: "
-                                                 f"{', '.join(sorted(_SETTINGS))})")
+        check_known(key, _SETTINGS, f"verify.{key}")
     numbers = {k: table[k] for k in ("level", "p0", "indifference", "alpha", "beta")
                if k in table}
     for key, value in numbers.items():
@@ -204,6 +204,9 @@ def _uncertainty(table: dict, nominal: dict, caveat: str) -> UncertaintySet:
           "needs at least one uncertain field, e.g. \"true_params.Mp\" = {uniform = [0, 1]}")
     axes = tuple(random_axis(p, spec, nominal, f"uncertainty.{p}")
                  for p, spec in sorted(flatten_axes(table).items()))
+    check_scales_on_arm({p: f"uncertainty.{a.path}" for a in axes if a.base for p in a.paths},
+                        {v for a in axes if "arm" in a.paths and a.kind == "choices"
+                         for v in a.arg if isinstance(v, str)}, nominal)
     fields = [p for axis in axes for p in axis.paths]
     twice = sorted({p for p in fields if fields.count(p) > 1})
     check(not twice, "uncertainty", f"{', '.join(twice)} set by more than one dimension")
