@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 from campaign_testing import campaign_toml  # noqa: E402
 
-from validation.batch.store import ResultStore  # noqa: E402
+from validation.batch.store.folder import ResultStore  # noqa: E402
 
 CAMPAIGN = {"name": "identity", "scenario": {"duration": 2.0, "transient": 1.0,
                                              "observer": {"kind": "smo-paper"},

@@ -25,7 +25,7 @@ from validation.batch.campaign import campaign_from_mapping
 from validation.batch.queue import run_campaign
 from validation.batch.executor import make_runner
 from validation.run.metrics import all_metrics
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 from validation.batch.worker import warm_up
 
 REPEATS = 5  # the machines drift up to 2x within an hour: medians of paired repeats

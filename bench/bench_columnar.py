@@ -5,9 +5,9 @@ Apache Parquet files queried by DuckDB, measured on the same rows.
 
 Rows like a metrics-only campaign's: 140 metrics (100 varying floats, 20 zeros, 17 NaN,
 3 short strings) and the identity columns, arriving as the store receives them — in
-batches of 512 rows (`validation.batch.committing.MAX_ROWS`), each committed at once.
+batches of 512 rows (`validation.batch.store.committing.MAX_ROWS`), each committed at once.
 SQLite: one table, a ``REAL`` column per metric, one transaction per batch (what
-`validation.batch.index.insert_rows` does).  Parquet: one file per batch (a file cannot
+`validation.batch.store.index.insert_rows` does).  Parquet: one file per batch (a file cannot
 be appended to; several writer processes each write their own), read back by DuckDB over
 ``*.parquet``; and the same after compacting them into one file.  Measured: writing,
 reading every metric of every row into numpy, a query (one metric above its 99th

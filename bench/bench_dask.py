@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 from campaign_testing import dask_cluster, metrics_table  # noqa: E402
 
-from validation.batch.store import ResultStore  # noqa: E402
+from validation.batch.store.folder import ResultStore  # noqa: E402
 
 WORKLOADS = {"reduced": REDUCED_48, "truth": TRUTH_8}
 

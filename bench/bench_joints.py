@@ -27,7 +27,7 @@ import numpy as np
 
 from _report import report, target
 from plant_exudyn import ExudynPlant
-from reduced_model import ArmParameters, ReducedPlant
+from reduced_model import ArmParameters, ReducedPlant, named_arm
 from validation.run.loop import run_scenario
 from validation.run.replay import bare_replay
 from validation.run.scenario import scenario_from_mapping
@@ -37,7 +37,7 @@ TS = 1e-3
 BAND = (0.99, 0.998, 0.999, 0.9999, 0.99999, 1.00001, 1.0001, 1.01)
 LOOP = {"duration": 5.0, "initial_state": "reference", "observer": {"kind": "smo-paper"},
         "sensors": {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}}
-_LAB = ArmParameters.lab()
+_LAB = named_arm("lab")
 _FRICTION = {f"{n}{i}": getattr(_LAB, f"{n}{i}") for i in (1, 2)
              for n in ("coulomb", "breakaway", "stribeck_velocity", "viscous")}
 _DRIVES = {f"{n}{i}": getattr(_LAB, f"{n}{i}") for i in (1, 2)
@@ -101,7 +101,7 @@ def band_rows() -> list[dict]:
     for joint in (1, 2):
         for fraction in BAND:
             torque = np.zeros(2)
-            torque[joint - 1] = fraction * params.static_friction(joint)
+            torque[joint - 1] = fraction * params.joints[joint - 1].static_friction
             moved = {}
             for kind, plant in (("reduced", ReducedPlant(params)),
                                 ("truth", ExudynPlant(params))):

@@ -30,7 +30,7 @@ import numpy as np
 from _report import report
 from validation.batch.campaign import campaign_from_mapping
 from validation.batch.queue import run_campaign
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 from validation.batch.worker import execute_run
 
 CAMPAIGN = {"name": "keep", "scenario": {"duration": 5.0, "observer": {"kind": "smo-paper"},

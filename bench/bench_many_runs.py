@@ -39,11 +39,11 @@ formula = "always[0.1,0.3](abs(theta1 - theta1_ref) <= 0.002)"
 
 #: Read every row, then the query, in the tree's own interpreter; prints two times.
 QUERY = """import sys, time
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 store = ResultStore(sys.argv[1])
 t = time.perf_counter(); every = store.rows(); read = time.perf_counter() - t
 try:
-    from validation.batch.index import metric_column
+    from validation.batch.store.index import metric_column
     where = metric_column("track_max_1") + " > ?"
 except ImportError:
     where = "json_extract(metrics, '$.track_max_1') > ?"

@@ -7,7 +7,7 @@ One real run (0.3 s reduced, PBC + sign SMO, noisy encoders, a requirement's ρ,
 metrics only) is stored by ``flexarm campaign``; its row is then written again for seeds
 1..RUNS-1 — each a scenario of its own whose id is its hash, its metrics scaled by a
 seed-dependent factor (distinct values for the distributions) — through the store's own
-row encoding (`validation.batch.index.row_values`), in batches of 512 as the committer
+row encoding (`validation.batch.store.index.row_values`), in batches of 512 as the committer
 writes them.  So the folder is what a seed sweep of RUNS runs stores, bit for bit in
 form, without its hours of simulation on 2 cores (`bench/bench_many_runs.py` runs them
 for real, before and after).  Then, in fresh interpreters: ``flexarm export`` (the
@@ -28,9 +28,9 @@ from _workloads import CLI, METRICS_ONLY
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from validation.batch.index import (dictionary_for, metric_column,  # noqa: E402
+from validation.batch.store.index import (dictionary_for, metric_column,  # noqa: E402
                                     row_values, run_id)
-from validation.batch.store import ResultStore  # noqa: E402
+from validation.batch.store.folder import ResultStore  # noqa: E402
 
 REQUIREMENT = """[[requirement]]
 name = "track"

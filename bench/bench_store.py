@@ -14,7 +14,7 @@ import numpy as np
 
 from _report import report, target
 from validation.run.results import RunResult
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 
 SIZES = (100, 1_000, 10_000)
 SAMPLES = 50  # adds timed at each size

@@ -6,7 +6,7 @@ stay flat as the store changes; the whole command's is `bench_workers.py coordin
 One metrics-only run (0.3 s reduced, PBC + sign SMO, noisy encoders) is made and its
 row encoded as a worker encodes it; then 20,480 rows of distinct ids go the way a
 campaign's rows go through the coordinator — unpickled as from a worker's pipe, committed
-512 to a transaction (`validation.batch.committing.MAX_ROWS`) — in REV's tree and in this
+512 to a transaction (`validation.batch.store.committing.MAX_ROWS`) — in REV's tree and in this
 one, each in a fresh interpreter: CPU milliseconds per row and bytes per row on the wire.
 Prints the table, writes bench/results/store_rows.json.
 """
@@ -24,10 +24,10 @@ from _workloads import ROOT, extract
 ROWS = 20_480
 #: Run in the measured tree: prints "CPU ms per row, bytes per row".
 MEASURE = """import pickle, sys, time
-from validation.batch.runfiles import Keep, run_file
-from validation.batch.store import ResultStore
+from validation.batch.store.runfiles import Keep, run_file
+from validation.batch.store.folder import ResultStore
 from validation.batch.worker import execute_run
-from validation.batch import index
+from validation.batch.store import index
 from validation.run.scenario import scenario_from_mapping
 s = scenario_from_mapping({"duration": 0.3, "transient": 0.1, "observer": {"kind": "smo-paper"},
                            "sensors": {"encoder_noise": 1e-4}})

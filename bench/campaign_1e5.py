@@ -33,8 +33,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
 from campaign_testing import stored_count  # noqa: E402
 
-from validation.batch.index import metric_column  # noqa: E402
-from validation.batch.store import ResultStore  # noqa: E402
+from validation.batch.store.index import metric_column  # noqa: E402
+from validation.batch.store.folder import ResultStore  # noqa: E402
 
 #: 0.1 s runs, no requirement.
 CAMPAIGN = METRICS_ONLY.replace("{duration}", "0.1").replace("{transient}", "0.05") \

@@ -5,8 +5,9 @@ trajectories (eq. 37).  All are plug-ins of one interface (`controllers._interfa
 ``Ts``; a controller is called as ``tau = controller(t, x, ref)``; an observer has
 ``measured``, ``reset(x_hat0)`` and ``update(t, y, tau) -> x_hat``.
 """
-from ._baselines import JointPD, RigidArm, RigidComputedTorque
-from ._compiled import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, CompiledLaw, compiled_form
+from ._baselines import JointPD, RigidComputedTorque
+from ._compiled import (CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, CompiledLaw, absent,
+                        compiled_form)
 from ._ekf import ExtendedKalmanFilter, PositionEKF
 from ._interface import Controller, Observer, ObserverFailure
 from ._lqr import GainScheduledLQR
@@ -18,7 +19,8 @@ from ._smo import BoundaryLayerSMO, PaperSMO, PositionOnlySMO
 
 __all__ = ["Controller", "Observer", "PassivityBasedController", "IdealisedPBC", "PaperSMO",
            "BoundaryLayerSMO", "PositionOnlySMO", "ExtendedKalmanFilter", "PositionEKF",
-           "JointPD", "RigidComputedTorque", "GainScheduledLQR", "RigidArm", "TorqueReplay",
+           "JointPD", "RigidComputedTorque", "GainScheduledLQR", "TorqueReplay",
            "PaperReference", "QuinticMove", "ReferenceKind", "reference_into", "CONTROLLERS",
            "OBSERVERS", "PluginError", "resolve", "accepted_options", "CompiledLaw",
-           "compiled_form", "CONTROLLER_SIGNATURE", "OBSERVER_SIGNATURE", "ObserverFailure"]
+           "compiled_form", "absent", "CONTROLLER_SIGNATURE", "OBSERVER_SIGNATURE",
+           "ObserverFailure"]

@@ -1,93 +1,143 @@
 """Baseline controllers to compare the PBC against: joint PD (with the rigid arm's
-feedforward) and rigid-body computed torque.  They use only the joint part of the state
-and ignore the flexible coordinates.
+feedforward) and rigid-body computed torque, on any arm.  They use only the joint part of
+the state and ignore the flexible coordinates.
 
-Fair comparison: both are tuned to the same joint error dynamics as the PBC's defaults
-(Λ = 3, K_v = (10, 5)) on the rigid arm at θ2 = 0.  The PBC's joint rows are
-τ = τ_ff − (M_θθ Λ + K_v) ė − K_v Λ e, i.e. a PD with K_d = M_jj Λ_j + K_v,j and
-K_p = K_v,j Λ_j (poles at Λ_j and K_v,j/M_jj); with M_11 = 2.694, M_22 = 1.067 kg m²
-(`ArmModel()` at Q = 0) that is K_p = (30, 15), K_d = (18.1, 8.2), and for computed
-torque (unit-inertia error dynamics) K_p = Λ K_v/M = (11.1, 14.1), K_d = Λ + K_v/M =
-(6.7, 7.7).  A test recomputes these from the model.
+Both rest on the rigid arm's inverse dynamics (`rigid_inverse_dynamics`): the model's
+own M, C and gravity at q = q̇ = 0, from its compiled kernels.
+
+Fair comparison: both are tuned to the joint error dynamics of the PBC's default gains
+(`controllers.arm_gains`: Λ and K_v per joint, M_jj the inertia about joint j of the arm
+straight and at rest).  The PBC's joint rows are τ = τ_ff − (M_θθ Λ + K_v) ė − K_v Λ e,
+i.e. a PD with K_d = M_jj Λ_j + K_v,j and K_p = K_v,j Λ_j (poles at Λ_j and
+K_v,j/M_jj), and for computed torque (unit-inertia error dynamics) K_p = Λ K_v/M and
+K_d = Λ + K_v/M; each gain is rounded to 0.1 (to one significant figure below 1).  On
+the paper's arm (Λ = 3, K_v = (10, 5), M_jj = 2.694, 1.067 kg m²) that is K_p = (30,
+15), K_d = (18.1, 8.2) for the PD and K_p = (11.1, 14.1), K_d = (6.7, 7.7) for computed
+torque.
 """
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
+from reduced_model.dynamics import mass_bias_into, unpack_model, unpack_workspace
 
 from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
-from ._gains import control_period, gain_vector
+from ._gains import arm_gains, control_period, gain_vector
 
-__all__ = ["JointPD", "RigidComputedTorque", "RigidArm", "rigid_torque"]
+__all__ = ["JointPD", "RigidComputedTorque", "baseline_gains", "rigid_inverse_dynamics"]
 
 
-class RigidArm:
-    """The rigid arm of a model (q = q̇ = 0) for fast inverse dynamics.
+def _tenth(value: float) -> float:
+    """Rounded to 0.1 (one significant figure below 1, so that no gain rounds to 0)."""
+    return round(value, 1) if value >= 1.0 else float(f"{value:.0e}")
 
-    Every rigid planar two-link arm has M_θθ(θ2) = [[a + 2c, d + c], [d + c, d]] with
-    c = b_c cos θ2 − b_s sin θ2 and C_θθ θ̇ from the Christoffel symbols of that M.  The
-    four constants are read off the model's own M at θ2 = 0 and π/2 and checked against
-    its M and C at random states (to 1e-9 relative, else RuntimeError), so this is the
-    model's rigid part, evaluated in ~1 µs by `rigid_torque` instead of ~30 µs through
-    the general M and C.
+
+def baseline_gains(model: ArmModel, Ts: float, law: str) -> tuple[np.ndarray, np.ndarray]:
+    """Default (K_p, K_d) of the joint PD (``law="pd"``) or of computed torque
+    (``"ct"``) on ``model`` at ``Ts``: the PBC's joint error dynamics (module docstring).
 
     Parameters
     ----------
     model : ArmModel
-        The model whose rigid part is taken (any modes per link).
+        The law's nominal model.
+    Ts : float
+        The control period [s].
+    law : {"pd", "ct"}
+        Which law's gains.
 
-    Raises
-    ------
-    RuntimeError
-        If the model's M and C are not those of a rigid planar two-link arm at q = 0
-        (to 1e-9 relative).
+    Returns
+    -------
+    (ndarray, ndarray)
+        K_p and K_d, one per joint ([N m/rad], [N m s/rad] for the PD; [1/s²], [1/s]
+        for computed torque).
     """
-
-    def __init__(self, model: ArmModel) -> None:
-        Q = np.zeros(model.n)
-        m0 = model.mass_matrix(Q)[:2, :2]
-        Q[1] = np.pi / 2
-        m90 = model.mass_matrix(Q)[:2, :2]
-        d = m0[1, 1]
-        bc, bs = m0[0, 1] - d, d - m90[0, 1]
-        #: (a, d, b_c, b_s)
-        self.constants = np.array([m0[0, 0] - 2.0 * bc, d, bc, bs])
-        rng = np.random.default_rng(0)
-        for _ in range(3):
-            th, dth, ddth = rng.uniform(-3, 3, 2), rng.uniform(-2, 2, 2), rng.uniform(-2, 2, 2)
-            Q, Qd = np.zeros(model.n), np.zeros(model.n)
-            Q[:2], Qd[:2] = th, dth
-            want = model.mass_matrix(Q)[:2, :2] @ ddth + model.coriolis_matrix(Q, Qd)[:2, :2] @ dth
-            got = self.torque(th, dth, ddth)
-            if not np.allclose(got, want, rtol=1e-9, atol=1e-9 * np.abs(want).max()):
-                raise RuntimeError(f"the model's rigid part is not a planar two-link arm: "
-                                   f"{got} vs {want}")
-
-    def torque(self, theta, dtheta, ddtheta) -> np.ndarray:
-        """M_θθ(θ) θ̈ + C_θθ(θ, θ̇) θ̇ of the rigid arm."""
-        out = np.empty(2)
-        rigid_torque(self.constants, np.asarray(theta, float), np.asarray(dtheta, float),
-                     np.asarray(ddtheta, float), out)
-        return out
+    rule = arm_gains(model, Ts)
+    lam, kv, m = rule.lambda_joint, rule.kv_joint, rule.inertia
+    if law == "pd":
+        kp, kd = kv * lam, m * lam + kv
+    else:
+        kp, kd = lam * kv / m, lam + kv / m
+    return (np.array([_tenth(g) for g in kp]), np.array([_tenth(g) for g in kd]))
 
 
-@njit(cache=True)
-def rigid_torque(ff, th, dth, ddth, tau):
-    """M_θθ(θ2) θ̈ + C_θθ(θ2, θ̇) θ̇ of a rigid planar two-link arm, constants (a, d, b_c, b_s)."""
-    a, d, bc, bs = ff[0], ff[1], ff[2], ff[3]
-    c2, s2 = math.cos(th[1]), math.sin(th[1])
-    c = bc * c2 - bs * s2  # the θ2-dependent inertia term
-    dc = -(bc * s2 + bs * c2)  # ∂c/∂θ2
-    tau[0] = (a + 2.0 * c) * ddth[0] + (d + c) * ddth[1] \
-        + dc * (2.0 * dth[0] * dth[1] + dth[1] * dth[1])
-    tau[1] = (d + c) * ddth[0] + d * ddth[1] - dc * dth[0] * dth[0]
+def _flag(name: str, value) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be true or false, got {value!r}")
+    return bool(value)
 
 
-class JointPD:
+def _without_gravity(model: ArmModel) -> ArmModel:
+    """``model`` with gravity switched off: what a law without gravity compensation
+    believes."""
+    if not any(model.params.gravity):
+        return model
+    return ArmModel(model.params.replace(gravity=(0.0, 0.0)), model.modes_per_link,
+                    model.kinematics)
+
+
+@njit(cache=True, inline="always")
+def rigid_inverse_dynamics(d, ws, theta, dtheta, ddtheta, Qs, tau):
+    """τ = M_θθ θ̈ + C_θθ θ̇ + g_θ of the arm at Q = [θ, q₀], Q̇ = [θ̇, 0] into
+    ``tau[:N]``, from the model's kernels (paper's kinematics: at rest both kinematics
+    have the same M and gravity).  ``Qs`` is scratch (2n) whose entries N…n−1 hold q₀:
+    0 for the rigid arm (the model at q = q̇ = 0), the static deflection for the arm at
+    rest in gravity (the LQR's operating point)."""
+    N, n = d.links, d.n
+    Q, Qd = Qs[:n], Qs[n:]
+    for i in range(N):
+        Q[i] = theta[i]
+        Qd[i] = dtheta[i]
+    for i in range(N, n):
+        Qd[i] = 0.0
+    mass_bias_into(d, Q, Qd, ws.M, ws.f, ws, True, False)
+    for i in range(N):
+        acc = ws.f[i]
+        for j in range(N):
+            acc += ws.M[i, j] * ddtheta[j]
+        tau[i] = acc
+
+
+class _JointLaw:
+    """What the PD and computed torque share: gains, the model they believe and running
+    their kernel from Python on their own buffers."""
+
+    _kernel = None
+    _law = ""
+
+    def _setup(self, model, Ts, kp, kd, gravity, ints) -> None:
+        self.model, self.Ts = model, control_period(Ts)
+        N = model.n_joints
+        default_kp, default_kd = baseline_gains(model, self.Ts, self._law)
+        self.kp = gain_vector("kp", default_kp if kp is None else kp, N)
+        self.kd = gain_vector("kd", default_kd if kd is None else kd, N)
+        self.gravity_compensation = _flag("gravity_compensation", gravity)
+        self._believed = model if self.gravity_compensation else _without_gravity(model)
+        self._ints = np.array(ints, dtype=np.int64)
+        self._reals = np.concatenate([self.kp, self.kd])
+        self._state = np.zeros(3 * model.n_joints + 2 * model.n)
+        self._work = self._believed.new_workspace()[0]
+        self._ref = np.zeros(3 * N)
+        self._tau = np.zeros(N)
+        self._residual = np.zeros(0)
+
+    def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
+        N = self.model.n_joints
+        theta_d, dtheta_d, ddtheta_d = ref(t)
+        self._ref[:N], self._ref[N:2 * N], self._ref[2 * N:] = theta_d, dtheta_d, ddtheta_d
+        self._kernel(t, np.ascontiguousarray(x, dtype=float), self._ref, self._ints,
+                     self._reals, self._state, *self._believed.packed, *self._work, self._tau,
+                     self._residual)
+        return self._tau.copy()
+
+    def compiled(self) -> CompiledLaw:
+        """The compiled form (`controllers._compiled`): the gains, the model it believes."""
+        return CompiledLaw.of(self._kernel, CONTROLLER_SIGNATURE, self._believed,
+                              ints=self._ints, reals=self._reals, state=self._state)
+
+
+class JointPD(_JointLaw):
     """τ = τ_ff + K_p (θ_d − θ) + K_d (θ̇_d − θ̇).
 
     Parameters
@@ -96,96 +146,93 @@ class JointPD:
         The nominal model (for the feedforward).
     Ts : float
         The control period [s] (the law is continuous: it is recorded, not used).
-    kp, kd : one or two numbers
-        Joint gains [N m/rad], [N m s/rad].  Defaults (30, 15) and (18.1, 8.2): the PBC's
-        joint error dynamics (module docstring).
+    kp, kd : one number, or one per joint
+        Joint gains [N m/rad], [N m s/rad]; default: the PBC's joint error dynamics
+        (`baseline_gains`; (30, 15) and (18.1, 8.2) on the paper's arm).
     feedforward : bool
-        τ_ff = M_θθ(θ_d) θ̈_d + C_θθ(θ_d, θ̇_d) θ̇_d of the rigid arm (the model at q = 0)
-        if true (default), else 0.
+        τ_ff includes M_θθ(θ_d) θ̈_d + C_θθ(θ_d, θ̇_d) θ̇_d of the rigid arm (the model at
+        q = q̇ = 0) if true (default).
+    gravity_compensation : bool
+        τ_ff includes the rigid arm's gravity torque g_θ(θ_d) (default true; false: the
+        joints settle off their reference by the static moment over K_p).
     """
 
     name = "pd"
+    _law = "pd"
 
-    def __init__(self, model: ArmModel, *, Ts: float, kp=(30.0, 15.0), kd=(18.1, 8.2),
-                 feedforward: bool = True) -> None:
-        if not isinstance(feedforward, (bool, np.bool_)):
-            raise ValueError(f"feedforward must be true or false, got {feedforward!r}")
-        self.model, self.Ts = model, control_period(Ts)
-        self.rigid = RigidArm(model) if feedforward else None
-        self.kp, self.kd = gain_vector("kp", kp, 2), gain_vector("kd", kd, 2)
-
-    def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
-        n = x.shape[0] // 2
-        theta_d, dtheta_d, ddtheta_d = ref(t)
-        tau = self.kp * (theta_d - x[:2]) + self.kd * (dtheta_d - x[n:n + 2])
-        if self.rigid is not None:
-            tau = tau + self.rigid.torque(theta_d, dtheta_d, ddtheta_d)
-        return tau
-
-    def compiled(self) -> CompiledLaw:
-        """The compiled form (`controllers._compiled`): gains and the rigid constants."""
-        ff = self.rigid.constants if self.rigid is not None else np.zeros(4)
-        return CompiledLaw.of(pd_kernel, CONTROLLER_SIGNATURE, self.model,
-                              ints=[int(self.rigid is not None)],
-                              reals=np.concatenate([self.kp, self.kd, ff]), state=np.zeros(2))
+    def __init__(self, model: ArmModel, *, Ts: float, kp=None, kd=None,
+                 feedforward: bool = True, gravity_compensation: bool = True) -> None:
+        feedforward = _flag("feedforward", feedforward)
+        self.feedforward = feedforward
+        self._kernel = pd_kernel
+        self._setup(model, Ts, kp, kd, gravity_compensation, [int(feedforward)])
 
 
 @njit(cache=True)
 def pd_kernel(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
-    """`JointPD` compiled: ints = [feedforward], reals = [K_p, K_d, rigid constants]."""
-    n = x.shape[0] // 2
-    for i in range(2):
-        tau[i] = reals[i] * (ref[i] - x[i]) + reals[2 + i] * (ref[2 + i] - x[n + i])
-    if ints[0] == 1:
-        rigid_torque(reals[4:8], ref[0:2], ref[2:4], ref[4:6], state)
-        tau[0] += state[0]
-        tau[1] += state[1]
-    return 2
+    """`JointPD` compiled: ints = [feedforward], reals = [K_p, K_d], state = scratch
+    (3N + 2n)."""
+    d = unpack_model(mi, mr)
+    ws = unpack_workspace(mi, wc, wr)
+    N, n = d.links, d.n
+    zero, Qs, ff = state[:2 * N], state[2 * N:2 * N + 2 * n], state[2 * N + 2 * n:]
+    for i in range(2 * n):
+        Qs[i] = 0.0
+    if ints[0] == 1:  # the whole rigid inverse dynamics of the reference
+        rigid_inverse_dynamics(d, ws, ref[:N], ref[N:2 * N], ref[2 * N:3 * N], Qs, ff)
+    elif d.gx != 0.0 or d.gy != 0.0:  # its gravity torque only
+        for i in range(2 * N):
+            zero[i] = 0.0
+        rigid_inverse_dynamics(d, ws, ref[:N], zero[:N], zero[N:], Qs, ff)
+    else:
+        for i in range(N):
+            ff[i] = 0.0
+    for i in range(N):
+        tau[i] = reals[i] * (ref[i] - x[i]) + reals[N + i] * (ref[N + i] - x[n + i]) + ff[i]
+    return N
 
 
-class RigidComputedTorque:
+class RigidComputedTorque(_JointLaw):
     """Rigid-body computed torque: flexibility ignored.
 
-    τ = M_θθ(θ) (θ̈_d + K_d (θ̇_d − θ̇) + K_p (θ_d − θ)) + C_θθ(θ, θ̇) θ̇, with M and C of the
-    model at q = q̇ = 0 (the rigid arm with the same masses).
+    τ = M_θθ(θ) (θ̈_d + K_d (θ̇_d − θ̇) + K_p (θ_d − θ)) + C_θθ(θ, θ̇) θ̇ + g_θ(θ), with M, C
+    and g of the model at q = q̇ = 0 (the rigid arm with the same masses:
+    `rigid_inverse_dynamics`).
 
     Parameters
     ----------
     model : ArmModel
-        The nominal model (its rigid part: `RigidArm`).
+        The nominal model (its rigid part).
     Ts : float
         The control period [s] (the law is continuous: it is recorded, not used).
-    kp, kd : (float, float) or float
-        K_p [1/s²] and K_d [1/s] per joint, or one number for both; defaults (11.1, 14.1)
-        and (6.7, 7.7): the PBC's joint error poles (module docstring).
+    kp, kd : one number, or one per joint
+        K_p [1/s²] and K_d [1/s]; default: the PBC's joint error poles
+        (`baseline_gains`; (11.1, 14.1) and (6.7, 7.7) on the paper's arm).
+    gravity_compensation : bool
+        Include the gravity torque g_θ(θ) (default true; false: the joints settle off
+        their reference by the static moment over M_θθ K_p).
     """
 
     name = "ct"
+    _law = "ct"
 
-    def __init__(self, model: ArmModel, *, Ts: float, kp=(11.1, 14.1), kd=(6.7, 7.7)) -> None:
-        self.model, self.Ts = model, control_period(Ts)
-        self.rigid = RigidArm(model)
-        self.kp, self.kd = gain_vector("kp", kp, 2), gain_vector("kd", kd, 2)
-
-    def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
-        n = x.shape[0] // 2
-        theta, dtheta = x[:2], x[n:n + 2]
-        theta_d, dtheta_d, ddtheta_d = ref(t)
-        accel = ddtheta_d + self.kd * (dtheta_d - dtheta) + self.kp * (theta_d - theta)
-        return self.rigid.torque(theta, dtheta, accel)
-
-    def compiled(self) -> CompiledLaw:
-        """The compiled form (`controllers._compiled`): gains and the rigid constants."""
-        return CompiledLaw.of(ct_kernel, CONTROLLER_SIGNATURE, self.model,
-                              reals=np.concatenate([self.kp, self.kd, self.rigid.constants]),
-                              state=np.zeros(2))
+    def __init__(self, model: ArmModel, *, Ts: float, kp=None, kd=None,
+                 gravity_compensation: bool = True) -> None:
+        self._kernel = ct_kernel
+        self._setup(model, Ts, kp, kd, gravity_compensation, [])
 
 
 @njit(cache=True)
 def ct_kernel(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
-    """`RigidComputedTorque` compiled: reals = [K_p, K_d, rigid constants]."""
-    n = x.shape[0] // 2
-    for i in range(2):
-        state[i] = ref[4 + i] + reals[2 + i] * (ref[2 + i] - x[n + i]) + reals[i] * (ref[i] - x[i])
-    rigid_torque(reals[4:8], x[0:2], x[n:n + 2], state, tau)
-    return 2
+    """`RigidComputedTorque` compiled: reals = [K_p, K_d], state = scratch (3N + 2n)."""
+    d = unpack_model(mi, mr)
+    ws = unpack_workspace(mi, wc, wr)
+    N, n = d.links, d.n
+    accel, Qs = state[:N], state[3 * N:3 * N + 2 * n]
+    for i in range(2 * n):
+        Qs[i] = 0.0
+    for i in range(N):
+        accel[i] = ref[2 * N + i] + reals[N + i] * (ref[N + i] - x[n + i]) \
+            + reals[i] * (ref[i] - x[i])
+    rigid_inverse_dynamics(d, ws, x[:N], x[n:n + N], accel, Qs, tau)
+    return N

@@ -1,9 +1,11 @@
 """The compiled form of a law: a numba kernel with its role's fixed signature, and the
 buffers it works on.
 
-A compiled loop (`validation.run._sample`) calls a law through a function pointer of
-the role's signature, so the loop is compiled once for every law, and each law's kernel
-is compiled — and cached by numba — on its own, the first time a run uses it.  A law
+A compiled loop (`validation.run.sample`) calls a law through a typed function pointer of
+the role's signature (`reduced_model.contract.compiled.KernelPointer`, as it calls a
+plant), so the loop is compiled once for every law, and each law's kernel is compiled —
+and cached by numba — on its own, the first time a run uses it; a kernel that does not
+take its role's signature fails there, with a `TypeError` naming it.  A law
 offers its compiled form with a method ``compiled() -> CompiledLaw`` on the class that
 defines its Python form (``__call__`` for a controller, ``update`` for an observer);
 the buffers are copies, so a compiled run never changes the Python object.  Any law may
@@ -14,9 +16,9 @@ Controller kernel::
     n_tau = kernel(t, x, ref, ints, reals, state, model_ints, model_reals,
                    work_complex, work_real, tau, residual)
 
-writes the torques into ``tau`` (its first ``n_tau`` entries: 2, or n for a law that
+writes the torques into ``tau`` (its first ``n_tau`` entries: N, or n for a law that
 applies generalised forces to every coordinate) and what it cannot apply into
-``residual``; ``x`` is the state it is fed, ``ref`` = [θ_d, θ̇_d, θ̈_d] (6,).
+``residual``; ``x`` is the state it is fed, ``ref`` = [θ_d, θ̇_d, θ̈_d] (3N,).
 
 Observer kernel::
 
@@ -31,27 +33,18 @@ says how).
 """
 from __future__ import annotations
 
-import functools
-import warnings
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit, types
-from numba.core.errors import NumbaExperimentalFeatureWarning
-from numba.experimental.function_type import _get_wrapper_address
+
+from reduced_model.contract import KernelPointer, kernel_pointer
+from reduced_model.contract import vector as _vector
 
 __all__ = ["CONTROLLER_SIGNATURE", "OBSERVER_SIGNATURE", "CompiledLaw", "compiled_form",
-           "LawPointer", "law_pointer", "absent"]
+           "absent"]
 
 _f8, _i8, _c16 = types.float64, types.int64, types.complex128
-# Function pointers are numba's "experimental" first-class functions (stable since 0.53,
-# tested here on every path): say it once in this docstring, not at every compilation.
-warnings.filterwarnings("ignore", "First-class function type feature is experimental",
-                        NumbaExperimentalFeatureWarning)
-
-
-def _vector(dtype):
-    return types.Array(dtype, 1, "C")
 
 
 #: The compiled controller's signature (module docstring).
@@ -64,31 +57,6 @@ OBSERVER_SIGNATURE = _i8(_f8, _vector(_f8), _vector(_f8), _vector(_i8), _vector(
                          _vector(_f8), _vector(_f8))
 
 
-class LawPointer(types.WrapperAddressProtocol):
-    """A law's kernel as a first-class function of its role's signature: compiled loops
-    take it as an argument, so they are compiled once for every law.  It carries its
-    numba type, so passing it costs no type inference."""
-
-    def __init__(self, kernel, signature) -> None:
-        kernel.compile(signature.args)  # on first use; numba's cache keeps it
-        self._address = _get_wrapper_address(kernel, signature)
-        self._signature = signature
-        self._numba_type_ = types.FunctionType(signature)
-        self.kernel = kernel
-
-    def __wrapper_address__(self) -> int:
-        return self._address
-
-    def signature(self):
-        return self._signature
-
-
-@functools.cache
-def law_pointer(kernel, signature) -> LawPointer:
-    """The `LawPointer` of ``kernel`` (made once per process)."""
-    return LawPointer(kernel, signature)
-
-
 class CompiledLaw(NamedTuple):
     """A law's kernel and the buffers it works on: what a law's ``compiled()`` returns
     (the kernels' signatures are in this module's docstring).
@@ -99,7 +67,7 @@ class CompiledLaw(NamedTuple):
 
     Parameters
     ----------
-    pointer : LawPointer
+    pointer : KernelPointer
         The kernel as a function pointer of its role's signature.
     ints : ndarray of int64
         Integer options and flags (the kernel's ``ints``).
@@ -130,7 +98,7 @@ class CompiledLaw(NamedTuple):
     (array([30., 15.]), 0, '')
     """
 
-    pointer: LawPointer
+    pointer: KernelPointer
     ints: np.ndarray
     reals: np.ndarray
     state: np.ndarray
@@ -161,9 +129,14 @@ class CompiledLaw(NamedTuple):
         Returns
         -------
         CompiledLaw
+
+        Raises
+        ------
+        TypeError
+            When ``kernel`` does not take ``signature``.
         """
         work_complex, work_real = model.new_workspace()[0]
-        return cls(law_pointer(kernel, signature),
+        return cls(kernel_pointer(kernel, signature),
                    np.ascontiguousarray(ints, dtype=np.int64),
                    np.ascontiguousarray(reals, dtype=np.float64),
                    np.array(state, dtype=np.float64, order="C"),  # always a copy
@@ -216,7 +189,7 @@ def compiled_form(law, role: str) -> CompiledLaw | None:
         return None
     form = law.compiled()
     signature = CONTROLLER_SIGNATURE if role == "controller" else OBSERVER_SIGNATURE
-    if not (isinstance(form, CompiledLaw) and isinstance(form.pointer, LawPointer)
+    if not (isinstance(form, CompiledLaw) and isinstance(form.pointer, KernelPointer)
             and form.pointer.signature() == signature):
         text = " ".join(repr(form).split())
         raise TypeError(f"{cls.__module__}:{cls.__qualname__}.compiled() returned {text[:60]}{'...' if len(text) > 60 else ''}"
@@ -237,7 +210,20 @@ def _no_observer(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
 
 def absent(role: str, model) -> CompiledLaw:
     """What fills a law's place in a compiled sample when there is no observer, or when
-    the laws run as Python objects (never called: the loop knows)."""
+    the laws run as Python objects (never called: the loop knows).
+
+    Parameters
+    ----------
+    role : {"controller", "observer"}
+        The place it fills.
+    model : ArmModel
+        The model the loop's laws are built on.
+
+    Returns
+    -------
+    CompiledLaw
+        A law of that role's signature that does nothing.
+    """
     if role == "controller":
         return CompiledLaw.of(_no_controller, CONTROLLER_SIGNATURE, model)
     return CompiledLaw.of(_no_observer, OBSERVER_SIGNATURE, model)

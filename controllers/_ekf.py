@@ -17,9 +17,9 @@ import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
-from reduced_model._cholesky import cholesky_factor_inplace, cholesky_solve_factored
-from reduced_model._kernels import rk4_advance_packed
-from reduced_model._views import matrix_view
+from reduced_model.dynamics import (cholesky_factor_inplace, cholesky_solve_factored,
+                                    matrix_view, unpack_model)
+from reduced_model.dynamics.entries import advance_exact, advance_linear
 
 from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
 from ._gains import control_period, gain_vector
@@ -72,9 +72,9 @@ class ExtendedKalmanFilter:
     -----
     Jacobian.  Φ = ∂F/∂x is computed in compiled code by forward differences of the
     RK4 map itself (the same sub-steps as the prediction), one column per state with
-    step 3e-7·max(1, |x_j|): 2n RK4 maps per update (θ1 is cyclic, so its column is e_1
-    exactly; the test's independent central differences check that column too).  Φ is
-    accurate to 1e-7 on the default arm and 1.5e-6 on the Table 1 arm (measured against
+    step 3e-7·max(1, |x_j|): 2n RK4 maps per update (θ1 is cyclic in a horizontal arm,
+    so its column is e_1 exactly; the test's independent central differences check that
+    column too).  Φ is accurate to 1e-7 on the default arm and 1.5e-6 on the Table 1 arm (measured against
     Richardson-extrapolated central differences; the Table 1 mass matrix has condition
     ≈ 1e4, so the map's round-off is ~1e-13 and a √ε step would leave 1e-5 errors).
     Differentiating the discrete map rather than the continuous rhs keeps Φ consistent
@@ -82,8 +82,7 @@ class ExtendedKalmanFilter:
     accuracy the covariance does not need.
 
     No allocation; the RK4 kernel is called, not inlined, so this module compiles in
-    seconds instead of minutes (bench/bench_closed_loop.py measures the filter's cost in the
-    loop).
+    seconds instead of minutes.
     """
 
     name = "ekf"
@@ -92,43 +91,44 @@ class ExtendedKalmanFilter:
                  sigma_theta_dot=1e-3, sigma_q_dot=1e-3, accel_noise_theta=0.03,
                  accel_noise_q=0.03, p0_theta=0.1, p0_q=5e-3, p0_theta_dot=0.3,
                  p0_q_dot=0.05) -> None:
-        nf = model.n - 2
-        sigma = [gain_vector("sigma_theta", sigma_theta, 2, positive=True),
+        N, nf = model.n_joints, model.n - model.n_joints
+        sigma = [gain_vector("sigma_theta", sigma_theta, N, positive=True),
                  gain_vector("sigma_q", sigma_q, nf, positive=True),
-                 gain_vector("sigma_theta_dot", sigma_theta_dot, 2, positive=True),
+                 gain_vector("sigma_theta_dot", sigma_theta_dot, N, positive=True),
                  gain_vector("sigma_q_dot", sigma_q_dot, nf, positive=True)]
         self._setup(model, Ts, sigma, accel_noise_theta, accel_noise_q,
                     (p0_theta, p0_q, p0_theta_dot, p0_q_dot))
 
     def _setup(self, model, Ts, sigma, accel_noise_theta, accel_noise_q, p0) -> None:
         self.model, self.Ts = model, control_period(Ts)
-        self._nsub = max(1, math.ceil(self.Ts / _MAX_SUBSTEP - 1e-9))  # RK4 sub-steps
-        n, nf = model.n, model.n - 2
-        self._sigma = np.concatenate(sigma)
-        self._accel = np.concatenate([
-            gain_vector("accel_noise_theta", accel_noise_theta, 2),
-            gain_vector("accel_noise_q", accel_noise_q, nf)])
+        nsub = max(1, math.ceil(self.Ts / _MAX_SUBSTEP - 1e-9))  # RK4 sub-steps
+        n, nj = model.n, model.n_joints
+        nf = n - nj
+        sigma = np.concatenate(sigma)
+        accel = np.concatenate([gain_vector("accel_noise_theta", accel_noise_theta, nj),
+                                gain_vector("accel_noise_q", accel_noise_q, nf)])
         self._p0 = np.concatenate([
-            gain_vector(name, value, 2 if "theta" in name else nf)
+            gain_vector(name, value, nj if "theta" in name else nf)
             for name, value in zip(("p0_theta", "p0_q", "p0_theta_dot", "p0_q_dot"), p0)])
-        self._m = len(self._sigma)  # y = the first m states
-        self._r = self._sigma[:self._m] ** 2
-        self._work = model.new_workspace()[0]
+        self._m = m = len(sigma)  # y = the first m states
         N = 2 * n
-        self._x = np.zeros(N)
-        self._P = np.diag(self._p0 ** 2)
-        self._Qd = np.zeros((N, N))
-        # Scratch for the compiled update: x⁻, perturbed x, Φ, two N×N products, K (N×m),
-        # S (m×m), innovation (m,).
-        self._buf = (np.zeros(N), np.zeros(N), np.zeros((N, N)), np.zeros((N, N)),
-                     np.zeros((N, N)), np.zeros((N, self._m)), np.zeros((self._m, self._m)),
-                     np.zeros(self._m))
-        self._fresh = True
-        s2, T = self._accel ** 2, self.Ts
+        Qd = np.zeros((N, N))
+        s2, T = accel ** 2, self.Ts
         for i in range(n):  # white-noise acceleration on coordinate i, over one period
-            self._Qd[i, i] = s2[i] * T ** 3 / 3.0
-            self._Qd[i, n + i] = self._Qd[n + i, i] = s2[i] * T ** 2 / 2.0
-            self._Qd[n + i, n + i] = s2[i] * T
+            Qd[i, i] = s2[i] * T ** 3 / 3.0
+            Qd[i, n + i] = Qd[n + i, i] = s2[i] * T ** 2 / 2.0
+            Qd[n + i, n + i] = s2[i] * T
+        self._kernel = ekf_kernel_exact if model.exact else ekf_kernel
+        self._ints = np.array([m, nsub, 1], dtype=np.int64)  # [.., fresh]
+        self._reals = np.concatenate([sigma[:m] ** 2, Qd.ravel(), [self.Ts]])
+        # state: x̂, P, then scratch: x⁻, perturbed x, Φ, two N×N products, K (N×m),
+        # S (m×m), innovation (m,)
+        self._state = np.zeros(N + N * N + 2 * N + 3 * N * N + N * m + m * m + m)
+        self._x = self._state[:N]
+        self._P = self._state[N:N + N * N].reshape(N, N)
+        self._P[:] = np.diag(self._p0 ** 2)
+        self._work = model.new_workspace()[0]
+        self._x_hat = np.zeros(N)
 
     @property
     def measured(self) -> tuple[str, ...]:
@@ -146,7 +146,7 @@ class ExtendedKalmanFilter:
             raise ValueError(f"x_hat0 must have shape {self._x.shape}, got {x0.shape}")
         self._x[:] = x0
         self._P[:] = np.diag(self._p0 ** 2)
-        self._fresh = True
+        self._ints[2] = 1  # fresh: the next update only corrects
         return self._x.copy()
 
     def update(self, t: float, y: np.ndarray, tau: np.ndarray) -> np.ndarray:
@@ -154,16 +154,13 @@ class ExtendedKalmanFilter:
         call after `reset`), then correct with ``y`` (in the order of `measured`)
         measured at ``t``.  Returns a copy of x̂; raises `ObserverFailure` if the
         covariance update failed (the closed loop then ends the run as diverged)."""
-        y = np.asarray(y, dtype=float)
+        y = np.ascontiguousarray(y, dtype=float)
         if y.shape != (self._m,):
             raise ValueError(f"y must have shape ({self._m},) (measured), got {y.shape}")
-        ints, reals = self.model.packed
-        wc, wr = self._work
-        ok = _ekf_update(ints, reals, wc, wr, self._x, self._P, np.asarray(tau, dtype=float),
-                         self.Ts / self._nsub, self._nsub, not self._fresh, y, self._r, self._Qd,
-                         *self._buf)
-        self._fresh = False
-        if not ok:
+        failed = self._kernel(t, y, np.ascontiguousarray(tau, dtype=float), self._ints,
+                              self._reals, self._state, *self.model.packed, *self._work,
+                              self._x_hat)
+        if failed:
             self._x[:] = np.nan
             raise ObserverFailure(COVARIANCE_FAILURE)
         return self._x.copy()
@@ -171,13 +168,8 @@ class ExtendedKalmanFilter:
     def compiled(self) -> CompiledLaw:
         """The compiled form (`controllers._compiled`), its state (x̂, P) copied as it is
         now."""
-        N, m = self._x.shape[0], self._m
-        scratch = 2 * N + 3 * N * N + N * m + m * m + m
-        return CompiledLaw.of(ekf_kernel, OBSERVER_SIGNATURE, self.model,
-                              ints=[m, self._nsub, int(self._fresh)],
-                              reals=np.concatenate([self._r, self._Qd.ravel(), [self.Ts]]),
-                              state=np.concatenate([self._x, self._P.ravel(), np.zeros(scratch)]),
-                              failure=COVARIANCE_FAILURE)
+        return CompiledLaw.of(self._kernel, OBSERVER_SIGNATURE, self.model, ints=self._ints,
+                              reals=self._reals, state=self._state, failure=COVARIANCE_FAILURE)
 
     def jacobian(self, x, tau) -> np.ndarray:
         """Φ = ∂F/∂x of the prediction map F (RK4 over ``Ts``, ``tau`` held) at ``x``,
@@ -187,8 +179,10 @@ class ExtendedKalmanFilter:
             raise ValueError(f"x must have shape {self._x.shape}, got {x.shape}")
         N = x.shape[0]
         Phi, xn, xp = np.zeros((N, N)), np.zeros(N), np.zeros(N)
-        _jacobian(*self.model.packed, *self.model.new_workspace()[0], x,
-                  np.asarray(tau, dtype=float), self.Ts / self._nsub, self._nsub, xn, xp, Phi)
+        nsub = self._ints[1]
+        (ekf_jacobian_exact if self.model.exact else ekf_jacobian)(
+            *self.model.packed, *self.model.new_workspace()[0], x, np.asarray(tau, dtype=float),
+            self.Ts / nsub, nsub, xn, xp, Phi)
         return Phi
 
 
@@ -211,43 +205,67 @@ class PositionEKF(ExtendedKalmanFilter):
     def __init__(self, model: ArmModel, *, Ts: float, sigma_theta=1e-4, sigma_q=1e-5,
                  accel_noise_theta=0.03, accel_noise_q=0.03, p0_theta=0.1, p0_q=5e-3,
                  p0_theta_dot=0.3, p0_q_dot=0.05) -> None:
-        sigma = [gain_vector("sigma_theta", sigma_theta, 2, positive=True),
-                 gain_vector("sigma_q", sigma_q, model.n - 2, positive=True)]
+        N = model.n_joints
+        sigma = [gain_vector("sigma_theta", sigma_theta, N, positive=True),
+                 gain_vector("sigma_q", sigma_q, model.n - N, positive=True)]
         self._setup(model, Ts, sigma, accel_noise_theta, accel_noise_q,
                     (p0_theta, p0_q, p0_theta_dot, p0_q_dot))
 
 
-@njit(cache=True)
-def _jacobian(ints, reals, wc, wr, x, tau, h, nsub, xn, xp, Phi):
-    """F(x) into ``xn`` and Φ = ∂F/∂x (forward differences of the RK4 map) into ``Phi``.
+@njit(cache=True, inline="always")
+def _advance(ints, reals, wc, wr, x, tau, h, nsub, exact):
+    """The model's RK4 map, called, not inlined: the same machine code, and this module
+    compiles in seconds instead of minutes."""
+    if exact:
+        advance_exact(ints, reals, wc, wr, x, tau, h, nsub)
+    else:
+        advance_linear(ints, reals, wc, wr, x, tau, h, nsub)
 
-    Calls the compiled `rk4_advance_packed` rather than inlining `rk4_advance`: the
-    same machine code, and this module compiles in seconds instead of minutes."""
+
+@njit(cache=True, inline="always")
+def _jacobian(ints, reals, wc, wr, x, tau, h, nsub, xn, xp, Phi, exact):
+    """F(x) into ``xn`` and Φ = ∂F/∂x (forward differences of the RK4 map) into ``Phi``."""
     N = x.shape[0]
     xn[:] = x
-    rk4_advance_packed(ints, reals, wc, wr, xn, tau, h, nsub)
-    # θ1 is cyclic (the rhs does not depend on it): ∂F/∂θ1 = e_1 exactly, one map saved.
-    for i in range(N):
-        Phi[i, 0] = 0.0
-    Phi[0, 0] = 1.0
-    for j in range(1, N):
+    _advance(ints, reals, wc, wr, xn, tau, h, nsub, exact)
+    # In a horizontal arm θ1 is cyclic (the rhs does not depend on it): ∂F/∂θ1 = e_1
+    # exactly, one map saved; gravity makes it a coordinate like the others.
+    d = unpack_model(ints, reals)
+    first = 1 if d.gx == 0.0 and d.gy == 0.0 else 0
+    if first:
+        for i in range(N):
+            Phi[i, 0] = 0.0
+        Phi[0, 0] = 1.0
+    for j in range(first, N):
         xp[:] = x
         xp[j] = x[j] + _FD_STEP * max(1.0, abs(x[j]))
         step = xp[j] - x[j]  # the step actually taken (exactly representable)
-        rk4_advance_packed(ints, reals, wc, wr, xp, tau, h, nsub)
+        _advance(ints, reals, wc, wr, xp, tau, h, nsub, exact)
         for i in range(N):
             Phi[i, j] = (xp[i] - xn[i]) / step
 
 
 @njit(cache=True)
+def ekf_jacobian(ints, reals, wc, wr, x, tau, h, nsub, xn, xp, Phi):
+    """`_jacobian` with the paper's kinematics (for `ExtendedKalmanFilter.jacobian`)."""
+    _jacobian(ints, reals, wc, wr, x, tau, h, nsub, xn, xp, Phi, False)
+
+
+@njit(cache=True)
+def ekf_jacobian_exact(ints, reals, wc, wr, x, tau, h, nsub, xn, xp, Phi):
+    """`_jacobian` with exact kinematics."""
+    _jacobian(ints, reals, wc, wr, x, tau, h, nsub, xn, xp, Phi, True)
+
+
+@njit(cache=True, inline="always")
 def _ekf_update(ints, reals, wc, wr, x, P, tau, h, nsub, predict, y, r, Qd, xn, xp, Phi,
-                T1, T2, Kg, S, nu):
+                T1, T2, Kg, S, nu, exact):
     """One EKF step in place on ``x`` and ``P``; False if H P Hᵀ + R is not positive
     definite (P no longer a covariance)."""
     N = x.shape[0]
     m = y.shape[0]
     if predict:
-        _jacobian(ints, reals, wc, wr, x, tau, h, nsub, xn, xp, Phi)
+        _jacobian(ints, reals, wc, wr, x, tau, h, nsub, xn, xp, Phi, exact)
         # P⁻ = Φ P Φᵀ + Q_d, symmetrised against round-off.
         for i in range(N):
             for j in range(N):
@@ -304,8 +322,8 @@ def _ekf_update(ints, reals, wc, wr, x, P, tau, h, nsub, predict, y, r, Qd, xn, 
     return True
 
 
-@njit(cache=True)
-def ekf_kernel(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+@njit(cache=True, inline="always")
+def _ekf(y, tau, ints, reals, state, mi, mr, wc, wr, x_hat, exact):
     """The EKF compiled (`controllers._compiled`): ints = [m measured, RK4 sub-steps,
     fresh], reals = [R diagonal, Q_d, Ts], state = [x̂, P, scratch]; status 1 when the
     covariance update fails."""
@@ -322,8 +340,20 @@ def ekf_kernel(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
                      matrix_view(state, b + 2 * N + nn, N, N),
                      matrix_view(state, b + 2 * N + 2 * nn, N, N),
                      matrix_view(state, s, N, m), matrix_view(state, s + N * m, m, m),
-                     state[s + N * m + m * m:s + N * m + m * m + m])
+                     state[s + N * m + m * m:s + N * m + m * m + m], exact)
     ints[2] = 0  # no longer fresh: later calls predict
     for i in range(N):
         x_hat[i] = x[i] if ok else np.nan
     return 0 if ok else 1
+
+
+@njit(cache=True)
+def ekf_kernel(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+    """`_ekf` on a model with the paper's kinematics."""
+    return _ekf(y, tau, ints, reals, state, mi, mr, wc, wr, x_hat, False)
+
+
+@njit(cache=True)
+def ekf_kernel_exact(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+    """`_ekf` on a model with exact kinematics."""
+    return _ekf(y, tau, ints, reals, state, mi, mr, wc, wr, x_hat, True)

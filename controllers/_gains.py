@@ -1,9 +1,66 @@
-"""Diagonal gains given as one number or one per coordinate, validated once."""
+"""Diagonal gains given as one number or one per coordinate, validated once, and the
+rule that gives a law's default gains from the arm it is built on (`arm_gains`)."""
 from __future__ import annotations
+
+import math
+from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["gain_vector", "joint_flex_gains", "control_period"]
+__all__ = ["gain_vector", "joint_flex_gains", "control_period", "ArmGains", "arm_gains",
+           "RIGID_BANDWIDTH", "SAMPLING_BANDWIDTH"]
+
+#: The bandwidth [rad/s] the gains are scaled to on an arm of rigid links only.
+RIGID_BANDWIDTH = 10.0
+#: The largest bandwidth the rule takes, as a fraction of the sampling rate 1/Ts: well
+#: inside what a 1 kHz loop samples (50 rad/s at 1 ms).
+SAMPLING_BANDWIDTH = 0.05
+
+
+class ArmGains(NamedTuple):
+    """The default gains of an arm (`arm_gains`)."""
+
+    bandwidth: float  # ω [rad/s]: the first locked frequency, capped
+    inertia: np.ndarray  # M_ii: the arm's inertia about each joint, straight, at rest [kg m²]
+    lambda_joint: np.ndarray  # Λ on θ [1/s]
+    lambda_flex: float  # Λ on q [1/s]
+    kv_joint: np.ndarray  # K_v on θ [N m s/rad]
+
+
+def _round(value: float) -> float:
+    """One significant figure: a starting point, not an optimum."""
+    return float(f"{value:.0e}")
+
+
+def arm_gains(model, Ts: float) -> ArmGains:
+    """The rule behind the laws' default gains, from the arm of ``model`` and ``Ts``.
+
+    ω is the arm's first natural frequency with the joints locked [rad/s] (`RIGID_BANDWIDTH`
+    for an arm of rigid links only), at most `SAMPLING_BANDWIDTH`/Ts; M_ii is the
+    inertia about joint i of the arm straight and at rest (the diagonal of M(0)).  The
+    PBC's joint error dynamics, (M_ii s + K_v,i)(s + Λ_i) = 0, get their poles at
+    Λ = 0.75 ω and K_v,i/M_ii = 1.1 ω — just below and at the first flexible mode, so
+    that the joints follow without driving it hard —, and Λ_f = 0.25 ω; each gain is
+    rounded to one significant figure.  On the paper's arm (ω = 3.97 rad/s, M_ii =
+    2.69, 1.07 kg m²) that is the paper's Λ = 3, Λ_f = 1, K_v = (10, 5).
+
+    Parameters
+    ----------
+    model : reduced_model.ArmModel
+        The law's nominal model.
+    Ts : float
+        The control period [s].
+
+    Returns
+    -------
+    ArmGains
+    """
+    locked = model.natural_frequencies(joints="locked")
+    omega = 2 * math.pi * float(locked[0]) if locked.size else RIGID_BANDWIDTH
+    omega = min(omega, SAMPLING_BANDWIDTH / Ts)
+    inertia = np.diag(model.mass_matrix(np.zeros(model.n)))[:model.n_joints].copy()
+    return ArmGains(omega, inertia, np.full(model.n_joints, _round(0.75 * omega)),
+                    _round(0.25 * omega), np.array([_round(1.1 * omega * m) for m in inertia]))
 
 
 def gain_vector(name: str, value, length: int, *, positive: bool = False) -> np.ndarray:
@@ -31,7 +88,7 @@ def control_period(Ts) -> float:
     return float(Ts)
 
 
-def joint_flex_gains(name: str, joint, flex, n_flex: int) -> np.ndarray:
-    """[2 joint gains, ``n_flex`` flexible gains]: ``joint`` one or two numbers, ``flex``
-    one or ``n_flex``."""
-    return np.concatenate([gain_vector(name, joint, 2), gain_vector(name, flex, n_flex)])
+def joint_flex_gains(name: str, joint, flex, n_joints: int, n_flex: int) -> np.ndarray:
+    """[``n_joints`` joint gains, ``n_flex`` flexible gains]: ``joint`` one number or one
+    per joint, ``flex`` one or ``n_flex``."""
+    return np.concatenate([gain_vector(name, joint, n_joints), gain_vector(name, flex, n_flex)])

@@ -3,14 +3,14 @@
 A controller is a class constructed as ``Cls(model, *, Ts, **options)``: ``model`` is the
 nominal `reduced_model.ArmModel` (what the controller believes), ``Ts`` the control period
 [s] — set once, when the law is built, as python-control's ``dt``: no method receives it
-again —, ``options`` the keyword options of the scenario's ``[controller] options`` table.  Calling it returns the two joint
+again —, ``options`` the keyword options of the scenario's ``[controller] options`` table.  Calling it returns the N joint
 torques::
 
-    tau = controller(t, x, ref)      # float array (2,) [N m]
+    tau = controller(t, x, ref)      # float array (N,) [N m]
 
 ``x`` is the state the loop feeds back — the observer's estimate or the true state —
 as ``[Q, Q̇]`` in the model's coordinates (length 2n); ``ref(t)`` returns
-``(θ_d, θ̇_d, θ̈_d)``, three float arrays of shape (2,).  Optional attributes: ``name``
+``(θ_d, θ̇_d, θ̈_d)``, three float arrays of shape (N,).  Optional attributes: ``name``
 (a label) and ``residual`` (a float array, recorded every sample as ``residual_*``, like
 the PBC's unrealisable forces).
 

@@ -1,7 +1,7 @@
 """Reference trajectories: the paper's eq. (37) and a smooth rest-to-rest move.
 
 A reference is called with the time and returns the desired joint angles, rates and
-accelerations (each shape (2,)); the desired flexible coordinates are zero (the paper's
+accelerations (each of shape (N,), one per joint); the desired flexible coordinates are zero (the paper's
 q_d = 0, eq. 4).  Each formula is written once, in `reference_into`, which compiled
 loops call directly and the Python objects call too.
 """
@@ -21,31 +21,33 @@ __all__ = ["PaperReference", "QuinticMove", "ReferenceKind", "reference_into"]
 class ReferenceKind(IntEnum):
     """The reference formulas of `reference_into`."""
 
-    PAPER = 0  # eq. (37): spec = [a1, a2, ω1, ω2]
-    QUINTIC = 1  # rest to rest: spec = [T, start1, start2, goal1, goal2]
+    PAPER = 0  # eq. (37): spec = [a_1 … a_N, ω_1 … ω_N]
+    QUINTIC = 1  # rest to rest: spec = [T, start_1 … start_N, goal_1 … goal_N]
 
 
 @njit(cache=True)
 def reference_into(kind, spec, t, out):
-    """θ_d, θ̇_d, θ̈_d at ``t`` into out[0:2], out[2:4], out[4:6] for the reference
-    ``kind`` (`ReferenceKind`) with parameters ``spec``."""
+    """θ_d, θ̇_d, θ̈_d at ``t`` into out[0:N], out[N:2N], out[2N:3N] (N joints: ``out``
+    holds 3N) for the reference ``kind`` (`ReferenceKind`) with parameters ``spec``."""
+    N = out.shape[0] // 3
     if kind == ReferenceKind.PAPER:  # eq. (37)
-        a1, a2, w1, w2 = spec[0], spec[1], spec[2], spec[3]
-        s1, c1, s2, c2 = math.sin(w1 * t), math.cos(w1 * t), math.sin(w2 * t), math.cos(w2 * t)
-        out[0], out[1] = a1 * s1, a2 * s2
-        out[2], out[3] = a1 * w1 * c1, a2 * w2 * c2
-        out[4], out[5] = -a1 * w1 * w1 * s1, -a2 * w2 * w2 * s2
+        for j in range(N):
+            a, w = spec[j], spec[N + j]
+            s, c = math.sin(w * t), math.cos(w * t)
+            out[j] = a * s
+            out[N + j] = a * w * c
+            out[2 * N + j] = -a * w * w * s
         return
     T = spec[0]  # quintic blend 10τ³ − 15τ⁴ + 6τ⁵, then hold
     tau = min(max(t / T, 0.0), 1.0)
     s = tau * tau * tau * (10 - 15 * tau + 6 * tau * tau)
     ds = 30 * tau * tau * (1 - tau) * (1 - tau) / T if 0 < t < T else 0.0
     dds = 60 * tau * (1 - tau) * (1 - 2 * tau) / (T * T) if 0 < t < T else 0.0
-    for j in range(2):
-        d = spec[3 + j] - spec[1 + j]
+    for j in range(N):
+        d = spec[1 + N + j] - spec[1 + j]
         out[j] = spec[1 + j] + s * d
-        out[2 + j] = ds * d
-        out[4 + j] = dds * d
+        out[N + j] = ds * d
+        out[2 * N + j] = dds * d
 
 
 class _Reference:
@@ -56,21 +58,22 @@ class _Reference:
     spec: np.ndarray  # the parameters `reference_into` reads (read-only by convention)
 
     def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        out = np.empty(6)
+        N = self.joints
+        out = np.empty(3 * N)
         reference_into(int(self.kind), self.spec, float(t), out)
-        return out[0:2], out[2:4], out[4:6]
+        return out[0:N], out[N:2 * N], out[2 * N:]
 
 
 @dataclass(frozen=True)
 class PaperReference(_Reference):
-    """θ1d = a1 sin(ω1 t), θ2d = a2 sin(ω2 t): eq. (37) with a = 2 rad, ω = (0.1π, 0.2π) rad/s.
+    """θ_id = a_i sin(ω_i t): eq. (37) with a = 2 rad, ω = (0.1π, 0.2π) rad/s.
 
     Parameters
     ----------
-    amplitude : (float, float)
-        a1, a2 [rad] (default 2, 2).
-    omega : (float, float)
-        ω1, ω2 [rad/s] (default 0.1π, 0.2π).
+    amplitude : tuple of float
+        a_i [rad], one per joint (default 2, 2).
+    omega : tuple of float
+        ω_i [rad/s], one per joint (default 0.1π, 0.2π).
 
     Examples
     --------
@@ -80,9 +83,18 @@ class PaperReference(_Reference):
     (array([1.4142, 2.    ]), array([0.4443, 0.    ]))
     """
 
-    amplitude: tuple[float, float] = (2.0, 2.0)
-    omega: tuple[float, float] = (0.1 * np.pi, 0.2 * np.pi)
+    amplitude: tuple[float, ...] = (2.0, 2.0)
+    omega: tuple[float, ...] = (0.1 * np.pi, 0.2 * np.pi)
     kind = ReferenceKind.PAPER
+
+    def __post_init__(self) -> None:
+        if len(self.amplitude) != len(self.omega):
+            raise ValueError(f"reference: {len(self.amplitude)} amplitudes for "
+                             f"{len(self.omega)} frequencies")
+
+    @property
+    def joints(self) -> int:
+        return len(self.amplitude)
 
     @functools.cached_property
     def spec(self) -> np.ndarray:
@@ -96,8 +108,9 @@ class QuinticMove(_Reference):
 
     Parameters
     ----------
-    start, goal : (float, float)
-        Joint angles [rad] at the start and the end (defaults (0, 0) and (1, −1)).
+    start, goal : tuple of float
+        Joint angles [rad] at the start and the end, one per joint (defaults (0, 0) and
+        (1, −1)).
     duration : float
         Time of the move [s] (default 4); the reference holds ``goal`` after it.
 
@@ -111,14 +124,21 @@ class QuinticMove(_Reference):
     array([ 1., -1.])
     """
 
-    start: tuple[float, float] = (0.0, 0.0)
-    goal: tuple[float, float] = (1.0, -1.0)
+    start: tuple[float, ...] = (0.0, 0.0)
+    goal: tuple[float, ...] = (1.0, -1.0)
     duration: float = 4.0
     kind = ReferenceKind.QUINTIC
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.duration) and self.duration > 0):
             raise ValueError(f"reference.duration must be > 0, got {self.duration!r}")
+        if len(self.start) != len(self.goal):
+            raise ValueError(f"reference: {len(self.start)} start angles for "
+                             f"{len(self.goal)} goals")
+
+    @property
+    def joints(self) -> int:
+        return len(self.start)
 
     @functools.cached_property
     def spec(self) -> np.ndarray:

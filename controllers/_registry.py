@@ -12,7 +12,7 @@ import inspect
 import os
 import types
 
-from reduced_model._cache_guard import invalidate_stale_plugin_caches
+from reduced_model.code import invalidate_stale_plugin_caches
 
 from ._baselines import JointPD, RigidComputedTorque
 from ._ekf import ExtendedKalmanFilter, PositionEKF

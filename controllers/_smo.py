@@ -45,7 +45,7 @@ import numpy as np
 from numba import njit
 
 from reduced_model import ArmModel
-from reduced_model._kernels import rk4_advance_packed
+from reduced_model.dynamics.entries import advance_exact, advance_linear
 
 from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
 from ._gains import control_period, joint_flex_gains
@@ -55,13 +55,13 @@ __all__ = ["PaperSMO", "BoundaryLayerSMO", "PositionOnlySMO"]
 _MAX_SUBSTEP = 1e-3
 
 
-def _joint_flex(name: str, value, n_flex: int) -> np.ndarray:
+def _joint_flex(name: str, value, n_joints: int, n_flex: int) -> np.ndarray:
     """A (joint, flexible) pair, or one number for both, as a gain vector."""
     if np.ndim(value) == 0:
         value = (value, value)
     if len(value) != 2:
         raise ValueError(f"{name}: need (joint, flexible) or one number, got {list(value)!r}")
-    return joint_flex_gains(name, value[0], value[1], n_flex)
+    return joint_flex_gains(name, value[0], value[1], n_joints, n_flex)
 
 
 def _positive(name: str, value) -> float:
@@ -94,17 +94,20 @@ class _SlidingModeObserver:
     def _setup(self, model: ArmModel, Ts, l_position, l_velocity, boundary_layer=1.0,
                filter_time=1.0, gate=1.0) -> None:
         self.model, self.Ts = model, control_period(Ts)
-        self._nsub = max(1, math.ceil(self.Ts / _MAX_SUBSTEP - 1e-9))  # RK4 sub-steps
-        n = model.n
-        self.lp = _joint_flex("l_position", l_position, n - 2)
-        self.lv = _joint_flex("l_velocity", l_velocity, n - 2)
+        n, N = model.n, model.n_joints
+        self.lp = _joint_flex("l_position", l_position, N, n - N)
+        self.lv = _joint_flex("l_velocity", l_velocity, N, n - N)
         self.boundary_layer = _positive("boundary_layer", boundary_layer)
         self.filter_time = _positive("filter_time", filter_time)
         self.gate = _positive("gate", gate)
+        nsub = max(1, math.ceil(self.Ts / _MAX_SUBSTEP - 1e-9))  # RK4 sub-steps
+        self._kernel = smo_kernel_exact if model.exact else smo_kernel
+        self._ints = np.array([nsub, 1, self._variant], dtype=np.int64)  # [.., fresh, ..]
+        self._reals = np.concatenate([self.lp, self.lv, [
+            self.boundary_layer, min(1.0, self.Ts / self.filter_time), self.gate, self.Ts]])
+        self._state = np.zeros(3 * n)  # [x̂, ν̄]
         self._work = model.new_workspace()[0]
-        self._x = np.zeros(2 * n)
-        self._nu = np.zeros(n)
-        self._fresh = True
+        self._x_hat = np.zeros(2 * n)
 
     @property
     def measured(self) -> tuple[str, ...]:
@@ -114,34 +117,27 @@ class _SlidingModeObserver:
 
     def reset(self, x_hat0) -> np.ndarray:
         x0 = np.asarray(x_hat0, dtype=float)
-        if x0.shape != self._x.shape:
-            raise ValueError(f"x_hat0 must have shape {self._x.shape}, got {x0.shape}")
-        self._x[:] = x0
-        self._nu[:] = 0.0
-        self._fresh = True
-        return self._x.copy()
+        n2 = 2 * self.model.n
+        if x0.shape != (n2,):
+            raise ValueError(f"x_hat0 must have shape ({n2},), got {x0.shape}")
+        self._state[:n2] = x0
+        self._state[n2:] = 0.0
+        self._ints[1] = 1  # fresh: the next update only corrects
+        return x0.copy()
 
     def update(self, t: float, y: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """Advance the estimate over the last period (torque ``tau``, float array) and
-        correct it with ``y`` (float array, in the order of `measured`) measured at ``t``;
-        the first call after `reset` only corrects."""
-        ints, reals = self.model.packed
-        wc, wr = self._work
-        _smo_update(ints, reals, wc, wr, self._x, tau, self.Ts, self._nsub, not self._fresh,
-                    y, self.lp, self.lv, self._variant, self.boundary_layer,
-                    min(1.0, self.Ts / self.filter_time), self.gate, self._nu)
-        self._fresh = False
-        return self._x.copy()
+        """Advance the estimate over the last period (torque ``tau``) and correct it with
+        ``y`` (in the order of `measured`) measured at ``t``; the first call after `reset`
+        only corrects."""
+        self._kernel(t, np.ascontiguousarray(y, dtype=float),
+                     np.ascontiguousarray(tau, dtype=float), self._ints, self._reals,
+                     self._state, *self.model.packed, *self._work, self._x_hat)
+        return self._x_hat.copy()
 
     def compiled(self) -> CompiledLaw:
         """The compiled form (`controllers._compiled`), its state copied as it is now."""
-        return CompiledLaw.of(
-            smo_kernel, OBSERVER_SIGNATURE, self.model,
-            ints=[self._nsub, int(self._fresh), self._variant],
-            reals=np.concatenate([self.lp, self.lv, [self.boundary_layer,
-                                                     min(1.0, self.Ts / self.filter_time),
-                                                     self.gate, self.Ts]]),
-            state=np.concatenate([self._x, self._nu]))
+        return CompiledLaw.of(self._kernel, OBSERVER_SIGNATURE, self.model, ints=self._ints,
+                              reals=self._reals, state=self._state)
 
 
 class PaperSMO(_SlidingModeObserver):
@@ -230,13 +226,14 @@ class PositionOnlySMO(_SlidingModeObserver):
         self._setup(model, Ts, l_position, l_velocity, filter_time=filter_time, gate=gate)
 
 
-# Inlined into `smo_kernel`: called there as a separate compiled function it cost 0.7 µs
-# of a 4.7 µs sample (20 s PBC + smo-paper on the reduced plant: 94.5 -> 81 ms).
 @njit(cache=True, inline="always")
 def _smo_update(ints, reals, wc, wr, x, tau, Ts, nsub, predict, y, lp, lv, variant, layer,
-                alpha, gate, nu):
+                alpha, gate, nu, exact):
     if predict:
-        rk4_advance_packed(ints, reals, wc, wr, x, tau, Ts / nsub, nsub)
+        if exact:
+            advance_exact(ints, reals, wc, wr, x, tau, Ts / nsub, nsub)
+        else:
+            advance_linear(ints, reals, wc, wr, x, tau, Ts / nsub, nsub)
     n = x.shape[0] // 2
     if variant == 2:  # position_only: step-by-step equivalent output injection
         for i in range(n):
@@ -256,8 +253,8 @@ def _smo_update(ints, reals, wc, wr, x, tau, Ts, nsub, predict, y, lp, lv, varia
             x[i] += Ts * gain * min(max(err / (layer * Ts * gain), -1.0), 1.0)
 
 
-@njit(cache=True)
-def smo_kernel(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+@njit(cache=True, inline="always")
+def _smo(y, tau, ints, reals, state, mi, mr, wc, wr, x_hat, exact):
     """Eq. (23)–(24) compiled (`controllers._compiled`): ints = [RK4 sub-steps, fresh,
     variant], reals = [L_P, L_V, boundary layer, filter factor, gate, Ts], state =
     [x̂, ν̄]."""
@@ -266,8 +263,20 @@ def smo_kernel(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
     x = state[:N]
     _smo_update(mi, mr, wc, wr, x, tau, reals[2 * n + 3], ints[0], ints[1] == 0, y, reals[:n],
                 reals[n:2 * n], ints[2], reals[2 * n], reals[2 * n + 1], reals[2 * n + 2],
-                state[N:N + n])
+                state[N:N + n], exact)
     ints[1] = 0  # no longer fresh: later calls predict
     for i in range(N):
         x_hat[i] = x[i]
     return 0
+
+
+@njit(cache=True)
+def smo_kernel(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+    """`_smo` on a model with the paper's kinematics."""
+    return _smo(y, tau, ints, reals, state, mi, mr, wc, wr, x_hat, False)
+
+
+@njit(cache=True)
+def smo_kernel_exact(t, y, tau, ints, reals, state, mi, mr, wc, wr, x_hat):
+    """`_smo` on a model with exact kinematics."""
+    return _smo(y, tau, ints, reals, state, mi, mr, wc, wr, x_hat, True)

@@ -1,9 +1,9 @@
-"""The truth plant: the two-link flexible arm as an Exudyn flexible multibody model.
+"""The truth plant: a planar arm of 1–4 links as an Exudyn flexible multibody model.
 
-Both links are ANCF cable elements (default) or geometrically exact 2D beams, built from
-the same `reduced_model.ArmParameters` as the reduced model; the deflection field is
-projected onto the reduced model's mode shapes so that both plants report the same
-coordinates.  `ExudynPlant` implements the plant contract (`reduced_model.Plant`);
+Flexible links are ANCF cable elements (default) or geometrically exact 2D beams, rigid
+links rigid bodies, in gravity or not, built from the same `reduced_model.ArmParameters`
+as the reduced model; the deflection field is projected onto the reduced model's mode
+shapes so that both plants report the same coordinates.  `ExudynPlant` implements the plant contract (`reduced_model.Plant`);
 `linear_model` linearises the FE arm about a configuration (a `control.StateSpace`).
 
 Loading the package (`Mesh`, the `ExudynPlant` class and its settings) never loads

@@ -1,6 +1,6 @@
 """The arm's joints beyond ideal ones in the Exudyn model: friction with stiction, drives
 (gear compliance with backlash, reflected rotor inertia) and the inputs they change —
-the same joint model as the reduced plant's (`reduced_model._joints`, whose docstring
+the same joint model as the reduced plant's (`reduced_model.joints.kernels`, whose docstring
 states it; docs/theory/joints.rst).
 
 Friction is Exudyn's ``CoordinateSpringDamperExt`` with the bristle model
@@ -37,6 +37,8 @@ from exudyn.itemInterface import (CoordinateSpringDamperExt, LoadCoordinate,
                                   MarkerNodeCoordinate, NodeGenericData, NodeGenericODE2,
                                   NodePointGround, ObjectGenericODE2)
 
+from ._bodies import rigid_body
+
 __all__ = ["BRISTLE_DAMPING_RATIO", "Joints", "add_joints"]
 
 #: Damping ratio of a friction bristle (module docstring).
@@ -50,44 +52,49 @@ class Joints:
     Attributes
     ----------
     inputs : list
-        Per motor torque (τ1, τ2), the loads it sets: (load, parameter, value per N m).
+        Per motor torque (τ1 … τN), the loads it sets: (load, parameter, value per N m).
     rotors : list
         Per joint, its rotor node (None: no drive).
     friction : list
         Per bristle connector, (data node, (node, coordinate) of its base and of its
-        moving side, joint 1 or 2, the connector).
-    stator, ground : int or None
-        The stator's node (joint 2's base), the ground node (joint 1's, if needed).
+        moving side, joint number from 1, the connector).
+    stators : tuple
+        Per joint, the node whose rotation is its base (None for joint 1, on the ground).
+    ground : int or None
+        The ground node (joint 1's base, if needed).
     """
 
     inputs: list = field(default_factory=list)
-    rotors: list = field(default_factory=lambda: [None, None])
+    rotors: list = field(default_factory=list)
     friction: list = field(default_factory=list)
-    stator: int | None = None
+    stators: tuple = ()
     ground: int | None = None
 
     def motor_reader(self, mbs):
         """A function ``read(u, v, truth, m)`` writing the motor angles and rates into the
-        truth vector's last four entries (``m``: where the rates start), from the ODE2
+        truth vector's last 2N entries (``m``: where the rates start), from the ODE2
         displacements ``u`` and rates ``v`` of the assembled ``mbs`` (module docstring:
-        a rotor's angle is absolute; joint 2's motor angle is relative to the stator)."""
+        a rotor's angle is absolute; joint i > 1's motor angle is relative to its
+        stator)."""
         sd = mbs.systemData
         ref = lambda node, k: mbs.GetNodeParameter(node, "referenceCoordinates")[k]  # noqa
+        N = len(self.rotors)
         rotors = [None if r is None else (sd.GetNodeLTGODE2(r)[0], ref(r, 0))
                   for r in self.rotors]
-        stator = ((sd.GetNodeLTGODE2(self.stator)[2], ref(self.stator, 2))
-                  if self.rotors[1] is not None else None)
+        stators = [(sd.GetNodeLTGODE2(s)[2], ref(s, 2)) if i > 0 and r is not None else None
+                   for i, (r, s) in enumerate(zip(self.rotors, self.stators))]
 
         def read(u, v, truth, m):
             for i, rotor in enumerate(rotors):
                 if rotor is None:
-                    truth[-4 + i], truth[-2 + i] = truth[i], truth[m + i]
+                    truth[-2 * N + i], truth[-N + i] = truth[i], truth[m + i]
                     continue
                 angle, rate = rotor[1] + u[rotor[0]], v[rotor[0]]
-                if i == 1:  # relative to the stator
+                stator = stators[i]
+                if stator is not None:  # relative to the stator
                     angle -= stator[1] + u[stator[0]]
                     rate -= v[stator[0]]
-                truth[-4 + i], truth[-2 + i] = angle, rate
+                truth[-2 * N + i], truth[-N + i] = angle, rate
         return read
 
     def sticks(self, mbs) -> list[tuple]:
@@ -120,40 +127,56 @@ class Joints:
         return data
 
 
+def _rotary_inertia(params, i: int, moving: bool) -> float:
+    """The rotary inertia of link ``i`` (from 0) at joint i's rotation coordinate
+    (``moving``: the hub of a flexible link) or at joint i+1's (the stator at its tip);
+    a rigid link turns as one body about its root."""
+    link = params.links[i]
+    if link.rigid:
+        mass, centre, inertia = rigid_body(params, i)
+        return inertia + mass * centre**2
+    return link.hub_inertia if moving else link.stator_inertia
+
+
 def _local_inertia(params, i: int) -> float:
-    """The inertia a friction bristle of joint ``i`` holds at its own (high) frequency:
-    the rotor, or the hub; for joint 2 in series with the stator it turns against."""
-    moving = params.rotor_inertia2 if params.has_drive(i) and i == 2 else (
-        params.rotor_inertia1 if params.has_drive(i) else (params.Jh1 if i == 1 else params.Jh2))
+    """The inertia a friction bristle of joint ``i`` (from 1) holds at its own (high)
+    frequency: the rotor, or the hub; for joint i > 1 in series with the stator it turns
+    against."""
+    joint = params.joints[i - 1]
+    moving = joint.rotor_inertia if joint.has_drive else _rotary_inertia(params, i - 1, True)
     if i == 1:
         return moving
-    return moving * params.stator_inertia / (moving + params.stator_inertia)
+    stator = _rotary_inertia(params, i - 2, False)
+    return moving * stator / (moving + stator)
 
 
-def add_joints(mbs, params, *, hub1: int, hub2: int, stator: int | None, hub1_load: int,
-               hub2_loads: tuple[int, int], references: tuple[float, float],
+def add_joints(mbs, params, *, hubs, stators, hub_loads, reactions, references,
                step: float | None) -> Joints:
     """Add ``params``' joint friction and drives to the arm in ``mbs`` (before it is
-    assembled).  ``hub1_load``, ``hub2_loads`` are the ideal joints' torque loads (hub 1;
-    hub 2 and its reaction on the link-1 tip), ``references`` the hubs' reference angles,
-    ``step`` the integration step that resolves the friction bristles (needed only where
-    a joint has dry friction)."""
-    joints = Joints(stator=stator)
+    assembled).  Per joint: ``hubs`` its moving rotation's node, ``stators`` its base's
+    (None for joint 1), ``hub_loads`` the ideal joint's torque load on the hub,
+    ``reactions`` its reaction's on the previous link's tip (None for joint 1),
+    ``references`` the hub's reference angle; ``step`` the integration step that
+    resolves the friction bristles (needed only where a joint has dry friction)."""
+    joints = Joints(stators=tuple(stators))
 
     def coordinate(node, index):
         return mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=node, coordinate=index))
 
     def base(i):
-        if i == 2:
-            return (stator, 2)
+        if i > 1:
+            return (stators[i - 1], 2)
         if joints.ground is None:
             joints.ground = mbs.AddNode(NodePointGround())
         return (joints.ground, 0)
 
-    for i, hub in ((1, hub1), (2, hub2)):
+    for i, hub in enumerate(hubs, start=1):
         moving = (hub, 2)
-        if params.has_drive(i):
-            B = getattr(params, f"rotor_inertia{i}")
+        joint, stator, reaction = params.joints[i - 1], stators[i - 1], reactions[i - 1]
+        reacting = [] if reaction is None else [(reaction, "loadVector", (0.0, 0.0, -1.0))]
+        rotor = None
+        if joint.has_drive:
+            B = joint.rotor_inertia
             rotor = mbs.AddNode(NodeGenericODE2(referenceCoordinates=[references[i - 1]],
                                                 initialCoordinates=[0.0],
                                                 initialCoordinates_t=[0.0],
@@ -164,13 +187,9 @@ def add_joints(mbs, params, *, hub1: int, hub2: int, stator: int | None, hub1_lo
                 g = np.array([1.0, 0.0, 0.0, -1.0])
                 mbs.AddObject(ObjectGenericODE2(nodeNumbers=[rotor, stator],
                                                 massMatrix=B * np.outer(g, g)))
-            joints.rotors[i - 1] = rotor
             load = mbs.AddLoad(LoadCoordinate(markerNumber=coordinate(rotor, 0), load=0.0))
-            joints.inputs.append([(load, "load", 1.0)] if i == 1 else
-                                 [(load, "load", 1.0), (hub2_loads[1], "loadVector",
-                                                        (0.0, 0.0, -1.0))])
-            k, d, b = (getattr(params, f"{name}{i}") for name in
-                       ("gear_stiffness", "gear_damping", "backlash"))
+            joints.inputs.append([(load, "load", 1.0), *reacting])
+            k, d, b = joint.gear_stiffness, joint.gear_damping, joint.backlash
             gear = dict(stiffness=k, damping=d) if b == 0 else dict(
                 useLimitStops=True, limitStopsLower=-b / 2, limitStopsUpper=b / 2,
                 limitStopsStiffness=k, limitStopsDamping=d,
@@ -180,16 +199,16 @@ def add_joints(mbs, params, *, hub1: int, hub2: int, stator: int | None, hub1_lo
                 markerNumbers=[coordinate(rotor, 0), coordinate(*moving)], **gear))
             moving = (rotor, 0)
         else:
-            joints.inputs.append([(hub1_load, "loadVector", (0.0, 0.0, 1.0))] if i == 1 else
-                                 [(hub2_loads[0], "loadVector", (0.0, 0.0, 1.0)),
-                                  (hub2_loads[1], "loadVector", (0.0, 0.0, -1.0))])
+            joints.inputs.append([(hub_loads[i - 1], "loadVector", (0.0, 0.0, 1.0)), *reacting])
+        joints.rotors.append(rotor)
         _add_friction(mbs, params, i, base(i) if _has_friction(params, i) else None, moving,
                       coordinate, joints, step)
     return joints
 
 
 def _has_friction(params, i: int) -> bool:
-    return params.static_friction(i) > 0 or getattr(params, f"viscous{i}") > 0
+    joint = params.joints[i - 1]
+    return joint.static_friction > 0 or joint.viscous > 0
 
 
 def _add_friction(mbs, params, i, base, moving, coordinate, joints, step) -> None:
@@ -197,8 +216,8 @@ def _add_friction(mbs, params, i, base, moving, coordinate, joints, step) -> Non
     docstring); nothing where it has none (``base`` None)."""
     if base is None:
         return
-    static, coulomb = params.static_friction(i), getattr(params, f"coulomb{i}")
-    viscous = getattr(params, f"viscous{i}")
+    joint = params.joints[i - 1]
+    static, coulomb, viscous = joint.static_friction, joint.coulomb, joint.viscous
     options = dict(damping=viscous)
     if static > 0:
         if step is None:
@@ -210,7 +229,7 @@ def _add_friction(mbs, params, i, base, moving, coordinate, joints, step) -> Non
         options.update(
             nodeNumber=data, dynamicFrictionForce=coulomb,
             staticFrictionOffsetForce=static - coulomb,
-            exponentialDecayStatic=getattr(params, f"stribeck_velocity{i}") or 1.0,
+            exponentialDecayStatic=joint.stribeck_velocity or 1.0,
             stickingStiffness=inertia / step**2,
             stickingDamping=2.0 * BRISTLE_DAMPING_RATIO * inertia / step,
             frictionProportionalZone=0.0)

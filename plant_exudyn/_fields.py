@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from reduced_model import LinkModes
-from reduced_model._modes import gauss_legendre, weighted_projector
+from reduced_model.shapes import gauss_legendre, weighted_projector
 
 from ._build import ArmSystem
 
@@ -52,13 +52,13 @@ def _hermite(xi: np.ndarray, h: np.ndarray, derivative: int) -> np.ndarray:
 
 
 class LinkField:
-    """Reads link ``link`` (0 or 1) of an `ArmSystem` in its root frame and projects it.
+    """Reads flexible link ``link`` of an `ArmSystem` in its root frame and projects it.
 
     Parameters
     ----------
     system : ArmSystem
     link : int
-        0 for link 1 (root frame: hub 1), 1 for link 2 (root frame: hub 2).
+        The link, from 0 (root frame: its hub's).
     modes : LinkModes
         The mode shapes to project on (normally the reduced model's, same link).
     """
@@ -78,7 +78,7 @@ class LinkField:
                        dtype=float)
         # ANCF nodes: (x, y, x', y'); geometrically exact nodes: (x, y, β).
         self._idx, self._ref = coords, ref
-        hub = system.hub1 if link == 0 else system.hub2
+        hub = system.hubs[link]
         self._hub_idx = np.array(mbs.systemData.GetNodeLTGODE2(hub), dtype=np.int64)
         self._hub_ref = np.array(mbs.GetNodeParameter(hub, "referenceCoordinates"), dtype=float)
         self._d = np.empty(2 * self.n_nodes)

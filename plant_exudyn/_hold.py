@@ -23,8 +23,13 @@ What it needs per jump, without asking Exudyn for matrices (a dense Jacobian rea
 beam and rigid 2D bodies), and so is C except where a rigid marker sits on an ANCF slope
 node: its rotation is atan2(s_y, s_x), whose gradient (−s_y, s_x)/|s|² follows the
 slope.  Those entries of C (clamps) and of the load matrix (a torque on such a marker)
-are rescaled from the current slope; everything else is read once from Exudyn.  The
-compiled update costs ~2 µs; with the state read and written back, ~10 µs per period.
+are rescaled from the current slope.  A rigid link's body (`_bodies`) has its node at
+its centre of mass and its joints at points along it: the entries of C (and of the load
+matrix) in its rotation's column are K + A cos φ + B sin φ of its angle φ (K alone for a
+torque, A and B alone for a joint or a force away from the node), read from Exudyn at φ,
+φ + π/2 and φ + π and set from the current angle.
+Everything else is read once from Exudyn.  The compiled update costs ~2 µs; with the
+state read and written back, ~10 µs per period.
 
 A stuck friction joint (`_drives`: a stiff bristle spring-damper about its last sticking
 position) is, for the hold, what it stands for: a constraint D Δq̈ = 0 on its relative
@@ -40,10 +45,10 @@ from __future__ import annotations
 
 import exudyn as exu
 import numpy as np
-from numba import njit, types
-from numba.experimental import structref
 
-__all__ = ["ExactHold", "HoldData", "slope_gradient_entries", "scaled"]
+from ._hold_kernels import new_hold_data, response_into, restart
+
+__all__ = ["ExactHold", "slope_gradient_entries", "rotation_entries", "scaled"]
 
 _TOL = 1e-9  # relative: what counts as a non-zero entry of C or of a load vector
 
@@ -75,6 +80,35 @@ def slope_gradient_entries(matrix: np.ndarray, slopes: np.ndarray, s0: np.ndarra
     return out
 
 
+def rotation_entries(matrix: np.ndarray, quarter: np.ndarray, half: np.ndarray, columns,
+                     angles):
+    """The entries of ``matrix`` (rows: constraint equations or load vectors, columns:
+    ODE2 coordinates) in the rotation ``columns`` of rigid bodies at ``angles``
+    ((reference, angle) [rad]) that turn with them, as (row, column, K, A, B, reference)
+    with entry = K + A cos φ + B sin φ at the angle φ = reference + displacement, from
+    ``matrix``, ``quarter`` and ``half`` (the same read with every one of those bodies
+    turned by π/2 and by π).  Raises ValueError if another entry changed (a dependence
+    on the rotation this hold does not know)."""
+    others = np.ones(matrix.shape[1], dtype=bool)
+    others[list(columns)] = False
+    scale = max(np.abs(m).max(initial=0.0) for m in (matrix, quarter, half))
+    changed = max(np.abs(matrix[:, others] - m[:, others]).max(initial=0.0)
+                  for m in (quarter, half))
+    if changed > _TOL * scale:
+        raise ValueError("a constraint or load depends on a rigid body's rotation other "
+                         "than through that rotation's column: not supported")
+    out = []
+    for col, (reference, angle) in zip(columns, angles):
+        c, s = np.cos(angle), np.sin(angle)
+        for row in range(matrix.shape[0]):
+            e0, e90, e180 = matrix[row, col], quarter[row, col], half[row, col]
+            K = 0.5 * (e0 + e180)
+            a, b = e0 - K, e90 - K  # the sinusoid at φ and φ + π/2
+            if max(abs(a), abs(b)) > _TOL * scale:
+                out.append((row, col, K, a * c - b * s, a * s + b * c, reference))
+    return np.array(out, dtype=float).reshape(-1, 6)
+
+
 class ExactHold:
     """The zero-order hold of a set of loads on an Exudyn system, exact in the step
     (module docstring).
@@ -93,6 +127,9 @@ class ExactHold:
         "loadVector", (0, 0, -1))]; a coordinate load: (load, "load", 1.0)).
     slope_nodes : list of int
         The ANCF nodes (``NodePoint2DSlope1``) that carry rigid markers (clamps, torques).
+    rotation_nodes : list of int
+        The rigid bodies' nodes whose joints or loads act away from the node (rigid
+        links, module docstring).
     sticks : list of tuple, optional
         The friction bristles kept stuck across a load jump (module docstring), each
         (base, moving, mode, position, stiffness, damping, level): the ODE2 indices of
@@ -101,7 +138,8 @@ class ExactHold:
         breakaway level.
     """
 
-    def __init__(self, mbs, settings, step: float, loads, slope_nodes, sticks=()) -> None:
+    def __init__(self, mbs, settings, step: float, loads, slope_nodes, rotation_nodes=(),
+                 sticks=()) -> None:
         ga = settings.timeIntegration.generalizedAlpha
         if ga.useNewmark or ga.spectralRadius <= 0.0:
             raise ValueError("the exact hold is written for generalised-alpha with a "
@@ -112,25 +150,51 @@ class ExactHold:
         n, m = solver.GetODE2size(), solver.GetAEsize()
         solver.ComputeMassMatrix(mbs)
         mass = solver.GetSystemMassMatrix()[:n, :n]
-        solver.SetSystemJacobian(np.zeros((n + m, n + m)))
-        solver.ComputeJacobianAE(mbs, 1.0, 0.0, 1.0, False)
-        C = solver.GetSystemJacobian()[n:, :n]
-        C = C[np.abs(C).max(axis=1) > 0.0]  # rows of unused algebraic coordinates are zero
+
+        def jacobian() -> np.ndarray:
+            solver.SetSystemJacobian(np.zeros((n + m, n + m)))
+            solver.ComputeJacobianAE(mbs, 1.0, 0.0, 1.0, False)
+            return solver.GetSystemJacobian()[n:, :n]
 
         def rhs() -> np.ndarray:
             solver.ComputeODE2RHS(mbs)
             return solver.GetSystemResidual()[:n].copy()
 
-        base = rhs()
-        B = np.zeros((n, len(loads)))
-        for j, parts in enumerate(loads):
-            for load, parameter, value in parts:
-                mbs.SetLoadParameter(load, parameter, scaled(value, 1.0))
-            B[:, j] = rhs() - base
-            for load, parameter, value in parts:
-                mbs.SetLoadParameter(load, parameter, scaled(value, 0.0))
+        def load_matrix() -> np.ndarray:
+            base = rhs()
+            B = np.zeros((n, len(loads)))
+            for j, parts in enumerate(loads):
+                for load, parameter, value in parts:
+                    mbs.SetLoadParameter(load, parameter, scaled(value, 1.0))
+                B[:, j] = rhs() - base
+                for load, parameter, value in parts:
+                    mbs.SetLoadParameter(load, parameter, scaled(value, 0.0))
+            return B
 
+        C = jacobian()
+        B = load_matrix()
         sd, cfg = mbs.systemData, exu.ConfigurationType
+        turns = [sd.GetNodeLTGODE2(k)[2] for k in rotation_nodes]
+        if turns:  # the same at every rigid body turned by π/2 and π (module docstring)
+            u = sd.GetODE2Coordinates(cfg.Current)
+            turned = []
+            for angle in (0.5 * np.pi, np.pi):
+                at = u.copy()
+                at[turns] += angle
+                sd.SetODE2Coordinates(at, cfg.Current)
+                turned.append((jacobian(), load_matrix()))
+            sd.SetODE2Coordinates(u, cfg.Current)
+            angles = [(r, r + u[col]) for r, col in zip(
+                [mbs.GetNodeParameter(k, "referenceCoordinates")[2] for k in rotation_nodes],
+                turns)]
+            (C90, B90), (C180, B180) = turned
+            used = np.abs(np.hstack([C, C90, C180])).max(axis=1) > 0.0
+            C, C90, C180 = C[used], C90[used], C180[used]
+            c_rot = rotation_entries(C, C90, C180, turns, angles)
+            b_rot = rotation_entries(B.T, B90.T, B180.T, turns, angles)
+        else:
+            C = C[np.abs(C).max(axis=1) > 0.0]  # rows of unused algebraic coordinates are zero
+            c_rot = b_rot = np.zeros((0, 6))
         slopes = np.array([sd.GetNodeLTGODE2(k)[2:4] for k in slope_nodes],
                           dtype=np.int64).reshape(-1, 2)
         slope_ref = np.array([mbs.GetNodeParameter(k, "referenceCoordinates")[2:4]
@@ -142,9 +206,15 @@ class ExactHold:
         # A body may have no mass in some direction (the stator: inertia without mass):
         # M + k C_fᵀC_f, with C_f the constraint rows that never change, has the same
         # constrained response (C_f Δq̈ = 0) and is invertible.
-        fixed = np.setdiff1d(np.arange(C.shape[0]), c_rows[:, 0].astype(int))
+        fixed = np.setdiff1d(np.arange(C.shape[0]),
+                             np.concatenate([c_rows[:, 0], c_rot[:, 0]]).astype(int))
         k = np.abs(np.diag(mass)).max()
-        minv = np.linalg.inv(mass + k * C[fixed].T @ C[fixed])
+        try:
+            minv = np.linalg.inv(mass + k * C[fixed].T @ C[fixed])
+        except np.linalg.LinAlgError:
+            raise ValueError("the exact hold needs inertia on every rotation clamped to a "
+                             "beam: a hub inertia of 0 on a flexible link leaves its "
+                             "accelerations undetermined") from None
         minv = np.ascontiguousarray(0.5 * (minv + minv.T))  # symmetric: rows are columns
         h = step
         rho = ga.spectralRadius  # Exudyn's α_m, α_f, β, γ of ρ∞ (Arnold and Brüls)
@@ -155,9 +225,9 @@ class ExactHold:
         m = C.shape[0]
         sticks = np.array(sticks, dtype=float).reshape(-1, 7)
         self.data = new_hold_data(
-            minv, np.ascontiguousarray(C), _pattern(C, c_rows, slopes),
-            np.ascontiguousarray(B.T), _pattern(B.T, b_rows, slopes), c_rows, b_rows,
-            slopes, slope_ref, factors, np.empty(n), np.empty((m, n)),
+            minv, np.ascontiguousarray(C), _pattern(C, c_rows, slopes, c_rot),
+            np.ascontiguousarray(B.T), _pattern(B.T, b_rows, slopes, b_rot), c_rows, b_rows,
+            slopes, slope_ref, c_rot, b_rot, factors, np.empty(n), np.empty((m, n)),
             np.empty((m, m)), np.empty(m), np.empty(n), np.empty(len(loads)),
             np.ascontiguousarray(sticks[:, :4].astype(np.int64)),
             np.ascontiguousarray(sticks[:, 4:]), np.empty((len(sticks), n)))
@@ -197,226 +267,17 @@ def _entries(entries) -> np.ndarray:
     return np.array(entries, dtype=float).reshape(-1, 3)
 
 
-def _pattern(matrix: np.ndarray, slope_rows: np.ndarray, slopes: np.ndarray) -> np.ndarray:
+def _pattern(matrix: np.ndarray, slope_rows: np.ndarray, slopes: np.ndarray,
+             rotation_rows: np.ndarray) -> np.ndarray:
     """The columns of each row's non-zero entries (the slope pair of a slope-dependent row
-    included, whatever its value now), padded with −1: (rows, most entries)."""
+    and the column of a rotation-dependent entry included, whatever their value now),
+    padded with −1: (rows, most entries)."""
     cols = [set(np.flatnonzero(row)) for row in matrix]
     for row, k, _ in slope_rows:
         cols[int(row)] |= set(slopes[int(k)])
+    for row, col, *_ in rotation_rows:
+        cols[int(row)].add(int(col))
     out = np.full((len(cols), max((len(c) for c in cols), default=0)), -1, dtype=np.int64)
     for i, c in enumerate(cols):
         out[i, :len(c)] = sorted(c)
     return out
-
-
-# --- the compiled update ------------------------------------------------------------------------
-_V, _M = types.Array(types.float64, 1, "C"), types.Array(types.float64, 2, "C")
-_MI = types.Array(types.int64, 2, "C")
-_FIELDS = (("minv", _M), ("C", _M), ("c_cols", _MI), ("Bt", _M), ("b_cols", _MI),
-           ("c_rows", _M), ("b_rows", _M), ("slopes", _MI), ("slope_ref", _M),
-           ("factors", _V), ("y", _V), ("G", _M), ("S", _M), ("z", _V), ("delta", _V),
-           ("change", _V), ("sticks", _MI), ("stick_law", _M), ("stick_response", _M))
-
-
-@structref.register
-class _HoldDataType(types.StructRef):
-    def preprocess_fields(self, fields):
-        return tuple((name, types.unliteral(typ)) for name, typ in fields)
-
-
-class HoldData(structref.StructRefProxy):
-    """What `restart` works with: M⁻¹, C and the load matrix with their patterns and
-    slope-dependent entries, the step's factors, the friction bristles (`ExactHold`'s
-    ``sticks``: indices, then stiffness, damping, level) and the work arrays (one
-    structure passed by reference: 19 separate arrays cost ~5 µs a call to unbox)."""
-
-    @property
-    def change(self):
-        return _change(self)
-
-
-@njit(cache=True)
-def _change(d):
-    return d.change
-
-
-structref.define_boxing(_HoldDataType, HoldData)
-_HOLD = _HoldDataType(_FIELDS)
-
-
-@njit(cache=True)
-def new_hold_data(minv, C, c_cols, Bt, b_cols, c_rows, b_rows, slopes, slope_ref, factors,
-                  y, G, S, z, delta, change, sticks, stick_law, stick_response):
-    """A `HoldData` of these arrays (shared, not copied)."""
-    d = structref.new(_HOLD)
-    d.minv, d.C, d.c_cols, d.Bt, d.b_cols = minv, C, c_cols, Bt, b_cols
-    d.c_rows, d.b_rows, d.slopes, d.slope_ref, d.factors = (c_rows, b_rows, slopes,
-                                                            slope_ref, factors)
-    d.y, d.G, d.S, d.z, d.delta, d.change = y, G, S, z, delta, change
-    d.sticks, d.stick_law, d.stick_response = sticks, stick_law, stick_response
-    return d
-
-
-@njit(cache=True)
-def _set_slope_entries(matrix, rows, slopes, slope_ref, q):
-    """Each slope-dependent pair of ``matrix`` (row, node, coefficient) from the slope in
-    ``q``: coefficient × (−s_y, s_x)/|s|²."""
-    for e in range(rows.shape[0]):
-        row, k, coef = int(rows[e, 0]), int(rows[e, 1]), rows[e, 2]
-        ix, iy = slopes[k, 0], slopes[k, 1]
-        sx, sy = slope_ref[k, 0] + q[ix], slope_ref[k, 1] + q[iy]
-        s2 = sx * sx + sy * sy
-        matrix[row, ix], matrix[row, iy] = -coef * sy / s2, coef * sx / s2
-
-
-@njit(cache=True)
-def _factor(d):
-    """G = C M⁻¹ and S = C M⁻¹ Cᵀ = L Lᵀ (L in S's lower triangle), C as last set."""
-    minv, C, c_cols, G, S = d.minv, d.C, d.c_cols, d.G, d.S
-    n, m = minv.shape[0], C.shape[0]
-    for r in range(m):  # row r of G: C's few entries of row r
-        G[r, :] = 0.0
-        for c in c_cols[r]:
-            if c >= 0:
-                w = C[r, c]
-                for i in range(n):
-                    G[r, i] += w * minv[c, i]
-    for r in range(m):  # S = G Cᵀ (symmetric positive definite)
-        for t in range(r + 1):
-            acc = 0.0
-            for c in c_cols[t]:
-                if c >= 0:
-                    acc += G[r, c] * C[t, c]
-            S[r, t] = acc
-    for r in range(m):
-        for t in range(r + 1):
-            acc = S[r, t]
-            for k in range(t):
-                acc -= S[r, k] * S[t, k]
-            S[r, t] = np.sqrt(acc) if t == r else acc / S[t, t]
-
-
-@njit(cache=True)
-def _project(d, y, out):
-    """``out`` = y − Gᵀ S⁻¹ C y: the constrained response to the load whose unconstrained
-    response is y = M⁻¹ f (`_factor` done)."""
-    C, c_cols, G, S, z = d.C, d.c_cols, d.G, d.S, d.z
-    n, m = y.shape[0], C.shape[0]
-    for r in range(m):  # z = C y, then S⁻¹ z
-        acc = 0.0
-        for c in c_cols[r]:
-            if c >= 0:
-                acc += C[r, c] * y[c]
-        z[r] = acc
-    for r in range(m):
-        acc = z[r]
-        for k in range(r):
-            acc -= S[r, k] * z[k]
-        z[r] = acc / S[r, r]
-    for r in range(m - 1, -1, -1):
-        acc = z[r]
-        for k in range(r + 1, m):
-            acc -= S[k, r] * z[k]
-        z[r] = acc / S[r, r]
-    for i in range(n):
-        out[i] = y[i]
-    for r in range(m):
-        for i in range(n):
-            out[i] -= G[r, i] * z[r]
-
-
-@njit(cache=True)
-def constrained_response(d, out):
-    """``out`` = W B ``d.change`` (module docstring), C and B as last set."""
-    minv, Bt, b_cols, change, y = d.minv, d.Bt, d.b_cols, d.change, d.y
-    n = minv.shape[0]
-    y[:] = 0.0  # y = M⁻¹ B change, from B's few non-zero entries (M⁻¹ symmetric)
-    for j in range(Bt.shape[0]):
-        if change[j] != 0.0:
-            for c in b_cols[j]:
-                if c >= 0:
-                    w = Bt[j, c] * change[j]
-                    for i in range(n):
-                        y[i] += w * minv[c, i]
-    _factor(d)
-    _project(d, y, out)
-
-
-@njit(cache=True)
-def response_into(d, q, out):
-    """``out`` = W B(q) ``d.change``: C's and B's slope-dependent entries set from ``q``,
-    then `constrained_response`."""
-    _set_slope_entries(d.C, d.c_rows, d.slopes, d.slope_ref, q)
-    _set_slope_entries(d.Bt, d.b_rows, d.slopes, d.slope_ref, q)
-    constrained_response(d, out)
-
-
-@njit(cache=True)
-def _relative(x, base, moving):
-    """A bristle's relative coordinate in ``x`` (base −1: the ground)."""
-    return x[moving] - (x[base] if base >= 0 else 0.0)
-
-
-@njit(cache=True)
-def hold_sticks(d, q, v, data, delta):
-    """Keep the stuck bristles stuck across the load change whose free response is
-    ``delta`` (module docstring): ``delta`` becomes the response with them as
-    constraints, each one's sticking position in ``data`` moves by −μ/k; a bristle whose
-    holding force would exceed its level is left free (the largest excess first)."""
-    sticks, law, response, y = d.sticks, d.stick_law, d.stick_response, d.y
-    minv = d.minv
-    count, n = sticks.shape[0], minv.shape[0]
-    stuck = np.zeros(count, np.bool_)
-    force = np.zeros(count)
-    for j in range(count):
-        base, moving, mode, position = sticks[j, 0], sticks[j, 1], sticks[j, 2], sticks[j, 3]
-        if data[mode] != 0.0:  # slipping
-            continue
-        stuck[j] = True
-        force[j] = (law[j, 0] * (_relative(q, base, moving) - data[position])
-                    + law[j, 1] * _relative(v, base, moving))
-        for i in range(n):  # M⁻¹ Dⱼᵀ (M⁻¹ symmetric)
-            y[i] = minv[moving, i] - (minv[base, i] if base >= 0 else 0.0)
-        _project(d, y, response[j])
-    while True:
-        held = np.flatnonzero(stuck)
-        k = held.shape[0]
-        if k == 0:
-            return
-        A, rhs = np.empty((k, k)), np.empty(k)
-        for r in range(k):
-            base, moving = sticks[held[r], 0], sticks[held[r], 1]
-            rhs[r] = _relative(delta, base, moving)
-            for t in range(k):
-                A[r, t] = _relative(response[held[t]], base, moving)
-        mu = np.linalg.solve(A, rhs)
-        worst, excess = -1, 1.0
-        for r in range(k):
-            ratio = abs(force[held[r]] + mu[r]) / law[held[r], 2]
-            if ratio > excess:
-                worst, excess = held[r], ratio
-        if worst < 0:
-            break
-        stuck[worst] = False
-    for r in range(k):
-        j = held[r]
-        for i in range(n):
-            delta[i] -= mu[r] * response[j, i]
-        data[sticks[j, 3]] -= mu[r] / law[j, 0]
-
-
-@njit(cache=True)
-def restart(d, q, v, a, data):
-    """Move the step's start (q, q̇, q̈ and the bristles' sticking positions in ``data``;
-    in place) as the loads changed by ``d.change`` demand: Δq̈ = W B(q) change, with the
-    stuck bristles held (`hold_sticks`), then the shifts of `ExactHold` (module
-    docstring)."""
-    delta = d.delta
-    response_into(d, q, delta)
-    if d.sticks.shape[0] > 0:
-        hold_sticks(d, q, v, data, delta)
-    fq, fv, fa = d.factors[0], d.factors[1], d.factors[2]
-    for i in range(q.shape[0]):
-        q[i] += fq * delta[i]
-        v[i] += fv * delta[i]
-        a[i] += fa * delta[i]

@@ -5,27 +5,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reduced_model import (ArmModel, ArmParameters, FieldError, LinkModes, Measurement,
-                           Plant, PlantFailure, SensorConfig, cached_model)
-from reduced_model._joint_linear import with_joints
-from reduced_model._joints import lag_step
-from reduced_model._parameters import JOINT_EFFECTS
-from reduced_model._plant import positive_step
-from reduced_model._plant_base import LEVELS, PlantSettings, Refinement
+from reduced_model import (LEVELS, ArmModel, ArmParameters, FieldError, Measurement,
+                           Plant, PlantFailure, PlantSettings, Refinement, SensorConfig,
+                           cached_model)
+from reduced_model.arm import JOINT_EFFECTS, MAX_LINKS
+from reduced_model.joints import lag_step, with_joints
+from reduced_model.plant import positive_step
 
-from ._mesh import Mesh, mesh_label
+from ._mesh import MAX_ELEMENTS, Mesh, mesh_label
 
 __all__ = ["ExudynPlant", "linear_model"]
 
 #: Element-count ratio of the geometrically exact beam to ANCF in a check: it converges
 #: slower (open-loop 4th-mode error: GE 16 el/link 0.6 %, ANCF 4 0.04 %).
 _GE_PER_ANCF = 8
-_MAX_ELEMENTS = 64
+
+
+def _plain(elements_per_link):
+    """A mesh's elements per link as a plant table holds it (a list, or one number)."""
+    return elements_per_link if isinstance(elements_per_link, int) else list(elements_per_link)
 
 
 class ExudynPlant(Plant):
-    """Two-link flexible arm as an Exudyn FE model (``kind = "exudyn"``: the truth plant;
-    the plant contract: `reduced_model.Plant`).
+    """A planar arm of 1–4 links as an Exudyn FE model (``kind = "exudyn"``: the truth
+    plant; the plant contract: `reduced_model.Plant`): flexible links as ANCF cable
+    elements (default) or geometrically exact beams, rigid links as rigid bodies, the
+    joints' friction and drives, gravity (`plant_exudyn.build_arm`).
 
     Parameters
     ----------
@@ -34,22 +39,29 @@ class ExudynPlant(Plant):
     model : ArmModel, optional
         The model whose mode shapes the deflection is projected on for `truth` and for
         measurements (the controller's nominal model); default: the reduced model of
-        ``params`` with 2 modes per link.
+        ``params`` with its modes per link.
     sensors : SensorConfig
         What `step` returns (default: encoders θ and the projected modal q).
+    Ts : float
+        The control period [s] each command is held for: a whole multiple of ``step``.
     step, mesh, spectral_radius, newton_tolerance
         Its settings (`ExudynPlant.Settings`).
-    exact_hold : bool
-        Apply each period's loads as an exact zero-order hold (default; `ExactHold`:
-        second order in the step).  False gives Exudyn's own treatment of a load that
-        jumps at a step boundary, first order in the step: kept as the known-bad
-        reference of the tests and benchmarks.
 
-    Coordinates: θ1 is hub 1's angle; θ2 is hub 2's angle relative to the tangent of
-    link 1 at its tip (what a motor-2 encoder reads).  q, q̇ are the mass-weighted
-    projections of each link's transverse deflection in its root frame (`LinkField`).
-    The solver is initialised once per `reset` and advanced period by period: identical
-    to a continuous run.
+    Coordinates: θ1 is hub 1's angle; θi is hub i's angle relative to the tangent of
+    link i−1 at its tip (what a motor-i encoder reads).  q, q̇ are the mass-weighted
+    projections of each flexible link's transverse deflection in its root frame
+    (`LinkField`); a rigid link has none.  The arm starts where `reset` places it
+    (undeformed by default, also in gravity: no static solve).  The solver is
+    initialised once per `reset` and advanced period by period: identical to a
+    continuous run.
+
+    Attributes
+    ----------
+    hold : ExactHold or None
+        How each period's loads are applied: an exact zero-order hold (`ExactHold`,
+        second order in the step).  None gives Exudyn's own treatment of a load that
+        jumps at a step boundary, first order in the step: the known-bad reference of
+        the tests and benchmarks (`validation.run.replay.bare_replay`).
     """
 
     role = "truth"
@@ -71,7 +83,7 @@ class ExudynPlant(Plant):
         step : float
             Generalised-α integration step [s]; ``Ts`` must be a whole multiple of it.
         mesh : Mesh
-            The finite elements of both links (`plant_exudyn.Mesh`).
+            The finite elements of the flexible links (`plant_exudyn.Mesh`).
         spectral_radius : float
             Generalised-α ρ∞ (1: no numerical damping; the default 0.9 damps only modes
             far above 1/step).
@@ -103,8 +115,7 @@ class ExudynPlant(Plant):
 
         def refined(self, level: int) -> dict:
             table = self.table()
-            table["mesh"]["elements_per_link"] = [2 ** level * n for n in
-                                                  self.mesh.elements_per_link]
+            table["mesh"]["elements_per_link"] = _plain(self.mesh.refined(2 ** level))
             table["step"] = self.step / 2 ** level
             return table
 
@@ -114,72 +125,81 @@ class ExudynPlant(Plant):
             8× the ANCF elements; ANCF 1/8 of GE's); meshes beyond 64 el/link are left
             out."""
             tables = [(self.refined(level), f"step/{2 ** level}", level) for level in LEVELS]
-            n = self.mesh.elements_per_link
             table = self.refined(1)
             if self.mesh.element == "ancf":
                 table["mesh"].update(element="geometrically_exact",
-                                     elements_per_link=[_GE_PER_ANCF * k for k in n])
+                                     elements_per_link=_plain(self.mesh.refined(_GE_PER_ANCF)))
             else:
-                table["mesh"].update(element="ancf",
-                                     elements_per_link=[max(1, k // _GE_PER_ANCF) for k in n])
+                epl = self.mesh.elements_per_link
+                table["mesh"].update(element="ancf", elements_per_link=(
+                    max(1, epl // _GE_PER_ANCF) if isinstance(epl, int)
+                    else [max(1, k // _GE_PER_ANCF) for k in epl]))
             tables.append((table, "step/2", None))
             # left out before a Mesh is made of them: Mesh refuses more than 64 el/link
             return [Refinement(f"{mesh_label(Mesh(**t['mesh']))}, {step}", t, level)
                     for t, step, level in tables
-                    if max(t["mesh"]["elements_per_link"]) <= _MAX_ELEMENTS]
+                    if np.max(t["mesh"]["elements_per_link"]) <= MAX_ELEMENTS]
 
         def step_cost(self) -> float:
-            return 2.5e-4 + 3e-5 * sum(self.mesh.elements_per_link)  # pessimistic, measured
+            """Pessimistic, measured on the paper's arm (one number of elements: counted
+            for as many links as an arm has at most)."""
+            epl = self.mesh.elements_per_link
+            total = MAX_LINKS * epl if isinstance(epl, int) else sum(epl)
+            return 2.5e-4 + 3e-5 * total
 
         def linear_model(self, params, *, theta, model):
             return linear_model(params, self.mesh, theta=theta, model=model)
 
     def __init__(self, params: ArmParameters | None = None, *, model: ArmModel | None = None,
-                 sensors: SensorConfig = SensorConfig(), step: float = 5e-4,
+                 sensors: SensorConfig = SensorConfig(), Ts: float = 1e-3, step: float = 5e-4,
                  mesh: Mesh = Mesh(), spectral_radius: float = 0.9,
-                 newton_tolerance: float = 1e-6, exact_hold: bool = True) -> None:
+                 newton_tolerance: float = 1e-6) -> None:
         import exudyn as exu  # the solver is loaded by the runs that use it
 
         from ._build import build_arm, simulation_settings
         from ._fields import LinkField
         from ._hold import ExactHold, scaled
-        from ._readout import new_readout, readout_into
+        from ._readout import link_arrays, new_readout, readout_into
         if not 0.0 < spectral_radius <= 1.0:
             raise ValueError(f"spectral_radius must be in (0, 1], got {spectral_radius!r}")
         if not (np.isfinite(newton_tolerance) and newton_tolerance > 0):
             raise ValueError(f"newton_tolerance must be > 0, got {newton_tolerance!r}")
-        self.params = params if params is not None else ArmParameters()
+        self.params = p = params if params is not None else ArmParameters()
         self.mesh = mesh
-        basis = (model or cached_model(self.params, (2, 2))).mode_shapes
-        self.modal_basis = basis
-        self._state_size = 2 * (2 + sum(m.n for m in basis))  # read every sample
-        self.system = build_arm(self.params, mesh, step=step)
-        self.fields = (LinkField(self.system, 0, basis[0]), LinkField(self.system, 1, basis[1]))
-        p = self.params
-        self.encoder_side = tuple("motor" if p.has_drive(i) else "link" for i in (1, 2))
-        Plant.__init__(self, sensors, basis, step)
+        basis = (model or cached_model(p)).mode_shapes
+        if len(basis) != p.n_links or any(m.n and link.rigid for m, link in zip(basis, p.links)):
+            raise ValueError(f"the model's modes per link {tuple(m.n for m in basis)} do not "
+                             f"fit the {p.n_links}-link arm with modes {p.modes()} (a rigid "
+                             "link has none)")
+        self._state_size = 2 * (p.n_links + sum(m.n for m in basis))  # read every sample
+        self.system = build_arm(p, mesh, step=step)
+        #: Each link's `LinkField` (None for a rigid link).
+        self.fields = tuple(None if link.rigid else LinkField(self.system, i, basis[i])
+                            for i, link in enumerate(p.links))
+        self.encoder_side = tuple("motor" if j.has_drive else "link" for j in p.joints)
+        Plant.__init__(self, sensors, basis, step, Ts)
         self.settings = simulation_settings(step=self.h, spectral_radius=spectral_radius,
                                             newton_tolerance=newton_tolerance)
         self.solver = exu.MainSolverImplicitSecondOrder()
         tip = self.system.tip_load
-        self._inputs = self.system.joints.inputs  # the loads τ1 and τ2 set (`_drives`)
+        self._inputs = self.system.joints.inputs  # the loads each τi sets (`_drives`)
         self._scaled = scaled
         self.hold = ExactHold(
             self.system.mbs, self.settings, self.h,
             [*self._inputs, [(tip, "loadVector", (1.0, 0.0, 0.0))],
              [(tip, "loadVector", (0.0, 1.0, 0.0))]],
-            [n for link in self.system.links for n in link.nodes]
-            if self.system.element == "ancf" else [],
-            self.system.joints.sticks(self.system.mbs)) if exact_hold else None
-        self._applied = np.zeros(4)  # the loads held now: τ1, τ2, Fx, Fy
-        #: The current loops' time constants and outputs (`reduced_model._joints.lag_step`).
-        self._lag = np.array([p.torque_time_constant1, p.torque_time_constant2])
+            self.system.beam_nodes if self.system.element == "ancf" else [],
+            [link.node for link in self.system.rigid_links],
+            self.system.joints.sticks(self.system.mbs))
+        N = p.n_links
+        self._applied = np.zeros(N + 2)  # the loads held now: τ1 … τN, Fx, Fy
+        #: The current loops' time constants and outputs (`reduced_model.joints.lag_step`).
+        self._lag = np.array([j.torque_time_constant for j in p.joints])
         self._lagging = bool(self._lag.any())
-        self._lagged = np.zeros(2)
+        self._lagged = np.zeros(N)
         self._read_motors = self.system.joints.motor_reader(self.system.mbs)
-        self._index_state()
-        self._readout = new_readout(self.system.element == "ancf", *self._joint_arrays(),
-                                    *self.fields[0].compiled(), *self.fields[1].compiled())
+        self._readout = new_readout(self.system.element == "ancf", *readout_arrays(self.system),
+                                    link_arrays(f for f in self.fields if f is not None))
         self._readout_into = readout_into
         self._truth = None
         self._cache = None  # state readout of the current step (see _read)
@@ -188,22 +208,6 @@ class ExudynPlant(Plant):
         self._set_load = self.system.mbs.SetLoadParameter
         self._iteration = self.solver.it
         self._system_data = self.system.mbs.systemData
-
-    def _index_state(self) -> None:
-        """Cache ODE2 indices and reference values of everything `truth` reads."""
-        mbs, sys_ = self.system.mbs, self.system
-        ltg = mbs.systemData.GetNodeLTGODE2
-        ref = lambda n: np.array(mbs.GetNodeParameter(n, "referenceCoordinates"), float)  # noqa
-        self._hub1_rot, self._hub2_rot = ltg(sys_.hub1)[2], ltg(sys_.hub2)[2]
-        self._hub1_ref, self._hub2_ref = ref(sys_.hub1)[2], ref(sys_.hub2)[2]
-        tip1, tip2 = sys_.links[0].nodes[-1], sys_.links[1].nodes[-1]
-        self._tip_idx = np.array([ltg(tip1)[:2], ltg(tip2)[:2]])
-        self._tip_ref = np.array([ref(tip1)[:2], ref(tip2)[:2]])
-        if sys_.element == "ancf":
-            self._tip1_slope_idx = np.array(ltg(tip1)[2:4])
-            self._tip1_slope_ref = ref(tip1)[2:4]
-        else:
-            self._tip1_rot_idx, self._tip1_rot_ref = ltg(tip1)[2], ref(tip1)[2]
 
     # --- Plant interface ---------------------------------------------------------------
     @property
@@ -236,22 +240,24 @@ class ExudynPlant(Plant):
                                f"{self.solver.GetErrorString()}")
         self._cache = self._truth = None
 
-    def _advance(self, tau: np.ndarray, steps: int, tip_force) -> None:
-        """Hold joint torques ``tau`` and the payload force ``tip_force`` over ``steps``
-        steps (an exact zero-order hold, `hold_loads`); `PlantFailure` with Exudyn's
+    def _advance(self, tau: np.ndarray, tip_force) -> None:
+        """Hold joint torques ``tau`` and the payload force ``tip_force`` over one control
+        period (an exact zero-order hold, `hold_loads`); `PlantFailure` with Exudyn's
         message if the solver fails."""
+        steps = self.steps
         fx, fy = (0.0, 0.0) if tip_force is None else (float(tip_force[0]),
                                                        float(tip_force[1]))
         self._cache = self._truth = None
         if not self._lagging:
-            self.hold_loads(float(tau[0]), float(tau[1]), fx, fy)
+            self.hold_loads([float(t) for t in tau], fx, fy)
             self._solve_to(self._steps + steps)
             return
-        lagged = self._lagged
+        lagged, lag, h = self._lagged, self._lag, self.h
+        held = [0.0] * len(lagged)
         for k in range(steps):  # the current loops' mean torque step by step
-            (u1, lagged[0]), (u2, lagged[1]) = (lag_step(float(tau[i]), lagged[i], self._lag[i],
-                                                         self.h) for i in (0, 1))
-            self.hold_loads(u1, u2, fx, fy)
+            for i in range(len(lagged)):
+                held[i], lagged[i] = lag_step(float(tau[i]), lagged[i], lag[i], h)
+            self.hold_loads(held, fx, fy)
             self._solve_to(self._steps + k + 1)
 
     def _solve_to(self, step: int) -> None:
@@ -262,28 +268,27 @@ class ExudynPlant(Plant):
             raise PlantFailure(f"Exudyn solver failed at t = {self._iteration.currentTime:.6g} "
                                f"s: {msg.strip()}")
 
-    def hold_loads(self, t1: float, t2: float, fx: float = 0.0, fy: float = 0.0) -> None:
-        """Hold joint torques ``t1``, ``t2`` [N m] and the payload force (``fx``, ``fy``)
-        [N] from now on: set the loads that changed and, with the exact hold, restart the
-        next step from the accelerations they give (`ExactHold`)."""
-        new = (t1, t2, fx, fy)
+    def hold_loads(self, torques, fx: float = 0.0, fy: float = 0.0) -> None:
+        """Hold joint torques ``torques`` (N values) [N m] and the payload force (``fx``,
+        ``fy``) [N] from now on: set the loads that changed and, with the exact hold,
+        restart the next step from the accelerations they give (`ExactHold`)."""
+        new = [*torques, fx, fy]
         applied = self._applied
-        if self.hold is not None and (new[0] != applied[0] or new[1] != applied[1]
-                                      or new[2] != applied[2] or new[3] != applied[3]):
-            self.hold.apply((new[0] - applied[0], new[1] - applied[1],
-                             new[2] - applied[2], new[3] - applied[3]))
+        if self.hold is not None and any(a != b for a, b in zip(new, applied)):
+            self.hold.apply([a - b for a, b in zip(new, applied)])
         self.set_loads(new)
 
     def set_loads(self, new) -> None:
-        """Set the loads of the inputs (τ1, τ2, Fx, Fy) ``new`` that changed (no hold)."""
+        """Set the loads of the inputs (τ1 … τN, Fx, Fy) ``new`` that changed (no hold)."""
         applied = self._applied
         set_load, scaled = self._set_load, self._scaled
-        for j in (0, 1):
+        N = len(self._inputs)
+        for j in range(N):
             if new[j] != applied[j]:
                 for load, parameter, value in self._inputs[j]:
                     set_load(load, parameter, scaled(value, new[j]))
-        if new[2] != applied[2] or new[3] != applied[3]:
-            set_load(self.system.tip_load, "loadVector", [new[2], new[3], 0.0])
+        if new[N] != applied[N] or new[N + 1] != applied[N + 1]:
+            set_load(self.system.tip_load, "loadVector", [new[N], new[N + 1], 0.0])
         applied[:] = new
 
     def measure(self) -> Measurement:
@@ -294,7 +299,8 @@ class ExudynPlant(Plant):
         return self.sensors.measure(self.time)
 
     def truth_vector(self) -> np.ndarray:
-        """[θ, q, θ̇, q̇ (projected), tip positions, tip deflections, projection residuals]."""
+        """[θ, q, θ̇, q̇ (projected), tip positions, tip deflections, projection residuals,
+        motors]."""
         return self._truth_now().copy()
 
     def truth_into(self, out: np.ndarray) -> None:
@@ -312,124 +318,47 @@ class ExudynPlant(Plant):
             self.truth_into(self._truth)
         return self._truth
 
-    # --- sensor primitives (see reduced_model._sensors) -------------------------------------
+    # --- sensor primitives (see reduced_model.contract.sensors) ----------------------------
     def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
-        _, theta, theta_dot, *_ = self._read()
-        return theta.copy(), theta_dot.copy()
+        truth, m, N = self._truth_now(), self._state_size // 2, self.n_joints
+        return truth[:N].copy(), truth[m:m + N].copy()
 
     def modal_state(self) -> tuple[np.ndarray, np.ndarray]:
-        *_, q, q_dot, _ = self._read()
-        return q.copy(), q_dot.copy()
+        truth, m, N = self._truth_now(), self._state_size // 2, self.n_joints
+        return truth[N:m].copy(), truth[m + N:2 * m].copy()
 
     def field_sampler(self, link: int, x, derivative: int):
         """Callable giving the ``derivative``-th s-derivative of link ``link``'s transverse
-        deflection (root frame) at points ``x``, from the FE interpolation."""
-        H = self.fields[link].interpolation(x, derivative)
-        return lambda: H @ self._read()[5][link]
+        deflection (root frame) at points ``x``, from the FE interpolation (0 on a rigid
+        link)."""
+        field = self.fields[link]
+        if field is None:
+            zeros = np.zeros(np.size(x))
+            return lambda: zeros.copy()
+        H = field.interpolation(x, derivative)
+        return lambda: H @ self._local_dofs()[link]
 
     def tip_positions(self) -> np.ndarray:
-        return self._tip_positions(self._read()[0])
+        e, N = self._state_size, self.n_joints
+        return self._truth_now()[e:e + 2 * N].reshape(N, 2).copy()
 
-    # --- state reading ---------------------------------------------------------------------
-    def _read(self):
-        """(u, θ, θ̇, q, q̇, local dofs per link) of the current state, computed once per
-        step and shared by the measurement and `truth` (treat as read-only)."""
+    def _local_dofs(self) -> list:
+        """Each flexible link's local dofs now (`LinkField.local_dofs`; None for a rigid
+        link), read once per step (treat as read-only)."""
         if self._cache is None:
-            sd = self.system.mbs.systemData
-            u, v = sd.GetODE2Coordinates(), sd.GetODE2Coordinates_t()
-            theta, theta_dot = self._joints(u, v)
-            q, q_dot, dofs = [], [], []
-            for f in self.fields:
-                d, dd = f.local_dofs(u, v)
-                dofs.append(d.copy())  # the field reuses its buffers on the next call
-                q.append(f.project(d))
-                q_dot.append(f.project(dd))
-            self._cache = (u, theta, theta_dot, np.concatenate(q), np.concatenate(q_dot), dofs)
+            sd = self._system_data
+            u = sd.GetODE2Coordinates()
+            self._cache = [None if f is None else f.local_dofs(u).copy() for f in self.fields]
         return self._cache
 
-    def _joint_arrays(self) -> tuple:
-        """Indices and reference values `readout_into` reads the joints and tips from."""
-        ancf = self.system.element == "ancf"
-        slope = self._tip1_slope_idx if ancf else np.array([self._tip1_rot_idx, 0])
-        slope_ref = self._tip1_slope_ref if ancf else np.array([self._tip1_rot_ref, 0.0])
-        idx = np.array([self._hub1_rot, self._hub2_rot, *slope], dtype=np.int64)
-        ref = np.array([self._hub1_ref, self._hub2_ref, *slope_ref], dtype=float)
-        return (idx, ref, np.ascontiguousarray(self._tip_idx, dtype=np.int64),
-                np.ascontiguousarray(self._tip_ref, dtype=float))
-
-    def _tip_positions(self, u: np.ndarray) -> np.ndarray:
-        return self._tip_ref + u[self._tip_idx]
-
-    def _joints(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        th1 = self._hub1_ref + u[self._hub1_rot]
-        hub2 = self._hub2_ref + u[self._hub2_rot]
-        if self.system.element == "ancf":
-            sx, sy = self._tip1_slope_ref + u[self._tip1_slope_idx]
-            sxd, syd = v[self._tip1_slope_idx]
-            c, s = np.cos(th1), np.sin(th1)
-            # Tangent angle = θ1 + (small) angle of the slope in hub 1's frame: continuous.
-            tangent = th1 + np.arctan2(-s * sx + c * sy, c * sx + s * sy)
-            tangent_rate = (sx * syd - sy * sxd) / (sx * sx + sy * sy)
-        else:
-            tangent = self._tip1_rot_ref + u[self._tip1_rot_idx]
-            tangent_rate = v[self._tip1_rot_idx]
-        th1d = v[self._hub1_rot]
-        return (np.array([th1, hub2 - tangent]),
-                np.array([th1d, v[self._hub2_rot] - tangent_rate]))
-
-    # --- initial conditions ------------------------------------------------------------------
     def _node_displacements(self, Q: np.ndarray) -> np.ndarray:
-        """ODE2 displacement vector placing every node for the configuration Q = [θ, q]."""
-        sys_, mbs = self.system, self.system.mbs
-        n1 = self.modal_basis[0].n
-        th1, th2, q1, q2 = Q[0], Q[1], Q[2:2 + n1], Q[2 + n1:]
-        u = np.zeros(mbs.systemData.ODE2Size())
-
-        def place(node, pos, angle_or_slope):
-            idx = mbs.systemData.GetNodeLTGODE2(node)
-            ref = np.array(mbs.GetNodeParameter(node, "referenceCoordinates"), float)
-            u[idx] = np.concatenate([pos, np.atleast_1d(angle_or_slope)]) - ref
-
-        def curve(modes: LinkModes, q, s):
-            """Inextensible curve with slope angle β = atan(w'): (x, y, β) at arc lengths s."""
-            fine = np.linspace(0.0, modes.L, 4001)
-            beta = np.arctan(modes.dphi(fine).T @ q)
-            from scipy.integrate import cumulative_trapezoid  # 0.2 s: not for a report
-            x = cumulative_trapezoid(np.cos(beta), fine, initial=0.0)
-            y = cumulative_trapezoid(np.sin(beta), fine, initial=0.0)
-            return (np.interp(s, fine, x), np.interp(s, fine, y),
-                    np.arctan(modes.dphi(s).T @ q))
-
-        def place_link(link, origin, frame_angle, q):
-            nodes = sys_.links[link]
-            x, y, beta = curve(self.modal_basis[link], q, nodes.s)
-            c, s = np.cos(frame_angle), np.sin(frame_angle)
-            pos = origin + np.column_stack([c * x - s * y, s * x + c * y])
-            for k, node in enumerate(nodes.nodes):
-                ang = frame_angle + beta[k]
-                if sys_.element == "ancf":
-                    place(node, pos[k], [np.cos(ang), np.sin(ang)])
-                else:
-                    place(node, pos[k], ang)
-            return pos[-1], frame_angle + beta[-1]
-
-        place(sys_.hub1, [0.0, 0.0], th1)
-        tip1, tangent1 = place_link(0, np.zeros(2), th1, q1)
-        alpha = tangent1 + th2
-        place(sys_.hub2, tip1, alpha)
-        tip2, tangent2 = place_link(1, tip1, alpha, q2)
-        if sys_.stator is not None:
-            place(sys_.stator, tip1, tangent1)
-        if sys_.payload is not None:
-            place(sys_.payload, tip2, tangent2)
-        for rotor, hub_angle in zip(sys_.joints.rotors, (th1, alpha)):
-            if rotor is not None:  # on its hub: the gear unloaded
-                u[mbs.systemData.GetNodeLTGODE2(rotor)[0]] = hub_angle - mbs.GetNodeParameter(
-                    rotor, "referenceCoordinates")[0]
-        return u
+        """ODE2 displacement vector placing every node for the configuration Q = [θ, q]
+        (`_placement.node_displacements`)."""
+        from ._placement import node_displacements
+        return node_displacements(self.system, self.modal_basis, Q)
 
     # --- modal analysis ---------------------------------------------------------------------------
-    def natural_frequencies(self, theta=(0.0, 0.0), joints: str = "locked",
+    def natural_frequencies(self, theta=None, joints: str = "locked",
                             n: int = 4) -> np.ndarray:
         """First ``n`` bending frequencies [Hz] of this plant's FE model linearised at
         ``theta`` (see `plant_exudyn.natural_frequencies`)."""
@@ -437,33 +366,68 @@ class ExudynPlant(Plant):
         return natural_frequencies(self.params, self.mesh, theta=theta, joints=joints, n=n)
 
 
+def readout_arrays(system) -> tuple:
+    """The joints' and tips' indices and reference values `new_readout` reads from, for
+    the `ArmSystem` ``system`` (`_readout.new_readout` says what each is)."""
+    from ._bodies import LinkNodes
+    from ._readout import ROTATION, SLOPE
+    mbs = system.mbs
+    ltg = mbs.systemData.GetNodeLTGODE2
+    ref = lambda n: np.array(mbs.GetNodeParameter(n, "referenceCoordinates"), float)  # noqa
+    N = len(system.links)
+    ancf = system.element == "ancf"
+    hub_idx = np.array([ltg(h)[2] for h in system.hubs], dtype=np.int64)
+    hub_ref = np.array([ref(h)[2] for h in system.hubs])
+    kind = np.zeros(N, dtype=np.int64)
+    t_idx, t_ref = np.zeros((N, 2), dtype=np.int64), np.zeros((N, 2))
+    tip_idx, tip_ref, tip_arm = np.full((N, 3), -1, dtype=np.int64), np.zeros((N, 2)), np.zeros((N, 2))
+    field_of = np.full(N, -1, dtype=np.int64)
+    fields = 0
+    for i, link in enumerate(system.links):
+        if isinstance(link, LinkNodes):
+            node = link.nodes[-1]
+            field_of[i], fields = fields, fields + 1
+            tip_idx[i, :2], tip_ref[i] = ltg(node)[:2], ref(node)[:2]
+            slope = (SLOPE, ltg(node)[2:4], ref(node)[2:4]) if ancf else (
+                ROTATION, [ltg(node)[2], 0], [ref(node)[2], 0.0])
+        else:
+            node, angle = link.node, ref(link.node)[2]
+            tip_idx[i], tip_ref[i] = ltg(node), ref(node)[:2]
+            tip_arm[i] = (link.length - link.centre) * np.array([np.cos(angle), np.sin(angle)])
+            slope = (ROTATION, [ltg(node)[2], 0], [angle, 0.0])
+        if i + 1 < N:
+            kind[i + 1], t_idx[i + 1], t_ref[i + 1] = slope
+    return hub_idx, hub_ref, kind, t_idx, t_ref, tip_idx, tip_ref, tip_arm, field_of
+
+
 def linear_model(params: ArmParameters | None = None, mesh: Mesh = Mesh(), *,
-                 theta=(0.0, 0.0), Ts: float | None = None,
+                 theta=None, Ts: float | None = None,
                  model: ArmModel | None = None):
     """The FE arm linearised about rest at joint angles ``theta`` (`plant_exudyn._linear`).
 
     Parameters
     ----------
     params : ArmParameters
-        The arm (default: `ArmParameters()`).
+        The arm, horizontal (default: `ArmParameters()`).
     mesh : Mesh
-        Element type and elements per link.
-    theta : (float, float)
-        θ1, θ2 [rad] of the configuration (θ2 relative to the link-1 tip tangent).
+        Element type and elements per flexible link.
+    theta : sequence of float, optional
+        θ1 … θN [rad] of the configuration (θi relative to link i−1's tip tangent;
+        default 0).
     Ts : float, optional
         If given, the exact zero-order-hold discretisation at this period [s].
     model : ArmModel, optional
         The model whose mode shapes the deflection is projected on for the q outputs
-        (default: the reduced model of ``params`` with 2 modes per link, as `ExudynPlant`).
+        (default: the reduced model of ``params`` with its modes per link, as `ExudynPlant`).
 
     Returns
     -------
     control.StateSpace
-        Inputs ``tau1``, ``tau2`` [N m]; outputs `reduced_model.output_names` (deviations
-        from the configuration: rad, m, rad/s, m/s); states ``eta1…`` (FE modes, the first
-        two rigid) and their rates, then the drives' and current loops' (the linear part
-        of the arm's joints, `reduced_model._joint_linear.with_joints`; dry friction and
-        backlash are left out).  Continuous, or discrete with ``dt = Ts``.
+        Inputs ``tau1`` … ``tauN`` [N m]; outputs `reduced_model.output_names`
+        (deviations from the configuration: rad, m, rad/s, m/s); states ``eta1…`` (FE
+        modes, the first N rigid) and their rates, then the drives' and current loops'
+        (the linear part of the arm's joints, `reduced_model.joints.with_joints`; dry
+        friction and backlash are left out).  Continuous, or discrete with ``dt = Ts``.
     """
     import control
 

@@ -8,7 +8,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from validation.batch.store import ResultStore, StoreError
+from validation.batch.store.folder import ResultStore, StoreError
 
 
 

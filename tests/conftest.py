@@ -20,8 +20,8 @@ FINE_ARM_PLANT = textwrap.dedent('''
     class FineArm(ReducedPlant):
         role = "truth"
 
-        def __init__(self, params, *, model, sensors, modes=3):
-            super().__init__(params, model=model, sensors=sensors,
+        def __init__(self, params, *, model, sensors, Ts, modes=3):
+            super().__init__(params, model=model, sensors=sensors, Ts=Ts,
                              modes_per_link=(modes, modes), step=2.5e-4)
 
 

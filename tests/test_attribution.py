@@ -147,8 +147,9 @@ def test_the_joints_are_factors_of_their_own(tmp_path):
     worlds = att.plan(s, factors, "j")
     by_real = {w.real: w.run.scenario for w in worlds}
     ideal = by_real[frozenset()]
-    assert ideal.true_params.static_friction(1) == ideal.nominal_params.static_friction(1) == 0
-    assert not ideal.true_params.has_drive(1) and ideal.true_params.Mp == 0.1
+    assert (ideal.true_params.joints[0].static_friction
+            == ideal.nominal_params.joints[0].static_friction == 0)
+    assert not ideal.true_params.joints[0].has_drive and ideal.true_params.Mp == 0.1
     only_friction = by_real[frozenset({"friction"})].true_params
     assert only_friction.coulomb1 == 0.3 and only_friction.Mp == 0.1  # the arm's, not nominal's
     a, summary = att.attribute(s, factors, tmp_path, name="j", progress=False)

@@ -129,7 +129,7 @@ def test_add_a_check_from_a_measured_run(tmp_path, capsys):
     """`baseline add RESULTS/RUN --metric KEY --margin 25%`: the run's value times 1.25 is
     the bound, its scenario (the keys that differ from the defaults) joins [scenarios],
     and `baseline check` measures the same value again.  Bad input writes nothing."""
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     from validation.cli import main
     file = tmp_path / "b.toml"
     file.write_text("# mine\n[policy]\nrelative = 0.25\n")

@@ -19,10 +19,9 @@ from validation.batch.executor import SerialRunner
 from validation.run.config import ConfigError
 from validation.run.experiments import from_run, read_experiment, write_experiment
 from validation.run.tomlfiles import load_toml
-from validation.verdicts.calibration import calibrate
-from validation.verdicts.calibration_intervals import parameter_uncertainty
-from validation.verdicts.calibration_plan import linear_response, plan_calibration
-from validation.verdicts.calibration_settings import calibration_settings
+from validation.verdicts.calibration import (calibrate, calibration_settings, linear_response,
+                                            plan_calibration)
+from validation.verdicts.calibration.intervals import parameter_uncertainty
 
 NOISE = {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}  # campaigns/base.toml
 EI_MP = ["true_params.EI1", "true_params.EI2", "true_params.Mp"]
@@ -48,10 +47,14 @@ def model(plant="reduced", start=None, noise=NOISE, **extra):
                                   "true_params": dict(start or {}), **extra})
 
 
-def fit(tmp_path, base, names, experiments, *, table=None, responses=()):
+def fit(tmp_path, base, names, experiments, *, table=None, responses=(), search=False,
+        **options):
+    """Calibrate ``names`` of ``base`` on ``experiments`` into tmp_path/out (without the
+    search for missing physics unless ``search``: the tests of it ask for it)."""
     settings = calibration_settings(dict(table or {}), names, base)
     plan = plan_calibration(base, settings, [(e, None) for e in experiments], list(responses))
-    return calibrate(plan, tmp_path / "out", runner=SerialRunner(), log=lambda *_: None)
+    return calibrate(plan, tmp_path / "out", runner=SerialRunner(), log=lambda *_: None,
+                     search=search, **options)
 
 
 def relative_errors(result, truth):
@@ -188,6 +191,10 @@ def test_parameters_the_data_see_together_or_not_at_all_are_flagged(tmp_path):
         "-1 mh2 +1 stator_mass" in p["true_params.mh2"]["reason"]
     assert not p["true_params.mh1"]["identifiable"] and "mh1" in p["true_params.mh1"]["reason"]
     assert p["true_params.EI1"]["identifiable"]
+    # the terminal's line is the short reason (issue 58: they ran to 1,000 characters)
+    assert all(len(p[n]["why"]) <= 120 and p[n]["why"] for n in names[:3]), \
+        [p[n]["why"] for n in names[:3]]
+    assert "mh2" in p["true_params.stator_mass"]["why"]
     # their sum is what the data fixed: 1.0 + 0.5 (float32 data, noise-free: 1e-5)
     total = p["true_params.mh2"]["estimate"] + p["true_params.stator_mass"]["estimate"]
     assert abs(total - 1.5) < 1e-4
@@ -256,7 +263,7 @@ def test_a_rerun_replays_the_stored_simulations(tmp_path):
     data = experiment("reduced", duration=0.3)
     base = model("reduced", {"EI1": 11.0})
     first = fit(tmp_path, base, ["true_params.EI1"], [data])
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     count = len(ResultStore(tmp_path / "out").rows())
     again = fit(tmp_path, base, ["true_params.EI1"], [data])
     assert len(ResultStore(tmp_path / "out").rows()) == count == first["simulations"]
@@ -283,6 +290,9 @@ def test_the_command_writes_a_runnable_scenario_and_a_verify_set(tmp_path, capsy
     out = capsys.readouterr().out
     assert "true_params.EI1" in out and f"residual RMS / noise, {rid}" in out
     assert '"model_adequate": true' in out
+    # what to do with it (issue 58: nothing said so)
+    assert "next: flexarm run --config cal/calibrated.toml" in out
+    assert 'include = ["cal/calibrated.toml", "cal/uncertainty.toml"]' in out
     calibrated = load_toml(tmp_path / "cal" / "calibrated.toml")
     scenario_from_mapping(calibrated)  # flexarm run --config takes it
     assert calibrated["name"] == "my-arm"  # the config's (issue 47: it was "paper")
@@ -435,7 +445,7 @@ def test_the_shipped_example_is_labelled_small_and_plans():
     KB; four files of 5-142 KB), and its files pass every check of a calibration, the
     friction experiment with its own arm (friction.toml)."""
     from validation.run.experiments import read_frequency_response
-    from validation.verdicts.calibration_settings import base_scenario
+    from validation.verdicts.calibration import base_scenario
     files = sorted(EXAMPLE.glob("*.csv"))
     assert {f.name for f in files} == {"tracking.csv", "moving.csv", "frf.csv",
                                        "reversals.csv"}

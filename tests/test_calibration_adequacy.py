@@ -16,8 +16,8 @@ import scipy.stats
 
 from test_calibration import EI_MP, NOISE, TRUTH, experiment, fit, model
 from validation.cli import main
-from validation.verdicts.calibration_adequacy import FAMILY_ALPHA, Block, adequacy
-from validation.verdicts.calibration_intervals import MODEL_ERROR_FACTOR, parameter_uncertainty
+from validation.verdicts.calibration.adequacy import FAMILY_ALPHA, Block, adequacy
+from validation.verdicts.calibration.intervals import MODEL_ERROR_FACTOR, parameter_uncertainty
 
 HIDDEN = {"EI1": 8.6, "EI2": 11.3, "Mp": 0.37}  # the issue's lab arm
 #: The FE arm the lab data come from in the slow cases (the issue's), and the cheap one.
@@ -104,7 +104,7 @@ def test_noise_ten_times_the_stated_level_is_misstated_noise_not_model_error(tor
 
 
 @pytest.mark.parametrize("error, failing", [
-    ("slow", {"chi2", "whiteness"}),   # a smooth error: correlated, beyond the noise
+    ("slow", {"level"}),               # a smooth error: correlated, beyond the noise
     ("input", {"inputs"}),             # the torque's effect, delayed and filtered, missed
 ])
 def test_a_model_error_is_called_one_and_the_noise_level_still_read(torque, error, failing):
@@ -122,7 +122,8 @@ def test_a_model_error_is_called_one_and_the_noise_level_still_read(torque, erro
     v = adequacy(blocks(noise, torque))
     tests = v["signals"]["e"]["s2"]
     assert v["model_adequate"] is False and tests["diagnosis"] == "model"
-    assert failing <= {k for k in ("chi2", "whiteness", "inputs") if not tests[k]["passed"]}
+    assert failing <= {k for k in ("chi2", "level", "whiteness", "inputs")
+                       if k in tests and not tests[k]["passed"]}
     assert v["noise_as_stated"] is True and "the noise levels are as stated" in v["verdict"]
     assert all(s["diagnosis"] == "adequate" for k, s in v["signals"]["e"].items() if k != "s2")
 
@@ -167,8 +168,10 @@ def test_the_reduced_model_on_fe_data_is_inadequate_and_no_interval_misses(tmp_p
     noise, correlated, following the torques), the estimates labelled effective, and
     every interval it reports holds the hidden value (measured: EI1 +3.3 % in an interval
     of −6.3..+13.0 %, −2.5..+9.1 % with κ = 3; EI2 +11 % and Mp +26 % reported not identifiable against the model
-    error, with no interval).  uncertainty.toml says so, and verify carries it onto its
-    verdicts."""
+    error, with no interval).  Its ranges are not handed to verify: no uncertainty.toml
+    (it was written before, labelled effective); asked for (export_inadequate, the same
+    fit again from its stored runs), it is written with a warning and the label, and
+    verify carries it onto its verdicts."""
     data = experiment("exudyn", duration=1.0, seed=1, noise=NOISE, params=HIDDEN)
     result = fit(tmp_path, model("reduced", {"EI1": 10.0, "EI2": 10.0, "Mp": 0.1},
                                  nominal_params=HIDDEN), EI_MP, [data])
@@ -178,8 +181,13 @@ def test_the_reduced_model_on_fe_data_is_inadequate_and_no_interval_misses(tmp_p
     assert all(covers(result, HIDDEN).values()), result["parameters"]
     assert all(p["ci95"] is None for p in result["parameters"].values())
     assert result["interval_kind"].startswith("effective parameters")
+    assert not (tmp_path / "out" / "uncertainty.toml").exists() and not result["exported"]
+    again = fit(tmp_path, model("reduced", {"EI1": 10.0, "EI2": 10.0, "Mp": 0.1},
+                                nominal_params=HIDDEN), EI_MP, [data], export_inadequate=True)
+    assert again["exported"] and again["parameters"] == result["parameters"]
     text = (tmp_path / "out" / "uncertainty.toml").read_text()
     assert "EFFECTIVE parameters" in text and 'calibration = "inadequate"' in text
+    assert "WARNING: written by --export-inadequate" in text
     (tmp_path / "verify.toml").write_text(
         'include = ["out/calibrated.toml", "out/uncertainty.toml"]\n'
         '[[requirement]]\nname = "tracking"\nclaim = "tracking"\n')
@@ -242,8 +250,12 @@ def test_models_fitted_to_the_same_data_are_compared_in_one_table(tmp_path, caps
             'fit = ["true_params.EI1", "true_params.EI2", "true_params.Mp"]\n')
     common = ["--workers", "1", "--no-progress"]
     assert main(["calibrate", "lab.csv", "--config", "reduced.toml", "--out", "red",
-                 *common]) == 0
-    assert '"model_adequate": false' in capsys.readouterr().out
+                 "--no-search", *common]) == 0
+    out = capsys.readouterr().out
+    assert '"model_adequate": false' in out
+    # what to do next (issue 58): the physics the screen points at, the search, --compare
+    assert "next: the residual follows" in out and "without --no-search" in out, out
+    assert not (tmp_path / "red" / "uncertainty.toml").exists()
     assert main(["calibrate", "lab.csv", "--config", "exudyn.toml", "--out", "fe",
                  "--compare", "red", *common]) == 0
     out = capsys.readouterr().out

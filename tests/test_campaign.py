@@ -23,8 +23,8 @@ from validation.batch.executor import LocalPoolRunner, SerialRunner, make_runner
 from validation.report.report import write_report
 from validation.run.results import RunResult
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
-from validation.batch.resimulate import every_signal
-from validation.batch.store import ResultStore, run_id
+from validation.batch.store.resimulate import every_signal
+from validation.batch.store.folder import ResultStore, run_id
 
 ROOT = Path(__file__).resolve().parent.parent
 SMALL = {"name": "small", "scenario": {"duration": 0.3, "transient": 0.1,
@@ -215,7 +215,7 @@ def test_resume_after_a_kill(tmp_path):
     proc.stderr.close()
     partial = metrics_table(out)  # the index is readable and every stored file verifies
     # Files a worker put in place whose rows the kill caught before their commit
-    # (validation.batch.committing): intact runs, adopted by the resume, not run again.
+    # (validation.batch.store.committing): intact runs, adopted by the resume, not run again.
     kept = len(partial) + len(ResultStore(out).unindexed_files())
     assert 3 <= len(partial) <= kept < 20, "the kill must land mid-campaign"
     summary = subprocess.run(cmd, capture_output=True, text=True)

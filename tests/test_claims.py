@@ -17,7 +17,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from validation.batch.resimulate import every_signal
+from validation.batch.store.resimulate import every_signal
 from validation.report.render import md_cell
 from validation.report.verdict_tables import claims_tables
 from validation.verdicts.claims import CLAIMS, SYSTEM, claim_columns, evaluate
@@ -251,7 +251,7 @@ def mesh_store(tmp_path_factory):
     their checks (ANCF 8 el/link at half the step, ANCF 16 at a quarter, GE 32 at half)."""
     from validation.batch.campaign import Campaign, PlannedRun
     from validation.batch.queue import run_campaign
-    from validation.batch.store import ResultStore, run_id
+    from validation.batch.store.folder import ResultStore, run_id
     from validation.run.scenario import scenario_to_mapping
     from validation.verdicts.mesh import run_checks
     out = tmp_path_factory.mktemp("mesh")
@@ -355,7 +355,7 @@ def test_a_second_level_is_run_only_where_it_could_change_the_verdict(values, ex
     second level — the claim is decided without it (known good); one whose margin is
     inside that is "mesh not checked" until level 2 runs, and `finer_runs` asks for it
     (known bad); a first level that disagrees decides alone: not converged."""
-    from validation.batch.store import run_id
+    from validation.batch.store.folder import run_id
     from validation.verdicts import claims as claims_module
     from validation.verdicts import mesh as mesh_check
     from validation.verdicts.claims import finer_runs

@@ -15,7 +15,7 @@ def test_version(capsys):
 
 
 def test_modes_prints_table1_frequencies(capsys):
-    assert main(["modes", "--table1", "--theta2", "0", "1.5708"]) == 0
+    assert main(["modes", "--arm", "table1", "--theta2", "0", "1.5708"]) == 0
     out = capsys.readouterr().out
     assert "0.6316" in out and "3.8313" in out and "2.2359" in out  # locked / free at θ2 = 0
     assert out.count("joints locked") == 2 and "Table 1" in out
@@ -28,8 +28,30 @@ def test_modes_reads_params_toml(tmp_path, capsys):
     assert str(path) in capsys.readouterr().out
 
 
+def test_arms_lists_the_shipped_arms_and_shows_one(capsys):
+    """``flexarm arms``: every shipped arm with its links and plane; one arm in full, its
+    clamped-mass frequencies those of `flexarm modes`."""
+    from reduced_model import named_arms
+    assert main(["arms"]) == 0
+    out = capsys.readouterr().out
+    assert all(name in out for name in named_arms()) and "R+F+F" in out and "vertical" in out
+    assert main(["arms", "three-link"]) == 0
+    out = capsys.readouterr().out
+    assert "link 1: 0.3 m, 1.5 kg/m, rigid" in out and out.count("clamped-mass modes") == 2
+    assert "EI3" in out and "EI4" not in out
+
+
+def test_modes_on_a_single_link_and_a_three_link_arm(capsys):
+    assert main(["modes", "--arm", "single-link"]) == 0
+    out = capsys.readouterr().out
+    assert "Reduced model, 2 clamped-mass modes" in out and "theta2" not in out
+    assert main(["modes", "--arm", "three-link", "--modes-per-link", "0", "3", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "0+3+1 clamped-mass modes" in out and "rigid" in out
+
+
 def test_modes_compare_prints_fe_next_to_reduced(capsys):
-    assert main(["modes", "--table1", "--compare", "--theta2", "0"]) == 0
+    assert main(["modes", "--arm", "table1", "--compare", "--theta2", "0"]) == 0
     out = capsys.readouterr().out
     assert out.count("FE  ") == 2 and out.count("gap [%]") == 2
     assert "31.4327" in out  # FE free 3rd mode (the reduced model's truncation gap)
@@ -37,11 +59,13 @@ def test_modes_compare_prints_fe_next_to_reduced(capsys):
 
 @pytest.mark.parametrize("args, text", [
     (["modes", "--compare", "--elements", "0"], "--elements: must be in 1..64"),
-    (["modes", "--table1", "--params", "x.toml"], "exclude each other"),
-    (["modes", "--modes-per-link", "5", "2"], "--modes-per-link must be two integers"),
+    (["modes", "--table1"], "--table1: is now --arm table1"),
+    (["modes", "--arm", "single-link", "--theta2", "1"], "--theta2: needs a joint 2"),
+    (["arms", "nope"], "arm: 'nope' is not a shipped arm"),
+    (["modes", "--modes-per-link", "5", "2"], "--modes-per-link must be one integer in 0..4 per link"),
     (["modes", "--params", "/nonexistent/arm.toml"], "cannot read"),
-    (["modes", "--params", "{bad_field}"], "params.Lx: unknown parameter"),
-    (["modes", "--params", "{negative}"], "params.EI1 must be > 0"),
+    (["modes", "--params", "{bad_field}"], "params.Lx is not a field of this 2-link arm"),
+    (["modes", "--params", "{negative}"], "params.EI1 must be >= 0, got -3.0"),
     (["modes", "--params", "{not_toml}"], "invalid TOML"),
     (["nonsense"], "invalid choice"),
 ])
@@ -60,7 +84,7 @@ def test_bad_input_one_line_exit_2(tmp_path, args, text):
 
 
 def test_modes_table1_prints_the_independent_reference_without_negative_zero(capsys):
-    assert main(["modes", "--table1"]) == 0
+    assert main(["modes", "--arm", "table1"]) == 0
     out = capsys.readouterr().out
     # The independent references (a converged Euler–Bernoulli FE model built outside this code), next to ours.
     assert "0.6316     3.8312     6.3499    33.6650" in out
@@ -88,7 +112,7 @@ def stored(tmp_path_factory):
 
 def test_a_short_run_states_its_window(tmp_path, capsys):
     """The default transient fits a 1 s run (half of it) and the output says so."""
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     assert main(["run", "--duration", "1", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "metrics after the 0.5 s transient, over 0.5–1 s" in out
@@ -111,7 +135,7 @@ def test_rerun_like_a_stored_run_reproduces_its_metrics(stored, tmp_path, capsys
     """--like reruns the stored scenario exactly (noise, seed, initial error included)
     and gives the stored metrics to 1e-12 (the same code, the same arithmetic: any
     difference is a scenario that was not reproduced)."""
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     row = ResultStore(stored).rows()[0]
     assert main(["run", "--like", f"{stored}/{row.run_id}", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
@@ -129,7 +153,7 @@ def test_rerun_like_a_stored_run_reproduces_its_metrics(stored, tmp_path, capsys
 
 
 def test_rerun_like_with_changes_says_which(stored, tmp_path, capsys):
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     row = ResultStore(stored).rows()[0]
     assert main(["run", "--like", f"{stored}/{row.run_id[:6]}", "--set", "seed=7",
                  "--out", str(tmp_path)]) == 0
@@ -148,7 +172,7 @@ def test_a_truth_plant_run_says_whether_it_converged(tmp_path, capsys):
     runs its checks (level 1 and GE decide here: level 2 is said to be not needed, issue
     46) and says whether its judged values agree; --like by its name then means the
     nominal run, not one of the checks that share the name."""
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     short = ["--plant", "exudyn", "--duration", "0.05", "--observer", "none"]
     assert main(["run", *short, "--out", str(tmp_path / "plain")]) == 0
     assert "convergence not checked: these are the FE model's numbers on ANCF 4 el/link" \
@@ -202,7 +226,7 @@ def test_a_failing_plugin_is_named_as_written_and_said_on_stderr(tmp_path, capsy
     """Issue 58: the failure went to stdout only (stderr empty), the run was labelled
     "JointPD@exudyn" while the error said "mypd", and a failed truth-plant run was still
     advised to check its convergence (--mesh-check)."""
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     plugin_lab({"mypdlab.py": RAISING})
     assert main(["run", "--controller", "mypdlab:JointPD", "--plant", "exudyn",
                  "--duration", "0.05", "--out", str(tmp_path)]) == 1
@@ -216,7 +240,7 @@ def test_a_failing_plugin_is_named_as_written_and_said_on_stderr(tmp_path, capsy
 
 
 def test_run_config_takes_a_campaigns_scenario_base(tmp_path, capsys):
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     camp = tmp_path / "camp.toml"
     camp.write_text('name = "x"\n[scenario]\nduration = 0.4\n[scenario.sensors]\n'
                     'encoder_noise = 1e-4\n[[sweep]]\nname = "s"\ngrid.seed = [1, 2]\n')
@@ -228,7 +252,7 @@ def test_run_config_takes_a_campaigns_scenario_base(tmp_path, capsys):
 
 
 def test_show_draws_the_paper_figures_of_one_run(stored, capsys):
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     row = ResultStore(stored).rows()[0]
     assert main(["show", f"{stored}/{row.run_id}", "--no-open"]) == 0
     folder = stored / "show" / row.run_id
@@ -242,7 +266,7 @@ def test_show_draws_the_paper_figures_of_one_run(stored, capsys):
 def test_show_overlays_the_same_scenario_on_the_other_plant_whatever_the_names(tmp_path, capsys):
     """`flexarm run` names runs by their plant ("pd@reduced", "pd@exudyn"): `show` of
     either draws the other over it, as the same scenario but the plant."""
-    from validation.batch.store import ResultStore
+    from validation.batch.store.folder import ResultStore
     out = tmp_path / "o"
     for plant in ("reduced", "exudyn"):
         assert main(["run", "--plant", plant, "--controller", "pd", "--observer", "none",

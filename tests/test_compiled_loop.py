@@ -54,7 +54,7 @@ def python_objects(s, monkeypatch):
 def stepped_from_python(s):
     """The run with the laws compiled but the plant stepped from Python."""
     setup = build(s)
-    setup.plant.compiled_stepping = lambda: None  # hide the plant's compiled stepping
+    setup.plant.compiled = lambda: None  # hide the plant's compiled form
     return simulate(setup.plant, setup.controller, setup.observer, s, model=setup.model)
 
 
@@ -101,7 +101,7 @@ def test_plugins_and_payload_forces_take_the_python_path():
     r = run_scenario(s)
     assert r.status == "ok" and r.timings["compiled_loop"] is False
     assert r.timings["paths"]["loop"] == "python"
-    assert ReducedPlant().compiled_stepping() is not None
+    assert ReducedPlant().compiled() is not None
 
 
 def test_the_sample_context_is_built_by_field_name():
@@ -109,8 +109,39 @@ def test_the_sample_context_is_built_by_field_name():
     passes them by name, so a reordered or renamed field cannot shift the others."""
     import inspect
 
-    from validation.run._sample import CONTEXT_FIELDS, context, new_context
+    from validation.run.sample import CONTEXT_FIELDS, context, new_context
     assert list(inspect.signature(new_context.py_func).parameters) == [
         name for name, _ in CONTEXT_FIELDS]
     with pytest.raises(TypeError, match=r"missing \['Ts'.*unknown \['ts'\]"):
         context(**{name: None for name, _ in CONTEXT_FIELDS if name != "Ts"}, ts=1e-3)
+
+
+def _two_args(a, b):
+    return a + b
+
+
+@pytest.mark.parametrize("role", ["controller", "observer", "plant"])
+def test_a_kernel_of_the_wrong_signature_fails_at_registration(role):
+    """Issue 55: a kernel whose arguments do not match its role's signature is refused
+    when its pointer is made — a `TypeError` naming the kernel and the signature — never
+    called with the wrong arguments.  Known good: the idle controller of
+    `CompiledLaw`'s example registers."""
+    from numba import njit
+
+    from controllers import CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, CompiledLaw
+    from reduced_model import ArmModel
+    from reduced_model.contract import PLANT_SIGNATURE, kernel_pointer
+    signature = {"controller": CONTROLLER_SIGNATURE, "observer": OBSERVER_SIGNATURE,
+                 "plant": PLANT_SIGNATURE}[role]
+    wrong = njit(cache=False)(_two_args)
+    with pytest.raises(TypeError, match=r"kernel _two_args does not take the signature"):
+        if role == "plant":
+            kernel_pointer(wrong, signature)
+        else:
+            CompiledLaw.of(wrong, signature, ArmModel())
+
+    @njit(cache=False)
+    def idle(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
+        tau[0] = tau[1] = 0.0
+        return 2
+    assert CompiledLaw.of(idle, CONTROLLER_SIGNATURE, ArmModel()).pointer.kernel is idle

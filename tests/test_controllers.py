@@ -119,7 +119,7 @@ def ct_error(params) -> float:
     ct = RigidComputedTorque(model, Ts=1e-3)
     plant.reset()
     for k in range(3000):
-        plant.step(ct(k * 1e-3, plant.state, ref), 1e-3)
+        plant.step(ct(k * 1e-3, plant.state, ref))
     return np.abs(plant.state[:2] - ref(3.0)[0]).max()
 
 
@@ -236,7 +236,7 @@ def test_observer_alone_converges_from_a_wrong_estimate(cls):
         errors.append(x_hat - plant.state)
         states.append(plant.state.copy())
         tau = np.array([0.5 * np.sin(2 * k * Ts), -0.3 * np.cos(3 * k * Ts)])
-        y = plant.step(tau, Ts)
+        y = plant.step(tau)
     errors, states = np.abs(np.array(errors)), np.array(states)
     n = MODEL.n
     band_p, band_v = Ts * obs.lp, Ts * obs.lv

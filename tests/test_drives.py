@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from plant_exudyn import ExudynPlant, linear_model
-from reduced_model import ArmModel, ArmParameters, ReducedPlant, reduced_linear_model
-from reduced_model._joint_linear import nonlinear_joint_effects
+from reduced_model import ArmModel, ArmParameters, ReducedPlant, reduced_linear_model, named_arm
+from reduced_model.joints import nonlinear_joint_effects
 
 #: Links 1e4× stiffer and undamped: their first mode (~220 Hz) is far above the drive's
 #: (5 Hz), so the arm is the rigid pair the formula describes to (5/220)² ~ 5e-4.
@@ -18,12 +18,13 @@ PLANTS = {"reduced": lambda p, step=5e-5: ReducedPlant(p, step=step),
           "truth": lambda p, step=None: ExudynPlant(p)}
 
 
-def simulate(plant, torque, duration, Ts=1e-3, force=None) -> np.ndarray:
+def simulate(plant, torque, duration, force=None) -> np.ndarray:
     plant.reset()
     out = [plant.truth_vector()]
+    Ts = plant.Ts
     for k in range(int(round(duration / Ts))):
         t = k * Ts
-        plant.advance(np.asarray(torque(t), float), Ts,
+        plant.advance(np.asarray(torque(t), float),
                       tip_force=None if force is None else force(t))
         out.append(plant.truth_vector())
     return np.array(out)
@@ -90,16 +91,16 @@ def test_both_plants_apply_the_lab_arms_joints_alike():
     their travel (measured 1.7e-3 and 1.0e-3; the same torques on the ideal arm: 3e-4 and
     6.6e-3, the FE arm's flexibility against two modes per link), and the encoders read
     the motors."""
-    runs = {kind: simulate(make(ArmParameters.lab()), lambda t: [1.0, 0.6], 1.0)
+    runs = {kind: simulate(make(named_arm("lab")), lambda t: [1.0, 0.6], 1.0)
             for kind, make in PLANTS.items()}
     a, b = runs["reduced"], runs["truth"]
     columns = [0, 1, -4, -3]
     travel = np.abs(a[-1, columns])
     assert np.all(np.abs(a[:, columns] - b[:, columns]).max(axis=0) <= 1e-2 * travel)
     assert np.all(np.abs(a[-1, -4:-2] - a[-1, :2]) > 1e-5)  # the gears carry torque
-    plant = ExudynPlant(ArmParameters.lab())
+    plant = ExudynPlant(named_arm("lab"))
     y = plant.reset()
-    plant.advance(np.array([1.0, 0.3]), 1e-3)
+    plant.advance(np.array([1.0, 0.3]))
     y = plant.measure()
     assert plant.sensors.encoder_side == ("motor", "motor")
     np.testing.assert_array_equal(y.values[:2], plant.truth_vector()[-4:-2])
@@ -119,7 +120,7 @@ def test_the_linear_models_carry_the_drive_and_name_what_they_leave_out():
         assert P.output_labels[-4:] == ["motor1", "motor2", "motor1_dot", "motor2_dot"]
         assert "motor1" in P.state_labels
     assert nonlinear_joint_effects(params) == ()
-    text = nonlinear_joint_effects(ArmParameters.lab())
+    text = nonlinear_joint_effects(named_arm("lab"))
     assert [t.split(" (")[0] for t in text] == ["joint 1 dry friction", "joint 1 backlash",
                                                  "joint 2 dry friction", "joint 2 backlash"]
 

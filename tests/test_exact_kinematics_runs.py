@@ -9,7 +9,7 @@ import pytest
 
 from controllers import IdealisedPBC
 from reduced_model import ArmModel, ReducedPlant
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 from validation.run.config import ConfigError
 from validation.run.loop import build, run_scenario
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
@@ -169,7 +169,7 @@ def test_the_issues_pulses_from_the_command_line(tmp_path):
         plant.reset()
         direct = [plant.truth_vector()[:2]]
         for row in tau[:theta.shape[1] - 1]:
-            plant.step(row, 1e-3)
+            plant.step(row)
             direct.append(plant.truth_vector()[:2])
         # The stored signals are float32: equal to the last bit of that.
         np.testing.assert_array_equal(theta, np.array(direct, dtype=np.float32).T)
@@ -226,9 +226,7 @@ def test_fitting_the_exact_kinematics_to_fe_data_leaves_no_payload_bias(tmp_path
     paper's kinematics move the payload by +39 % (and EI2 by +13 %)."""
     from validation.batch.executor import SerialRunner
     from validation.run.experiments import from_run
-    from validation.verdicts.calibration import calibrate
-    from validation.verdicts.calibration_plan import plan_calibration
-    from validation.verdicts.calibration_settings import calibration_settings
+    from validation.verdicts.calibration import calibrate, calibration_settings, plan_calibration
     result = run_scenario(scenario_from_mapping(
         {"duration": 1.0, "plant": {"kind": "exudyn", "mesh": {"elements_per_link": [16, 16]},
                                     "step": 1.25e-4}}))

@@ -9,9 +9,9 @@ from exudyn.itemInterface import (LoadForceVector, LoadTorqueVector, MarkerNodeP
 
 from plant_exudyn import ExudynPlant, Mesh, natural_frequencies
 from plant_exudyn._build import beam_template
-from reduced_model import ArmModel, ArmParameters
+from reduced_model import ArmModel, ArmParameters, named_arm
 
-TABLE1 = ArmParameters.table1()
+TABLE1 = named_arm("table1")
 LOCKED_REF = [0.6316, 3.8312, 6.3499, 33.665]  # converged Euler–Bernoulli FE built outside this code
 FREE_REF = [2.2359, 6.1233]
 
@@ -102,7 +102,7 @@ def test_energy_balance_undamped(element):
     for k in range(3000):
         t = k * 1e-3
         tau = np.array([0.8 * np.sin(2 * t), -0.5 * np.cos(3 * t)])
-        plant.step(tau, 1e-3)
+        plant.step(tau)
         new = plant.joint_state()[0]
         # Torques are constant over a period and the stator takes −τ2, so the work of the
         # motor pair is exactly τ·Δθ with θ2 relative to the link-1 tip tangent.
@@ -122,7 +122,7 @@ def torque_run(mesh: Mesh, seconds=5.0):
     plant.reset()
     for k in range(int(round(seconds / 1e-3))):
         t = k * 1e-3
-        plant.step([0.8 * np.sin(2 * t), -0.5 * np.cos(3 * t)], 1e-3)
+        plant.step([0.8 * np.sin(2 * t), -0.5 * np.cos(3 * t)])
     return plant.truth().theta
 
 
@@ -179,7 +179,7 @@ def test_tip_force_work_equals_energy_change(plant_kind):
     force = np.array([0.3, -0.5])
     e0, p0 = energy(), plant.truth().tip_positions[1]
     for _ in range(1000):
-        plant.step([0.0, 0.0], 1e-3, tip_force=force)
+        plant.step([0.0, 0.0], tip_force=force)
     work = force @ (plant.truth().tip_positions[1] - p0)
     # Exact for a constant force; the reduced plant holds Jᵀ F per 1 ms period, an O(Ts)
     # error of ~1e-3 relative; ρ∞ = 1 keeps the FE integrator from dissipating.

@@ -9,7 +9,7 @@ import pytest
 from controllers import JointPD, PaperReference
 from plant_exudyn import ExudynPlant, LinkField, Mesh
 from reduced_model import ArmModel, ArmParameters, PlantFailure, ReducedPlant, SensorConfig
-from reduced_model._plant_interface import true_state_from_vector
+from reduced_model.contract import true_state_from_vector
 
 MESHES = [Mesh("ancf", (4, 4)), Mesh("geometrically_exact", (8, 6))]
 
@@ -32,7 +32,7 @@ def test_behaves_as_a_plant(plant):
     # An undeformed arm is placed exactly (measured 6e-18): round-off only.
     np.testing.assert_allclose(y.values, x0[:6], atol=1e-14)
     vector, truth = plant.truth_vector(), plant.truth()
-    back = true_state_from_vector(truth.time, vector)
+    back = true_state_from_vector(truth.time, vector, 2)
     np.testing.assert_array_equal(vector[:12], truth.x)
     np.testing.assert_array_equal(back.tip_positions, truth.tip_positions)
     np.testing.assert_array_equal(back.tip_deflections, truth.tip_deflections)
@@ -41,7 +41,7 @@ def test_behaves_as_a_plant(plant):
     def response(p, tau, steps=10):
         p.reset(x0)
         for _ in range(steps):
-            y = p.step(tau, 1e-3)
+            y = p.step(tau)
         return y, p.truth()
 
     tau = np.array([0.5, -0.3])
@@ -122,12 +122,12 @@ def test_reset_places_the_modal_strain_energy(plant, request):
 
 
 def test_period_stepping_matches_one_continuous_run():
-    a, b = ExudynPlant(), ExudynPlant()
+    a, b = ExudynPlant(), ExudynPlant(Ts=1.0)
     a.reset()
     b.reset()
     for _ in range(1000):
-        a.step([0.3, -0.2], 1e-3)
-    b.step([0.3, -0.2], 1.0)
+        a.step([0.3, -0.2])
+    b.step([0.3, -0.2])
     # SolveSteps re-requests the Jacobian at each call, so the Newton iterates differ
     # within the 1e-6 tolerance: measured 8e-8 rad after 3 s, 600× below the 1 ms
     # time-step error.
@@ -141,8 +141,8 @@ def test_agrees_with_reduced_plant_on_a_gentle_move():
     red.reset()
     q11 = np.empty((2, 2000))
     for k in range(2000):
-        fe.step([0.3, -0.2], 1e-3)
-        red.step([0.3, -0.2], 1e-3)
+        fe.step([0.3, -0.2])
+        red.step([0.3, -0.2])
         q11[:, k] = fe.truth().q[0], red.truth().q[0]
     # 2 s of constant torque: the 2+2-mode model stays within 1e-3 rad (measured 6e-4).
     np.testing.assert_allclose(fe.truth().theta, red.truth().theta, atol=1e-3)
@@ -163,7 +163,7 @@ def pd_tracking(plant, kd2, seconds=3.0):
     try:
         for k in range(int(round(seconds / 1e-3))):
             truth = plant.truth()
-            plant.step(pd(k * 1e-3, truth.x, ref), 1e-3)
+            plant.step(pd(k * 1e-3, truth.x, ref))
             if not np.abs(plant.truth().q).max() < 0.5:
                 return np.inf
     except PlantFailure:
@@ -232,12 +232,14 @@ def test_bad_mesh(kwargs, match):
 
 
 def test_bad_steps():
+    with pytest.raises(ValueError, match="not a whole multiple"):
+        ExudynPlant(Ts=1.25e-3)  # 2.5 steps of 0.5 ms
     plant = ExudynPlant()
     plant.reset()
-    with pytest.raises(ValueError, match="not a whole multiple"):
-        plant.step([0.0, 0.0], 1.25e-3)  # 2.5 steps of 0.5 ms
     with pytest.raises(ValueError, match=r"takes 2 torques, got shape \(6,\)"):
-        plant.step(np.zeros(6), 1e-3)
+        plant.step(np.zeros(6))
+    with pytest.raises(TypeError, match="takes no Ts"):  # Ts is the plant's, given once
+        plant.step([0.0, 0.0], 1e-3)
     with pytest.raises(ValueError, match="state0 must be 12"):
         plant.reset(np.zeros(4))
 
@@ -251,7 +253,7 @@ def test_solver_failure_is_reported_and_nothing_is_written(tmp_path, monkeypatch
     plant.reset()
     with pytest.raises(PlantFailure, match="Exudyn solver failed at t = .*step size"):
         for _ in range(200):
-            plant.step([5.0, -5.0], 1e-3)
+            plant.step([5.0, -5.0])
     assert os.listdir(tmp_path) == []
 
 

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from reduced_model._imports import imports
+from reduced_model.code import imports
 from validation.batch import compiling
 from validation.batch.fingerprint import (_ROOT, code_fingerprint, plugin_sources,
                                           result_sources, run_fingerprint)
-from validation.batch.store import run_id
+from validation.batch.store.folder import run_id
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 
 HELPER = "GAIN = 30.0\n"
@@ -41,44 +41,97 @@ def plugin_package(plugin_lab):
                        "houselab/control.py": PLUGIN}) / "houselab"
 
 
+PLANT = textwrap.dedent('''
+    from reduced_model import ReducedPlant
+
+
+    class Fine(ReducedPlant):
+        """The reduced plant as a plug-in."""
+''')
+HIDDEN = textwrap.dedent('''
+    import importlib
+
+    from houselab.control import PD
+
+
+    class Hidden(PD):
+        def __init__(self, model, *, Ts):
+            super().__init__(model, Ts=Ts)
+            importlib.import_module("houselab." + "helpers_by_name")
+''')
+#: Runs of every kind a run can load different code for: a plug-in law on both plants, the
+#: exact kinematics, the lab arm's joint effects, a plug-in plant, an arm of one and of
+#: three links, an arm in gravity.
+RUNS = [
+    {"plant": {"kind": "reduced"}, "controller": {"kind": "houselab.control:PD"},
+     "observer": {"kind": "smo-paper"}},
+    {"plant": {"kind": "exudyn"}, "controller": {"kind": "houselab.control:PD"},
+     "observer": {"kind": "smo-paper"}},
+    {"plant": {"kind": "reduced", "kinematics": "exact"}, "arm": "lab",
+     "controller": {"kind": "pd"}, "observer": {"kind": "ekf-pos"}},
+    {"plant": {"kind": "exudyn"}, "arm": "lab"},
+    {"plant": {"kind": "houselab.plant:Fine", "role": "reduced"}},
+    {"arm": "single-link", "observer": {"kind": "none"}},
+    {"arm": "three-link", "observer": {"kind": "none"}},
+    {"arm": "vertical-two-link", "observer": {"kind": "none"}},
+]
 LOADED = textwrap.dedent('''
     import json, sys
     from validation.batch.worker import execute_run
-    for plant in ("reduced", "exudyn"):
-        result, _ = execute_run({"duration": 0.01, "transient": 0.0, "plant": {"kind": plant},
-                                 "controller": {"kind": "houselab.control:PD"},
-                                 "observer": {"kind": "smo-paper"}})
-        assert result.status == "ok", result.message
+    for config in json.loads(sys.argv[1]):
+        result, _ = execute_run({"duration": 0.01, "transient": 0.0, **config})
+        assert result.status == "ok", (config, result.message)
     print(json.dumps(sorted(m.__file__ for m in list(sys.modules.values())
                             if getattr(m, "__file__", None))))
 ''')
 
 
+def _loaded(folder: Path, runs: list[dict]) -> set[Path]:
+    """Every file a fresh process (the worker's path) loads to execute ``runs``."""
+    proc = subprocess.run([sys.executable, "-c", LOADED, json.dumps(runs)], capture_output=True,
+                          text=True, cwd=folder, timeout=900,
+                          env={**os.environ, "PYTHONPATH": f"{folder}:{_ROOT}"})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return {Path(f).resolve() for f in json.loads(proc.stdout.splitlines()[-1])}
+
+
 def test_the_fingerprint_covers_every_project_module_a_run_loads(plugin_package):
-    """Run a scenario on each plant with a plug-in in a fresh process (the worker's
-    path), collect every module it loaded: each project file is hashed into the code
-    fingerprint, each plug-in file into the run's fingerprint; the command line, the
-    store and the reports stay out (editing them leaves stored runs valid)."""
-    proc = subprocess.run([sys.executable, "-c", LOADED], capture_output=True, text=True,
-                          cwd=plugin_package.parent, timeout=600,
-                          env={**__import__("os").environ,
-                               "PYTHONPATH": f"{plugin_package.parent}:{_ROOT}"})
-    assert proc.returncode == 0, proc.stderr
-    loaded = {Path(f).resolve() for f in json.loads(proc.stdout.splitlines()[-1])}
+    """Execute a run of every kind (`RUNS`) in a fresh process, collect every module it
+    loaded — found by what the process imported, not by a list: each project file is hashed
+    into the code fingerprint, each plug-in file into its run's fingerprint; the command
+    line, the store and the reports stay out (editing them leaves stored runs valid)."""
+    (plugin_package / "plant.py").write_text(PLANT)
+    loaded = _loaded(plugin_package.parent, RUNS)
     packages = [_ROOT / name for name in ("reduced_model", "plant_exudyn", "controllers",
                                           "validation")]
     project = {p for p in loaded if any(p.is_relative_to(d) for d in packages)}
     assert project, "nothing of the project was loaded?"
     hashed = set(result_sources())
     assert project <= hashed, sorted(str(p) for p in project - hashed)
+    for kind in ("exact", "joints", "plant_exudyn"):  # the kernels a string registry hid
+        assert any(kind in str(p) for p in project), kind
     plugin = {p for p in loaded if p.is_relative_to(plugin_package)}
-    kind = "houselab.control:PD"
-    assert plugin == set(plugin_sources(kind)) == {plugin_package / "__init__.py",
-                                                  plugin_package / "helpers.py",
-                                                  plugin_package / "control.py"}
-    for name in ("validation/cli/one_run.py", "validation/batch/store.py", "validation/report/report.py",
-                 "validation/verdicts/claims.py", "validation/run/plotting.py"):
+    kinds = ("houselab.control:PD", "houselab.plant:Fine")
+    assert plugin == {f for kind in kinds for f in plugin_sources(kind)} == {
+        plugin_package / name for name in ("__init__.py", "helpers.py", "control.py",
+                                           "plant.py")}
+    for name in ("validation/cli/one_run.py", "validation/batch/store/folder.py",
+                 "validation/report/report.py", "validation/verdicts/claims.py",
+                 "validation/run/plotting.py"):
         assert _ROOT / name not in hashed, name
+
+
+def test_a_module_imported_by_a_string_is_caught(plugin_package):
+    """Known-bad of the test above (issue 55): a module imported by a string built at run
+    time (the kernels' old registry) is loaded but not found by the static walk — the
+    comparison of what a process loaded with what is hashed flags it."""
+    (plugin_package / "helpers_by_name.py").write_text("VALUE = 1\n")
+    (plugin_package / "hidden.py").write_text(HIDDEN)
+    loaded = _loaded(plugin_package.parent, [{"controller": {"kind": "houselab.hidden:Hidden"},
+                                             "observer": {"kind": "none"}}])
+    plugin = {p for p in loaded if p.is_relative_to(plugin_package)}
+    missed = plugin - set(plugin_sources("houselab.hidden:Hidden"))
+    assert missed == {plugin_package / "helpers_by_name.py"}
 
 
 def test_editing_a_hashed_file_changes_the_fingerprint(plugin_package, monkeypatch):
@@ -267,11 +320,11 @@ def test_importing_the_packages_does_no_io(tmp_path):
     records nothing — the numba cache check runs when the first model is built (numba
     itself makes its cache folders when a cached function is declared).  Known bad: the
     check ran at ``import reduced_model`` and wrote its record of keys there."""
-    from reduced_model._cache_guard import KEYS_FILE
+    from reduced_model.code import KEYS_FILE
     cache = tmp_path / "numba-cache"
     script = textwrap.dedent('''
         import reduced_model, plant_exudyn, controllers, validation
-        from reduced_model._cache_guard import fresh_kernel_caches
+        from reduced_model.code import fresh_kernel_caches
         print(fresh_kernel_caches.cache_info().currsize)
     ''')
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
@@ -297,3 +350,53 @@ def test_no_module_is_over_500_lines():
     assert not over, f"over 500 lines: {over}"
     done = sorted(m for m in OVERSIZED if lengths.get(m, 0) <= 500)
     assert not done, f"within 500 lines now, remove from OVERSIZED: {done}"
+
+
+def _prefix_families(folder: Path) -> dict[str, list[str]]:
+    """Name prefix (up to the first underscore) -> the modules of ``folder`` sharing it, for
+    prefixes shared by three or more."""
+    families: dict[str, list[str]] = {}
+    for p in folder.glob("*.py"):
+        if p.stem != "__init__":
+            families.setdefault(p.stem.lstrip("_").split("_")[0], []).append(p.stem)
+    return {k: sorted(v) for k, v in families.items() if len(v) >= 3}
+
+
+def test_rooms_not_prefix_families(tmp_path):
+    """A family of modules is a subpackage (issue 55: nine ``verdicts/calibration_*.py``):
+    no folder of the four packages has three or more modules sharing a name prefix.  Known
+    bad: a folder with ``calibration.py``, ``calibration_plan.py`` and ``_calibration_io.py``."""
+    folders = {p.parent for package in PACKAGES for p in (_ROOT / package).rglob("*.py")}
+    found = {str(f.relative_to(_ROOT)): fam for f in sorted(folders)
+             if (fam := _prefix_families(f))}
+    assert not found, found
+    for name in ("calibration.py", "calibration_plan.py", "_calibration_io.py", "other.py"):
+        (tmp_path / name).write_text("")
+    assert _prefix_families(tmp_path) == {
+        "calibration": ["_calibration_io", "calibration", "calibration_plan"]}
+
+
+def _private_imports(module: str, path: Path) -> list[str]:
+    """The private modules or names (``_name``) of another of the four packages that
+    ``module`` (the file ``path``) imports, inside functions too."""
+    top, out = module.split(".")[0], []
+    for source, names in imports(path, module, nested=True):
+        parts = source.split(".")
+        if parts[0] in PACKAGES and parts[0] != top and any(
+                p.startswith("_") and not p.startswith("__") for p in [*parts[1:], *names]):
+            out.append(f"{module}: from {source} import {', '.join(names)}")
+    return out
+
+
+def test_no_package_imports_another_packages_private_code(tmp_path):
+    """A package's private modules and names are its own (issue 55: 26 imports such as
+    ``from reduced_model._kernels import ...``): the public face of each package is what
+    the others use.  Known bad: a module of `controllers` importing a private module and a
+    private name of `reduced_model`."""
+    found = [line for module, path in _modules(*PACKAGES).items()
+             for line in _private_imports(module, path)]
+    assert not found, found
+    bad = tmp_path / "bad.py"
+    bad.write_text("from reduced_model._kernels import step\n"
+                   "def f():\n    from reduced_model.model import _packed\n")
+    assert len(_private_imports("controllers.bad", bad)) == 2

@@ -12,12 +12,13 @@ from reduced_model import ArmModel, ArmParameters, ReducedPlant
 PLANTS = {"reduced": lambda p: ReducedPlant(p), "truth": lambda p: ExudynPlant(p)}
 
 
-def simulate(plant, torque, duration: float, Ts: float = 1e-3) -> np.ndarray:
+def simulate(plant, torque, duration: float) -> np.ndarray:
     """The truth vectors at every period (from t = 0) with ``torque(t)`` held."""
     plant.reset()
     out = [plant.truth_vector()]
+    Ts = plant.Ts
     for k in range(int(round(duration / Ts))):
-        plant.advance(np.asarray(torque(k * Ts), float), Ts)
+        plant.advance(np.asarray(torque(k * Ts), float))
         out.append(plant.truth_vector())
     return np.array(out)
 

@@ -7,7 +7,7 @@ import pytest
 
 from controllers import GainScheduledLQR, JointPD, PaperReference, PassivityBasedController
 from plant_exudyn import ExudynPlant, Mesh, linear_model, natural_frequencies
-from reduced_model import ArmModel, ArmParameters
+from reduced_model import ArmModel, ArmParameters, named_arm
 from validation import law_gain, reduced_linear_model
 from validation.verdicts.linear import (NotLinearisable, closed_loop_matrix, growth_rate,
                                         largest_stable_period)
@@ -18,7 +18,7 @@ def hold(theta):
     return lambda t: (np.asarray(theta, float), np.zeros(2), np.zeros(2))
 
 
-@pytest.mark.parametrize("params", [ArmParameters(), ArmParameters.table1()],
+@pytest.mark.parametrize("params", [ArmParameters(), named_arm("table1")],
                          ids=["default", "table1"])
 @pytest.mark.parametrize("theta", [(0.0, 0.0), (0.3, 1.2)])
 def test_fe_linearisation_has_the_fe_natural_frequencies(params, theta):
@@ -46,7 +46,7 @@ def test_fe_step_response_matches_an_open_loop_exudyn_run():
     m = plant.state_size // 2
     truth = []
     for _ in t[1:]:
-        plant.step(tau, 1e-3)
+        plant.step(tau)
         v = plant.truth_vector()
         truth.append(np.concatenate([v[:2 * m], v[2 * m + 4:2 * m + 6]]))
     truth = np.array(truth) - np.concatenate([x0, [0.0, 0.0]])

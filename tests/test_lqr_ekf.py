@@ -12,12 +12,12 @@ import scipy.signal
 from controllers import PaperReference
 from controllers._ekf import ExtendedKalmanFilter, PositionEKF
 from controllers._lqr import GainScheduledLQR
-from reduced_model import ArmModel, ArmParameters, ReducedPlant, SensorConfig
-from reduced_model._kernels import rk4_advance_packed
+from reduced_model import ArmModel, ArmParameters, ReducedPlant, SensorConfig, named_arm
+from reduced_model.dynamics.entries import advance_linear
 from validation.run.loop import simulate
 from validation.run.scenario import ObserverSpec, Scenario, SensorSpec
 
-ARMS = {"default": ArmParameters(), "table1": ArmParameters.table1()}
+ARMS = {"default": ArmParameters(), "table1": named_arm("table1")}
 TS = 1e-3
 NOISE = SensorSpec(encoder_noise=1e-4, modal_noise=1e-5, rate_noise=1e-3)  # the campaigns'
 INITIAL_ERROR = (0.1, 5e-3, 0.3, 0.05)  # the campaigns' observer start: rad, m, rad/s, m/s
@@ -31,9 +31,10 @@ def arm(request):
     return request.param, model, GainScheduledLQR(model, Ts=1e-3)
 
 
-def linearised(model, theta2):
+def linearised(model, theta):
+    """(A, B) about rest at the joint angles ``theta`` (a horizontal arm: no torque)."""
     Q0 = np.zeros(model.n)
-    Q0[1] = theta2
+    Q0[:2] = theta
     return model.linearize(Q0)
 
 
@@ -67,20 +68,22 @@ def after(result, t0):
 # --- LQR: design --------------------------------------------------------------------
 def test_lqr_sampled_loop_is_stable_at_every_grid_point(arm):
     name, model, lqr = arm
-    for theta2, K in zip(lqr.grid, lqr.gains):
-        Ad, Bd = zoh(*linearised(model, theta2))
+    assert lqr.scheduled == (1,) and lqr.grid.shape == (24, 2)  # θ2 only: θ1 is cyclic
+    np.testing.assert_array_equal(lqr.grid[:, 0], 0.0)
+    for theta, K in zip(lqr.grid, lqr.gains):
+        Ad, Bd = zoh(*linearised(model, theta))
         radius = np.abs(np.linalg.eigvals(Ad - Bd @ K)).max()
         # Strictly inside: the smallest margin, 3e-6, is the Table 1 arm's 33 Hz mode at
         # θ2 = ±π/2, where it has no joint motion and no damping; eigenvalues of a 12×12
         # matrix are accurate to ~1e-13 here.
-        assert radius < 1.0, (name, theta2, radius)
+        assert radius < 1.0, (name, theta, radius)
 
 
 @pytest.mark.parametrize("theta2", [-np.pi, -2.5, -0.8, 0.0, 0.4, 0.8, 2.2, 3.0])
 def test_lqr_continuous_closed_loop_is_hurwitz(arm, theta2):
     name, model, lqr = arm
-    A, B = linearised(model, theta2)
-    worst = np.linalg.eigvals(A - B @ lqr.gain(theta2)).real.max()
+    A, B = linearised(model, (0.0, theta2))
+    worst = np.linalg.eigvals(A - B @ lqr.gain((0.0, theta2))).real.max()
     # Every pole decays at least at 0.05 1/s (measured: >= 0.09 on the Table 1 arm, 0.7
     # on the default one).  Away from θ2 ≈ ±(1.2…1.9) on purpose: there a 5.4 Hz and a
     # 33 Hz mode lose all joint motion, no joint torque can damp them, and the margin
@@ -92,8 +95,8 @@ def test_lqr_damps_no_worse_than_structure_anywhere_on_the_default_arm():
     model = ArmModel(ARMS["default"], (2, 2))
     lqr = GainScheduledLQR(model, Ts=1e-3)
     for theta2 in np.linspace(-np.pi, np.pi, 97):  # 4 points per grid cell
-        A, B = linearised(model, theta2)
-        worst = np.linalg.eigvals(A - B @ lqr.gain(theta2)).real.max()
+        A, B = linearised(model, (0.0, theta2))
+        worst = np.linalg.eigvals(A - B @ lqr.gain((0.0, theta2))).real.max()
         # The structural (Kelvin–Voigt) damping of the mode the torques cannot reach
         # near θ2 ≈ ±1.39 is 0.115 1/s; interpolated gains keep at least 0.1.
         assert worst < -0.1, (theta2, worst)
@@ -102,26 +105,27 @@ def test_lqr_damps_no_worse_than_structure_anywhere_on_the_default_arm():
 def test_lqr_interpolates_linearly_and_periodically(arm):
     _, model, lqr = arm
     scale = np.abs(lqr.gains).max()
-    for theta2, K in zip(lqr.grid, lqr.gains):
+    for theta, K in zip(lqr.grid, lqr.gains):
         # At a grid point the blend weight is 0 or 1 up to round-off in (θ2 + π)·N/2π.
-        np.testing.assert_allclose(lqr.gain(theta2), K, rtol=0, atol=1e-12 * scale)
-    np.testing.assert_allclose(lqr.gain(np.pi), lqr.gains[0], rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(lqr.gain(theta), K, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(lqr.gain((0.0, np.pi)), lqr.gains[0], rtol=0,
+                               atol=1e-12 * scale)
     N = len(lqr.grid)
     for _ in range(20):
         k = RNG.integers(N)
         f = RNG.uniform(0.01, 0.99)
-        theta2 = lqr.grid[k] + f * 2 * np.pi / N
+        theta = lqr.grid[k] + (0.0, f * 2 * np.pi / N)
         lo, hi = lqr.gains[k], lqr.gains[(k + 1) % N]
-        K = lqr.gain(theta2)
+        K = lqr.gain(theta)
         # Between its neighbours entry by entry (1e-12 of the largest gain: round-off),
         # and exactly the linear blend.
         assert np.all(K >= np.minimum(lo, hi) - 1e-12 * scale)
         assert np.all(K <= np.maximum(lo, hi) + 1e-12 * scale)
         np.testing.assert_allclose(K, (1 - f) * lo + f * hi, rtol=0, atol=1e-9 * scale)
-        # One period on: the same gain (θ1 is cyclic, θ2 periodic).
-        np.testing.assert_allclose(lqr.gain(theta2 + 2 * np.pi), K, rtol=0,
+        # One period on, and any θ1: the same gain (θ1 is cyclic, θ2 periodic).
+        np.testing.assert_allclose(lqr.gain(theta + (1.3, 2 * np.pi)), K, rtol=0,
                                    atol=1e-9 * scale)
-    assert np.all(np.isnan(lqr.gain(np.nan)))
+    assert np.all(np.isnan(lqr.gain((0.0, np.nan))))
 
 
 def rigid_inverse_dynamics(model, theta, dtheta, ddtheta):
@@ -144,9 +148,9 @@ def test_lqr_law_matches_numpy(arm):
         th, dth, ddth = ref(t)
         x_d = np.zeros(2 * n)
         x_d[:2], x_d[n:n + 2] = th, dth
-        want = rigid_inverse_dynamics(model, th, dth, ddth) - lqr.gain(x[1]) @ (x - x_d)
-        # The rigid arm's closed form reproduces the model's M and C to round-off
-        # (~1e-13 relative); 1e-9 of the torque scale leaves a wide margin.
+        want = rigid_inverse_dynamics(model, th, dth, ddth) - lqr.gain(x[:2]) @ (x - x_d)
+        # The law's kernels and the public M and C sum in other orders: round-off
+        # (~1e-15 relative); 1e-9 of the torque scale leaves a wide margin.
         np.testing.assert_allclose(lqr(t, x, ref), want, rtol=1e-9,
                                    atol=1e-9 * np.abs(want).max())
     x = np.zeros(2 * n)
@@ -268,7 +272,7 @@ def rk4_map(model, x, tau, Ts):
     """F(x): the RK4 prediction over Ts in sub-steps of at most 1 ms (the EKF's rule)."""
     nsub = max(1, math.ceil(Ts / 1e-3 - 1e-9))
     out = np.array(x, dtype=float)
-    rk4_advance_packed(*model.packed, *model.new_workspace()[0], out, tau, Ts / nsub, nsub)
+    advance_linear(*model.packed, *model.new_workspace()[0], out, tau, Ts / nsub, nsub)
     return out
 
 

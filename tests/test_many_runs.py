@@ -8,8 +8,8 @@ import pytest
 from validation.batch.campaign import campaign_from_mapping
 from validation.batch.executor import SerialRunner
 from validation.batch.queue import run_campaign
-from validation.batch.records import metric_matrix
-from validation.batch.store import ResultStore
+from validation.batch.store.records import metric_matrix
+from validation.batch.store.folder import ResultStore
 from validation.report import many
 from validation.report.report import report_data
 

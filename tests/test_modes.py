@@ -4,7 +4,7 @@ import pytest
 import scipy.linalg
 
 from reduced_model import LinkModes
-from reduced_model._modes import clamped_mass_roots, gauss_legendre
+from reduced_model.shapes import clamped_mass_roots, gauss_legendre
 
 # De Luca & Siciliano (1991) example: ρ = 0.2 kg/m, EI = 1 N m², L = 0.5 m, Jh2 = 0.1 kg m²,
 # mh2 = 1 kg, Mp = 0.1 kg, Jp = 0.0005 kg m².

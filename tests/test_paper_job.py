@@ -6,9 +6,9 @@ from types import SimpleNamespace
 
 from validation.batch import worker
 from validation.batch.campaign import expand, load_campaign
-from validation.batch.resimulate import every_signal
-from validation.batch.runfiles import KEEP_NONE, Keep
-from validation.batch.store import ResultStore
+from validation.batch.store.resimulate import every_signal
+from validation.batch.store.runfiles import KEEP_NONE, Keep
+from validation.batch.store.folder import ResultStore
 from validation.cli import main
 from validation.cli.campaigns import paper_keep
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping

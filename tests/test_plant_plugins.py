@@ -10,7 +10,7 @@ import textwrap
 import pytest
 
 from conftest import FINE_ARM_PLANT, write_files
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 
 SCENARIO = textwrap.dedent('''
     duration = 1.0

@@ -9,7 +9,7 @@ import pytest
 
 from validation.batch.worker import execute_run
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 
 PLUGIN = textwrap.dedent('''
     """Plug-ins for the tests: written only against the public interface."""

@@ -11,7 +11,7 @@ def test_rk4_matches_tight_reference_solution():
     plant.reset()
     tau = np.array([0.3, -0.2])
     for _ in range(2000):
-        plant.step(tau, 1e-3)
+        plant.step(tau)
     ref = solve_ivp(lambda t, x: plant.model.rhs(x, tau), (0.0, 2.0), np.zeros(12),
                     method="DOP853", rtol=1e-12, atol=1e-14).y[:, -1]
     # RK4 at 1 ms on this arm (top mode 34 Hz, ωh = 0.21): measured 3e-12 rad on θ and
@@ -22,18 +22,21 @@ def test_rk4_matches_tight_reference_solution():
 
 
 def test_control_period_is_whole_multiple_of_internal_step():
-    plant = ReducedPlant(step=2.5e-4)
+    plant = ReducedPlant(step=2.5e-4, Ts=1e-3)
+    assert plant.steps == 4
     plant.reset()
-    a = plant.step([0.1, 0.1], 1e-3).values
-    other = ReducedPlant(step=2.5e-4)
+    a = plant.step([0.1, 0.1]).values
+    other = ReducedPlant(step=2.5e-4, Ts=2.5e-4)
     other.reset()
     for _ in range(4):
-        b = other.step([0.1, 0.1], 2.5e-4).values
+        b = other.step([0.1, 0.1]).values
     np.testing.assert_array_equal(a, b)  # same arithmetic, same bits
     with pytest.raises(ValueError, match="not a whole multiple"):
-        plant.step([0.0, 0.0], 1.1e-4)
+        ReducedPlant(step=2.5e-4, Ts=1.1e-4)
     with pytest.raises(ValueError, match="Ts must be a positive"):
-        plant.step([0.0, 0.0], 0.0)
+        ReducedPlant(step=2.5e-4, Ts=0.0)
+    with pytest.raises(TypeError, match="takes no Ts"):  # Ts is the plant's, given once
+        plant.step([0.0, 0.0], 1e-3)
 
 
 def test_interface_measurement_and_truth():
@@ -50,9 +53,10 @@ def test_interface_measurement_and_truth():
     assert y["theta2"] == -0.4
     with pytest.raises(KeyError, match="tip_x"):
         y["tip_x"]
-    Ts = 1e-3
+    Ts = plant.Ts
+    assert Ts == 1e-3
     acc = plant.model.acceleration(x0[:5], x0[5:], np.zeros(2))
-    y = plant.step([0.0, 0.0], Ts)
+    y = plant.step([0.0, 0.0])
     truth = plant.truth()
     assert y.time == truth.time == plant.time == Ts
     # One period against a second-order Taylor step from x0 (independent of RK4): the
@@ -66,7 +70,7 @@ def test_interface_measurement_and_truth():
     general = ReducedPlant(ArmParameters(Mp=0.3), modes_per_link=(1, 2),
                            sensors=SensorConfig(rates=True, tip_position=True))
     general.reset(x0)
-    y_general = general.step([0.0, 0.0], Ts)
+    y_general = general.step([0.0, 0.0])
     assert y_general.names == y.names + ("tip_x", "tip_y")
     np.testing.assert_array_equal(y_general.values[:10], y.values)
     np.testing.assert_array_equal(y.values, truth.x)  # direct sensors read the true state
@@ -87,7 +91,7 @@ def test_reset_is_deterministic():
     for _ in range(2):
         plant.reset()
         for k in range(300):
-            plant.step([np.sin(0.01 * k), 0.2], 1e-3)
+            plant.step([np.sin(0.01 * k), 0.2])
         runs.append(plant.state)
     np.testing.assert_array_equal(runs[0], runs[1])
 
@@ -95,12 +99,12 @@ def test_reset_is_deterministic():
 def test_idealised_input_reaches_flexible_rows():
     plant = ReducedPlant()
     plant.reset()
-    plant.step(np.array([0, 0, 1.0, 0, 0, 0]), 1e-3)  # force only on q11
+    plant.step(np.array([0, 0, 1.0, 0, 0, 0]))  # force only on q11
     assert plant.truth().q[0] > 0.0
 
 
 @pytest.mark.parametrize("call, match", [
-    (lambda p: p.step([1.0], 1e-3), r"the reduced plant takes 2 or 6 torques, got shape \(1,\)"),
+    (lambda p: p.step([1.0]), r"the reduced plant takes 2 or 6 torques, got shape \(1,\)"),
     (lambda p: p.reset(np.zeros(5)), "state0 must be 12"),
     (lambda p: p.reset(np.full(12, np.nan)), "state0 must be 12"),
     (lambda p: ReducedPlant(step=-1e-3), "step must be a positive"),
@@ -114,7 +118,7 @@ def test_bad_input(call, match):
 
 def test_modal_basis_projection():
     from reduced_model import ArmModel
-    from reduced_model._modes import projection
+    from reduced_model.shapes import projection
     x0 = np.zeros(12)
     x0[2:6] = [4e-3, -1e-3, 2e-3, 5e-4]
     shapes = ArmModel().mode_shapes

@@ -14,7 +14,7 @@ from validation.batch.campaign import campaign_from_mapping
 from validation.batch.queue import run_campaign
 from validation.report.sweep_figures import sweep_figures
 from validation.report.report import write_report
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 
 SPEC = {"name": "rep", "description": "report test",
         "scenario": {"duration": 3.0, "transient": 1.0, "observer": {"kind": "smo-bl"},

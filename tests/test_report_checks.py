@@ -10,10 +10,11 @@ from reduced_model import ArmParameters
 from validation.batch.campaign import campaign_from_mapping
 from validation.batch.executor import SerialRunner
 from validation.batch.queue import run_campaign
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 from validation.report.content_key import content_key
 from validation.report.report import report_data
 from validation.report.verdict_figures import validity_map
+from validation.run.arms import parameter_value
 
 # Two 0.2 s runs of one arm that differ in its payload: their validity maps differ.
 CAMPAIGN = {"name": "payloads", "scenario": {"duration": 0.2, "transient": 0.1},
@@ -81,7 +82,7 @@ def test_a_map_that_fails_before_the_check_is_drawn_after_it(folder, monkeypatch
     map, the second run's, instead of stopping."""
     from validation.report import report
     first, second = ResultStore(folder).rows()
-    bad = first.config["true_params"]["Mp"]
+    bad = parameter_value(first.config, "true_params.Mp")
 
     def failing(params, *args):
         if params.Mp == bad:

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 from validation.batch.worker import execute_run
 from validation.run.config import ConfigError
 from validation.run.claim_measures import claim_by_key

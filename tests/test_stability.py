@@ -442,7 +442,7 @@ def test_stored_predictions_outlive_an_edit_of_a_report_not_of_their_code():
     files = {p.relative_to(root).as_posix() for p in module_sources(MADE_BY)}
     assert not any(f.startswith(("validation/report/", "validation/cli/")) for f in files)
     assert {"validation/verdicts/sampled.py", "validation/verdicts/linear.py",
-            "validation/run/laws.py", "reduced_model/_model.py"} <= files
+            "validation/run/laws.py", "reduced_model/model.py"} <= files
 
 
 def test_maps_into_one_folder_keep_each_others_predictions(tmp_path, monkeypatch):

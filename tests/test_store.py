@@ -17,7 +17,7 @@ from campaign_testing import campaign_toml
 from validation.batch.campaign import campaign_from_mapping
 from validation.batch.queue import run_campaign
 from validation.cli import main
-from validation.batch.store import ResultStore, StoreError
+from validation.batch.store.folder import ResultStore, StoreError
 
 
 def spec(name: str, n: int, duration: float = 0.5) -> dict:
@@ -65,7 +65,7 @@ def test_two_campaigns_into_one_folder_both_keep_every_row(tmp_path):
 OPEN_OUTPUT_REPEATEDLY = """
 import sys
 from validation.cli.common import open_output
-from validation.batch.store import StoreError
+from validation.batch.store.folder import StoreError
 refused = 0
 for _ in range(200):
     try:
@@ -91,7 +91,7 @@ def test_commands_opening_one_folder_at_once_all_find_it_writable(tmp_path):
 
 CREATE_FOLDERS_AT = """
 import sys, time
-from validation.batch.store import ResultStore, StoreError
+from validation.batch.store.folder import ResultStore, StoreError
 start, folders = float(sys.argv[1]), sys.argv[2:]
 time.sleep(max(0.0, start - time.time()))
 refused = 0
@@ -260,7 +260,7 @@ def test_workers_beyond_the_cores_need_force(capsys, tmp_path):
 
 
 def test_a_full_disk_is_one_line_naming_the_folder(tmp_path, capsys, monkeypatch):
-    import validation.batch.runfiles as store_module
+    import validation.batch.store.runfiles as store_module
 
     def full(path, *a, **k):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
@@ -425,7 +425,8 @@ def test_export_never_writes_fewer_runs_than_the_last_export_without_saying_so(f
 def test_an_export_written_in_slices_is_the_export_written_whole(folder, monkeypatch):
     """Known-good: the 3 runs' metrics.csv written by 3 workers, a row each, is the one
     written in one piece; known-bad: the slices out of order give other bytes."""
-    from validation.batch import executor, export
+    from validation.batch import executor
+    from validation.batch.store import export
     out, c, metrics = folder
     monkeypatch.setattr(export, "_ROWS_A_WORKER", 10**9)  # one slice
     ResultStore(out).export()

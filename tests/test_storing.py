@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from campaign_testing import metrics_table
-from validation.batch import committing
+from validation.batch.store import committing
 from validation.batch.campaign import campaign_from_mapping, expand
 from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
-from validation.batch.errors import StoreError
-from validation.batch.resimulate import every_signal
-from validation.batch.store import ResultStore, environment
-from validation.batch.storing import (Destination, StoreTask, landed, leave_token,
+from validation.batch.store.errors import StoreError
+from validation.batch.store.resimulate import every_signal
+from validation.batch.store.folder import ResultStore, environment
+from validation.batch.store.writing import (Destination, StoreTask, landed, leave_token,
                                       run_and_store)
 from validation.run.config import ConfigError
 
@@ -135,7 +135,7 @@ def test_what_a_run_keeps_and_its_signals_on_demand(reference, tmp_path, keep):
 
 def test_re_simulation_refuses_a_run_it_does_not_reproduce(tmp_path):
     """Known-bad: a stored metric that the scenario does not give (other code made it)."""
-    from validation.batch.index import metric_column, transaction
+    from validation.batch.store.index import metric_column, transaction
     out = tmp_path / "kept"
     run_campaign(campaign_from_mapping(dict(SMALL, keep={"signals": "none"})), out,
                  runner=SerialRunner(), progress=False)
@@ -225,7 +225,7 @@ def test_an_in_memory_store_keeps_float64_signals_and_writes_nothing(tmp_path, m
     made it (float64, equal to the run itself), rows and metrics as a folder's; nothing
     is written (the working directory stays empty).  Known-bad: the folder's copy of
     the same run is float32 (what calibration's residuals went through)."""
-    from validation.batch.memory import MemoryStore
+    from validation.batch.store.memory import MemoryStore
     from validation.run.loop import run_scenario
     from validation.run.scenario import scenario_from_mapping
     from validation.verdicts.evaluations import Evaluations
@@ -252,7 +252,7 @@ def test_store_errors_are_not_value_errors_and_reach_the_caller(tmp_path, monkey
     by `except ValueError` (StoreError was one) and the run redone; now it reaches the
     caller.  Known-good: a file that is not a run file is still passed over."""
     from validation.batch.queue import classify
-    from validation.batch.errors import IndexBusy, NotARunFile
+    from validation.batch.store.errors import IndexBusy, NotARunFile
     assert not issubclass(StoreError, ValueError)
     c = campaign_from_mapping(SMALL)
     planned = expand(c)

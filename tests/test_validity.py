@@ -19,7 +19,7 @@ from validation.verdicts.validity_file import CHANNELS, load_validity
     (["validity", "{tmp}/missing.toml"], "missing.toml"),
     (["validity", "{tmp}/bad.toml"], "duration"),
     (["validity", "{tmp}/ok.toml", "--stability", "{tmp}"], "--stability"),
-    (["validity", "{tmp}/ok.toml", "--arm", "paper"], "--arm: invalid choice"),
+    (["validity", "{tmp}/ok.toml", "--arm", "paper"], "arm: 'paper' is not a shipped arm"),
 ])
 def test_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, argv, text):
     (tmp_path / "bad.toml").write_text("duration = -1.0\n")
@@ -139,8 +139,8 @@ def test_the_validity_map_of_an_arm_with_drives_warns_of_nothing():
     `reproduce-paper --lab`); the map now compares the bending modes above RIGID_HZ."""
     import warnings
     from validation.report.verdict_figures import validity_map
-    from validation.run.scenario import arm_parameters
+    from reduced_model import named_arm
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        figure = validity_map(arm_parameters("lab"), (2, 2), "the lab arm")
+        figure = validity_map(named_arm("lab"), (2, 2), "the lab arm")
     assert figure.startswith(b"\x89PNG")

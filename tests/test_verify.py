@@ -15,6 +15,7 @@ from scipy.stats import binom
 
 from validation.batch.campaign import campaign_from_mapping, expand
 from validation.batch.worker import execute_run
+from validation.run.arms import parameter_value
 from validation.run.config import ConfigError
 from validation.run.tomlfiles import load_toml
 from validation.verdicts.search import minimise
@@ -121,7 +122,7 @@ def test_an_uncertainty_set_draws_what_a_random_sweep_draws(tmp_path):
     assert [r.axes for r in runs] == points
     assert len(set(noise)) == 6  # every draw its own noise realisation
     # the shared draw and the factor of the nominal value
-    EI = system.nominal["true_params"]["EI1"]
+    EI = parameter_value(system.nominal, "true_params.EI1")
     assert all(p["true_params.EI1"] == p["true_params.EI2"] and
                0.7 * EI <= p["true_params.EI1"] <= 1.3 * EI for p in points)
     # the searches' coordinates map the unit cube's corners onto the set's

@@ -27,13 +27,12 @@ _EXPORTS = {
     "Campaign": "batch.campaign", "load_campaign": "batch.campaign",
     "campaign_from_mapping": "batch.campaign", "expand": "batch.campaign",
     "run_campaign": "batch.queue", "make_runner": "batch.executor",
-    "ResultStore": "batch.store",
+    "ResultStore": "batch.store.folder",
     "nu_gap": "verdicts.nugap", "stability_margin": "verdicts.nugap",
     "reduced_linear_model": "verdicts.linear", "law_gain": "verdicts.linear",
     "read_experiment": "run.experiments", "read_frequency_response": "run.experiments",
-    "base_scenario": "verdicts.calibration_settings",
-    "calibration_settings": "verdicts.calibration_settings",
-    "plan_calibration": "verdicts.calibration_plan", "calibrate": "verdicts.calibration",
+    "base_scenario": "verdicts.calibration", "calibration_settings": "verdicts.calibration",
+    "plan_calibration": "verdicts.calibration", "calibrate": "verdicts.calibration",
 }
 
 __all__ = sorted(_EXPORTS)

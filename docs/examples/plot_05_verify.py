@@ -58,7 +58,7 @@ print({k: falsify[k] for k in ("found", "rho_reduced", "rho_truth", "simulations
 from validation import ResultStore  # noqa: E402
 
 rows = [r for r in ResultStore(folder / "estimate").rows() if r.status == "ok"]
-payload = [r.config["true_params"]["Mp"] for r in rows]
+payload = [r.config["true_params"]["payload"]["mass"] for r in rows]  # Mp
 pulse = [r.config["disturbances"][0]["amplitude"] for r in rows]
 rho = np.array([r.metrics["rho_tracking"] for r in rows])
 fig, ax = plt.subplots(figsize=(6, 4))

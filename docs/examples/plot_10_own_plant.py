@@ -19,8 +19,8 @@ class ThreeModeArm(ReducedPlant):
 
     role = "truth"  # declared: a plant's role is never defaulted
 
-    def __init__(self, params, *, model, sensors, modes=3):
-        super().__init__(params, model=model, sensors=sensors,
+    def __init__(self, params, *, model, sensors, Ts, modes=3):
+        super().__init__(params, model=model, sensors=sensors, Ts=Ts,
                          modes_per_link=(modes, modes), step=2.5e-4)
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from validation import run_scenario, scenario_from_mapping
 from validation.run.experiments import Experiment, from_run, write_experiment
-from validation.verdicts.calibration_plan import linear_response
+from validation.verdicts.calibration import linear_response
 
 HERE = Path(__file__).resolve().parent
 TRUE = {"EI1": 9.2, "EI2": 10.6, "Mp": 0.23}

@@ -5,12 +5,13 @@ arm), its parameter tables follow the new arm and keep only the user's own value
 axis that would give one arm another arm's value is refused."""
 import pytest
 
+from reduced_model import named_arm
 from validation.batch.campaign import campaign_from_mapping, expand
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 from validation.cli import main
+from validation.run.arms import parameter_value
 from validation.run.config import ConfigError
-from validation.run.scenario import (arm_parameters, own_parameters, scenario_from_mapping,
-                                     scenario_to_mapping)
+from validation.run.scenario import own_parameters, scenario_from_mapping, scenario_to_mapping
 
 SHORT = ["--duration", "0.2", "--name", "d"]
 
@@ -60,9 +61,9 @@ def test_like_with_set_arm_keeps_the_users_own_values(plain, tmp_path, capsys):
     assert main(["run", "--like", f"{first}/d", "--set", 'arm="lab"',
                  "--out", str(tmp_path / "lab")]) == 0
     (row,) = ResultStore(tmp_path / "lab").rows()
-    lab = scenario_to_mapping(arm_parameters("lab"))
-    assert row.config["true_params"] == dict(lab, Mp=0.3)
-    assert row.config["nominal_params"] == lab
+    lab = named_arm("lab")
+    assert row.config["true_params"] == scenario_to_mapping(lab.replace(Mp=0.3))
+    assert row.config["nominal_params"] == scenario_to_mapping(lab)
     assert "true_params.Mp" not in capsys.readouterr().out.splitlines()[-1]
 
 
@@ -119,10 +120,10 @@ def test_a_stability_map_on_another_arm_keeps_the_scenarios_own_values():
     s = scenario_from_mapping({"true_params": {"Mp": 0.3}})
     cases = {c.arm: c.base for c in cases_from_scenarios([s], plants=["reduced"],
                                                          arms=["default", "lab"])}
-    assert cases["lab"]["true_params"]["Mp"] == 0.3
-    assert cases["lab"]["true_params"]["coulomb1"] == 0.3 == cases["lab"]["nominal_params"][
-        "coulomb1"]
-    assert cases["default"]["true_params"]["coulomb1"] == 0.0
+    assert parameter_value(cases["lab"], "true_params.Mp") == 0.3
+    assert parameter_value(cases["lab"], "true_params.coulomb1") == 0.3 == parameter_value(
+        cases["lab"], "nominal_params.coulomb1")
+    assert parameter_value(cases["default"], "true_params.coulomb1") == 0.0
 
 
 def test_a_calibration_experiment_on_another_arm_is_that_arm():

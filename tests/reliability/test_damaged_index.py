@@ -11,8 +11,8 @@ import sqlite3
 
 import pytest
 
-from validation.batch.index import TEXT_METRICS
-from validation.batch.store import ResultStore
+from validation.batch.store.index import TEXT_METRICS
+from validation.batch.store.folder import ResultStore
 from validation.cli import main
 
 

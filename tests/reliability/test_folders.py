@@ -10,7 +10,7 @@ import textwrap
 
 import pytest
 
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 
 CAMPAIGN = textwrap.dedent('''
     name = "f"

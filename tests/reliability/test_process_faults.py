@@ -17,7 +17,7 @@ import pytest
 
 from campaign_testing import wait_gone
 from conftest import write_files
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 from validation.run.config import ConfigError
 
 FAULTS = textwrap.dedent('''

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from conftest import write_files
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 
 LAWS = {
     "labctl.py": textwrap.dedent('''

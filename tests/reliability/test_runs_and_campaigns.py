@@ -16,7 +16,7 @@ from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
 from validation.run.loop import run_scenario
 from validation.run.scenario import scenario_from_mapping
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 
 UNSTABLE = {"controller": {"kind": "pd", "options": {"kd": [8.0, 500.0]}}}
 

@@ -21,10 +21,10 @@ from validation.batch.campaign import campaign_from_mapping
 
 from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
-from reduced_model._cache_guard import kernel_keys
+from reduced_model.code import kernel_keys
 from validation.batch.fingerprint import (_ROOT, forget_plugins, plugin_sources,
                                           run_fingerprint)
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 
 from conftest import write_files
@@ -217,18 +217,19 @@ def test_a_sourceless_plugin_and_what_its_bytecode_imports_are_hashed(plugin_lab
 
 
 def test_an_edit_of_the_views_intrinsics_rekeys_every_kernel_that_uses_them(monkeypatch):
-    """reduced_model/_views.py defines numba intrinsics, no @njit: the kernels that
-    inline them must be recompiled when it changes (it was not guarded)."""
+    """reduced_model/dynamics/linalg.py defines numba intrinsics (`matrix_view`) beside
+    its @njit functions: the kernels that inline them must be recompiled when it changes
+    (it was not guarded)."""
     before = kernel_keys()
-    assert "reduced_model/_views.py" in before
-    views = _ROOT / "reduced_model" / "_views.py"
+    assert "reduced_model/dynamics/linalg.py" in before
+    views = _ROOT / "reduced_model" / "dynamics" / "linalg.py"
     original = Path.read_bytes
     monkeypatch.setattr(Path, "read_bytes",
                         lambda self: original(self) + (b"#" if self == views else b""))
     after = kernel_keys()
     changed = {k for k in before if before[k] != after[k]}
-    assert {"reduced_model/_views.py", "reduced_model/_kernels.py", "controllers/_pbc.py",
-            "controllers/_ekf.py"} <= changed
+    assert {"reduced_model/dynamics/linalg.py", "reduced_model/dynamics/motion.py",
+            "reduced_model/plant/plant.py", "controllers/_pbc.py", "controllers/_ekf.py"} <= changed
     assert "controllers/_replay.py" not in changed  # what does not use them keeps its cache
 
 

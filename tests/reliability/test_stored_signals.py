@@ -15,8 +15,8 @@ import pytest
 from validation.batch.campaign import campaign_from_mapping
 from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
-from validation.batch.index import transaction
-from validation.batch.store import ResultStore
+from validation.batch.store.index import transaction
+from validation.batch.store.folder import ResultStore
 
 ROOT = Path(__file__).resolve().parents[2]
 #: One short metrics-only run (its signals are re-simulated on demand).

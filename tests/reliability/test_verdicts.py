@@ -13,7 +13,7 @@ import pytest
 import scipy.optimize
 
 from conftest import FINE_ARM_PLANT, write_files
-from validation.batch.store import ResultStore
+from validation.batch.store.folder import ResultStore
 from validation.cli import main
 from validation.run.loop import run_scenario
 from validation.run.requirements import _parse, requirement_metrics

@@ -1,1 +1,1 @@
-"""Many runs: campaigns, where runs execute (serial, process pool, Dask), the results store and the code fingerprint."""
+"""Many runs: campaigns, where runs execute (serial, process pool, Dask), the code fingerprint, and the results store (`validation.batch.store`)."""

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..run.config import ConfigError, check
-from ..run.tomlfiles import flatten, get_dotted
+from ..run.arms import parameter_value
+from ..run.tomlfiles import flatten
 
 __all__ = ["flatten_axes", "numeric_field", "RandomAxis", "random_axis", "draw_points"]
 
@@ -23,7 +24,7 @@ def flatten_axes(table: dict) -> dict[str, object]:
 def numeric_field(resolved_base: dict, path: str, where: str):
     """The base scenario's value at ``path``, which a ``scale`` axis multiplies: a number."""
     try:
-        value = get_dotted(resolved_base, path)
+        value = parameter_value(resolved_base, path)
     except KeyError:
         raise ConfigError(where, f"{path} is not a scenario field") from None
     check(isinstance(value, (int, float)) and not isinstance(value, bool), where,

@@ -40,8 +40,8 @@ from ..run.config import ConfigError, check, check_known, check_label
 from ..run.scenario import (Scenario, check_scales_on_arm, scenario_from_mapping,
                             scenario_to_mapping)
 from .axes import draw_points, flatten_axes, numeric_field, random_axis
-from .runfiles import KEEP_ALL, Keep, keep_from_mapping
-from .store import run_id
+from .store.runfiles import KEEP_ALL, Keep, keep_from_mapping
+from .store.folder import run_id
 from ..run.tomlfiles import deep_merge, load_toml, set_dotted
 
 __all__ = ["Campaign", "PlannedRun", "load_campaign", "load_study", "own_name", "is_campaign",

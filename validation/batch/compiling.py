@@ -29,7 +29,7 @@ COMPILE_NOTE = "once per checkout: numba keeps the machine code in its __pycache
 #: that share a compiled kernel with one compiled before them load in well under a
 #: second.  A group not listed counts as the mean of those that are.
 REFERENCE_SECONDS = {
-    "arm model (M, C, RK4, kinematics)": 10.0,
+    "reduced plant (the paper's kinematics)": 10.0,
     "controller pbc": 6.0, "controller pbc-idealised": 0.5, "controller pd": 0.5,
     "controller ct": 0.5, "controller lqr": 1.0,
     "observer smo-paper": 2.0, "observer smo-bl": 0.5, "observer smo-pos": 0.5,

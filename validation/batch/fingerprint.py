@@ -5,7 +5,7 @@ or bytecode), every package version and every compiled artefact that produced it
 files hashed are found, not listed: every project module that executing one run
 (`validation.batch.worker`) can import — at module level or inside a function, directly
 or through other modules — found by a static walk of the import statements
-(`reduced_model._imports`), plus the ``__init__`` of every package on the way.  A module
+(`reduced_model.code.imports`), plus the ``__init__`` of every package on the way.  A module
 that can change a stored signal or metric is imported by the run path, so none can be
 left out; modules the run path never imports (the command line, the store, the reports,
 the verdicts computed from stored metrics) stay out, and so does what it imports only to
@@ -21,7 +21,7 @@ way, and every installed package it imports, the same way as the project's: a pl
 installed with ``pip`` and upgraded is new code; a module in site-packages that no
 distribution declares is hashed by its files, as the user's own.  Files are located without
 importing anything, so reading a results folder never runs a plug-in's code.  Numba's
-compiled artefacts are kept consistent with these sources by `reduced_model._cache_guard`.
+compiled artefacts are kept consistent with these sources by `reduced_model.code.cache_guard`.
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ from importlib.metadata import PackageNotFoundError, distribution, packages_dist
 from importlib.util import find_spec
 from pathlib import Path
 
-from reduced_model._imports import walk
+from reduced_model.code import walk
 
 __all__ = ["code_fingerprint", "source_fingerprint", "run_fingerprint", "result_sources",
            "module_sources", "computed_by", "plugin_sources", "plugin_kinds",

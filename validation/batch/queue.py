@@ -4,7 +4,7 @@ stored into its own results folder, executed together on one runner.
 A *job* is one campaign's runs into one folder (`open_job`: the folder prepared, what it
 holds already classified, `classify`).  `run_jobs` gives the runs of every job
 to the runner at once — a worker never idles while any job has a run left — and stores
-each as it finishes: its worker has put the file in place (`validation.batch.storing`),
+each as it finishes: its worker has put the file in place (`validation.batch.store.writing`),
 the row is committed with the others that arrived meanwhile (`committing.Committer`).
 
 A *question* is a generator that yields `Batch` es — the runs it needs next, into its
@@ -27,15 +27,15 @@ from ..run.scenario import scenario_to_mapping
 from .campaign import Campaign, PlannedRun, campaign_keep, expand
 from .executor import Runner, SerialRunner
 from .fingerprint import is_fresh
-from .committing import Committer
-from .errors import NotARunFile
-from .index import dictionary_for
+from .store.committing import Committer
+from .store.errors import NotARunFile
+from .store.index import dictionary_for
 from .interrupts import Interrupted
 from .limits import expected_work
-from .memory import MemoryStore
+from .store.memory import MemoryStore
 from .progress import progress as progress_counter
-from .store import ResultStore, environment
-from .storing import Destination, StoreTask, landed, leave_token
+from .store.folder import ResultStore, environment
+from .store.writing import Destination, StoreTask, landed, leave_token
 
 __all__ = ["Job", "open_job", "run_jobs", "Batch", "answer_all", "CampaignSummary",
            "classify", "run_planned", "run_campaign"]

@@ -1,6 +1,6 @@
 """What runs inside a worker: one scenario in, its result and metrics out, never an
 exception (`execute_run`); how a worker process starts (`worker_init`; its loop, which
-also stores the run, is `validation.batch.storing.serve`); and what a worker
+also stores the run, is `validation.batch.store.writing.serve`); and what a worker
 needs before it runs anything: the simulation code (models, plants, laws, the closed
 loop, metrics) loaded and its kernels compiled — not the command line and not
 matplotlib.  `warm_up` compiles or loads the kernels the runs need in the parent before
@@ -145,42 +145,58 @@ def worker_init(parent: int, memory_mib: int | None) -> None:
 
 def kernel_groups(scenarios) -> list[tuple[str, object]]:
     """The compiled code the runs of ``scenarios`` use, as (label, callable that compiles
-    or loads it) in the order a run needs them: the arm model's kernels, each distinct
-    law, the closed loop on each plant (the sample kernels, the FE plant's readout).
-    Each piece is compiled once per checkout (numba's cache) and loaded in well under a
-    second afterwards.  Compiling executes two samples of a run, so runs of plug-in laws
-    (whose code may exit, crash or hang) are left out: their workers compile what they
-    need within the run (its time limit allows for it); so are runs of plug-in plants."""
+    or loads it) in the order a run needs them: the reduced plant's kernel of each
+    kinematics and joints a run steps, each distinct built-in law on each kinematics of
+    its model, the closed loop on each built-in plant (the sample kernels, the FE plant's
+    readout).  Each piece is compiled once per checkout (numba's cache) and loaded in well
+    under a second afterwards.  A plug-in's own code (whose import may exit, crash or
+    hang) is left to its run; what a plug-in run uses of the project — the built-in laws
+    beside it, the reduced model's kernels a plug-in plant built on `ReducedPlant` steps
+    with — is compiled here, so a run's time limit counts simulation, not compilation."""
     from controllers import compiled_form
     from reduced_model import ReducedPlant
 
     from ..run.laws import build_controller, build_observer, nominal_model
 
-    def model_kernels():
-        plant = ReducedPlant()
+    def plant_kernel(s, kinematics):
+        plant = ReducedPlant(s.true_params, kinematics=kinematics, Ts=s.Ts,
+                             step=getattr(s.plant, "step", s.Ts))
         plant.reset()
-        plant.step([0.0, 0.0], plant.h)
-        plant.truth_vector()
+        plant.advance(np.zeros(plant.n_joints))
 
-    scenarios = [s for s in scenarios
-                 if ":" not in s.controller.kind + s.observer.kind + s.plant.kind]
-    if not scenarios:
-        return []
-    groups, seen = [("arm model (M, C, RK4, kinematics)", model_kernels)], set()
+    groups, seen = [], set()
     for s in scenarios:
-        model = nominal_model(s.nominal_params, s.model.modes_per_link)
+        plugin_plant = ":" in s.plant.kind
+        kinematics = (getattr(s.plant, "kinematics", "linear"),) if s.plant.kind == "reduced" \
+            else (("linear", s.model.kinematics) if plugin_plant else ())
+        for kin in kinematics:
+            key = ("plant", kin, any(j != type(j)() for j in s.true_params.joints))
+            if key not in seen:
+                seen.add(key)
+                groups.append((f"reduced plant ({_kinematics_label(kin)}"
+                               f"{', joints' if key[2] else ''})",
+                               lambda s=s, k=kin: plant_kernel(s, k)))
+        model = nominal_model(s.nominal_params, s.model.modes_per_link, s.model.kinematics)
         for role, spec, build in (("controller", s.controller, build_controller),
                                   ("observer", s.observer, build_observer)):
-            key = (role, spec.kind)
-            if spec.kind == "none" or key in seen:
+            key = (role, spec.kind, s.model.kinematics)
+            if spec.kind == "none" or ":" in spec.kind or key in seen:
                 continue
             seen.add(key)
-            groups.append((f"{role} {spec.kind}", lambda b=build, s=s, m=model, r=role:
-                           compiled_form(b(s, m), r)))
-    for plant in sorted({s.plant.kind for s in scenarios}):
-        example = next(s for s in scenarios if s.plant.kind == plant)
+            label = f"{role} {spec.kind}" + (f" ({_kinematics_label(s.model.kinematics)})"
+                                            if s.model.kinematics != "linear" else "")
+            groups.append((label, lambda b=build, s=s, m=model, r=role: compiled_form(b(s, m), r)))
+    examples = {}
+    for s in scenarios:
+        if ":" not in s.controller.kind + s.observer.kind + s.plant.kind:
+            examples.setdefault(s.plant.kind, s)
+    for plant, example in sorted(examples.items()):
         groups.append((f"closed loop on the {plant} plant", lambda e=example: _short_run(e)))
     return groups
+
+
+def _kinematics_label(kinematics: str) -> str:
+    return "exact kinematics" if kinematics == "exact" else "the paper's kinematics"
 
 
 def _short_run(scenario) -> None:

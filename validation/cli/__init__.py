@@ -52,7 +52,7 @@ from .system import missing_library  # noqa: E402
 
 try:
     from ..batch.interrupts import Interrupted, exit_status, signals_interrupt  # noqa: E402
-    from ..batch.store import StoreError  # noqa: E402
+    from ..batch.store.folder import StoreError  # noqa: E402
     from ..run.processes import CHECK_TIMEOUT, contain_checks  # noqa: E402
     from ..run.config import short_repr  # noqa: E402
     from .common import EXIT_FAILED, EXIT_USAGE  # noqa: E402

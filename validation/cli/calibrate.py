@@ -12,7 +12,7 @@ from ..run.experiments import from_run, read_experiment, read_frequency_response
 
 from .common import EXIT_FAILED, runner_for
 from .one_run import stored_run
-from ..batch.resimulate import every_signal
+from ..batch.store.resimulate import every_signal
 
 #: Failing residual tests listed on the terminal (all are in calibration.json).
 _FAILING_SHOWN = 8
@@ -32,11 +32,9 @@ def _fit_names(text: str | None) -> list[str] | None:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from ..verdicts.calibration import calibrate
-    from ..verdicts.calibration_comparison import data_fingerprint, read_fits
-    from ..verdicts.calibration_outputs import RESULT_FILES, refuse_links
-    from ..verdicts.calibration_plan import plan_calibration
-    from ..verdicts.calibration_settings import base_scenario, calibration_settings
+    from ..verdicts.calibration import (RESULT_FILES, base_scenario, calibrate,
+                                        calibration_settings, data_fingerprint,
+                                        plan_calibration, read_fits, refuse_links)
     base, table = base_scenario(args.config)
     settings = calibration_settings(table, _fit_names(args.fit), base)
     experiments = [_experiment(spec) for spec in args.data]
@@ -51,7 +49,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(f"calibrating {', '.join(settings.names)} on {len(plan.targets)} experiment(s)"
               f"{f' and {len(responses)} frequency response(s)' if responses else ''} "
               f"({settings.inputs}, {base.plant.kind} plant) into {out}")
-        result = calibrate(plan, out, runner=runner, compare=fits)
+        result = calibrate(plan, out, runner=runner, compare=fits, search=not args.no_search,
+                           export_inadequate=args.export_inadequate)
     print(f"{result['iterations']} iterations, {result['simulations']} simulations, cost "
           f"{result['cost']:.6g} (residual variance {result['residual_variance']:.3g}, in units "
           "of the noise levels)")
@@ -66,15 +65,60 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         if ratios:
             print(f"  residual RMS / noise, {exp}: {', '.join(ratios)}")
     _print_adequacy(result["adequacy"])
+    if "extensions" in result:
+        _print_extensions(result["extensions"])
     if "comparison" in result:
         _print_comparison(result["comparison"])
     written = [f for f in RESULT_FILES if (out / f).is_file()]
     print(f"wrote {', '.join(str(out / f) for f in written)}; report: flexarm report {out}")
+    _print_next(result, out)
     if result["failed_runs"]:
         print(f"flexarm: {len(result['failed_runs'])} simulation(s) failed: "
               f"{', '.join(result['failed_runs'][:8])}", file=sys.stderr)
         return EXIT_FAILED
     return 0
+
+
+def _print_extensions(search: dict) -> None:
+    print(f"  what the model lacks: {search['verdict']}")
+    for row in search["fits"]:
+        print(f"    {row['name']}: {'adequate' if row['model_adequate'] else 'INADEQUATE'}, "
+              f"AIC {row['aic']:.6g} (dAIC {row['delta_aic']:.4g})")
+
+
+def _print_next(result: dict, out: Path) -> None:
+    """What to do with the result: run and verify the calibrated arm, or what to try
+    when the model is inadequate."""
+    from ..verdicts.calibration import EXTENDED
+    verify = (f'include = ["{{0}}/calibrated.toml", "{{0}}/uncertainty.toml"] in a verify file, '
+              "then flexarm verify FILE")
+    if result["model_adequate"] is not False:
+        print(f"next: flexarm run --config {out / 'calibrated.toml'} runs the calibrated arm; "
+              + (verify.format(out) + " judges a controller over its intervals"
+                 if (out / "uncertainty.toml").is_file() else
+                 "no parameter has an interval to verify over"))
+        return
+    search = result.get("extensions", {})
+    screened = [r["name"] for r in result.get("screen", []) if r["significant"]]
+    if search.get("adequate"):
+        extended = out / EXTENDED
+        print(f"next: the model with {search['adequate']} explains the data: flexarm run "
+              f"--config {extended / 'calibrated.toml'}; "
+              + (verify.format(extended) + " (its 95 % intervals)"
+                 if (extended / "uncertainty.toml").is_file() else
+                 "its intervals hold only at the estimate of a parameter the data do not "
+                 "identify (extended/calibration.json), so no uncertainty.toml was written"))
+        return
+    if screened and not search:
+        print(f"next: the residual follows {', '.join(screened[:3])} (screen): run again "
+              "without --no-search to fit them, or add them to the scenario and --compare")
+        return
+    print("next: the model misses physics the toolkit cannot name here: add it to the "
+          "scenario (its joints: --fit true_params.coulomb1,... with [calibrate] start and "
+          "bounds; plant.kinematics = \"exact\"; a finer plant), fit each candidate into its "
+          "own folder and rank them with --compare"
+          + ("" if result.get("exported") else "; no uncertainty.toml was written "
+             "(--export-inadequate writes its effective ranges, with a warning)"))
 
 
 def _print_parameters(result: dict) -> None:
@@ -84,7 +128,7 @@ def _print_parameters(result: dict) -> None:
     width = max(len(n) for n in result["parameters"])
     for name, p in result["parameters"].items():
         if not p["identifiable"]:
-            print(f"  {name:<{width}}  {p['estimate']:.7g}  NOT IDENTIFIABLE: {p['reason']}")
+            print(f"  {name:<{width}}  {p['estimate']:.7g}  NOT IDENTIFIABLE: {p['why']}")
             continue
         lo, hi = p["interval"]
         if effective:

@@ -7,8 +7,8 @@ import functools
 import sys
 from pathlib import Path
 
-from ..batch.resimulate import every_signal
-from ..batch.store import ResultStore
+from ..batch.store.resimulate import every_signal
+from ..batch.store.folder import ResultStore
 
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
 from .job_clock import PAPER, JobClock
@@ -120,7 +120,7 @@ def paper_keep(runs, campaign) -> list:
     figures (``[report] figures``) read them —, the claims' signals for the disturbance
     run (`mesh.CHECK_KEEP`), the metrics alone for every other run (re-simulated bit for
     bit on demand: ``flexarm run --like``)."""
-    from ..batch.runfiles import KEEP_NONE, Keep
+    from ..batch.store.runfiles import KEEP_NONE, Keep
     from ..verdicts.claims import DISTURBED, SYSTEM
     from ..verdicts.mesh import CHECK_KEEP
     everything = {SYSTEM, *campaign.report.get("figures", [])}

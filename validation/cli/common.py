@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..batch.executor import check_runner, make_runner
 from ..batch.interrupts import exit_status
-from ..batch.store import ResultStore, StoreError
+from ..batch.store.folder import ResultStore, StoreError
 
 
 EXIT_USAGE = 2
@@ -82,7 +82,7 @@ def mesh_checks(runner, out: Path, run_ids: set, *, progress: bool,
     and the other formulation, then level 2 of the runs whose verdict it could still
     change (`claims.finer_runs`).  A non-zero exit status if interrupted or a check
     failed."""
-    from ..batch.resimulate import every_signal
+    from ..batch.store.resimulate import every_signal
     from ..verdicts.claims import finer_runs
     from ..verdicts.mesh import FIRST_STAGE, MESH_SWEEP, run_checks
     store = ResultStore(out)

@@ -15,11 +15,12 @@ from ..batch.campaign import PlannedRun
 from ..batch.executor import available_cores, check_runner, make_runner
 from ..batch.interrupts import Interrupted
 from ..batch.queue import run_planned
-from ..batch.resimulate import every_signal
-from ..batch.store import ResultStore, StoreError, run_id
+from ..batch.store.resimulate import every_signal
+from ..batch.store.folder import ResultStore, StoreError, run_id
 from ..run.config import ConfigError, check_label, to_mapping
 from ..run.plants import is_truth
-from ..run.scenario import (PARAMETER_TABLES, Scenario, arm_parameters, default_transient,
+from ..run.arms import arm_of, flat_config, flat_values
+from ..run.scenario import (PARAMETER_TABLES, Scenario, default_transient,
                             own_parameters, scenario_from_mapping)
 from ..run.tomlfiles import deep_merge, flatten, parse_value, set_dotted
 from ..verdicts.mesh import is_check
@@ -37,7 +38,7 @@ def stored_run(spec: str, flag: str):
     a results index; RUN is a run id (or a unique prefix of one, at least 4 characters)
     or a run name (in full, or its part after the campaign's "/").  A name shared by a
     run and its mesh/step checks (which keep its name) means the run itself."""
-    from ..batch.store import INDEX_NAME
+    from ..batch.store.folder import INDEX_NAME
     parts = Path(spec).parts
     for k in range(len(parts) - 1, 0, -1):
         if (Path(*parts[:k]) / INDEX_NAME).is_file():
@@ -141,7 +142,7 @@ def scenario_from_args(args: argparse.Namespace) -> tuple[Scenario, list[str]]:
     if like:
         from ..batch.fingerprint import run_fingerprint
         from ..run.scenario import scenario_to_mapping
-        old, new = flatten(row.config), flatten(scenario_to_mapping(scenario))
+        old, new = flat_config(row.config), flat_config(scenario_to_mapping(scenario))
         changed = [k for k in sorted(old | new) if old.get(k) != new.get(k)]
         followed = _following_the_arm(changed, new, row.config.get("arm"), scenario.arm)
         changed = [f"{k} = {new.get(k)!r} (was {old.get(k)!r})" for k in changed
@@ -165,23 +166,20 @@ def _following_the_arm(changed: list[str], new: dict, old_arm: str, arm: str) ->
     that are now the new arm's own (the physics that follows ``arm``)."""
     if arm == old_arm:
         return set()
-    values = flatten({t: to_mapping(arm_parameters(arm)) for t in PARAMETER_TABLES})
+    values = {f"{t}.{k}": v for t in PARAMETER_TABLES for k, v in flat_values(arm_of(arm)).items()}
     return {k for k in changed if k in values and new.get(k) == values[k]}
 
 
+#: The rows of a run's table: (metric key, label, format, scale); ``{i}``: each joint (or
+#: link) from 1, a row per joint the run has.
 _TABLE = [("status", "status", "{}"),
-          ("track_max_1", "max |θ1 − θ1d| [mrad]", "{:.4g}", 1e3),
-          ("track_max_2", "max |θ2 − θ2d| [mrad]", "{:.4g}", 1e3),
-          ("track_rms_1", "RMS θ1 − θ1d [mrad]", "{:.3g}", 1e3),
-          ("track_rms_2", "RMS θ2 − θ2d [mrad]", "{:.3g}", 1e3),
+          ("track_max_{i}", "max |θ{i} − θ{i}d| [mrad]", "{:.4g}", 1e3),
+          ("track_rms_{i}", "RMS θ{i} − θ{i}d [mrad]", "{:.3g}", 1e3),
           ("tip_err_max", "max payload error vs the rigid arm [mm]", "{:.3g}", 1e3),
-          ("defl_max_1", "max tip deflection, link 1 [mm]", "{:.3g}", 1e3),
-          ("defl_max_2", "max tip deflection, link 2 [mm]", "{:.3g}", 1e3),
-          ("vib_rms_1", "vibration RMS, link 1 [mm]", "{:.3g}", 1e3),
-          ("vib_rms_2", "vibration RMS, link 2 [mm]", "{:.3g}", 1e3),
-          ("tau_max_1", "max |τ1| [N m]", "{:.3g}"), ("tau_max_2", "max |τ2| [N m]", "{:.3g}"),
-          ("tau_tv_1", "τ1 variation [N m/s]", "{:.3g}"),
-          ("tau_tv_2", "τ2 variation [N m/s]", "{:.3g}"),
+          ("defl_max_{i}", "max tip deflection, link {i} [mm]", "{:.3g}", 1e3),
+          ("vib_rms_{i}", "vibration RMS, link {i} [mm]", "{:.3g}", 1e3),
+          ("tau_max_{i}", "max |τ{i}| [N m]", "{:.3g}"),
+          ("tau_tv_{i}", "τ{i} variation [N m/s]", "{:.3g}"),
           ("wall_s", "wall time [s]", "{:.3g}"), ("realtime_factor", "real-time factor", "{:.3g}")]
 #: Of `_TABLE`, what measures the computer, not the run (the run's timings).
 _TIMINGS = ("wall_s", "realtime_factor")
@@ -198,7 +196,11 @@ def format_metrics(metrics: dict, units: dict | None = None) -> str:
                      "whole run)" if end > transient else
                      f"  no metrics after the transient: the run ended at {end:g} s, before "
                      f"its {transient:g} s transient did")
-    for key, label, fmt, *scale in _TABLE:
+    joints = sum(1 for k in metrics if k.startswith("track_max_"))
+    rows = [(key.format(i=i), label.format(i=i), fmt, *scale)
+            for key, label, fmt, *scale in _TABLE
+            for i in (range(1, joints + 1) if "{i}" in key else (None,))]
+    for key, label, fmt, *scale in rows:
         value = metrics.get(key)
         if value is None or (isinstance(value, float) and not value >= 0 and key in _TIMINGS) \
                 or (isinstance(value, float) and math.isnan(value)):

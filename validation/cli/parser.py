@@ -9,12 +9,12 @@ from controllers import CONTROLLERS, OBSERVERS
 
 from ..batch.executor import available_cores
 from ..run.config import did_you_mean, fraction_hint
-from ..run.scenario import ARMS, DEFAULT_TRANSIENT, PLANT_KINDS, Scenario
+from ..run.scenario import DEFAULT_TRANSIENT, PLANT_KINDS, Scenario
 
 from .calibrate import cmd_calibrate
 from .campaigns import cmd_campaign, cmd_reproduce_paper
 from .common import EXIT_USAGE
-from .modes import cmd_modes
+from .modes import cmd_arms, cmd_modes
 from .one_run import cmd_run, cmd_show
 from .results import cmd_export, cmd_repair, cmd_report
 from .verdicts import (cmd_attribute, cmd_baseline_add, cmd_baseline_check,
@@ -100,7 +100,8 @@ def _run_defaults(d: Scenario) -> str:
     return f"""\
 defaults of a plain run (no --config, no --like):
   reference            eq. (37): theta_d = 2 sin(0.1 pi t), 2 sin(0.2 pi t) rad
-  plant                {d.plant.kind}, {d.plant.modes_per_link[0]}+{d.plant.modes_per_link[1]} modes, internal step {d.plant.step:g} s
+  arm                  {d.arm} (the paper's two flexible links, horizontal)
+  plant                {d.plant.kind}, the arm's modes per link, internal step {d.plant.step:g} s
   sensors              angles and q read directly, rates measured; noise: {noise};
                        no quantisation, no delay
   observer start       exact (initial_error: none)
@@ -129,9 +130,9 @@ def _add_cases(p) -> None:
     """--plant and --arm of the commands that take a scenario or a campaign's cases."""
     p.add_argument("--plant", action="append", choices=PLANT_KINDS,
                    help="plant(s) (default: both for a scenario, the campaign's own)")
-    p.add_argument("--arm", action="append", choices=tuple(ARMS),
-                   help="arm(s) (default: default and table1 for a scenario, the campaign's "
-                        "own)")
+    p.add_argument("--arm", action="append", metavar="ARM",
+                   help="arm(s): a shipped arm's name or an arm file .toml (default: default "
+                        "and table1 for a scenario, the campaign's own)")
 
 
 def _add_tolerance(p) -> None:
@@ -159,21 +160,26 @@ def _add_execution(p, *, dask: bool = True) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     from plant_exudyn import ELEMENTS
-    parser = _Parser(prog="flexarm", description="Validate controllers and observers of a two-link "
-                     "flexible arm on its reduced model and a flexible multibody truth plant.")
+    parser = _Parser(prog="flexarm", description="Validate controllers and observers of a flexible "
+                     "arm (1-4 links, rigid or flexible, in a plane or in gravity) on its "
+                     "reduced model and a flexible multibody truth plant.")
     parser.add_argument("--version", action="version",
                         version=f"flexarm-validation {version('flexarm-validation')}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     modes = sub.add_parser("modes", help="natural frequencies of the reduced model (and FE)")
+    modes.add_argument("--arm", default="default", metavar="ARM",
+                       help="a shipped arm (flexarm arms) or an arm file (default: default)")
     modes.add_argument("--params", metavar="TOML",
-                       help="arm parameters (top-level keys or a [params] table)")
-    modes.add_argument("--table1", action="store_true",
-                       help="the paper's Table 1 exactly (no stator inertia, no damping)")
-    modes.add_argument("--modes-per-link", nargs=2, type=int, default=[2, 2],
-                       metavar=("N1", "N2"), help="assumed modes of link 1 and 2 (1..4)")
+                       help="the arm's fields changed by flat key (top-level keys or a [params] "
+                            "table)")
+    modes.add_argument("--table1", action="store_true", help=argparse.SUPPRESS)
+    modes.add_argument("--modes-per-link", nargs="+", type=int, metavar="N",
+                       help="assumed modes per link, from the base out (1..4; 0 for a rigid "
+                            "link; default: the arm's)")
     modes.add_argument("--theta2", nargs="+", type=_finite, default=[0.0], metavar="RAD",
-                       help="joint-2 angles at which to linearise (default 0)")
+                       help="joint-2 angles at which to linearise (default 0; the other joints "
+                            "at 0)")
     modes.add_argument("--compare", action="store_true",
                        help="also print the Exudyn FE model's frequencies and the gap")
     modes.add_argument("--element", choices=ELEMENTS, default="ancf",
@@ -181,6 +187,10 @@ def build_parser() -> argparse.ArgumentParser:
     modes.add_argument("--elements", type=_int_in(1, 64), default=4, metavar="N",
                        help="FE elements per link for --compare (default 4)")
     modes.set_defaults(func=cmd_modes)
+
+    arms = sub.add_parser("arms", help="the shipped arms, or one arm in full")
+    arms.add_argument("arm", nargs="?", metavar="ARM", help="a shipped arm or an arm file")
+    arms.set_defaults(func=cmd_arms)
 
     d = Scenario()
     run = sub.add_parser("run", help="simulate one closed-loop scenario",
@@ -194,9 +204,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="rerun a stored run exactly (RUN: its id or name; a name shared "
                           "with mesh/step checks means the nominal run), with the flags and "
                           "--set as changes")
-    run.add_argument("--arm", choices=tuple(ARMS), help=f"default arm, the paper's table1 or "
-                                                        f"the harmonic-drive lab arm "
-                                                        f"(default: {d.arm})")
+    run.add_argument("--arm", metavar="ARM",
+                     help=f"a shipped arm (default, table1, lab, single-link, rigid-flexible, "
+                          f"three-link, vertical-two-link; `flexarm arms` lists them) or an "
+                          f"arm file .toml (default: {d.arm})")
     run.add_argument("--plant", choices=PLANT_KINDS, help=f"reduced model or Exudyn truth plant "
                                                      f"(default: {d.plant.kind})")
     run.add_argument("--controller", metavar="KIND",
@@ -373,6 +384,14 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--compare", nargs="+", metavar="OTHER_DIR",
                      help="calibrations of other models on the same data: one table of "
                           "residual, adequacy and information criteria (AIC, BIC)")
+    cal.add_argument("--no-search", action="store_true",
+                     help="do not fit the toolkit's physics extensions (friction, Stribeck, "
+                          "drives, backlash, exact kinematics) to an inadequate model (the "
+                          "screen still ranks them)")
+    cal.add_argument("--export-inadequate", action="store_true",
+                     help="write uncertainty.toml even for a model the residual tests call "
+                          "inadequate (its ranges are of effective parameters and may "
+                          "exclude the arm's values; a warning says so)")
     _add_execution(cal)
     cal.set_defaults(func=cmd_calibrate)
 

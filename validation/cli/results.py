@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..batch.store import ResultStore, StoreError
+from ..batch.store.folder import ResultStore, StoreError
 
 
 def render_report(results, *, animate: bool, progress: bool, force: bool = False) -> str:

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from ..batch.interrupts import signals_interrupt
-from ..batch.store import ResultStore, StoreError
+from ..batch.store.folder import ResultStore, StoreError
 from ..run.config import ConfigError, check
 from ..run.plants import ROLES
 from ..run.results import own_folder

@@ -36,7 +36,7 @@ def calibration_section(store) -> tuple[dict | None, list]:
     for name, p in result["parameters"].items():
         if not p["identifiable"]:
             rows.append([name, f"{p['estimate']:.7g}", "—", "—", "—",
-                         f"NOT IDENTIFIABLE: {p['reason']}"])
+                         f"NOT IDENTIFIABLE: {p.get('why') or p['reason']}"])
             continue
         lo, hi = p.get("interval") or p["ci95"]
         # as many digits as the interval needs to show its width
@@ -59,6 +59,7 @@ def calibration_section(store) -> tuple[dict | None, list]:
             "interval_kind": result.get("interval_kind", "95 % (the noise)"),
             "adequacy": _adequacy(result.get("adequacy")),
             "comparison": [_comparison_row(r) for r in result.get("comparison", [])],
+            "extensions": _extensions(result),
             "summary": f"{result['iterations']} iterations, {result['simulations']} "
                        f"simulations, cost {fmt_number(result['cost'])}, residual variance "
                        f"{fmt_number(result['residual_variance'])} (in units of the noise "
@@ -79,8 +80,9 @@ def calibration_section(store) -> tuple[dict | None, list]:
     return data, tasks
 
 
-#: The residual tests, in the order of the report's columns.
-_TESTS = ("chi2", "noise", "whiteness", "inputs")
+#: The residual tests, in the order of the report's columns (a correlated residual's
+#: level, judged with its noise model, in χ²'s).
+_TESTS = (("chi2", "level"), ("noise",), ("whiteness",), ("inputs",))
 
 
 def _test_cell(test: dict | None) -> str:
@@ -97,13 +99,32 @@ def _adequacy(verdict: dict | None) -> dict | None:
     its threshold, and the diagnosis (None for a calibration made before the tests)."""
     if verdict is None:
         return None
-    rows = [[exp, signal, *(_test_cell(tests.get(k)) for k in _TESTS), tests["diagnosis"]]
+    rows = [[exp, signal, *(_test_cell(next((tests[k] for k in kinds if k in tests), None))
+                            for kinds in _TESTS),
+             tests["diagnosis"] + (f" (AR({tests['noise_model']['order']}))"
+                                   if "noise_model" in tests else "")]
             for exp, signals in verdict["signals"].items()
             for signal, tests in signals.items()]
     return {"verdict": verdict["verdict"], "rows": rows,
             "model_adequate": verdict["model_adequate"],
             "alpha": f"{verdict['family_alpha']:g} for all tests together, "
                      f"{fmt_number(verdict['test_alpha'])} each"}
+
+
+def _extensions(result: dict) -> dict | None:
+    """What the model lacks: the screen of the physics extensions (each candidate's score
+    against its threshold) and the extended models fitted, best AIC first (None where
+    nothing was screened)."""
+    screen = result.get("screen") or []
+    if not screen:
+        return None
+    search = result.get("extensions", {})
+    return {"verdict": search.get("verdict", "the screen alone (no search)"),
+            "screen": [[r["name"], fmt_number(r["score"]), fmt_number(r["threshold"]),
+                        "yes" if r["significant"] else "no"] for r in screen],
+            "fits": [[r["name"], "adequate" if r["model_adequate"] else "INADEQUATE",
+                      fmt_number(r["aic"]), fmt_number(r["delta_aic"])]
+                     for r in search.get("fits", [])]}
 
 
 def _comparison_row(row: dict) -> list[str]:
@@ -115,7 +136,7 @@ def _comparison_row(row: dict) -> list[str]:
 def _fit_figure(store, csv: Path, row, name: str) -> bytes:
     import matplotlib.pyplot as plt
     measured = read_experiment(csv)
-    from ..batch.resimulate import every_signal
+    from ..batch.store.resimulate import every_signal
     fitted = every_signal(store, row)
     t = np.arange(measured.samples) * measured.Ts
     k = min(measured.samples, len(fitted.time))

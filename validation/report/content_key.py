@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 
 from ..batch.fingerprint import fingerprint_of, source_fingerprint
-from ..batch.store import ResultStore
+from ..batch.store.folder import ResultStore
 
 __all__ = ["content_key", "report_is_current", "paths"]
 

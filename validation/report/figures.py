@@ -32,6 +32,7 @@ import numpy as np  # noqa: E402
 from ..run.plotting import (BOUND_STYLE, DPI, PLANT_STYLE, SUB, bound_lines,  # noqa: E402
                              draw_deflections, draw_tracking, envelope, pixel_columns,
                              figure_legend, figure_title, fit_ylim, plant_trace, trace)
+from ..run.reductions import joints_of  # noqa: E402
 from ..run.results import write_atomic  # noqa: E402
 
 __all__ = ["png", "state_label", "state_unit", "state_display", "tracking", "deflections",
@@ -78,7 +79,9 @@ def describe_run(config: dict) -> str:
 def tracking(group, title: str, transient: float, bound: float | None = None) -> bytes:
     """Fig. 3 analogue: θ and θ − θ_d per joint, every plant of the group overlaid; the
     errors in mrad with the tracking claim's bound ``bound`` [rad]."""
-    fig, axes = plt.subplots(2, 2, figsize=(7, 4.6), sharex=True, layout="constrained")
+    joints = joints_of(group[0][1])
+    fig, axes = plt.subplots(2, joints, figsize=(1.0 + 3.0 * joints, 4.6), sharex=True,
+                             squeeze=False, layout="constrained")
     draw_tracking(axes, group, transient, bound)
     for ax in axes[1]:
         ax.set_xlabel("t [s]")
@@ -93,8 +96,9 @@ def deflections(group, title: str, transient: float, cutoff_hz: float | None,
     """Fig. 4 analogue: tip deflections [mm], and their oscillatory part (the vibration)
     with the vibration claim's bound on its RMS, ``bound`` [m]."""
     rows = 2 if cutoff_hz else 1
-    fig, axes = plt.subplots(rows, 2, figsize=(7, 2.0 * rows + 0.6), sharex=True,
-                             squeeze=False, layout="constrained")
+    links = joints_of(group[0][1])
+    fig, axes = plt.subplots(rows, links, figsize=(1.0 + 3.0 * links, 2.0 * rows + 0.6),
+                             sharex=True, squeeze=False, layout="constrained")
     draw_deflections(axes, group, transient, cutoff_hz, bound)
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")

@@ -9,7 +9,7 @@ from pathlib import Path
 from reduced_model import ArmParameters
 
 from . import figures as fig
-from ..batch.resimulate import every_signal
+from ..batch.store.resimulate import every_signal
 from ..verdicts.mesh import is_check
 from .run_tables import swept
 
@@ -81,7 +81,7 @@ def claim_bounds() -> dict:
 
 def _loaded(store, group):
     """(row, every signal) of each run of a figure group (re-simulated where a run's file
-    keeps less: `validation.batch.resimulate.every_signal`)."""
+    keeps less: `validation.batch.store.resimulate.every_signal`)."""
     return [(r, every_signal(store, r)) for r in group]
 
 

@@ -6,7 +6,7 @@ budget: 10^4–10^6 runs) is summarised: for each main metric and each requireme
 robustness ρ, over the runs that completed, its quantiles and histogram, the runs where
 it is worst, and for a requirement how many runs fail it and the runs nearest its
 boundary (ρ closest to 0: those a slightly different arm or code would turn).  The
-values are read from the rows' metric columns (`validation.batch.records.metric_matrix`:
+values are read from the rows' metric columns (`validation.batch.store.records.metric_matrix`:
 no run's scenario decoded), so the section's time grows linearly with the runs, a few
 seconds at 10^5; every run's values are in ``metrics.csv``."""
 from __future__ import annotations
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..batch.records import metric_matrix
+from ..batch.store.records import metric_matrix
 from .render import fmt_number
 
 __all__ = ["MANY", "is_many", "Completed", "completed", "distributions", "histograms",
@@ -46,7 +46,7 @@ def is_many(runs) -> bool:
 @dataclass(frozen=True)
 class Completed:
     """The runs that completed and their metrics, read once from the rows' columns
-    (`validation.batch.records.metric_matrix`) for the summary's tables, its figure and
+    (`validation.batch.store.records.metric_matrix`) for the summary's tables, its figure and
     the windows of the report's scope."""
 
     ok: list

@@ -34,7 +34,7 @@ from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
 from ..batch.beside import beside, out_of_collection
 from ..batch.fingerprint import fingerprint_of
-from ..batch.resimulate import every_signal
+from ..batch.store.resimulate import every_signal
 from .render import fmt_number, folded_text, render
 from .bottom_line import bottom_line
 from .calibration import calibration_section
@@ -44,8 +44,8 @@ from .many import completed, distributions, histograms, is_many, read_metrics, w
 from .robust import robust_section
 from .run_tables import estimation_table, mesh_table, metrics_table, runs_table, table
 from ..run.results import own_folder, write_atomic
-from ..run.scenario import ARMS
-from ..batch.store import ResultStore, StoreError
+from ..run.arms import arm_description
+from ..batch.store.folder import ResultStore, StoreError
 from ..verdicts.evaluations import FIT_SWEEP, ROBUST_SWEEPS
 from ..verdicts.mesh import MESH_SWEEP, is_check
 from ..verdicts.validity_file import load_validity
@@ -209,7 +209,7 @@ def _scope(runs, done=None) -> list[str]:
     kinds = {}  # a run per kind, in one pass over the runs (10^5 of them: ~20 ms a pass)
     for r in runs:
         kinds.setdefault((r.arm, r.plant, r.role, r.Ts, r.initial_state), r)
-    scope = [f"arm: {a} — {ARMS.get(a, a)}" for a in sorted({k[0] for k in kinds})]
+    scope = [f"arm: {a} — {arm_description(a)}" for a in sorted({k[0] for k in kinds})]
     scope.append("plants: " + ", ".join(sorted({r.plant_label for r in kinds.values()})))
     scope.append("control periods Ts: " + ", ".join(
         f"{1e3 * t:g} ms" if t is not None else "not given"  # a scenario without Ts

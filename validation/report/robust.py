@@ -166,8 +166,8 @@ def _case_figures(v: dict, store) -> list:
     truth_id = (v.get("runs") or {}).get("truth")
     if truth_id is None:
         return []
-    from ..batch.resimulate import every_signal
-    from ..batch.store import run_id
+    from ..batch.store.resimulate import every_signal
+    from ..batch.store.folder import run_id
     from ..run.config import to_mapping
     from ..run.vibration import vibration_cutoff
     from ..run.plants import plant_for_role, plant_settings

@@ -25,7 +25,7 @@ def show_run(store, row) -> tuple[Path, list[Path], str]:
     """Draw the paper's figures of the stored run ``row`` of ``store`` (ok runs only);
     returns the page, the PNG files and a note naming the run drawn with it (or "")."""
     from ..batch.fingerprint import is_fresh
-    from ..batch.resimulate import STALE
+    from ..batch.store.resimulate import STALE
     from .groups import claim_bounds, figure_group, paper_figure_tasks
     group = [r for r in figure_group(row, store.rows()) if r.status == "ok"]
     others = [r for r in group if r.run_id != row.run_id]

@@ -13,11 +13,11 @@ from pathlib import Path
 
 from reduced_model import ArmParameters
 
-from ..batch.resimulate import every_signal
-from ..batch.store import ResultStore
+from ..batch.store.resimulate import every_signal
+from ..batch.store.folder import ResultStore
 from ..run.requirements import Requirement
 from ..run.results import own_folder, write_atomic
-from ..run.scenario import ARMS
+from ..run.arms import arm_description
 from ..verdicts import mesh as mesh_check
 from ..verdicts.attribution import (DIVERGED_RULE, FACTORS, METRIC_NAMES, METRICS,
                                     Attribution, records)
@@ -79,7 +79,7 @@ def claims_tables(columns: list[Column]) -> list[dict]:
                   "verdicts": [c.verdicts[claim.key].verdict for c in cols]}
                  for claim in CLAIMS]
         rows += _requirement_rows(cols)
-        tables.append({"arm": arm, "arm_text": ARMS.get(arm, arm),
+        tables.append({"arm": arm, "arm_text": arm_description(arm),
                        "columns": [c.label for c in cols], "rows": rows,
                        "notes": arm_notes(cols)})
     return tables

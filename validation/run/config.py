@@ -115,6 +115,8 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
         if value is None and type(None) in args:
             return None
         members = [a for a in args if a is not type(None)]
+        if len(members) > 1 and not any(dataclasses.is_dataclass(m) for m in members):
+            return _first_fitting(members, value, path)
         if len(members) > 1:
             return _tagged(members, value, path)
         return _convert(members[0], value, path)
@@ -155,6 +157,18 @@ def _convert(tp: Any, value: Any, path: str) -> Any:
             raise ConfigError(path, f"expected a table, got {short_repr(value)}")
         return {k: _plain(v, f"{path}.{k}") for k, v in value.items()}
     raise TypeError(f"unsupported configuration type {tp!r} at {path}")
+
+
+def _first_fitting(members: list, value: Any, path: str) -> Any:
+    """A choice between plain types (``int | tuple[int, ...]``): the first that takes
+    ``value``."""
+    reasons = []
+    for member in members:
+        try:
+            return _convert(member, value, path)
+        except ConfigError as exc:
+            reasons.append(exc.message)
+    raise ConfigError(path, " or ".join(reasons))
 
 
 def _tagged(members: list, value: Any, path: str) -> Any:

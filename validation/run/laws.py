@@ -34,11 +34,12 @@ _IDEALISED_ONLY = {"kv_flex", "compensate_damping"}
 _OBSERVER_METHODS = ("reset", "update")
 
 
-def nominal_model(params: ArmParameters, modes_per_link: tuple[int, int],
+def nominal_model(params: ArmParameters, modes_per_link: tuple[int, ...] | None,
                   kinematics: str = "linear") -> ArmModel:
     """The `ArmModel` the laws are built on (`reduced_model.cached_model`: built once
     per process; laws must not mutate it)."""
-    return cached_model(params, tuple(modes_per_link), kinematics)
+    return cached_model(params, None if modes_per_link is None else tuple(modes_per_link),
+                        kinematics)
 
 
 def measurement_names(scenario, model: ArmModel) -> tuple[str, ...]:
@@ -151,7 +152,7 @@ def check_laws(scenario) -> None:
     """Raise `ConfigError` unless the scenario's controller and observer can be built."""
     s = scenario
     key = (s.Ts, s.nominal_params, s.model.modes_per_link)
-    check(not (applies_generalised_forces(s) and s.plant.actuated == 2), "controller.kind",
+    check(not (applies_generalised_forces(s) and not s.plant.generalised_forces), "controller.kind",
           f"the {s.plant.label} has two actuators; {s.controller.kind} applies forces to "
           "every coordinate (the idealised PBC: all n rows of eq. 20), which runs only on "
           "the reduced plant")

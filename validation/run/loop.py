@@ -4,7 +4,7 @@ At every control instant t_k = k·Ts:  y_k (+ noise, delay) → observer → x̂
 controller(t_k, x̂_k or x_k, ref) → saturation → τ_k (+ disturbances) held over
 [t_k, t_{k+1}) by the plant.  Divergence and solver failures end the run as a result.
 
-What happens at a sample is the compiled kernels of `validation.run._sample`, on every
+What happens at a sample is the compiled kernels of `validation.run.sample`, on every
 path: laws with a compiled form run through it (`controllers._compiled`), others as the
 Python objects they are; a plant that can step itself in compiled code (the reduced
 plant) with compiled laws runs the whole loop in one compiled call, any other plant is
@@ -19,15 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers import ObserverFailure, PaperReference, QuinticMove, compiled_form
-from controllers._compiled import absent
-from reduced_model import ArmModel, PlantFailure, SensorConfig
-from reduced_model._plant_interface import TRUTH_EXTRAS
+from controllers import ObserverFailure, PaperReference, QuinticMove, absent, compiled_form
+from reduced_model import ArmModel, PlantFailure, SensorConfig, truth_extras
 
 from .config import short_repr, short_str
-from ._sample import (DisturbanceKind, DisturbanceTarget, Group, SampleStatus,
-                      check_bounds, context, law_fields, noise_stream, post_sample, pre_sample,
-                      run_reduced, sample_laws, signal_layout, status_message)
+from .sample import (DisturbanceKind, Group, SampleStatus, check_bounds, context,
+                      disturbance_target, law_fields, noise_stream, plant_fields, post_sample,
+                      pre_sample, run_compiled, sample_laws, signal_layout, status_message)
 from .laws import build_controller, build_observer, name_of, nominal_model
 from .results import RunResult
 from .scenario import Scenario, check_scenario, scenario_to_mapping
@@ -60,7 +58,8 @@ class _SampledReference:
     def __call__(self, t: float):
         if t == self.t:
             v = self.values
-            return v[0:2].copy(), v[2:4].copy(), v[4:6].copy()
+            N = len(v) // 3
+            return v[0:N].copy(), v[N:2 * N].copy(), v[2 * N:].copy()
         return self.reference(t)
 
 
@@ -97,7 +96,7 @@ def build(scenario: Scenario) -> Setup:
         strain_gauges=(sens.gauges_link1, sens.gauges_link2) if sens.modal == "gauges" else None,
         strain_quantity=sens.strain_quantity or "curvature", modal=sens.modal != "none",
         rates=sens.rates, tip_position=sens.tip_position)
-    plant = s.plant.build(s.true_params, model, sensor_config)
+    plant = s.plant.build(s.true_params, model, sensor_config, s.Ts)
     controller, observer = build_controller(s, model), build_observer(s, model)
     return Setup(model, plant, controller, observer, make_reference(s.reference))
 
@@ -138,36 +137,37 @@ class _Run:
     (allocated once: no allocation per sample)."""
 
     def __init__(self, s: Scenario, model: ArmModel, reference, measured: tuple[str, ...],
-                 observer, residual_names: tuple[str, ...], laws, truth_size: int,
+                 observer, residual_names: tuple[str, ...], laws, plant_form,
                  y_idx: np.ndarray) -> None:
-        n, Ts = model.n, s.Ts
-        self.n, self.N = n, int(round(s.duration / Ts))
+        n, Ts, joints = model.n, s.Ts, model.n_joints
+        extras = truth_extras(joints)
+        self.n, self.N, self.joints = n, int(round(s.duration / Ts)), joints
         seeds = np.random.SeedSequence(s.seed).spawn(2)
         self.std = measurement_noise(s.sensors, measured)
         noise = (noise_stream(np.random.default_rng(seeds[0]), (self.N, len(measured)))
                  if np.any(self.std > 0) else np.zeros((0, len(measured))))
-        dspec = _disturbance_spec(s.disturbances, Ts)
+        dspec = _disturbance_spec(s.disturbances, Ts, joints)
         dnoise = noise_stream(np.random.default_rng(seeds[1]), _noise_draws(dspec, self.N, Ts))
-        self.names, self.off = signal_layout(model.state_names, TRUTH_EXTRAS, measured,
-                                             observer is not None, residual_names)
+        self.names, self.off = signal_layout(model.state_names, extras, measured,
+                                             observer is not None, residual_names, joints)
         self.rows = np.full((self.N, len(self.names)), np.nan)
         self.obs_idx = (np.array([measured.index(m) for m in observer.measured], dtype=np.int64)
                         if observer is not None else np.zeros(0, dtype=np.int64))
-        self.info, self.ref = np.zeros(1), np.zeros(6)
+        self.info, self.ref = np.zeros(2), np.zeros(3 * joints)
+        lengths = np.array([link.length for link in s.true_params.links])
         self.bounds = np.array([s.divergence.max_angle, s.divergence.max_rate,
-                                s.divergence.max_deflection * s.true_params.L1,
-                                s.divergence.max_deflection * s.true_params.L2])
-        self.truth = np.zeros(truth_size)
+                                *(s.divergence.max_deflection * lengths)])
+        self.truth = np.zeros(2 * n + len(extras))
         self.yv, self.y_used = np.zeros(len(measured)), np.zeros(len(measured))
         self.x_hat = np.zeros(2 * n)
         self.tau, self.tau_plant, self.last_tau = np.zeros(2 * n), np.zeros(2 * n), np.zeros(2 * n)
         self.force = np.zeros(2)
         self.traceback = ""  # a law's own frames where it raised (`own_frames`)
-        self.counts = np.array([0, 2], dtype=np.int64)  # noise draws used, torques applied
+        self.counts = np.array([0, joints], dtype=np.int64)  # noise draws, torques applied
         (controller, observer_law), self.failure = laws
         self.context = context(
-            n=n, Ts=Ts, refkind=int(reference.kind), refspec=reference.spec,
-            bounds=self.bounds, lengths=np.array([s.true_params.L1, s.true_params.L2]),
+            n=n, joints=joints, Ts=Ts, refkind=int(reference.kind), refspec=reference.spec,
+            bounds=self.bounds, lengths=lengths,
             info=self.info, truth=self.truth, y_idx=y_idx, yv=self.yv, std=self.std,
             noise=noise, dbuf=np.zeros((s.sensors.delay + 1, len(measured))),
             y_used=self.y_used, ref=self.ref, off=self.off, limit=float(s.torque_limit),
@@ -177,7 +177,8 @@ class _Run:
             y_obs=np.zeros(len(self.obs_idx)), x_hat=self.x_hat, tau=self.tau,
             tau_plant=self.tau_plant, force=self.force, last_tau=self.last_tau,
             **law_fields("c", "controller", controller),
-            **law_fields("o", "observer", observer_law))
+            **law_fields("o", "observer", observer_law),
+            **plant_fields(plant_form, len(plant_form.state) if plant_form else 0))
 
 
 @one_thread
@@ -189,7 +190,7 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
     Parameters
     ----------
     plant : Plant
-        Any object with the Plant interface (`reduced_model._plant_interface`).
+        Any plant (`reduced_model.Plant`), built for the scenario's ``Ts``.
     controller, observer
         The laws (`controllers._interface`); ``observer`` may be None.
     scenario : Scenario
@@ -211,7 +212,7 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
                                    s.model.kinematics)
     if reference is not None and reference != make_reference(s.reference):
         raise ValueError("reference must be the scenario's own (see scenario.reference)")
-    n, Ts = model.n, s.Ts
+    n, Ts, N = model.n, s.Ts, model.n_joints
     reference = make_reference(s.reference)
     x0 = initial_state(s, model)
     y = plant.reset(plant_state(x0, plant, model))
@@ -222,22 +223,23 @@ def simulate(plant, controller, observer, scenario: Scenario, *, reference=None,
         observer.reset(x0 + s.initial_estimate_error())
     residual = getattr(controller, "residual", None)  # the PBC's unrealisable forces
     residual_names = () if residual is None else (
-        model.coordinate_names[2:] if len(residual) == n - 2 else
+        model.coordinate_names[N:] if len(residual) == n - N else
         tuple(str(i + 1) for i in range(len(residual))))
     laws = _compiled_laws(controller, observer, model)
     payload_force = any(d.target in ("tip_x", "tip_y") for d in s.disturbances)
-    plant_form = plant.compiled_stepping() if laws is not None and not payload_force else None
     direct = plant.measurement_index()  # the measurement's place in the truth, or None
+    plant_form = (plant.compiled() if laws is not None and not payload_force
+                  and direct is not None else None)
     y_idx = np.zeros(0, dtype=np.int64) if direct is None else direct
     r = _Run(s, model, reference, y.names, observer, residual_names,
-             laws or _absent_laws(model), 2 * n + len(TRUTH_EXTRAS), y_idx)
+             laws or _absent_laws(model), plant_form, y_idx)
     paths = {"loop": "compiled" if plant_form is not None else "python",
              "controller": "compiled" if laws is not None else "python",
              "observer": ("none" if observer is None else
                           "compiled" if laws is not None else "python")}
     wall0 = _time.perf_counter()
     if plant_form is not None:
-        status, message, k_done, timings = _compiled_loop(plant_form, r, s)
+        status, message, k_done, timings = _compiled_loop(r, s)
     else:
         status, message, k_done, timings = _python_loop(plant, controller, observer, s,
                                                         reference, r, laws is not None,
@@ -278,12 +280,10 @@ def _absent_laws(model: ArmModel):
     return (absent("controller", model), absent("observer", model)), ""
 
 
-def _compiled_loop(plant_form: dict, r: _Run, s: Scenario):
-    """The whole loop in one compiled call (`run_reduced`)."""
-    k_done, code = run_reduced(r.context, r.rows, plant_form["h"], plant_form["nsteps"](s.Ts),
-                               plant_form["x"], *plant_form["model"], plant_form["basis"],
-                               *plant_form["joints"])
-    message = status_message(code, r.info[0], s.divergence, min(k_done, r.N) * s.Ts, r.failure)
+def _compiled_loop(r: _Run, s: Scenario):
+    """The whole loop in one compiled call (`run_compiled`)."""
+    k_done, code = run_compiled(r.context, r.rows)
+    message = status_message(code, r.info, s.divergence, min(k_done, r.N) * s.Ts, r.failure)
     status = "ok" if code == SampleStatus.OK else "diverged"
     return status, message, k_done, {"first": 0.0}  # one call: no split into plant and laws
 
@@ -301,7 +301,7 @@ def _python_loop(plant, controller, observer, s: Scenario, reference, r: _Run,
     status, message, k_done = "ok", "", N
     # the payload force, when a disturbance acts there (else the plant is told none)
     force = r.force if any(d.target in ("tip_x", "tip_y") for d in s.disturbances) else None
-    applied = {m: r.tau_plant[:m] for m in (2, n)}  # by the number of torques applied
+    applied = {m: r.tau_plant[:m] for m in (r.joints, n)}  # by the torques applied
     sample = laws.sample if laws is not None else (lambda t, k, row: sample_laws(ctx, t, k, row))
     advance, truth_into, truth = plant.advance, plant.truth_into, r.truth
     truth_into(truth)
@@ -319,11 +319,11 @@ def _python_loop(plant, controller, observer, s: Scenario, reference, r: _Run,
             break
         if code != SampleStatus.OK:
             status, k_done = "diverged", k
-            message = status_message(code, r.info[0], s.divergence, t, r.failure)
+            message = status_message(code, r.info, s.divergence, t, r.failure)
             break
         t_laws += _time.perf_counter() - a
         try:
-            advance(applied[r.counts[1]], Ts, tip_force=force)
+            advance(applied[r.counts[1]], tip_force=force)
         except PlantFailure as exc:
             status, message, k_done = "failed", str(exc), k + 1
             break
@@ -331,9 +331,9 @@ def _python_loop(plant, controller, observer, s: Scenario, reference, r: _Run,
         if k == 0:  # the first sample pays for loading or compiling the kernels
             first = _time.perf_counter() - wall0
     else:
-        code = check_bounds(r.truth, n, r.bounds, r.info)
+        code = check_bounds(r.truth, n, r.joints, r.bounds, r.info)
         if code != SampleStatus.OK:
-            status, message = "diverged", status_message(code, r.info[0], s.divergence, N * Ts)
+            status, message = "diverged", status_message(code, r.info, s.divergence, N * Ts)
     plant_s = _time.perf_counter() - wall0 - t_laws  # the plant and the loop around it
     return status, message, k_done, {"plant_s": plant_s, "laws_s": t_laws, "first": first}
 
@@ -377,7 +377,7 @@ class _PythonLaws:
             calling = self.controller
             out = _real_array(self.controller(t, x_hat if self.use_estimate else
                                               r.truth[:2 * self.n], self.ref),
-                              ((2,), (self.n,)), "torques")
+                              ((r.joints,), (self.n,)), "torques")
             if self.s_res is not None:  # read each sample: it may be rebound
                 row[self.s_res] = _real_array(self.controller.residual,
                                               ((self.s_res.stop - self.s_res.start,),),
@@ -385,7 +385,8 @@ class _PythonLaws:
         except ObserverFailure as exc:
             label = name_of(calling)
             raise _LawRaised("diverged", status_message(
-                SampleStatus.OBSERVER_FAILED, 0.0, self.divergence, t, f"{label}: {exc}")) from None
+                SampleStatus.OBSERVER_FAILED, (0.0, 0.0), self.divergence, t,
+                f"{label}: {exc}")) from None
         except _NotReal as exc:
             label = name_of(calling)
             raise _LawRaised("failed", f"{label} returned {exc} at t = {t:.4g} s") from None
@@ -419,13 +420,13 @@ def _real_array(value, shapes: tuple, what: str) -> np.ndarray:
     return array.astype(float, copy=False)
 
 
-def _disturbance_spec(specs, Ts: float) -> np.ndarray:
+def _disturbance_spec(specs, Ts: float, joints: int) -> np.ndarray:
     """The scenario's disturbances as rows [kind, target, amplitude, start, duration,
-    frequency, decay] for the sample kernel (`DisturbanceKind`, `DisturbanceTarget`);
+    frequency, decay] for the sample kernel (`DisturbanceKind`, `disturbance_target`);
     decay = exp(−2π·bandwidth·Ts) of the low-passed noise."""
     out = np.zeros((len(specs), 7))
     for i, d in enumerate(specs):
-        out[i] = (DisturbanceKind[d.kind.upper()], DisturbanceTarget[d.target.upper()],
+        out[i] = (DisturbanceKind[d.kind.upper()], disturbance_target(d.target, joints),
                   d.amplitude, d.start, d.duration or 0.0, d.frequency or 0.0,
                   np.exp(-2 * np.pi * d.bandwidth * Ts) if d.bandwidth else 0.0)
     return out
@@ -451,18 +452,18 @@ def measurement_noise(sensors, measured) -> np.ndarray:
 def initial_state(scenario: Scenario, model: ArmModel) -> np.ndarray:
     """x(0) of a run of ``scenario`` in ``model``'s coordinates: at rest at θ_d(0), or
     moving with the reference (initial_state = "reference"); no deflection."""
-    n = model.n
+    n, N = model.n, model.n_joints
     x0 = np.zeros(2 * n)
     theta_d0, dtheta_d0, _ = make_reference(scenario.reference)(0.0)
-    x0[:2] = theta_d0
+    x0[:N] = theta_d0
     if scenario.initial_state == "reference":
-        x0[n:n + 2] = dtheta_d0
+        x0[n:n + N] = dtheta_d0
     return x0
 
 
 def plant_state(x0: np.ndarray, plant, model: ArmModel) -> np.ndarray:
     """The initial state in the plant's own coordinates: same joints, no deflection."""
     out = np.zeros(plant.state_size)
-    half, n = plant.state_size // 2, model.n
-    out[:2], out[half:half + 2] = x0[:2], x0[n:n + 2]
+    half, n, N = plant.state_size // 2, model.n, model.n_joints
+    out[:N], out[half:half + N] = x0[:N], x0[n:n + N]
     return out

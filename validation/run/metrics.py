@@ -44,6 +44,7 @@ from reduced_model import ArmParameters
 from .reductions import after as _after
 from .reductions import as_float as _f64
 from .reductions import peak as _max
+from .reductions import per_joint
 from .reductions import rms as _rms
 from .results import RunResult
 from .vibration import vibration, vibration_cutoff
@@ -93,7 +94,7 @@ def tracking(result: RunResult, transient: float) -> dict[str, float]:
     Returns
     -------
     track_rms_i : float
-        RMS of θ_i − θ_i,d after the transient [rad], joint i = 1, 2.
+        RMS of θ_i − θ_i,d after the transient [rad], joint i = 1 … N.
     track_max_i : float
         Max |θ_i − θ_i,d| after the transient [rad].
     rate_err_max_i : float
@@ -102,15 +103,17 @@ def tracking(result: RunResult, transient: float) -> dict[str, float]:
         The larger of rate_err_max_i ÷ the reference's peak rate of joint i [ratio].
     """
     window = _after(result, transient)
-    err = (_f64(result, ["theta1", "theta2"]) - _f64(result, ["theta1_ref", "theta2_ref"]))
-    rate_ref = _f64(result, ["theta1_dot_ref", "theta2_dot_ref"])[:, window]
-    rate_err = _f64(result, ["theta1_dot", "theta2_dot"])[:, window] - rate_ref
+    err = (_f64(result, per_joint(result, "theta{}"))
+           - _f64(result, per_joint(result, "theta{}_ref")))
+    rate_ref = _f64(result, per_joint(result, "theta{}_dot_ref"))[:, window]
+    rate_err = _f64(result, per_joint(result, "theta{}_dot"))[:, window] - rate_ref
     err = err[:, window]
     rms, mx, rmx = _rms(err), _max(err), _max(rate_err)
     peak = _max(rate_ref)
-    out = {f"track_rms_{i + 1}": float(rms[i]) for i in range(2)}
-    out |= {f"track_max_{i + 1}": float(mx[i]) for i in range(2)}
-    out |= {f"rate_err_max_{i + 1}": float(rmx[i]) for i in range(2)}
+    joints = range(err.shape[0])
+    out = {f"track_rms_{i + 1}": float(rms[i]) for i in joints}
+    out |= {f"track_max_{i + 1}": float(mx[i]) for i in joints}
+    out |= {f"rate_err_max_{i + 1}": float(rmx[i]) for i in joints}
     with np.errstate(divide="ignore", invalid="ignore"):
         out["rate_err_rel"] = float(np.max(rmx / peak)) if np.all(peak > 0) else math.nan
     return out
@@ -134,8 +137,9 @@ def tip_error(result: RunResult, transient: float) -> dict[str, float]:
         Its max after the transient [m].
     """
     window = _after(result, transient)
-    d = np.hypot(result["tip2_x"].astype(float) - result["tip_ref_x"],
-                 result["tip2_y"].astype(float) - result["tip_ref_y"])[window]
+    tip = per_joint(result, "tip{}")[-1]  # the last link's tip: the payload
+    d = np.hypot(result[f"{tip}_x"].astype(float) - result["tip_ref_x"],
+                 result[f"{tip}_y"].astype(float) - result["tip_ref_y"])[window]
     return {"tip_err_rms": float(_rms(d)), "tip_err_max": float(_max(d))}
 
 
@@ -158,10 +162,10 @@ def deflection(result: RunResult, transient: float) -> dict[str, float]:
     defl_rms_i : float
         RMS tip deflection of link i after the transient [m].
     """
-    w = _f64(result, ["tip_defl1", "tip_defl2"])
+    w = _f64(result, per_joint(result, "tip_defl{}"))
     late = _after(result, transient)
     out = {}
-    for i in range(2):
+    for i in range(w.shape[0]):
         out[f"defl_max_{i + 1}"] = float(_max(w[i]))
         out[f"defl_late_max_{i + 1}"] = float(_max(w[i, late]))
         out[f"defl_rms_{i + 1}"] = float(_rms(w[i, late]))
@@ -197,7 +201,7 @@ def convergence_tolerances(states, signal_rms: dict, noise_floor: dict,
     where the paper states no number, `CONVERGENCE_FRACTION` × its RMS."""
     slopes = {}
     if model is not None:
-        names = model.coordinate_names[2:]
+        names = model.coordinate_names[model.n_joints:]
         dphi = np.concatenate([m.tip_values[1] for m in model.mode_shapes])
         slopes = {f"{c}_dot": abs(float(d)) for c, d in zip(names, dphi)}
     out = {}
@@ -313,9 +317,11 @@ def tip_slope_rate_error(result: RunResult, transient: float, model) -> dict[str
     if "xhat_theta1" not in result:
         return {}
     window = _after(result, transient)
-    names = model.coordinate_names[2:]
+    names = model.coordinate_names[model.n_joints:]
     out, start = {}, 0
     for i, modes in enumerate(model.mode_shapes):
+        if not modes.n:
+            continue
         link = names[start:start + modes.n]
         start += modes.n
         dphi = modes.tip_values[1]
@@ -344,8 +350,8 @@ def torque(result: RunResult) -> dict[str, float]:
     """
     out = {}
     span = max(result.time[-1] - result.time[0], 1e-12) if result.time.size > 1 else math.nan
-    for i in (1, 2):
-        tau = result[f"tau{i}"].astype(float)
+    for i, name in enumerate(per_joint(result, "tau{}"), start=1):
+        tau = result[name].astype(float)
         out[f"tau_rms_{i}"] = float(_rms(tau))
         out[f"tau_max_{i}"] = float(_max(tau))
         out[f"tau_tv_{i}"] = float(np.abs(np.diff(tau)).sum() / span) if tau.size > 1 else math.nan
@@ -372,7 +378,7 @@ def growth_rate(result: RunResult) -> dict[str, float]:
     growth_rate : float
         Growth rate of the loop's fastest motion over the run's second half [1/s].
     """
-    tau = np.vstack([result["tau1"], result["tau2"]]).astype(float)
+    tau = _f64(result, per_joint(result, "tau{}"))
     if tau.shape[1] < 3:
         return {"growth_rate": math.nan}
     d2, t = np.diff(tau, 2, axis=1), result.time[2:]
@@ -438,7 +444,7 @@ def all_metrics(result: RunResult, transient: float | None = None) -> dict[str, 
         transient = float(config["transient"])
     true_params = ArmParameters.from_mapping(config["true_params"])
     model = nominal_model(ArmParameters.from_mapping(config["nominal_params"]),
-                          tuple(config["model"]["modes_per_link"]))
+                          config["model"]["modes_per_link"])
     return (base | tracking(result, transient) | tip_error(result, transient)
             | deflection(result, transient)
             | vibration(result, transient, vibration_cutoff(true_params))

@@ -35,9 +35,9 @@ class PluginSettings(PlantSettings):
     """``kind = "package.module:Class"``: a user's plant.
 
     A `reduced_model.Plant` subclass (of the base or of a built-in plant), constructed as
-    ``Class(params, model=..., sensors=..., **options)`` (``params``: the true arm;
-    ``model``: the controller's nominal `ArmModel`, whose mode shapes its q are
-    expressed in).
+    ``Class(params, model=..., sensors=..., Ts=..., **options)`` (``params``: the true
+    arm; ``model``: the controller's nominal `ArmModel`, whose mode shapes its q are
+    expressed in; ``Ts``: the control period).
 
     Parameters
     ----------
@@ -72,8 +72,8 @@ class PluginSettings(PlantSettings):
         return f"{self.role} plant ({self.kind})"
 
     @property
-    def actuated(self) -> int:
-        return 2  # known without importing it: two joint torques
+    def generalised_forces(self) -> bool:
+        return False  # known without importing it: the joint torques only
 
     def check(self) -> None:
         """ConfigError naming the key unless the plug-in class imports and takes the
@@ -86,17 +86,17 @@ class PluginSettings(PlantSettings):
                                                    f"the scenario says {self.role!r}")
         accepted = accepted_options(cls)
         if accepted is not None:
-            own = [k for k in accepted if k not in ("params", "model", "sensors")]
+            own = [k for k in accepted if k not in ("params", "model", "sensors", "Ts")]
             for key in self.options:
                 check(key in own, f"plant.options.{key}",
                       f"not an option of {self.kind} (options: {', '.join(own) or 'none'})"
                       f"{did_you_mean(key, own)}")
         return cls
 
-    def build(self, params, model, sensors):
+    def build(self, params, model, sensors, Ts):
         cls = self._checked_class()
         try:
-            plant = cls(params, model=model, sensors=sensors, **self.options)
+            plant = cls(params, model=model, sensors=sensors, Ts=Ts, **self.options)
         except Exception as exc:  # noqa: BLE001 - a plug-in may raise anything; say what
             message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise ConfigError("plant.options", f"{self.kind}: {message}") from None

@@ -109,18 +109,19 @@ def bound_lines(ax, bound: float, label: str) -> None:
 
 # --- the paper's Figs. 3 and 4 -------------------------------------------------------------
 def draw_tracking(axes, group, transient: float, bound: float | None = None) -> None:
-    """The panels of the paper's Fig. 3 into ``axes`` (2 × 2: θ per joint above, θ − θ_d
+    """The panels of the paper's Fig. 3 into ``axes`` (2 × N: θ per joint above, θ − θ_d
     [mrad] below), every run of ``group`` ((run, result) pairs) overlaid, with the
     tracking claim's bound ``bound`` [rad]; the error axes scaled after ``transient``."""
-    errs = {0: [], 1: []}
+    joints = range(axes.shape[1])
+    errs = {j: [] for j in joints}
     for run, res in group:
-        for j in (0, 1):
+        for j in joints:
             plant_trace(axes[0, j], run, res.time, res[f"theta{j + 1}"])
             e = 1e3 * (res[f"theta{j + 1}"].astype(float) - res[f"theta{j + 1}_ref"])
             plant_trace(axes[1, j], run, res.time, e, label=False)
             errs[j].append((res.time, e))
     ref = group[0][1]
-    for j in (0, 1):
+    for j in joints:
         axes[0, j].plot(ref.time, ref[f"theta{j + 1}_ref"], color="k", lw=0.6, ls=":",
                         label="reference, eq. (37)", zorder=4)
         axes[0, j].set_ylabel(f"θ{j + 1} [rad]".translate(SUB))
@@ -137,19 +138,20 @@ def draw_deflections(axes, group, transient: float, cutoff_hz: float | None = No
     [mm], and with ``cutoff_hz`` a second row: its oscillatory part above that frequency,
     the vibration the claim judges, with the bound ``bound`` [m] on its RMS)."""
     from .vibration import oscillatory
-    vib, rms = {0: [], 1: []}, {0: [], 1: []}
+    links = range(axes.shape[1])
+    vib, rms = {j: [] for j in links}, {j: [] for j in links}
     for run, res in group:
-        for j in (0, 1):
+        for j in links:
             plant_trace(axes[0, j], run, res.time, 1e3 * res[f"tip_defl{j + 1}"].astype(float))
         if cutoff_hz and res.time.size > 16:
             v = 1e3 * oscillatory(res, cutoff_hz)
             late = res.time >= transient
-            for j in (0, 1):
+            for j in links:
                 plant_trace(axes[1, j], run, res.time, v[j], label=False)
                 vib[j].append((res.time, v[j]))
                 if late.any():
                     rms[j].append(f"{run.role} {np.sqrt(np.mean(v[j][late] ** 2)):.3g}")
-    for j in (0, 1):
+    for j in links:
         axes[0, j].set_ylabel(f"tip deflection {j + 1} [mm]")
         if cutoff_hz:
             axes[1, j].set_ylabel(f"vibration {j + 1} [mm]\n(> {cutoff_hz:.2f} Hz)")
@@ -163,16 +165,19 @@ def draw_deflections(axes, group, transient: float, cutoff_hz: float | None = No
 
 
 def plot_results(results, *, transient: float | None = None):
-    """One figure of the paper's Figs. 3–4 layout for ``results`` (RunResults, overlaid:
-    the same scenario on two plants, say): θ per joint with the reference, θ − θ_d [mrad]
-    and the tip deflections [mm], a column per joint.  The error axes are scaled after
+    """One figure of the paper's Figs. 3–4 layout for ``results`` (RunResults of one arm,
+    overlaid: the same scenario on two plants, say): θ per joint with the reference,
+    θ − θ_d [mrad] and the tip deflections [mm], a column per joint (and its link).  The error axes are scaled after
     ``transient`` (default: the first result's)."""
     import matplotlib.pyplot as plt
     results = [r for r in results if r.time.size]
     group = [(_View(r.config), r) for r in results]
     if transient is None:
         transient = float(results[0].config.get("transient", 0.0))
-    fig, axes = plt.subplots(3, 2, figsize=(9, 7), sharex=True, layout="constrained")
+    from .reductions import joints_of
+    joints = joints_of(results[0])
+    fig, axes = plt.subplots(3, joints, figsize=(1.5 + 3.75 * joints, 7), sharex=True,
+                             layout="constrained", squeeze=False)
     draw_tracking(axes[:2], group, transient)
     draw_deflections(axes[2:], group, transient)
     for ax in axes[-1]:

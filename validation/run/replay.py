@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reduced_model._plant_interface import TRUTH_EXTRAS, check_sample_time
+from reduced_model import check_sample_time
 
 from .loop import build, initial_state, plant_state
 from .scenario import Scenario
@@ -25,7 +25,7 @@ __all__ = ["Replay", "fresh_plant", "truth_now", "bare_replay"]
 @dataclass
 class Replay:
     """What `bare_replay` measured."""
-    theta: np.ndarray  #: (periods, 2): θ at the start of each period (``record``) or of the last
+    theta: np.ndarray  #: (periods, N): θ at the start of each period (``record``) or of the last
     truth: np.ndarray  #: the truth vector at the end
     seconds: float  #: wall time of the periods (loads and solves)
     newton_per_step: float  #: Newton iterations per solver step
@@ -46,21 +46,21 @@ def fresh_plant(scenario: Scenario):
 
 def truth_now(plant) -> np.ndarray:
     """The plant's truth vector read now (not the copy it keeps for its last step)."""
-    out = np.empty(plant.state_size + len(TRUTH_EXTRAS))
+    out = np.empty(plant.truth_size)
     plant.truth_into(out)
     return out
 
 
 def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False,
                 exact_hold: bool = True) -> Replay:
-    """Apply ``torques`` (periods, 2) [N m] — what the plant received, disturbances
+    """Apply ``torques`` (periods, N) [N m] — what the plant received, disturbances
     included — one per control period of ``scenario`` to its fresh Exudyn plant.
     ``record``: read θ at the start of every period (costs a readout per period; off,
     only at the start of the last one, as the floor should be timed).  ``exact_hold``
     False replays with Exudyn's own first-order treatment of the torque jumps (the
     truth plant before issue 31: what ``bench/bench_hold.py`` measures against)."""
     p = scenario.true_params
-    if p.torque_time_constant1 > 0 or p.torque_time_constant2 > 0:
+    if any(j.torque_time_constant > 0 for j in p.joints):
         raise ValueError("a bare replay holds each period's torque as it is; an arm with "
                          "current-loop lags needs the plant's own advance")
     plant = fresh_plant(scenario)
@@ -69,13 +69,15 @@ def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False
     mbs, solver, settings = plant.system.mbs, plant.solver, plant.settings
     hold_loads = plant.hold_loads
     steps_per_period = check_sample_time(scenario.Ts, plant.h)
-    periods = torques.shape[0]
-    theta = np.empty((periods if record else 1, 2))
+    periods, N = torques.shape[0], plant.n_joints
+    if torques.shape != (periods, N):
+        raise ValueError(f"torques must be (periods, {N}), one per joint, got {torques.shape}")
+    theta = np.empty((periods if record else 1, N))
     started = time.perf_counter()
     for k in range(periods):
         if record or k == periods - 1:
-            theta[k if record else 0] = truth_now(plant)[:2]
-        hold_loads(float(torques[k, 0]), float(torques[k, 1]))
+            theta[k if record else 0] = truth_now(plant)[:N]
+        hold_loads([float(t) for t in torques[k]])
         solver.it.endTime = (k + 1) * steps_per_period * plant.h
         if not solver.SolveSteps(mbs, settings):
             raise RuntimeError(f"the bare replay's solver failed in period {k}")

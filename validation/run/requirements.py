@@ -298,17 +298,18 @@ def _variables(node) -> set[str]:
 
 
 def signal_names(scenario) -> tuple[str, ...]:
-    """The signals a run of ``scenario`` records (`validation.run._sample.signal_layout`): the
+    """The signals a run of ``scenario`` records (`validation.run.sample.signal_layout`): the
     model's states, tips, reference, estimates (with an observer), measurements,
     torques, the PBC's unrealisable forces (laws that have them) and disturbances."""
-    from reduced_model._plant_interface import TRUTH_EXTRAS
+    from reduced_model import truth_extras
 
-    from ._sample import signal_layout
+    from .sample import signal_layout
     from .laws import measurement_names, nominal_model
     model = nominal_model(scenario.nominal_params, scenario.model.modes_per_link)
-    names, _ = signal_layout(model.state_names, TRUTH_EXTRAS,
+    N = model.n_joints
+    names, _ = signal_layout(model.state_names, truth_extras(N),
                              measurement_names(scenario, model),
-                             scenario.observer.kind != "none", model.coordinate_names[2:])
+                             scenario.observer.kind != "none", model.coordinate_names[N:], N)
     return names
 
 

@@ -4,7 +4,7 @@ Arrays of time series are ``(n_signals, n_samples)`` with a tuple of names (SI u
 radians).  A result unpacks like python-control's responses: ``t, y = result``.
 Stored as one ``.npz`` per run (no pickle; metadata as a JSON string; the signals packed
 without loss where a campaign asks: `validation.run.packing`),
-written atomically (`validation.batch.runfiles`; the store: `validation.batch.store`).
+written atomically (`validation.batch.store.runfiles`; the store: `validation.batch.store.folder`).
 """
 from __future__ import annotations
 

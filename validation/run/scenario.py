@@ -8,42 +8,32 @@ combinations before anything is simulated.  Every error names the dotted key.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
-from reduced_model import STRAIN_QUANTITIES, ArmParameters
+from reduced_model import STRAIN_QUANTITIES, ArmParameters, validate_modes_per_link
 
+from .arms import (PAPER_ARMS, PARAMETER_TABLES, arm_label, arm_of, check_scales_on_arm,
+                   own_parameters, params_from_table)
 from .config import ConfigError, check, from_mapping, to_mapping
 from .laws import check_laws, nominal_model
 from .plants import PLANTS, PlantTable
 from .requirements import Requirement, check_requirements
+from .specs import _REFERENCE_FIELDS, reference_defaults
 from .specs import (ControllerSpec, DisturbanceSpec, DivergenceSpec, ModelSpec, ObserverSpec,
                     ReferenceSpec, SensorSpec, class_path, one_of, positive)
 
 __all__ = [
     "Scenario", "PlantTable", "ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec",
     "SensorSpec", "DisturbanceSpec", "DivergenceSpec", "check_scenario",
-    "scenario_from_mapping", "scenario_to_mapping", "arm_parameters", "own_parameters",
-    "check_scales_on_arm", "PARAMETER_TABLES", "PLANT_KINDS", "ARMS",
-    "PAPER_ARMS",
-    "DEFAULT_TRANSIENT", "default_transient",
+    "scenario_from_mapping", "scenario_to_mapping", "own_parameters", "check_scales_on_arm",
+    "PARAMETER_TABLES", "PLANT_KINDS", "PAPER_ARMS", "DEFAULT_TRANSIENT", "default_transient",
 ]
 
-#: The arms a scenario can start from: the practical default (Table 1 + a motor-2 stator
-#: inertia of 0.01 kg m² + bending damping 2e-3 N m² s), the paper's Table 1 exactly, and
-#: the default arm behind small harmonic drives (`ArmParameters.lab`).
-ARMS = {"default": "practical default arm (Table 1 + stator inertia 0.01 kg m² + damping "
-                   "2e-3 N m² s)",
-        "table1": "the paper's Table 1 exactly (no stator inertia, no damping)",
-        "lab": "the default arm behind small harmonic drives: joint friction with "
-               "stiction, gear compliance, rotor inertia, backlash, a 500 Hz current loop"}
-#: The arms a single scenario's stability map and validity are judged on (unless --arm).
-PAPER_ARMS = ("default", "table1")
-#: The scenario's tables that start from the parameters of its ``arm`` (`arm_parameters`).
-PARAMETER_TABLES = ("true_params", "nominal_params")
 FEEDBACK = ("auto", "true", "estimate")
 #: Caps that keep a typo from exhausting memory or hanging a run: samples held in memory
 #: (5e6 = 83 min at 1 kHz, ~3 GB of signals) and internal plant steps per run.
@@ -75,16 +65,20 @@ class Scenario:
     ----------
     name : str
         The run's name in results and reports.
-    arm : {"default", "table1", "lab"}
-        The arm both parameter tables start from: the practical default (Table 1 + a
-        motor-2 stator inertia + structural damping), the paper's Table 1 exactly, or the
-        default arm behind small harmonic drives (`ARMS`, `ArmParameters.lab`).
+    arm : str
+        The arm both parameter tables start from: a shipped arm's name
+        (`reduced_model.named_arms`: the practical default — Table 1 + a motor-2 stator
+        inertia + structural damping —, the paper's Table 1 exactly, the default arm
+        behind small harmonic drives, and arms of 1 to 3 links, rigid or flexible,
+        horizontal or vertical), the path of an arm file, or an inline ``[arm]`` table
+        (named by its ``name``); runs are grouped by it.
     plant : PlantTable
         The plant simulated, chosen by its ``kind``: the settings of a built-in plant
         (`reduced_model.ReducedPlant.Settings`, `plant_exudyn.ExudynPlant.Settings`) or
         of a plug-in (`validation.run.plants.PluginSettings`).
     true_params : reduced_model.ArmParameters
-        The arm simulated: ``arm``'s parameters, overridden key by key.
+        The arm simulated: ``arm``'s parameters, changed by flat key (``EI1``,
+        ``coulomb2``, ``Mp``, ``gravity``); stored in full.
     nominal_params : reduced_model.ArmParameters
         The arm the controller and observer believe in (the same unless a scenario says
         otherwise).
@@ -125,8 +119,8 @@ class Scenario:
     name: str = "paper"
     arm: str = "default"
     plant: PlantTable = PLANTS["reduced"].Settings()
-    true_params: ArmParameters = ArmParameters()
-    nominal_params: ArmParameters = ArmParameters()
+    true_params: ArmParameters = dataclasses.field(default_factory=ArmParameters)
+    nominal_params: ArmParameters = dataclasses.field(default_factory=ArmParameters)
     model: ModelSpec = ModelSpec()
     controller: ControllerSpec = ControllerSpec()
     observer: ObserverSpec = ObserverSpec()
@@ -146,7 +140,7 @@ class Scenario:
     def __post_init__(self):
         check(isinstance(self.name, str) and self.name.strip() != "" and self.name.isprintable(),
               "name", f"must be a non-empty printable string, got {self.name!r}")
-        one_of(self.arm, tuple(ARMS), "arm")
+        arm_label(self.arm)
         one_of(self.feedback, FEEDBACK, "feedback")
         one_of(self.initial_state, INITIAL_STATES, "initial_state")
         positive(self.Ts, "Ts")
@@ -159,16 +153,23 @@ class Scenario:
 
     def initial_estimate_error(self) -> "np.ndarray":
         """x̂(0) − x(0) as a model-state vector (see ObserverSpec.initial_error)."""
-        n = 2 + sum(self.model.modes_per_link)
+        N = self.nominal_params.n_links
+        n = N + sum(self.model_modes)
         err = self.observer.initial_error
         if len(err) == 2 * n:
             return np.asarray(err, dtype=float)
         out = np.zeros(2 * n)
         if len(err) == 4:
             signs = lambda k: (-1.0) ** np.arange(k)  # noqa: E731
-            out[:2], out[2:n] = err[0] * signs(2), err[1] * signs(n - 2)
-            out[n:n + 2], out[n + 2:] = err[2] * signs(2), err[3] * signs(n - 2)
+            out[:N], out[N:n] = err[0] * signs(N), err[1] * signs(n - N)
+            out[n:n + N], out[n + N:] = err[2] * signs(N), err[3] * signs(n - N)
         return out
+
+    @property
+    def model_modes(self) -> tuple[int, ...]:
+        """The laws' modes per link (``model.modes_per_link``, else the nominal arm's)."""
+        modes = self.model.modes_per_link
+        return tuple(modes) if modes is not None else self.nominal_params.modes()
 
     @property
     def uses_estimate(self) -> bool:
@@ -207,24 +208,43 @@ def check_scenario(s: Scenario) -> None:
     s.plant.check()
     check(not (s.feedback == "estimate" and s.observer.kind == "none"), "feedback",
           "'estimate' needs an observer (observer.kind is 'none')")
-    for link, name in ((1, "L1"), (2, "L2")):
-        check(getattr(s.true_params, name) == getattr(s.nominal_params, name),
-              f"nominal_params.{name}", f"must equal true_params.{name}: the modal "
-                                        "coordinates of links of different lengths "
-                                        "cannot be compared")
+    true, nominal = s.true_params, s.nominal_params
+    check(true.n_links == nominal.n_links, "nominal_params.links",
+          f"must be as many as true_params' ({true.n_links}), got {nominal.n_links}")
+    for i, (a, b) in enumerate(zip(true.links, nominal.links), start=1):
+        check(a.length == b.length, f"nominal_params.L{i}",
+              f"must equal true_params.L{i}: the modal coordinates of links of different "
+              "lengths cannot be compared")
+        check(a.rigid == b.rigid, f"nominal_params.modes{i}",
+              f"link {i} must be rigid (0) or flexible in both arms")
+    for key, modes, arm in (("model.modes_per_link", s.model.modes_per_link, nominal),
+                            ("plant.modes_per_link", getattr(s.plant, "modes_per_link", None),
+                             true)):
+        if modes is not None:
+            try:
+                validate_modes_per_link(modes, arm, where=key)
+            except ValueError as exc:
+                raise ConfigError(key, str(exc).removeprefix(key).lstrip(": ")) from None
     for key in PARAMETER_TABLES:
-        _check_modelable(getattr(s, key), s.model.modes_per_link, key)
+        _check_modelable(getattr(s, key), s.model_modes, key)
+    for name in ("amplitude", "omega", "start", "goal"):
+        value = getattr(s.reference, name)
+        check(value is None or len(value) == nominal.n_links, f"reference.{name}",
+              f"needs one value per joint ({nominal.n_links}), got {list(value or ())}")
     check_laws(s)
-    n = 2 + sum(s.model.modes_per_link)
+    N = nominal.n_links
+    n = N + sum(s.model_modes)
     check(len(s.observer.initial_error) in (0, 4, 2 * n), "observer.initial_error",
           f"needs {2 * n} values (the model state), 4 (per group) or none, got "
           f"{len(s.observer.initial_error)}")
     if s.sensors.modal == "gauges":
-        model = nominal_model(s.nominal_params, s.model.modes_per_link)
+        check(N == 2, "sensors.modal", "strain gauges are placed on two-link arms "
+                                       "(gauges_link1, gauges_link2)")
+        model = nominal_model(s.nominal_params, s.model_modes)
         quantity = STRAIN_QUANTITIES[s.sensors.strain_quantity]
         for link, gauges in enumerate((s.sensors.gauges_link1, s.sensors.gauges_link2)):
             key = f"sensors.gauges_link{link + 1}"
-            modes = s.model.modes_per_link[link]
+            modes = s.model_modes[link]
             check(len(gauges) >= modes, key, f"{len(gauges)} gauge(s) for {modes} modes; "
                                              f"need at least {modes}")
             L = s.true_params.L1 if link == 0 else s.true_params.L2
@@ -236,71 +256,6 @@ def check_scenario(s: Scenario) -> None:
                   "(coincident, or at nodes of a mode)")
     check_requirements(s)
     _CHECKED[id(s)] = s
-
-
-def arm_parameters(arm: str) -> ArmParameters:
-    """The parameters of a named arm (`ARMS`)."""
-    one_of(arm, tuple(ARMS), "arm")
-    return {"table1": ArmParameters.table1, "lab": ArmParameters.lab}.get(arm, ArmParameters)()
-
-
-def own_parameters(data: dict) -> dict:
-    """A scenario mapping (a stored run's resolved one) with each parameter table
-    (`PARAMETER_TABLES`) reduced to the user's own layer: the values that differ from the
-    parameters of its ``arm``.  `scenario_from_mapping` merges that layer over whichever
-    arm is named then, so a rerun with another ``arm`` takes that arm's physics and keeps
-    the user's own values.  A value equal to the old arm's cannot be told from it: it
-    follows the new arm.
-
-    Parameters
-    ----------
-    data : dict
-        A scenario mapping; not changed.
-
-    Returns
-    -------
-    dict
-        A copy of ``data`` whose parameter tables hold only the user's own values (a table
-        that is not a table is left for `scenario_from_mapping` to refuse).
-    """
-    base = to_mapping(arm_parameters(data.get("arm", "default")))
-    out = dict(data)
-    for key in PARAMETER_TABLES:
-        table = data.get(key, {})
-        if isinstance(table, dict):
-            out[key] = {k: v for k, v in table.items() if k not in base or base[k] != v}
-    return out
-
-
-def check_scales_on_arm(scaled: dict[str, str], arms, base: dict) -> None:
-    """A scale axis multiplies the base scenario's value, resolved on the base's arm.  On
-    a parameter (`PARAMETER_TABLES`) that the base leaves to its arm, beside an axis that
-    runs an arm whose value differs, it would give that arm the base arm's value: refused
-    (`ConfigError` naming the axis).
-
-    Parameters
-    ----------
-    scaled : dict
-        The dotted fields scaled, each with the axis that scales it (for the error).
-    arms : iterable of str
-        The arms the axes run (an arm that is not one is left to the run's own check).
-    base : dict
-        The resolved base scenario (`scenario_to_mapping`).
-    """
-    own = own_parameters(base)
-    for path, where in scaled.items():
-        table, _, key = path.partition(".")
-        if table not in PARAMETER_TABLES or key in own[table]:
-            continue  # not the arm's, or the base's own value: the same on every arm
-        for arm in sorted(set(arms) - {base["arm"]}):
-            try:
-                value = to_mapping(arm_parameters(arm)).get(key)
-            except ConfigError:
-                continue
-            check(value == base[table].get(key), where,
-                  f"scales {path} of the {base['arm']} arm ({base[table].get(key)!r}), but "
-                  f"the axes also run the {arm} arm, whose value is {value!r}: give values, "
-                  f"not factors, or set arm = {arm!r} in the base scenario")
 
 
 def _check_modelable(params: ArmParameters, modes, key: str) -> None:
@@ -315,7 +270,7 @@ def _check_modelable(params: ArmParameters, modes, key: str) -> None:
 
 
 @functools.lru_cache(maxsize=256)  # an eigenproblem per check; campaigns repeat arms
-def _has_positive_frequencies(params: ArmParameters, modes: tuple[int, int]) -> bool:
+def _has_positive_frequencies(params: ArmParameters, modes: tuple[int, ...]) -> bool:
     with np.errstate(all="raise"):
         f = nominal_model(params, modes).natural_frequencies()
     return bool(np.all(np.isfinite(f)) and np.all(f > 0))
@@ -324,7 +279,7 @@ def _has_positive_frequencies(params: ArmParameters, modes: tuple[int, int]) -> 
 def scenario_from_mapping(data: dict) -> Scenario:
     """Build and check a scenario from a mapping (unknown keys and bad values raise
     `ConfigError` naming the dotted key).  ``true_params`` and ``nominal_params`` start
-    from the parameters of ``arm`` and override them key by key.
+    from the arm ``arm`` names and change it by flat key (`validation.run.arms`).
 
     Parameters
     ----------
@@ -356,15 +311,32 @@ def scenario_from_mapping(data: dict) -> Scenario:
     validation.run.config.ConfigError: plant.stepp: unknown key for kind 'exudyn'; did you
     mean plant.step? (...)
     """
-    base = to_mapping(arm_parameters(data.get("arm", "default")))
     data = dict(data)
+    arm = data.get("arm", "default")
+    data["arm"] = arm_label(arm)
+    base = functools.cache(lambda: arm_of(arm))  # read only where a table needs it
     for role in ("controller", "observer", "plant"):
         spec = data.get(role)
         if isinstance(spec, dict) and "kind" in spec and not isinstance(spec["kind"], str):
             data[role] = dict(spec, kind=class_path(spec["kind"], f"{role}.kind"))
     for key in PARAMETER_TABLES:
         given = data.get(key, {})
-        data[key] = {**base, **given} if isinstance(given, dict) else given
+        if not isinstance(given, ArmParameters):
+            data[key] = params_from_table(given, base, key)
+    # The reference's per-joint defaults are for the arm's joints.
+    reference = data.get("reference", {})
+    if isinstance(reference, dict):
+        joints = data["nominal_params"].n_links
+        used = _REFERENCE_FIELDS[reference.get("kind", "paper")] if reference.get(
+            "kind", "paper") in _REFERENCE_FIELDS else ()
+        data["reference"] = {**{k: v for k, v in reference_defaults(joints).items()
+                                if k in used}, **reference}
+    # Model orders not given are the arms' own, written out in the resolved scenario.
+    for role, params in (("model", data["nominal_params"]), ("plant", data["true_params"])):
+        table = data.get(role, {})
+        if isinstance(table, dict) and table.get("modes_per_link") is None and (
+                role == "model" or table.get("kind", "reduced") == "reduced"):
+            data[role] = {**table, "modes_per_link": list(params.modes())}
     scenario = from_mapping(Scenario, data)
     check_scenario(scenario)
     return scenario

@@ -13,18 +13,17 @@ import numpy as np
 from controllers import ReferenceKind
 from reduced_model import KINEMATICS, STRAIN_QUANTITIES, validate_modes_per_link
 
-from ._sample import DisturbanceKind, DisturbanceTarget
+from .sample import DISTURBANCE_TARGETS, DisturbanceKind
 from .config import ConfigError, check, did_you_mean
 
 __all__ = ["ModelSpec", "ControllerSpec", "ObserverSpec", "ReferenceSpec", "SensorSpec",
            "DisturbanceSpec", "DivergenceSpec", "class_path", "one_of", "positive",
-           "REFERENCE_KINDS", "MODAL_SENSORS", "DISTURBANCE_KINDS", "DISTURBANCE_TARGETS",
+           "REFERENCE_KINDS", "reference_defaults", "MODAL_SENSORS", "DISTURBANCE_KINDS", "DISTURBANCE_TARGETS",
            "MAX_NOISE"]
 
 REFERENCE_KINDS = tuple(k.name.lower() for k in ReferenceKind)
 MODAL_SENSORS = ("direct", "gauges", "none")
 DISTURBANCE_KINDS = tuple(k.name.lower() for k in DisturbanceKind)
-DISTURBANCE_TARGETS = tuple(k.name.lower() for k in DisturbanceTarget)
 #: Largest noise standard deviation accepted (rad, m, rad/s or m/s): beyond it nothing is
 #: measured at all.
 MAX_NOISE = 1e3
@@ -42,11 +41,13 @@ def positive(value, name, *, allow_zero=False) -> None:
 
 
 def _modes(value) -> None:
+    if value is None:
+        return
     try:
         validate_modes_per_link(value)
     except ValueError:
-        raise ConfigError("modes_per_link", f"must be two integers in 1..4, got "
-                                            f"{list(value)!r}") from None
+        raise ConfigError("modes_per_link", f"must be one integer in 0..4 per link (0: a "
+                                            f"rigid link), got {list(value)!r}") from None
 
 
 
@@ -58,8 +59,9 @@ class ModelSpec:
 
     Parameters
     ----------
-    modes_per_link : (int, int)
-        Assumed modes of link 1 and link 2 in the model the laws are built on (1..4 each).
+    modes_per_link : list of int, optional
+        Assumed modes of each link in the model the laws are built on (1..4; 0 for a
+        rigid link; default: the nominal arm's ``modes``).
     kinematics : {"linear", "exact"}
         The kinematics of that model: the paper's linear kinematics, or exact
         inextensible kinematics (`reduced_model.ArmModel`).  The PBC, the observers and
@@ -67,7 +69,7 @@ class ModelSpec:
         designed at q = 0 where both kinematics agree, are the same on either.
     """
 
-    modes_per_link: tuple[int, int] = (2, 2)
+    modes_per_link: tuple[int, ...] | None = None
     kinematics: str = "linear"
 
     def __post_init__(self):
@@ -146,10 +148,21 @@ class ObserverSpec:
               "must be finite numbers")
 
 
-#: The settings each reference kind uses, and their defaults.
+#: The settings each reference kind uses.
 _REFERENCE_FIELDS = {"paper": ("amplitude", "omega"), "quintic": ("start", "goal", "move_time")}
-_REFERENCE_DEFAULTS = {"amplitude": (2.0, 2.0), "omega": (0.1 * np.pi, 0.2 * np.pi),
-                       "start": (0.0, 0.0), "goal": (1.0, -1.0), "move_time": 4.0}
+
+
+def reference_defaults(joints: int) -> dict:
+    """The reference's defaults for an arm of ``joints`` joints: eq. (37)'s amplitude 2 rad
+    and ω_i = 0.1π·i rad/s (the paper's (0.1π, 0.2π) on two joints); a move from 0 to ±1
+    rad, alternating, in 4 s."""
+    return {"amplitude": (2.0,) * joints,
+            "omega": tuple(0.1 * np.pi * (i + 1) for i in range(joints)),
+            "start": (0.0,) * joints, "goal": (1.0, -1.0, 1.0, -1.0)[:joints],
+            "move_time": 4.0}
+
+
+_REFERENCE_DEFAULTS = reference_defaults(2)
 
 
 @dataclass(frozen=True)
@@ -162,24 +175,24 @@ class ReferenceSpec:
     kind : {"paper", "quintic"}
         "paper": eq. (37), θ_d = amplitude·sin(omega·t); "quintic": rest-to-rest from
         ``start`` to ``goal`` in ``move_time``, then hold.
-    amplitude : (float, float)
-        Amplitudes of eq. (37) per joint [rad] (only "paper"; default (2, 2)).
-    omega : (float, float)
-        Angular frequencies of eq. (37) per joint [rad/s] (only "paper"; default
-        (0.1π, 0.2π)).
-    start : (float, float)
-        Joint angles at the start of the move [rad] (only "quintic"; default (0, 0)).
-    goal : (float, float)
-        Joint angles at its end [rad] (only "quintic"; default (1, −1)).
+    amplitude : list of float
+        Amplitudes of eq. (37), one per joint [rad] (only "paper"; default 2 each).
+    omega : list of float
+        Angular frequencies of eq. (37), one per joint [rad/s] (only "paper"; default
+        0.1π·i for joint i: the paper's (0.1π, 0.2π)).
+    start : list of float
+        Joint angles at the start of the move [rad] (only "quintic"; default 0 each).
+    goal : list of float
+        Joint angles at its end [rad] (only "quintic"; default 1, −1, 1, … alternating).
     move_time : float
         Duration of the move [s] (only "quintic"; default 4).
     """
 
     kind: str = "paper"
-    amplitude: tuple[float, float] | None = None
-    omega: tuple[float, float] | None = None
-    start: tuple[float, float] | None = None
-    goal: tuple[float, float] | None = None
+    amplitude: tuple[float, ...] | None = None
+    omega: tuple[float, ...] | None = None
+    start: tuple[float, ...] | None = None
+    goal: tuple[float, ...] | None = None
     move_time: float | None = None
 
     def __post_init__(self):

@@ -27,7 +27,7 @@ import numpy as np
 
 from reduced_model import ArmParameters
 
-from .reductions import after, as_float, peak, rms
+from .reductions import after, as_float, peak, per_joint, rms
 
 __all__ = ["vibration", "vibration_decay", "vibration_cutoff", "oscillatory",
            "VIBRATION_CUTOFF", "VIBRATION_WINDOW"]
@@ -40,9 +40,11 @@ VIBRATION_WINDOW = 2.0
 
 
 def vibration_cutoff(params: ArmParameters) -> float:
-    """The vibration high-pass frequency [Hz] for an arm (module docstring)."""
+    """The vibration high-pass frequency [Hz] for an arm (module docstring); NaN for an
+    arm of rigid links only (it has no vibration)."""
     from .laws import nominal_model
-    return VIBRATION_CUTOFF * float(nominal_model(params, (2, 2)).natural_frequencies()[0])
+    frequencies = nominal_model(params, None).natural_frequencies()
+    return VIBRATION_CUTOFF * float(frequencies[0]) if frequencies.size else math.nan
 
 
 @functools.lru_cache(maxsize=64)  # every run of an arm at one Ts designs the same filter
@@ -54,8 +56,8 @@ def _highpass(normalised_cutoff: float) -> np.ndarray:
 
 
 def oscillatory(result, cutoff_hz: float) -> np.ndarray:
-    """The tip deflections' oscillatory part (2, n_samples): zero-phase high-pass."""
-    w = as_float(result, ["tip_defl1", "tip_defl2"])
+    """The tip deflections' oscillatory part (N, n_samples): zero-phase high-pass."""
+    w = as_float(result, per_joint(result, "tip_defl{}"))
     dt = result.time[1] - result.time[0]
     nyquist = 0.5 / dt
     sos = _highpass(min(cutoff_hz / nyquist, 0.99)).copy()  # scipy wants it writable
@@ -88,12 +90,14 @@ def vibration(result, transient: float, cutoff_hz: float) -> dict[str, float]:
     """
     late = after(result, transient)
     out = {"vib_cutoff_hz": cutoff_hz}
-    if result.time.size < 16 or not late.any():
-        return out | {f"vib_{k}_{i}": math.nan for k in ("rms", "max") for i in (1, 2)}
+    links = len(per_joint(result, "{}"))
+    if result.time.size < 16 or not late.any() or not math.isfinite(cutoff_hz):
+        return out | {f"vib_{k}_{i}": math.nan for k in ("rms", "max")
+                      for i in range(1, links + 1)}
     v = oscillatory(result, cutoff_hz)
     late_rms, mx = rms(v[:, late]), peak(v[:, late])
-    return out | {f"vib_rms_{i + 1}": float(late_rms[i]) for i in range(2)} | \
-        {f"vib_max_{i + 1}": float(mx[i]) for i in range(2)} | \
+    return out | {f"vib_rms_{i + 1}": float(late_rms[i]) for i in range(links)} | \
+        {f"vib_max_{i + 1}": float(mx[i]) for i in range(links)} | \
         vibration_decay(result.time, v, transient)
 
 
@@ -106,7 +110,7 @@ def vibration_decay(time: np.ndarray, oscillation: np.ndarray, transient: float)
     time : ndarray
         Sample times [s].
     oscillation : ndarray
-        The oscillatory tip deflections (2, n_samples) [m].
+        The oscillatory tip deflections (N, n_samples) [m].
     transient : float
         Where the decay is measured from [s].
 
@@ -128,7 +132,7 @@ def vibration_decay(time: np.ndarray, oscillation: np.ndarray, transient: float)
     first = int(np.searchsorted(starts, transient - 1e-9))
     second_half = time >= time[0] + 0.5 * (time[-1] - time[0])
     out = {}
-    for i in range(2):
+    for i in range(oscillation.shape[0]):
         windows = np.array([rms(oscillation[i, j * k:(j + 1) * k]) for j in range(n)])
         out |= {f"vib_win_{i + 1}_{s:02.0f}": float(r) for s, r in zip(starts, windows)}
         pair = windows[first:first + 2]

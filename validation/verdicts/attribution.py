@@ -18,7 +18,7 @@ shown for contrast), and the largest pairwise interaction
 m(F) − m(F∖i) − m(F∖j) + m(F∖{i,j}) says where factors do not add up.
 
 ``truncation`` splits the ``plant`` contribution along a sub-ladder: the controller's
-reduced model → the reduced model with 4+4 modes → the FE truth plant.  Every term of
+reduced model → the reduced model with 4 modes per flexible link → the FE truth plant.  Every term of
 the plant's Shapley sum is split the same way, so the two parts — *modes left out* and
 *beyond assumed modes* (distributed FE, geometric nonlinearity) — add up to the plant's
 contribution exactly.
@@ -45,14 +45,15 @@ import itertools
 import math
 from dataclasses import dataclass, field
 
-from reduced_model._parameters import JOINT_EFFECTS
+from reduced_model.arm import JOINT_EFFECTS
 
+from ..run.arms import PARAMETER_TABLES, flat_values, params_from_table
 from ..run.config import ConfigError, check, did_you_mean
 from ..batch.campaign import PlannedRun
 from ..batch.queue import run_planned
 from ..run.plants import with_plant
 from ..run.scenario import Scenario, scenario_from_mapping, scenario_to_mapping
-from ..batch.store import ResultStore, run_id
+from ..batch.store.folder import ResultStore, run_id
 
 __all__ = ["FACTORS", "METRICS", "METRIC_NAMES", "DIVERGED_RULE", "World", "Attribution",
            "plan", "attribute", "shapley", "attribution_from_store", "parse_factors"]
@@ -82,17 +83,19 @@ FACTORS = {
     "bandwidth": "the current loops' lag → an ideal torque, in the true and the nominal arm",
     "kinematics": "the reduced plant's exact inextensible kinematics → the paper's linear "
                   "kinematics (on every reduced plant of a world; none on a truth plant)",
+    "gravity": "the arm's gravity → a horizontal arm (none), in the true and the nominal "
+               "arm",
 }
 #: Attributed metrics: name → (how it is made from a run's metrics, unit).
 METRICS = {
-    "track_max": (lambda m: max(m["track_max_1"], m["track_max_2"]), "rad"),
-    "track_rms": (lambda m: math.hypot(m["track_rms_1"], m["track_rms_2"]) / math.sqrt(2), "rad"),
-    "vib_rms": (lambda m: math.hypot(m["vib_rms_1"], m["vib_rms_2"]) / math.sqrt(2), "m"),
+    "track_max": (lambda m: max(_per_joint(m, "track_max_")), "rad"),
+    "track_rms": (lambda m: _quadratic_mean(_per_joint(m, "track_rms_")), "rad"),
+    "vib_rms": (lambda m: _quadratic_mean(_per_joint(m, "vib_rms_")), "m"),
     "est_rms_theta": (lambda m: _group(m, "theta", False), "rad"),
     "est_rms_q": (lambda m: _group(m, "q", False), "m"),
     "est_rms_theta_dot": (lambda m: _group(m, "theta", True), "rad/s"),
     "est_rms_q_dot": (lambda m: _group(m, "q", True), "m/s"),
-    "tau_tv": (lambda m: m["tau_tv_1"] + m["tau_tv_2"], "N m/s"),
+    "tau_tv": (lambda m: sum(_per_joint(m, "tau_tv_")), "N m/s"),
 }
 #: What a reader calls each metric (tables, waterfalls, attribution.md).
 METRIC_NAMES = {
@@ -104,6 +107,22 @@ METRIC_NAMES = {
 }
 MAX_FACTORS = 7
 _SUB_LADDER = ("plant: modes left out", "plant: beyond assumed modes")
+
+
+def _per_joint(m: dict, prefix: str) -> list[float]:
+    """The values of a metric per joint or link (``prefix`` then 1, 2, …)."""
+    out, i = [], 1
+    while f"{prefix}{i}" in m:
+        out.append(m[f"{prefix}{i}"])
+        i += 1
+    return out
+
+
+def _quadratic_mean(values: list[float]) -> float:
+    """√(Σ v²/k): the paper's two-link hypot(v1, v2)/√2 for any number of joints."""
+    if len(values) == 2:  # as it has always been computed (the same rounding)
+        return math.hypot(*values) / math.sqrt(2)
+    return math.sqrt(sum(v * v for v in values) / len(values)) if values else math.nan
 
 
 def _group(m: dict, kind: str, rate: bool) -> float:
@@ -153,7 +172,15 @@ def default_factors(scenario: Scenario) -> tuple[str, ...]:
         names.remove("truncation")
     if not scenario.uses_estimate:
         names.remove("estimation")
+    if any(scenario.true_params.gravity):
+        names.insert(1, "gravity")
+        names.remove("actuation")  # at most MAX_FACTORS: an arm in gravity names its own
     return tuple(names)
+
+
+def _flat(table: dict) -> dict:
+    """A resolved parameter table by flat key (``EI1``, ``coulomb2``, ``gravity``)."""
+    return flat_values(params_from_table(table, lambda: None, "params"))
 
 
 def _step_for(Ts: float, step: float) -> float:
@@ -165,19 +192,28 @@ def _idealise(data: dict, factor: str, players) -> None:
     """Switch ``factor`` of the resolved scenario mapping ``data`` to its ideal level
     (``players``: every factor of the attribution)."""
     if factor in JOINT_EFFECTS:
-        for table in ("true_params", "nominal_params"):
-            data[table].update({f"{name}{i}": 0.0 for name in JOINT_EFFECTS[factor]
-                                for i in (1, 2)})
+        for table in PARAMETER_TABLES:
+            joints = len(data[table]["links"])
+            data[table] = {**data[table], **{f"{name}{i}": 0.0 for name in JOINT_EFFECTS[factor]
+                                             for i in range(1, joints + 1)}}
+    elif factor == "gravity":
+        for table in PARAMETER_TABLES:
+            data[table] = {**data[table], "gravity": [0.0, 0.0]}
     elif factor == "plant":
         data["plant"] = with_plant(data["plant"], "reduced",
                                    modes_per_link=list(data["model"]["modes_per_link"]),
                                    kinematics=data["model"].get("kinematics", "linear"),
                                    step=_step_for(data["Ts"], min(data["plant"]["step"], 1e-3)))
     elif factor == "parameters":
+        true, nominal = _flat(data["true_params"]), _flat(data["nominal_params"])
+        joints = len(data["true_params"]["links"])
         own = {f"{name}{i}" for effect in JOINT_EFFECTS if effect in players
-               for name in JOINT_EFFECTS[effect] for i in (1, 2)}
-        data["true_params"] = {key: data["true_params"][key] if key in own else value
-                               for key, value in data["nominal_params"].items()}
+               for name in JOINT_EFFECTS[effect] for i in range(1, joints + 1)}
+        if "gravity" in players:
+            own.add("gravity")
+        data["true_params"] = {**data["true_params"],
+                               **{key: true[key] if key in own else value
+                                  for key, value in nominal.items()}}
     elif factor == "sensing":
         s = data["sensors"]
         data["sensors"] = dict(s, modal="direct" if s["modal"] == "gauges" else s["modal"],
@@ -206,9 +242,10 @@ def _set_kinematics(data: dict, kinematics: str) -> None:
 
 
 def _truncation_level(data: dict) -> None:
-    """The middle of the plant sub-ladder: the reduced plant with 4+4 modes (RK4 needs
-    a step ≤ 0.25 ms for its ~250 Hz top mode)."""
-    data["plant"] = with_plant(data["plant"], "reduced", modes_per_link=[4, 4],
+    """The middle of the plant sub-ladder: the reduced plant with 4 modes per flexible link
+    (RK4 needs a step ≤ 0.25 ms for its ~250 Hz top mode)."""
+    modes = [4 if link["modes"] else 0 for link in data["true_params"]["links"]]
+    data["plant"] = with_plant(data["plant"], "reduced", modes_per_link=modes,
                                step=_step_for(data["Ts"], min(data["plant"]["step"], 2.5e-4)))
 
 

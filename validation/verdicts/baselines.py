@@ -39,7 +39,7 @@ from ..batch.worker import execute_run
 from ..batch.fingerprint import run_fingerprint
 from ..run.results import write_atomic
 from ..run.scenario import PLANT_KINDS, scenario_from_mapping, scenario_to_mapping
-from ..batch.store import INDEX_NAME, ResultStore, StoreError, run_id
+from ..batch.store.folder import INDEX_NAME, ResultStore, StoreError, run_id
 from ..run.tomlfiles import flatten, load_toml, set_dotted, toml_value
 
 __all__ = ["Check", "Baselines", "load_baselines", "measure", "evaluate", "updated_bound",

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..batch.campaign import PlannedRun
 from ..batch.queue import Batch, answer_all
-from ..batch.store import ResultStore, run_id
+from ..batch.store.folder import ResultStore, run_id
 from ..run.config import ConfigError
 from ..run.requirements import Requirement
 from ..run.results import write_atomic

@@ -37,8 +37,8 @@ from ..batch.campaign import PlannedRun
 
 from ..batch.queue import run_planned
 from ..batch.executor import Runner
-from ..batch.runfiles import Keep
-from ..batch.store import run_id
+from ..batch.store.runfiles import Keep
+from ..batch.store.folder import run_id
 from ..run.claim_measures import CLAIMS
 from ..run.plants import LEVELS, Refinement, is_truth, plant_settings
 from ..run.scenario import scenario_from_mapping, scenario_to_mapping

@@ -165,7 +165,7 @@ def _prediction(config_json: str) -> Prediction:
     if K0 is None:
         return Prediction(math.nan, math.nan, f"the law does not build at Ts = {PROBE_TS:g} s")
     forces = K0[0].shape[0] > 2
-    if forces and spec.actuated == 2:
+    if forces and not spec.generalised_forces:
         return Prediction(math.nan, math.nan, "the law applies forces on the modal "
                           f"coordinates: the {spec.label} has two actuators")
     truth = spec if spec.role == "truth" else None

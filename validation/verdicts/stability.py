@@ -58,11 +58,11 @@ from ..batch.campaign import PlannedRun
 
 from ..batch.queue import run_planned
 from ..batch.executor import Runner
-from ..batch.runfiles import KEEP_NONE
+from ..batch.store.runfiles import KEEP_NONE
 from ..run.laws import applies_generalised_forces
 from ..run.plants import is_truth, plant_settings, with_plant
 from ..run.scenario import own_parameters, scenario_from_mapping, scenario_to_mapping
-from ..batch.store import ResultStore, run_id
+from ..batch.store.folder import ResultStore, run_id
 from .bisection import GOOD, TOLERANCE, Lattice, Limit, limit_of, next_points
 from .predictions import Predictions, prediction_key, read_predictions, write_predictions
 from .resolution import ResolvedLimit, resolve_limit
@@ -171,7 +171,7 @@ def cases_from_scenarios(scenarios, *, plants=None, arms=None) -> list[Stability
                             duration=DURATION, transient=DURATION / 2, requirement=[])
                 base["plant"] = with_plant(base["plant"], plant)
                 base["arm"] = arm
-                if plant_settings(base["plant"]).actuated == 2 and \
+                if not plant_settings(base["plant"]).generalised_forces and \
                         applies_generalised_forces(s):
                     continue  # two actuators: a law of forces on every coordinate cannot run
                 label = _label(base)

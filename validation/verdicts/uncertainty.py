@@ -55,7 +55,7 @@ from ..run.requirements import Requirement
 from ..run.scenario import (Scenario, check_scales_on_arm, own_parameters,
                             scenario_from_mapping, scenario_to_mapping)
 from ..run.tomlfiles import set_dotted
-from .calibration_outputs import CALIBRATION_VERDICTS
+from .calibration import CALIBRATION_VERDICTS
 from .statistics import SequentialTest
 
 __all__ = ["UncertaintySet", "System", "VerifySettings", "load_systems"]

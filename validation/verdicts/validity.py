@@ -33,7 +33,7 @@ import control
 import numpy as np
 
 from reduced_model import ArmModel
-from reduced_model._joint_linear import nonlinear_joint_effects
+from reduced_model.joints import nonlinear_joint_effects
 
 from ..run.laws import build_controller
 from ..run.plants import is_truth, truth_settings

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..batch.queue import answer_all
-from ..batch.resimulate import every_signal
+from ..batch.store.resimulate import every_signal
 from ..run.config import ConfigError
 from ..run.requirements import Requirement
 from .evaluations import (Evaluations, asked, effective_rho, number, point_axes,
@@ -38,7 +38,7 @@ from .search import CMASearch
 from .statistics import clopper_pearson, sprt
 from .uncertainty import System
 
-__all__ = ["estimate", "estimate_question", "falsify", "falsify_question", "conform",
+__all__ = ["estimate", "estimate_question", "falsify", "falsify_question",
            "conform_question"]
 
 
@@ -116,14 +116,9 @@ def _estimate_numbers(rows, requirement: Requirement, system: System) -> dict:
 
 
 # --- conform --------------------------------------------------------------------------------------
-def conform(system: System, out, *, runner, budget: int, seed: int, log=print) -> dict:
-    """The largest disagreement between the two plants over the set (module docstring)."""
-    return answer_all([conform_question(system, out, budget=budget, seed=seed, log=log)],
-                      runner)[0]
-
-
 def conform_question(system: System, out, *, budget: int, seed: int, log=print):
-    """`conform` as a question of the queue (`validation.batch.queue.answer_all`)."""
+    """The largest disagreement between the two plants over the set (module docstring), as
+    a question of the queue (`validation.batch.queue.answer_all`)."""
     out = Path(out)
     ev = Evaluations(out, None, f"verify-conform/{system.name}")
     search = CMASearch(system.uncertainty.dim, seed)

@@ -152,7 +152,7 @@ def render(docs) -> str:
                (ObserverSpec, "kind"): '``"none"``, ' + law.format(
                    ", ".join(map(literal, OBSERVERS)))}
     default = ArmParameters()
-    arms = {"table1": ArmParameters.table1(), "lab": ArmParameters.lab()}
+    arms = {"table1": named_arm("table1"), "lab": named_arm("lab")}
     arm_overrides = {f.name: "; ".join(f"``{arm}``: {_toml(getattr(p, f.name))}"
                                        for arm, p in arms.items()
                                        if getattr(p, f.name) != getattr(default, f.name))

@@ -1,7 +1,7 @@
 """The signal names of a run and the metric keys of its results, generated from the code
 that defines them.
 
-Signals: the groups of `validation.run._sample.Group` in the order `signal_layout` writes
+Signals: the groups of `validation.run.sample.Group` in the order `signal_layout` writes
 them, each with its ``#:`` comment, and the names of a sample run's result.  Metrics: the
 named ``Returns`` entries of each metric function (key pattern, unit in ``[...]``,
 meaning), with the keys a sample run actually produced under each pattern — so a key no
@@ -103,7 +103,7 @@ def render_metrics(docs) -> str:
 
 def render_signals(docs) -> str:
     from sphinx.pycode import ModuleAnalyzer
-    from validation.run._sample import Group, signal_layout
+    from validation.run.sample import Group, signal_layout
     result, _ = sample_run()
     comments = ModuleAnalyzer.for_module(Group.__module__).find_attr_docs()
     names, offsets = signal_layout(*_layout_arguments(result))
@@ -123,10 +123,12 @@ def render_signals(docs) -> str:
 def _layout_arguments(result):
     """The arguments `signal_layout` was given for ``result``, read back from its names
     (the state comes first, up to the first of the plants' extra truth signals)."""
-    from reduced_model._plant_interface import TRUTH_EXTRAS
+    from reduced_model import truth_extras
     names = result.names
-    states = names[:names.index(TRUTH_EXTRAS[0])]
+    joints = sum(1 for s in names if s.startswith("theta") and s[5:].isdigit())
+    extras = truth_extras(joints)
+    states = names[:names.index(extras[0])]
     measured = [s.removeprefix("y_") for s in names if s.startswith("y_")]
     residual = [s.removeprefix("residual_") for s in names if s.startswith("residual_")]
     has_observer = any(s.startswith("xhat_") for s in names)
-    return states, TRUTH_EXTRAS, measured, has_observer, residual
+    return states, extras, measured, has_observer, residual, joints
