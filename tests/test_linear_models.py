@@ -137,13 +137,14 @@ def test_lqr_gain_round_trip_through_python_control():
     LQR's gain has the eigenvalues of our own closed-loop analysis (to 1e-9)."""
     model = ArmModel(ArmParameters())
     lqr = GainScheduledLQR(model, Ts=1e-3)
-    theta2 = float(lqr.grid[7])  # a grid point: the design's own gain, no interpolation
+    theta = lqr.grid[7]  # a grid point: the design's own gain, no interpolation
+    theta2 = float(theta[1])
     x = np.zeros(2 * model.n)
-    x[1] = theta2
+    x[:2] = theta
     K = law_gain(lqr, x, 0.0, hold(x[:2]))
     # Our linearisation reads the law's own gain (central differences of a law linear in
     # x: 1e-7 relative is their round-off).
-    np.testing.assert_allclose(K, lqr.gain(theta2), rtol=1e-7, atol=1e-7 * np.abs(K).max())
+    np.testing.assert_allclose(K, lqr.gain(theta), rtol=1e-7, atol=1e-7 * np.abs(K).max())
     P = reduced_linear_model(model, theta=(0.0, theta2), Ts=1e-3)[list(model.state_names), :]
     ours = np.linalg.eigvals(closed_loop_matrix(P, K, model.state_names))
     theirs = control.feedback(P, K).poles()

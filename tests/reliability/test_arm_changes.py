@@ -128,7 +128,7 @@ def test_a_stability_map_on_another_arm_keeps_the_scenarios_own_values():
 
 def test_a_calibration_experiment_on_another_arm_is_that_arm():
     from types import SimpleNamespace
-    from validation.verdicts.calibration_plan import _experiment_mapping
+    from validation.verdicts.calibration.plan import _experiment_mapping
     base = scenario_to_mapping(scenario_from_mapping({"true_params": {"Mp": 0.3}}))
     data = _experiment_mapping(base, SimpleNamespace(name="e", duration=1.0), None,
                                {"arm": "lab"}, SimpleNamespace(names=()))

@@ -1,5 +1,5 @@
-"""One estimate of the time a command of several phases has left (issue 46: the paper
-reproduction's phases each had a bar, and nothing said how long the whole would take).
+"""One estimate of the time a command of several phases has left: a bar per phase says
+nothing of how long the whole will take.
 
 A command names its phases with their wall times on the reference machine (`PAPER`,
 measured by ``bench/bench_paper.py``); `JobClock` says the total when the command

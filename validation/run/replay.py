@@ -57,8 +57,8 @@ def bare_replay(scenario: Scenario, torques: np.ndarray, *, record: bool = False
     included — one per control period of ``scenario`` to its fresh Exudyn plant.
     ``record``: read θ at the start of every period (costs a readout per period; off,
     only at the start of the last one, as the floor should be timed).  ``exact_hold``
-    False replays with Exudyn's own first-order treatment of the torque jumps (the
-    truth plant before issue 31: what ``bench/bench_hold.py`` measures against)."""
+    False replays with Exudyn's own first-order treatment of the torque jumps (what
+    ``bench/bench_hold.py`` measures the exact hold against)."""
     p = scenario.true_params
     if any(j.torque_time_constant > 0 for j in p.joints):
         raise ValueError("a bare replay holds each period's torque as it is; an arm with "

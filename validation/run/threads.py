@@ -10,8 +10,8 @@ with a thread per core — and a multithreaded product sums in another order: th
 run (ANCF 16 el/link) gave a robustness 2e-12 apart on local workers and on Dask's
 (whose nanny sets the environment), where the runners promise identical values.  So
 `one_thread` limits the loaded libraries themselves (threadpoolctl, as scikit-learn
-does) while a run is built and simulated: the values no longer depend on how the process
-started, and two workers no longer share two cores with BLAS threads spinning beside them.
+does) while a run is built and simulated: the values do not depend on how the process
+started, and two workers do not share two cores with BLAS threads spinning beside them.
 """
 from __future__ import annotations
 
