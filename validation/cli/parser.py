@@ -6,6 +6,7 @@ import math
 from importlib.metadata import version
 
 from controllers import CONTROLLERS, OBSERVERS
+from reduced_model import named_arms
 
 from ..batch.executor import available_cores
 from ..run.config import did_you_mean, fraction_hint
@@ -205,9 +206,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "with mesh/step checks means the nominal run), with the flags and "
                           "--set as changes")
     run.add_argument("--arm", metavar="ARM",
-                     help=f"a shipped arm (default, table1, lab, single-link, rigid-flexible, "
-                          f"three-link, vertical-two-link; `flexarm arms` lists them) or an "
-                          f"arm file .toml (default: {d.arm})")
+                     help=f"a shipped arm ({', '.join(named_arms())}; `flexarm arms` "
+                          f"describes them) or an arm file .toml (default: {d.arm})")
     run.add_argument("--plant", choices=PLANT_KINDS, help=f"reduced model or Exudyn truth plant "
                                                      f"(default: {d.plant.kind})")
     run.add_argument("--controller", metavar="KIND",
