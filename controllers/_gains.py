@@ -8,10 +8,16 @@ from typing import NamedTuple
 import numpy as np
 
 __all__ = ["gain_vector", "joint_flex_gains", "control_period", "ArmGains", "arm_gains",
-           "RIGID_BANDWIDTH", "SAMPLING_BANDWIDTH"]
+           "RIGID_BANDWIDTH", "SAMPLING_BANDWIDTH", "FLEX_POSITION_GAIN"]
 
 #: The bandwidth [rad/s] the gains are scaled to on an arm of rigid links only.
 RIGID_BANDWIDTH = 10.0
+#: The flexible coordinates' share of the observers' position gain, L_P,q·ω² [m/s³]: a
+#: mode of frequency ω deflects ∝ 1/ω² under the same joint motion, and the discrete
+#: sliding band ±Ts·L_P,q must stay below that deflection, or the chatter it injects
+#: into q̂ (through K q̂) biases the light joints' rate estimates.  8 m/s³ gives the
+#: paper's L_P,q = 0.5 m/s on its arm (ω = 3.95 rad/s).
+FLEX_POSITION_GAIN = 8.0
 #: The largest bandwidth the rule takes, as a fraction of the sampling rate 1/Ts: well
 #: inside what a 1 kHz loop samples (50 rad/s at 1 ms).
 SAMPLING_BANDWIDTH = 0.05
@@ -25,6 +31,7 @@ class ArmGains(NamedTuple):
     lambda_joint: np.ndarray  # Λ on θ [1/s]
     lambda_flex: float  # Λ on q [1/s]
     kv_joint: np.ndarray  # K_v on θ [N m s/rad]
+    l_position_flex: float  # the observers' L_P on q [m/s]
 
 
 def _round(value: float) -> float:
@@ -40,9 +47,10 @@ def arm_gains(model, Ts: float) -> ArmGains:
     inertia about joint i of the arm straight and at rest (the diagonal of M(0)).  The
     PBC's joint error dynamics, (M_ii s + K_v,i)(s + Λ_i) = 0, get their poles at
     Λ = 0.75 ω and K_v,i/M_ii = 1.1 ω — just below and at the first flexible mode, so
-    that the joints follow without driving it hard —, and Λ_f = 0.25 ω; each gain is
-    rounded to one significant figure.  On the paper's arm (ω = 3.97 rad/s, M_ii =
-    2.69, 1.07 kg m²) that is the paper's Λ = 3, Λ_f = 1, K_v = (10, 5).
+    that the joints follow without driving it hard —, and Λ_f = 0.25 ω; the sliding-mode
+    observers' position gain on q is L_P,q = `FLEX_POSITION_GAIN`/ω²; each gain is
+    rounded to one significant figure.  On the paper's arm (ω = 3.95 rad/s, M_ii =
+    2.69, 1.07 kg m²) that is the paper's Λ = 3, Λ_f = 1, K_v = (10, 5) and L_P,q = 0.5.
 
     Parameters
     ----------
@@ -60,7 +68,8 @@ def arm_gains(model, Ts: float) -> ArmGains:
     omega = min(omega, SAMPLING_BANDWIDTH / Ts)
     inertia = np.diag(model.mass_matrix(np.zeros(model.n)))[:model.n_joints].copy()
     return ArmGains(omega, inertia, np.full(model.n_joints, _round(0.75 * omega)),
-                    _round(0.25 * omega), np.array([_round(1.1 * omega * m) for m in inertia]))
+                    _round(0.25 * omega), np.array([_round(1.1 * omega * m) for m in inertia]),
+                    _round(FLEX_POSITION_GAIN / omega ** 2))
 
 
 def gain_vector(name: str, value, length: int, *, positive: bool = False) -> np.ndarray:

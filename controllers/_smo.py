@@ -48,7 +48,7 @@ from reduced_model import ArmModel
 from reduced_model.dynamics.entries import advance_exact, advance_linear
 
 from ._compiled import OBSERVER_SIGNATURE, CompiledLaw
-from ._gains import control_period, joint_flex_gains
+from ._gains import arm_gains, control_period, joint_flex_gains
 
 __all__ = ["PaperSMO", "BoundaryLayerSMO", "PositionOnlySMO"]
 
@@ -76,9 +76,10 @@ class _SlidingModeObserver:
 
     Gains (every variant's defaults):
     l_position : (joint, flexible)
-        L_P [rad/s on θ, m/s on q].  Default (1.0, 0.5): above the largest velocity
-        estimation errors after the initial transient (condition 31); position band
-        ±Ts·L_P = 1e-3 rad and 5e-4 m at 1 kHz.
+        L_P [rad/s on θ, m/s on q].  Default (1.0, the arm's rule `arm_gains`: 0.5 on the
+        paper's arm): above the largest velocity estimation errors after the initial
+        transient (condition 31); position band ±Ts·L_P = 1e-3 rad and 5e-4 m at 1 kHz
+        on the paper's arm.
     l_velocity : (joint, flexible)
         L_V [rad/s², m/s²].  Default (5, 2): velocity bands ±5e-3 rad/s and ±2e-3 m/s at
         1 kHz.  Measured on the paper's scenario with noise: L_V = 20 gives a band as
@@ -95,6 +96,8 @@ class _SlidingModeObserver:
                filter_time=1.0, gate=1.0) -> None:
         self.model, self.Ts = model, control_period(Ts)
         n, N = model.n, model.n_joints
+        if l_position is None:
+            l_position = (1.0, arm_gains(model, self.Ts).l_position_flex)
         self.lp = _joint_flex("l_position", l_position, N, n - N)
         self.lv = _joint_flex("l_velocity", l_velocity, N, n - N)
         self.boundary_layer = _positive("boundary_layer", boundary_layer)
@@ -153,7 +156,8 @@ class PaperSMO(_SlidingModeObserver):
         injection's band ±Ts·L.
     l_position, l_velocity : (float, float) or float
         L_P [rad/s on θ, m/s on q] and L_V [rad/s², m/s²] as (joint, flexible) gains, or
-        one number for both; defaults (1.0, 0.5) and (5, 2), chosen as the private base
+        one number for both; defaults (1.0, the arm's rule: 0.5 on the paper's arm) and
+        (5, 2), chosen as the private base
         class `_SlidingModeObserver` records (conditions (31) and (36) of the paper).
 
     Examples
@@ -174,7 +178,7 @@ class PaperSMO(_SlidingModeObserver):
 
     name = "smo-paper"
 
-    def __init__(self, model: ArmModel, *, Ts: float, l_position=(1.0, 0.5),
+    def __init__(self, model: ArmModel, *, Ts: float, l_position=None,
                  l_velocity=(5.0, 2.0)):
         self._setup(model, Ts, l_position, l_velocity)
 
@@ -195,7 +199,7 @@ class BoundaryLayerSMO(_SlidingModeObserver):
     name = "smo-bl"
     _variant = 1
 
-    def __init__(self, model: ArmModel, *, Ts: float, l_position=(1.0, 0.5),
+    def __init__(self, model: ArmModel, *, Ts: float, l_position=None,
                  l_velocity=(5.0, 2.0), boundary_layer: float = 2.0):
         self._setup(model, Ts, l_position, l_velocity, boundary_layer=boundary_layer)
 
@@ -221,7 +225,7 @@ class PositionOnlySMO(_SlidingModeObserver):
     _variant = 2
     _positions_only = True
 
-    def __init__(self, model: ArmModel, *, Ts: float, l_position=(1.0, 0.5),
+    def __init__(self, model: ArmModel, *, Ts: float, l_position=None,
                  l_velocity=(5.0, 2.0), filter_time: float = 5e-3, gate: float = 2.0):
         self._setup(model, Ts, l_position, l_velocity, filter_time=filter_time, gate=gate)
 

@@ -32,7 +32,7 @@ import numpy as np  # noqa: E402
 from ..run.plotting import (BOUND_STYLE, DPI, PLANT_STYLE, SUB, bound_lines,  # noqa: E402
                              draw_deflections, draw_tracking, envelope, pixel_columns,
                              figure_legend, figure_title, fit_ylim, plant_trace, trace)
-from ..run.reductions import joints_of  # noqa: E402
+from ..run.reductions import joints_of, per_joint  # noqa: E402
 from ..run.results import write_atomic  # noqa: E402
 
 __all__ = ["png", "state_label", "state_unit", "state_display", "tracking", "deflections",
@@ -203,9 +203,11 @@ def phase_portrait(group, title: str, transient: float,
     quarter of the reference's peak rate, after the transient) is drawn as its mean per
     pixel column with the band light behind it, the y-range at most 3× the orbit's and
     the chatter's extent named."""
-    fig, axes = plt.subplots(1, 2, figsize=(7, 3.5), layout="constrained")
     ref = group[0][1]
-    for j, ax in enumerate(axes):
+    joints = joints_of(ref)
+    fig, axes = plt.subplots(1, joints, figsize=(3.5 * joints, 3.5), layout="constrained",
+                             squeeze=False)
+    for j, ax in enumerate(axes[0]):
         name = f"θ̇{j + 1}".translate(SUB)
         th_ref, w_ref = ref[f"theta{j + 1}_ref"], ref[f"theta{j + 1}_dot_ref"].astype(float)
         peak = float(np.max(np.abs(w_ref))) or 1.0
@@ -253,7 +255,7 @@ def phase_portrait(group, title: str, transient: float,
         ax.set_ylim(min(lo, -1.2) - pad, max(hi, 1.2) + pad)
         if notes:  # above the panel, never over the orbit
             ax.set_title("\n".join(notes), fontsize=7, color="0.25")
-    figure_legend(fig, axes)
+    figure_legend(fig, axes[0])
     figure_title(fig, f"{title}: phase portrait (cf. Fig. 8), y-range after the "
                       f"{transient:g} s transient")
     return png(fig)
@@ -274,7 +276,8 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str | 
     t_end = max(res.time[-1] for _, res in ok)
     frames = np.arange(0.0, t_end, 1.0 / fps * 2)  # 2 s of motion per second of GIF
     fig, ax = plt.subplots(figsize=(5, 5.6), layout="constrained", dpi=80)
-    reach = params.L1 + params.L2
+    lengths = [link.length for link in params.links]
+    reach = sum(lengths)
     ax.set_xlim(-1.1 * reach, 1.1 * reach)
     ax.set_ylim(-1.1 * reach, 1.1 * reach)
     ax.set_aspect("equal")
@@ -291,7 +294,7 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str | 
     shape = _arm_shape(params, model, magnify)
     states = [(res.time, res.select(coords).astype(float)) for _, res in ok]
     longest = max((res for _, res in ok), key=lambda r: r.time.size)
-    reference = (longest.time, longest.select(["theta1_ref", "theta2_ref"]).astype(float))
+    reference = (longest.time, longest.select(per_joint(longest, "theta{}_ref")).astype(float))
 
     fig.canvas.draw()  # the static parts, laid out once
     fig.set_layout_engine("none")
@@ -303,7 +306,7 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str | 
             z = shape(_sample(time, values, t))
             line.set_data(z.real, z.imag)
         th = _sample(*reference, t)
-        zr = np.cumsum([0, params.L1 * np.exp(1j * th[0]), params.L2 * np.exp(1j * th.sum())])
+        zr = np.cumsum([0, *(np.array(lengths) * np.exp(1j * np.cumsum(th)))])
         ref_line.set_data(zr.real, zr.imag)
         clock.set_text(f"t = {t:4.1f} s")
         for artist in (*lines, ref_line, clock):
@@ -322,9 +325,9 @@ def animation(group, params, model, title: str, path, *, fps: int = 8) -> str | 
 def _magnification(ok, params) -> float:
     """How much the deflections are magnified to be seen: to a tenth of link 1 (95th
     percentile of the tips' deflections)."""
-    typical = max(float(np.percentile(np.abs(res.select(["tip_defl1", "tip_defl2"])
+    typical = max(float(np.percentile(np.abs(res.select(per_joint(res, "tip_defl{}"))
                                              .astype(float)), 95)) for _, res in ok)
-    return float(max(1, round(0.1 * params.L1 / max(typical, 1e-9))))
+    return float(max(1, round(0.1 * params.links[0].length / max(typical, 1e-9))))
 
 
 def _sample(time, values, t):
@@ -334,17 +337,22 @@ def _sample(time, values, t):
 
 def _arm_shape(params, model, magnify: float):
     """``shape(Q)``: the arm's centre line at the coordinates Q as complex points (x + iy),
-    the deflections (assumed modes) magnified ``magnify`` times."""
-    n1 = model.modes_per_link[0]
-    x1, x2 = np.linspace(0, params.L1, 15), np.linspace(0, params.L2, 15)
-    m1, m2 = model.mode_shapes
-    phi1, phi2, slope = m1.phi(x1).T, m2.phi(x2).T, m1.tip_values[1]
+    the deflections (assumed modes) magnified ``magnify`` times; each link starts at the
+    previous one's tip, turned by its joint angle and the previous tip's slope."""
+    N = len(params.links)
+    spans = [np.linspace(0, link.length, 15) for link in params.links]
+    shapes = [(modes.phi(x).T, modes.tip_values[1]) for modes, x in zip(model.mode_shapes, spans)]
+    first = N + np.cumsum([0, *model.modes_per_link])
 
     def shape(Q):
-        w1, w2 = magnify * (phi1 @ Q[2:2 + n1]), magnify * (phi2 @ Q[2 + n1:])
-        z1 = np.exp(1j * Q[0]) * (x1 + 1j * w1)
-        z2 = z1[-1] + np.exp(1j * (Q[0] + Q[1] + magnify * (slope @ Q[2:2 + n1]))) * (x2 + 1j * w2)
-        return np.concatenate([[0], z1, z2])
+        points, tip, angle = [np.zeros(1, complex)], 0j, 0.0
+        for i, (x, (phi, slope)) in enumerate(zip(spans, shapes)):
+            q = Q[first[i]:first[i + 1]]
+            angle += Q[i]
+            z = tip + np.exp(1j * angle) * (x + 1j * magnify * (phi @ q))
+            points.append(z)
+            tip, angle = z[-1], angle + magnify * (slope @ q)
+        return np.concatenate(points)
     return shape
 
 
@@ -358,7 +366,7 @@ def arm_snapshots(group, params, model, title: str, *, count: int = 9) -> bytes 
         return None
     magnify = _magnification(ok, params)
     shape = _arm_shape(params, model, magnify)
-    reach = 1.1 * (params.L1 + params.L2)
+    reach = 1.1 * sum(link.length for link in params.links)
     fig, axes = plt.subplots(1, len(ok), figsize=(3.5 * len(ok), 3.6), squeeze=False,
                              layout="constrained")
     for ax, (run, res) in zip(axes[0], ok):

@@ -37,6 +37,7 @@ from ..batch.fingerprint import fingerprint_of
 from ..batch.store.resimulate import every_signal
 from .render import fmt_number, folded_text, render
 from .bottom_line import bottom_line
+from .arms import arms_answers, arms_table
 from .calibration import calibration_section
 from .content_key import content_key, paths, report_is_current
 from .groups import animation, claim_bounds, figure_groups, paper_figure_tasks
@@ -74,6 +75,8 @@ class ReportData:
     scope: list
     bottom_line: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
+    arms_answers: list = field(default_factory=list)
+    arms: dict | None = None
     summary: list | None = None
     pairs: dict | None = None
     claims: list | None = None
@@ -313,8 +316,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     for arm, example in _first_of_each_arm(runs).items():
         early, png = found.drawn.get(arm, (None, None))
         tasks.append(("Validity of the reduced model",
-                      f"validity map, {arm} arm: reduced model vs FE frequencies over θ₂ and "
-                      "their relative gap",
+                      f"validity map, {arm} arm: reduced model vs FE frequencies over a joint "
+                      "angle and their relative gap",
                       (lambda png=png: png) if early is example and png is not None
                       else _validity_task(example)))
     makes = [make for _, _, make in tasks]
@@ -338,6 +341,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
                                 if c.key in NOTE_MEANING]
         data.pairs = pairs_table(runs, fig.describe_run) if len({r.role for r in runs}) > 1 \
             else None
+        data.arms_answers, data.arms = arms_answers(runs), arms_table(runs)
         data.bottom_line = bottom_line(counted, checks, columns, data.calibration)
         if many:
             data.many = distributions(runs, done)
@@ -385,7 +389,8 @@ def file_stem(caption: str, taken: set[str]) -> str:
 def contents(data: ReportData) -> list[tuple[str, str]]:
     """(anchor, title) of each section the report has, for its table of contents."""
     has = {s: any(f.section == s for f in data.figures) for s in SECTIONS}
-    present = [("summary", "Summary", data.summary or data.pairs),
+    present = [("arms", "The arms side by side", data.arms),
+               ("summary", "Summary", data.summary or data.pairs),
                ("claims", "The paper's claims", data.claims),
                ("mesh", "Mesh and time-step convergence", data.mesh),
                ("stability", "Stability map", data.stability),

@@ -82,8 +82,11 @@ def estimation_table(runs) -> dict | None:
     observed = [r for r in runs if r.status == "ok" and "est_rms_theta1" in r.metrics]
     if not observed:
         return None
-    states = [k.removeprefix("est_rms_") for k in observed[0].metrics
-              if k.startswith("est_rms_") and not k.startswith("est_rms_slope")]
+    observed.sort(key=lambda r: (r.arm, r.name, r.role))
+    # every run's states (arms differ in them): angles, then modal positions, then rates
+    states = sorted({k.removeprefix("est_rms_") for r in observed for k in r.metrics
+                     if k.startswith("est_rms_") and not k.startswith("est_rms_slope")},
+                    key=lambda s: (s.endswith("_dot"), not s.startswith("theta"), s))
     ident = ["name", "arm", "plant", "Ts [ms]", "start", "observer"]
     head = ident + [fig.state_label(s) for s in states] + ["worse than the measurement it is fed",
                                                            "worse than x̂ ≡ 0"]

@@ -19,7 +19,7 @@ from .render import display_unit, fmt_number
 from ..verdicts.resolution import UNDECIDED
 
 __all__ = ["verdict_parts", "value_text", "verdict_counts", "counted",
-           "pairs_table", "NOTE_MEANING", "margin", "VERDICT_ORDER"]
+           "pairs_table", "NOTE_MEANING", "margin", "VERDICT_ORDER", "numbered"]
 
 #: What the note in brackets after a verdict says, per claim.
 NOTE_MEANING = {
@@ -116,11 +116,18 @@ def _delta(truth: float, reduced: float) -> str:
     return f"truth = {_times(truth / reduced)} reduced"
 
 
-#: (metric keys whose largest value is shown, name, SI unit) of the reduced-vs-truth table.
-PAIR_METRICS = [(("track_max_1", "track_max_2"), "tracking error, max", "rad"),
-                (("vib_rms_1", "vib_rms_2"), "vibration RMS", "m"),
-                (("est_max_theta1", "est_max_theta2"), "angle estimation error, max", "rad"),
-                (("tau_tv_1",), "τ₁ variation", "N m/s")]
+#: (metric key prefix: the largest value over the joints or links numbered after it is
+#: shown, name, SI unit) of the reduced-vs-truth table.
+PAIR_METRICS = [("track_max_", "tracking error, max", "rad"),
+                ("vib_rms_", "vibration RMS", "m"),
+                ("est_max_theta", "angle estimation error, max", "rad"),
+                ("tau_tv_", "τ variation, max", "N m/s")]
+
+
+def numbered(metrics: dict, prefix: str) -> list[float]:
+    """The finite values of ``metrics`` named ``prefix`` and a joint's or link's number."""
+    return [v for k, v in metrics.items() if k.startswith(prefix)
+            and k[len(prefix):].isdigit() and isinstance(v, float) and math.isfinite(v)]
 
 
 def pairs_table(runs, describe) -> dict | None:
@@ -151,8 +158,7 @@ def _pair_cell(red, tru, keys, scale) -> str:
     def value(run):
         if run.status != "ok":
             return math.nan, run.status.upper()
-        vals = [run.metrics.get(k) for k in keys]
-        vals = [v for v in vals if isinstance(v, float) and math.isfinite(v)]
+        vals = numbered(run.metrics, keys)
         return (max(vals), fmt_number(scale * max(vals))) if vals else (math.nan, "—")
     (a, ta), (b, tb) = value(red), value(tru)
     if ta == tb == "—":

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from ..run.plotting import SUB
 from .figures import figure_legend, figure_title, plt, png
 
 __all__ = ["validity_map", "stability_chart", "waterfall", "RIGID_HZ"]
@@ -17,42 +18,50 @@ __all__ = ["validity_map", "stability_chart", "waterfall", "RIGID_HZ"]
 RIGID_HZ = 1e-2
 
 
-def validity_map(params, modes: tuple[int, int], arm_text: str) -> bytes:
+def validity_map(params, modes: tuple[int, ...], arm_text: str) -> bytes:
     """Frequencies of the reduced model vs the FE model's bending modes (above
-    `RIGID_HZ`) over θ2, and their gap in %."""
+    `RIGID_HZ`) over the second joint's angle (the first's on a single link; the
+    others at 0), and their gap in %."""
     from plant_exudyn import Mesh, natural_frequencies
     from reduced_model import ArmModel
-    theta2 = np.linspace(0.0, np.pi, 13)
+    swept = np.linspace(0.0, np.pi, 13)
     model = ArmModel(params, modes)
+    N = model.n_joints
+    joint = min(1, N - 1)
+    name = f"θ{joint + 1}".translate(SUB)
     fig, axes = plt.subplots(2, 2, figsize=(7, 4.8), sharex=True, layout="constrained")
     for col, joints in enumerate(("locked", "free")):
         red, fe = [], []
-        for t2 in theta2:
+        for angle in swept:
+            theta = np.zeros(N)
+            theta[joint] = angle
             Q = np.zeros(model.n)
-            Q[1] = t2
+            Q[:N] = theta
             red.append(model.natural_frequencies(Q, joints)[:4])
-            found = natural_frequencies(params, Mesh(), theta=(0.0, t2), joints=joints,
+            found = natural_frequencies(params, Mesh(), theta=tuple(theta), joints=joints,
                                         n=len(red[-1]) + 4)
             elastic = found[found > RIGID_HZ][:len(red[-1])]
             fe.append(np.pad(elastic, (0, len(red[-1]) - len(elastic)),
                              constant_values=np.nan))
         red, fe = np.array(red), np.array(fe)
         for k in range(red.shape[1]):
-            axes[0, col].plot(theta2, red[:, k], color=f"C{k}", label=f"mode {k + 1}, reduced")
-            axes[0, col].plot(theta2, fe[:, k], color=f"C{k}", ls="--", marker=".",
+            axes[0, col].plot(swept, red[:, k], color=f"C{k}", label=f"mode {k + 1}, reduced")
+            axes[0, col].plot(swept, fe[:, k], color=f"C{k}", ls="--", marker=".",
                               label=f"mode {k + 1}, FE")
             relative = np.divide(red[:, k] - fe[:, k], fe[:, k], out=np.full(len(fe), np.nan),
                                  where=fe[:, k] > 0)
-            axes[1, col].plot(theta2, 100 * relative, color=f"C{k}", marker=".")
+            axes[1, col].plot(swept, 100 * relative, color=f"C{k}", marker=".")
         axes[0, col].set_yscale("log")
         axes[0, col].set_ylabel("frequency [Hz]")
         axes[0, col].set_title(f"joints {joints}", fontsize=10)
         axes[1, col].set_ylabel("(reduced − FE)/FE [%]")
-        axes[1, col].set_xlabel("θ₂ [rad]")
+        axes[1, col].set_xlabel(f"{name} [rad]")
         axes[1, col].axhline(0, color="k", lw=0.5)
     figure_legend(fig, axes[0, :1])
-    figure_title(fig, f"validity map, {arm_text}: reduced model ({modes[0]}+{modes[1]} modes, "
-                "solid) vs FE (ANCF, 4 elements per link, dashed), θ₁ = 0")
+    others = ", ".join(f"θ{i + 1}".translate(SUB) for i in range(N) if i != joint)
+    figure_title(fig, f"validity map, {arm_text}: reduced model ({'+'.join(map(str, modes))} "
+                      f"modes, solid) vs FE (ANCF, 4 elements per link, dashed)"
+                      + (f", {others} = 0" if others else ""))
     return png(fig)
 
 

@@ -19,7 +19,7 @@ from .config import ConfigError, check
 
 __all__ = ["arm_label", "arm_of", "params_from_table", "STRUCTURE", "PAPER_ARMS",
            "PARAMETER_TABLES", "arm_description", "flat_values", "own_parameters",
-           "check_scales_on_arm", "flat_config", "parameter_value"]
+           "check_scales_on_arm", "flat_config", "parameter_value", "paper_shaped"]
 
 #: The keys of a parameter table that describe a whole arm (a resolved scenario's form).
 STRUCTURE = ("links", "joints", "payload", "gravity")
@@ -27,6 +27,15 @@ STRUCTURE = ("links", "joints", "payload", "gravity")
 PAPER_ARMS = ("default", "table1")
 #: The scenario's tables that start from its ``arm``.
 PARAMETER_TABLES = ("true_params", "nominal_params")
+
+
+def paper_shaped(table: dict) -> bool:
+    """Whether a resolved parameter table (a stored run's ``true_params``) is an arm of
+    the paper's shape — two flexible links in a horizontal plane —, the arms the paper's
+    claims are judged on (other arms get the requirements a user states)."""
+    links = table.get("links", ())
+    return (len(links) == 2 and all(link["modes"] > 0 for link in links)
+            and not any(table.get("gravity", (0.0, 0.0))))
 
 
 def arm_label(value) -> str:

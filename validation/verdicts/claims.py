@@ -1,5 +1,7 @@
 """The paper's claims (Section 5) as criteria that a perfect system passes and a useless
-one fails, checked on every arm, plant, sampling period and initial condition run.
+one fails, checked on every arm of the paper's shape (two flexible links, horizontal:
+`validation.run.arms.paper_shaped`), plant, sampling period and initial condition run;
+runs on other arms are judged by the requirements a user states.
 
 Each `Claim` (defined with its measure in `validation.run.claim_measures`, so that a
 run's worker can compute its robustness) turns a sentence of the paper into a number
@@ -35,6 +37,7 @@ import math
 from dataclasses import dataclass, field
 
 from ..run.claim_measures import CLAIMS, DISTURBED, SYSTEM, Claim
+from ..run.arms import paper_shaped
 from ..run.plants import is_truth, label_of, plant_settings
 from ..run.metrics import all_metrics
 from . import mesh as mesh_check
@@ -287,13 +290,14 @@ def claim_columns(runs, signals=None) -> list[Column]:
     arm, plant, Ts, start; ``signals``: (a run, names) → those signals, every one for no
     names (e.g. `every_signal` of its store; default: the run object's own ``load()``).
     Mesh-check runs among ``runs`` are used as the checks of the runs they refine, never
-    as columns of their own."""
+    as columns of their own; runs on arms not of the paper's shape are no column."""
     runs = list(runs)
     by_id = {r.run_id: r for r in runs}
     groups: dict[tuple, dict] = {}
     for r in runs:
         short = r.name.split("/")[-1]
-        if short in CLAIM_RUNS and not mesh_check.is_check(r):
+        if (short in CLAIM_RUNS and not mesh_check.is_check(r)
+                and paper_shaped(r.config["true_params"])):
             groups.setdefault(column_key(r.config), {})[short] = r
     columns, cache = [], _Cache(signals)
     order = {"default": 0, "table1": 1, "rest": 0, "reference": 1}
