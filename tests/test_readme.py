@@ -39,6 +39,8 @@ COMMANDS = [line for line in LINES if line.startswith("flexarm ")]
 SLOW = {"flexarm reproduce-paper --lab --no-stability": "460 s",
         "flexarm attribute campaigns/kinematics.toml": "186 s",
         "flexarm campaign campaigns/mismatch.toml --workers 2": "52 s",
+        "flexarm campaign campaigns/arms.toml --workers 2": "45 s",
+        "flexarm report results/arms": "reads the campaign's folder",
         "flexarm report results/mismatch": "reads the campaign's folder",
         "flexarm stability campaigns/paper.toml --tolerance 0.005": "STABILITY",
         "flexarm validity campaigns/paper.toml": "VALIDITY",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
 from ..run.plotting import SUB
 from .figures import figure_legend, figure_title, plt, png
@@ -20,14 +21,13 @@ RIGID_HZ = 1e-2
 
 def validity_map(params, modes: tuple[int, ...], arm_text: str) -> bytes:
     """Frequencies of the reduced model vs the FE model's bending modes (above
-    `RIGID_HZ`) over the second joint's angle (the first's on a single link; the
-    others at 0), and their gap in %."""
+    `RIGID_HZ`) over the last joint's angle (the others at 0), and their gap in %."""
     from plant_exudyn import Mesh, natural_frequencies
     from reduced_model import ArmModel
     swept = np.linspace(0.0, np.pi, 13)
     model = ArmModel(params, modes)
     N = model.n_joints
-    joint = min(1, N - 1)
+    joint = N - 1
     name = f"θ{joint + 1}".translate(SUB)
     fig, axes = plt.subplots(2, 2, figsize=(7, 4.8), sharex=True, layout="constrained")
     for col, joints in enumerate(("locked", "free")):
@@ -52,6 +52,10 @@ def validity_map(params, modes: tuple[int, ...], arm_text: str) -> bytes:
                                  where=fe[:, k] > 0)
             axes[1, col].plot(swept, 100 * relative, color=f"C{k}", marker=".")
         axes[0, col].set_yscale("log")
+        # ticks at 1, 2, 5 per decade, labelled plainly: legible on a narrow panel
+        axes[0, col].yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        axes[0, col].yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        axes[0, col].yaxis.set_minor_formatter(NullFormatter())
         axes[0, col].set_ylabel("frequency [Hz]")
         axes[0, col].set_title(f"joints {joints}", fontsize=10)
         axes[1, col].set_ylabel("(reduced − FE)/FE [%]")

@@ -3,7 +3,7 @@
 At ``builder-inited`` each generator writes one reStructuredText file into
 ``docs/_generated/``, which the pages ``.. include::``: the configuration keys
 (`configref`), the command line (`cliref`), the signal names and metric keys
-(`signalref`), the paper's claims (`claimsref`), the built-in laws (`lawsref`) and the findings of a stored
+(`signalref`), the paper's claims (`claimsref`), the built-in laws (`lawsref`), the arm files' fields and the shipped arms (`armref`) and the findings of a stored
 ``flexarm reproduce-paper`` (`findings`).  Nothing in them is typed by hand.  MathJax is
 copied into the built site (`mathjax`): the site needs no network.
 """
@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .rst import escape_bars
-from . import claimsref, cliref, configref, findings, lawsref, signalref
+from . import armref, claimsref, cliref, configref, findings, lawsref, signalref
 from .mathjax import copy_mathjax
 
 #: File name in docs/_generated → the function returning its text (given the docs folder).
@@ -23,6 +23,7 @@ GENERATORS = {
     "metrics.rst": signalref.render_metrics,
     "claims.rst": claimsref.render,
     "laws.rst": lawsref.render,
+    "arms.rst": armref.render,
     "findings.rst": findings.render,
 }
 
