@@ -316,16 +316,20 @@ def test_the_report_opens_with_its_bottom_line(report):
     out, page, md = report
     first = md.split("\n\n")[1]
     rows = [r for r in ResultStore(out).rows() if r.sweep != "mesh-check"]
-    assert first.startswith(f"**{len(rows)} runs: {len(rows) - 1} completed, 1 diverged, "
-                            "0 failed. 1 divergence is on the default arm at Ts = 8 ms, "
-                            "reduced plant. The paper's "), first
-    assert "claims over 2 columns" in first and "on the truth plant" in first
+    assert first.startswith("**On the truth plant, default arm (1 column × the paper's 9 "
+                            "claims): "), first
+    assert "On the reduced model, default arm (1 column × the paper's 9 claims)" in first
+    assert first.endswith(f"{len(rows)} runs: {len(rows) - 1} completed, 1 diverged, 0 failed. "
+                          "1 divergence is on the default arm at Ts = 8 ms, reduced plant.**")
     assert '<p class="bottom-line">' in page.split("<h2")[0]
+    # The Summary counts each plant apart: the truth plant's verdicts are not mixed in.
+    assert "| claim | default arm, truth plant (1 column) | default arm, reduced model (1 " \
+        "column) | " in md
 
 
-def _row(status, arm="table1", Ts=1e-3, plant="truth plant (Exudyn)"):
+def _row(status, arm="table1", Ts=1e-3, plant="truth plant (Exudyn)", run_id=""):
     from types import SimpleNamespace
-    return SimpleNamespace(status=status, arm=arm, Ts=Ts, plant_label=plant)
+    return SimpleNamespace(status=status, arm=arm, Ts=Ts, plant_label=plant, run_id=run_id)
 
 
 def test_the_bottom_line_says_where_runs_diverged_and_counts_checks_apart():
@@ -349,5 +353,15 @@ def test_the_bottom_line_says_where_runs_diverged_and_counts_checks_apart():
     assert bottom_line(spread, [], [])[1] == (
         "The 5 divergences: 3 on the table1 arm at Ts = 1 ms, truth plant (Exudyn); 2 on the "
         "default arm at Ts = 5 ms, truth plant (Exudyn).")
+    # The divergences the stability map foresees are said to be expected; the rest named.
+    foreseen = [_row("diverged", run_id=f"r{i}") for i in range(3)]
+    other = [_row("diverged", "default", 5e-3, run_id="x")]
+    assert bottom_line(foreseen, [], [], expected={"r0", "r1", "r2"})[1] == (
+        "All of the 3 divergences are expected: at or beyond the stability map's first "
+        "divergence of their arm and plant.")
+    assert bottom_line(foreseen + other, [], [], expected={"r0", "r1", "r2"})[1] == (
+        "3 of the 4 divergences are expected: at or beyond the stability map's first "
+        "divergence of their arm and plant; 1 unexpected divergence is on the default arm "
+        "at Ts = 5 ms, truth plant (Exudyn).")
     # Nothing stopped: no second sentence.
     assert bottom_line([_row("ok")] * 3, [], []) == ["3 runs: 3 completed, 0 diverged, 0 failed."]

@@ -1,8 +1,9 @@
-"""The report's bottom line: two or three sentences a reviewer can quote, computed from
-the stored results — how many runs completed, diverged and failed (the mesh/step checks
-counted apart from the runs they check), where the divergences and failures are (which
-arm, control period and plant), and what became of the paper's claims on each plant, the
-verdicts that cannot be given named with what stops them.  A calibration's folder says
+"""The report's bottom line: sentences a reviewer can quote, computed from the stored
+results — first what became of the paper's claims on each plant and arm (the truth plant
+first), the verdicts that cannot be given named with what stops them; then how many runs
+completed, diverged and failed (the mesh/step checks counted apart from the runs they
+check) and where the divergences and failures are (which arm, control period and plant),
+the divergences the stability map foresees said to be expected.  A calibration's folder says
 what was fitted and the verdict on the model instead."""
 from __future__ import annotations
 
@@ -64,39 +65,54 @@ def _runs_sentence(runs, checks) -> str:
     return text + "."
 
 
-def _stops_sentence(runs, checks) -> str:
-    parts = [_where([r for r in group if r.status == s], word)
-             for group, s, word in ((runs, "diverged", "divergence"),
-                                    (runs, "failed", "failure"),
-                                    (checks, "failed", "failed check"))
-             if any(r.status == s for r in group)]
+def _stops_sentence(runs, checks, expected: frozenset = frozenset()) -> str:
+    diverged = [r for r in runs if r.status == "diverged"]
+    foreseen = [r for r in diverged if r.run_id in expected] if expected else []
+    parts = []
+    if foreseen:
+        parts.append(f"{'all' if len(foreseen) == len(diverged) else len(foreseen)} of the "
+                     f"{_plural(len(diverged), 'divergence')} "
+                     f"{'are' if len(foreseen) > 1 else 'is'} expected: at or beyond the "
+                     "stability map's first divergence of their arm and plant")
+        diverged = [r for r in diverged if r.run_id not in expected]
+        if diverged:
+            parts.append(_where(diverged, "unexpected divergence"))
+    elif diverged:
+        parts.append(_where(diverged, "divergence"))
+    parts += [_where([r for r in group if r.status == s], word)
+              for group, s, word in ((runs, "failed", "failure"),
+                                     (checks, "failed", "failed check"))
+              if any(r.status == s for r in group)]
     if not parts:
         return ""
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
 
 
-def _claims_sentence(columns) -> str:
-    """The claims' verdicts counted per plant role, the undecided ones by what stops them."""
+def _claims_sentences(columns) -> list[str]:
+    """Per plant (the truth plant first) and arm: the paper's claims that hold and fail,
+    the ones not given named with what stops them."""
     from ..verdicts.claims import CLAIMS
-    parts = []
+    lines = []
     for role, name in (("truth", "the truth plant"), ("reduced", "the reduced model")):
-        verdicts = Counter(v.verdict for c in columns
-                           if is_truth(next(iter(c.runs.values())).config) == (role == "truth")
-                           for v in c.verdicts.values() if v.verdict != "n/a")
-        if not verdicts:
-            continue
-        undecided = [f"{verdicts[v]} {v} ({meaning})" for v, meaning in UNDECIDED.items()
-                     if verdicts[v]]
-        text = f"on {name} {verdicts['holds']} hold and {verdicts['fails']} fail"
-        if undecided:
-            total = sum(verdicts[v] for v in UNDECIDED)
-            text += f"; {total} are not given: " + ", ".join(undecided)
-        parts.append(text)
-    if not parts:
-        return ""
-    return (f"The paper's {len(CLAIMS)} claims over {_plural(len(columns), 'column')} (arm, "
-            f"plant, control period, start): " + "; ".join(parts) + ".")
+        for arm in dict.fromkeys(c.arm for c in columns):
+            verdicts = Counter(v.verdict for c in columns if c.arm == arm and is_truth(
+                next(iter(c.runs.values())).config) == (role == "truth")
+                for v in c.verdicts.values() if v.verdict != "n/a")
+            if not verdicts:
+                continue
+            count = sum(c.arm == arm and is_truth(next(iter(c.runs.values())).config)
+                        == (role == "truth") for c in columns)
+            text = (f"On {name}, {arm} arm ({_plural(count, 'column')} × the paper's "
+                    f"{len(CLAIMS)} claims): {verdicts['holds']} verdicts hold and "
+                    f"{verdicts['fails']} fail")
+            undecided = [f"{verdicts[v]} {v} ({meaning})" for v, meaning in UNDECIDED.items()
+                         if verdicts[v]]
+            if undecided:
+                total = sum(verdicts[v] for v in UNDECIDED)
+                text += f"; {total} are not given: " + ", ".join(undecided)
+            lines.append(text + ".")
+    return lines
 
 
 def _calibration_sentence(calibration: dict) -> str:
@@ -108,7 +124,8 @@ def _calibration_sentence(calibration: dict) -> str:
     return f"flexarm calibrate fitted {fitted}. The verdict on the model: {verdict}."
 
 
-def bottom_line(runs, checks, columns, calibration: dict | None = None) -> list[str]:
+def bottom_line(runs, checks, columns, calibration: dict | None = None, *,
+                expected: frozenset = frozenset()) -> list[str]:
     """The report's first sentences.
 
     Parameters
@@ -121,11 +138,15 @@ def bottom_line(runs, checks, columns, calibration: dict | None = None) -> list[
         The claims' columns (`validation.verdicts.claims.claim_columns`), or [].
     calibration : dict, optional
         The report's calibration section (`validation.report.calibration`).
+    expected : set of str, optional
+        The ids of the runs whose divergence the stability map foresees
+        (`validation.verdicts.stability.beyond_every_limit`).
 
     Returns
     -------
     list of str
-        One to four sentences, each complete on its own.
+        Sentences, each complete on its own: the claims per plant and arm first (the
+        answer), then the runs counted and where they stopped.
 
     Examples
     --------
@@ -136,11 +157,9 @@ def bottom_line(runs, checks, columns, calibration: dict | None = None) -> list[
     3 runs: 1 completed, 2 diverged, 0 failed.
     All 2 divergences are on the table1 arm at Ts = 1 ms, reduced plant.
     """
-    lines = []
+    lines = _claims_sentences(columns) if columns else []
     if runs:
-        lines += [_runs_sentence(runs, checks), _stops_sentence(runs, checks)]
-    if columns:
-        lines.append(_claims_sentence(columns))
+        lines += [_runs_sentence(runs, checks), _stops_sentence(runs, checks, expected)]
     if calibration:
         lines.append(_calibration_sentence(calibration))
     return [line for line in lines if line]

@@ -257,7 +257,10 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
 
     tasks = []
     results = found.meanwhile
+    expected = frozenset()
     if results:
+        from ..verdicts.stability import beyond_every_limit
+        expected = frozenset(beyond_every_limit(results, runs))
         rows = stability_rows(results)
         data.stability = {"table": table(
             ["case", "plant", "arm", "no divergence up to [ms]", "first divergence [ms]",
@@ -342,7 +345,8 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         data.pairs = pairs_table(runs, fig.describe_run) if len({r.role for r in runs}) > 1 \
             else None
         data.arms_answers, data.arms = arms_answers(runs), arms_table(runs)
-        data.bottom_line = bottom_line(counted, checks, columns, data.calibration)
+        data.bottom_line = bottom_line(counted, checks, columns, data.calibration,
+                                       expected=expected)
         if many:
             data.many = distributions(runs, done)
         else:

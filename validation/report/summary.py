@@ -97,15 +97,25 @@ def counted(verdicts) -> str:
 
 
 def verdict_counts(columns) -> dict:
-    """The claims at a glance: per claim and arm, its verdicts over the arm's columns
-    counted ("3 holds, 1 diverged"), and how many columns each arm has."""
+    """The claims at a glance: per claim, arm and plant (the truth plant first), its
+    verdicts over those columns counted ("3 holds, 1 diverged"), and how many columns
+    each has."""
+    from ..run.plants import is_truth
     from ..verdicts.claims import CLAIMS
-    arms = list(dict.fromkeys(c.arm for c in columns))
+
+    def where(c):
+        return c.arm, "truth plant" if is_truth(next(iter(c.runs.values())).config) \
+            else "reduced model"
+    found = {where(c) for c in columns}
+    places = [(arm, plant) for plant in ("truth plant", "reduced model")
+              for arm in dict.fromkeys(c.arm for c in columns) if (arm, plant) in found]
     rows = [{"claim": claim.text,
-             "cells": [counted(c.verdicts[claim.key].verdict for c in columns if c.arm == arm)
-                       for arm in arms]} for claim in CLAIMS]
-    return {"arms": [f"{arm} arm ({sum(c.arm == arm for c in columns)} columns)"
-                     for arm in arms], "rows": rows}
+             "cells": [counted(c.verdicts[claim.key].verdict for c in columns
+                               if where(c) == place) for place in places]} for claim in CLAIMS]
+    sizes = Counter(map(where, columns))
+    return {"arms": [f"{arm} arm, {plant} ({sizes[arm, plant]} column"
+                     f"{'' if sizes[arm, plant] == 1 else 's'})" for arm, plant in places],
+            "rows": rows}
 
 
 def _delta(truth: float, reduced: float) -> str:
