@@ -10,7 +10,7 @@ from .one_run import scenario_from_args
 
 def cmd_export_fmu(args: argparse.Namespace) -> int:
     from ..run.fmu.export import export_law, export_plant
-    from ..run.fmu.settings import signal_names
+    from ..run.fmu import signal_names
     check(bool(args.plant_fmu or args.law_fmu), "export-fmu",
           "name what to write: --plant-fmu FILE.fmu, --law-fmu FILE.fmu or both")
     if args.plant_fmu and args.law_fmu:

@@ -1,4 +1,4 @@
-"""An FMU as a plant table names it: FMPy (the ``fmi`` extra) found when an FMU is first
+"""An FMU as a plant table names it: the plant contract's names (`signal_names`), FMPy (the ``fmi`` extra) found when an FMU is first
 read, the FMU's model description read and checked against the variables a table maps
 (each refusal one `ConfigError` naming the key), its file hashed (for the run's
 fingerprint) and its archive unpacked once per process."""
@@ -13,9 +13,11 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from reduced_model import coordinate_names, truth_extras
+
 from ..config import ConfigError, check, did_you_mean, short_str
 
-__all__ = ["fmpy", "read_description", "variable", "file_sha256", "unpacked", "REAL_TYPES",
+__all__ = ["fmpy", "read_description", "variable", "signal_names", "file_sha256", "unpacked", "REAL_TYPES",
            "FMI_VERSIONS"]
 
 #: The FMI versions read (co-simulation): 2.0 and 3.0.
@@ -126,3 +128,14 @@ def _remove_own() -> None:
     for folder, pid in list(_UNPACKED.values()):
         if pid == os.getpid():
             shutil.rmtree(folder, ignore_errors=True)
+
+
+def signal_names(table: str, links: int, modes_per_link) -> tuple[str, ...]:
+    """The contract names of ``table`` for an arm of ``links`` links whose laws' model
+    has ``modes_per_link``: the torques in; the truth vector's entries out
+    (`reduced_model.truth_extras`); the state for ``initial``."""
+    if table == "inputs":
+        return tuple(f"tau{i + 1}" for i in range(links))
+    coords = coordinate_names(tuple(modes_per_link))
+    state = coords + tuple(f"{c}_dot" for c in coords)
+    return state if table == "initial" else state + truth_extras(links)

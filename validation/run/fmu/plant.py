@@ -15,8 +15,7 @@ import numpy as np
 from reduced_model import Plant, PlantFailure, truth_extras
 
 from ..config import short_str
-from .description import fmpy, read_description, unpacked
-from .settings import signal_names
+from .description import fmpy, read_description, signal_names, unpacked
 
 __all__ = ["FmuPlant"]
 

@@ -15,13 +15,12 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from reduced_model import (FieldError, PlantSettings, ROLES, coordinate_names,
-                           truth_extras)
+from reduced_model import FieldError, PlantSettings, ROLES
 
 from ..config import ConfigError, check
-from .description import read_description, unpacked, variable
+from .description import read_description, signal_names, unpacked, variable
 
-__all__ = ["FmuSettings", "signal_names", "TABLES"]
+__all__ = ["FmuSettings", "TABLES"]
 
 #: The mapping tables, each with the causality its FMU variables must have and the
 #: contract names it takes.
@@ -31,17 +30,6 @@ _NAMES = {"inputs": re.compile(r"tau\d+"),
           "outputs": re.compile(r"(theta\d+|q\d+)(_dot)?|tip\d+_[xy]|tip_defl\d+|proj_res\d+"
                                 r"|motor\d+(_dot)?"),
           "initial": re.compile(r"(theta\d+|q\d+)(_dot)?")}
-
-
-def signal_names(table: str, links: int, modes_per_link) -> tuple[str, ...]:
-    """The contract names of ``table`` for an arm of ``links`` links whose laws' model
-    has ``modes_per_link``: the torques in; the truth vector's entries out
-    (`reduced_model.truth_extras`); the state for ``initial``."""
-    if table == "inputs":
-        return tuple(f"tau{i + 1}" for i in range(links))
-    coords = coordinate_names(tuple(modes_per_link))
-    state = coords + tuple(f"{c}_dot" for c in coords)
-    return state if table == "initial" else state + truth_extras(links)
 
 
 @dataclass(frozen=True)
