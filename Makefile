@@ -11,7 +11,7 @@ STAMP  := $(VENV)/.installed
 # cores the suite takes ~55 % of its serial time.  PARALLEL= runs it serially.
 PARALLEL ?= -n 2 --dist loadfile
 PYTEST := $(BIN)/python -m pytest $(PARALLEL)
-EXTRAS := test,cluster
+EXTRAS := test,cluster,fmi
 # The docs extra is pinned with the rest but installed only by `make docs`: the test
 # suite needs none of Sphinx.
 DOCS_EXTRAS := $(EXTRAS),docs

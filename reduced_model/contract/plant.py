@@ -121,6 +121,11 @@ class PlantSettings:
     def check(self) -> None:
         """What only running can check (a plug-in's class and options); nothing here."""
 
+    def check_with(self, params, modes_per_link, measured) -> None:
+        """What it can check of the true arm ``params`` it will simulate, the laws'
+        ``modes_per_link`` and the ``measured`` names (an FMU's variables); nothing
+        here."""
+
     def build(self, params, model, sensors: SensorConfig, Ts: float) -> "Plant":
         """The plant of the true arm ``params``, measuring with ``sensors`` in the modal
         basis of ``model`` (the controller's nominal `ArmModel`), at the control period

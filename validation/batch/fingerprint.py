@@ -36,7 +36,7 @@ from reduced_model.code import walk
 
 __all__ = ["code_fingerprint", "source_fingerprint", "run_fingerprint", "result_sources",
            "module_sources", "computed_by", "plugin_sources", "plugin_kinds",
-           "forget_plugins", "is_fresh", "fingerprint_of"]
+           "forget_plugins", "is_fresh", "fingerprint_of", "fmu_of"]
 
 _ROOT = Path(__file__).resolve().parents[2]
 #: Where executing a run starts: everything it can import decides results.
@@ -191,11 +191,18 @@ def plugin_kinds(scenario: dict) -> list[str]:
                               for part in ("controller", "observer", "plant")) if ":" in k)
 
 
+def _fmu_of(scenario: dict) -> str | None:
+    """The FMU file a scenario mapping's plant runs (``kind = "fmu"``), else None."""
+    plant = scenario.get("plant", {})
+    return str(plant.get("fmu") or "") if plant.get("kind") == "fmu" else None
+
+
 def run_fingerprint(scenario: dict) -> str:
     """The fingerprint of one run's code: `code_fingerprint` plus its plug-ins' sources
-    and installed packages."""
-    kinds = plugin_kinds(scenario)
-    if not kinds:
+    and installed packages, and an FMU plant's file (its SHA-256) and FMPy (its
+    version and installed files)."""
+    kinds, fmu = plugin_kinds(scenario), _fmu_of(scenario)
+    if not kinds and fmu is None:
         return code_fingerprint()
     h = hashlib.sha256(code_fingerprint().encode())
     for kind in kinds:
@@ -206,18 +213,28 @@ def run_fingerprint(scenario: dict) -> str:
         else:
             h.update(b"unknown")
         _hash_packages(h, _plugin_walk(kind.partition(":")[0]).packages)
+    if fmu is not None:
+        from ..run.fmu import file_sha256  # hashes the file: runs none of its code
+        h.update(f"fmu\0{file_sha256(fmu)}\0".encode())
+        _hash_packages(h, ("fmpy",))
     return h.hexdigest()[:16]
 
 
 def is_fresh(row) -> bool:
     """Whether the stored run ``row`` (`StoredRun`) was made by this installation's code:
     its fingerprint is the one its laws and plant would get now (their kinds are columns
-    of the row: no scenario decoded)."""
-    return row.fingerprint == fingerprint_of(row.controller, row.observer, row.plant)
+    of the row: no scenario decoded, but for an FMU plant, whose file is in it)."""
+    return row.fingerprint == fingerprint_of(row.controller, row.observer, row.plant,
+                                             fmu_of(row))
 
 
-def fingerprint_of(controller: str, observer: str, plant: str) -> str:
+def fmu_of(row) -> str | None:
+    """The FMU file a stored run's plant ran (decoded from its scenario), else None."""
+    return _fmu_of(row.config) if row.plant == "fmu" else None
+
+
+def fingerprint_of(controller: str, observer: str, plant: str, fmu: str | None = None) -> str:
     """`run_fingerprint` of a run of these kinds of laws and plant (all that it reads of
-    a scenario)."""
+    a scenario; ``fmu``: an FMU plant's file)."""
     return run_fingerprint({"controller": {"kind": controller}, "observer": {"kind": observer},
-                            "plant": {"kind": plant}})
+                            "plant": {"kind": plant, "fmu": fmu}})

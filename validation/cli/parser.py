@@ -15,6 +15,7 @@ from ..run.scenario import DEFAULT_TRANSIENT, PLANT_KINDS, Scenario
 from .calibrate import cmd_calibrate
 from .campaigns import cmd_campaign, cmd_reproduce_paper
 from .common import EXIT_USAGE
+from .export_fmu import cmd_export_fmu
 from .modes import cmd_arms, cmd_modes
 from .one_run import cmd_run, cmd_show
 from .results import cmd_export, cmd_repair, cmd_report
@@ -239,6 +240,24 @@ def build_parser() -> argparse.ArgumentParser:
                           "and say whether its numbers converged")
     _add_limits(run)
     run.set_defaults(func=cmd_run)
+
+    fmu = sub.add_parser("export-fmu", help="write a scenario's reduced plant and its laws as "
+                                            "co-simulation FMUs (the fmi extra)")
+    fmu.add_argument("--config", metavar="TOML", help="scenario file (default: the default "
+                                                     "scenario); flags override it")
+    fmu.add_argument("--arm", metavar="ARM", help="a shipped arm or an arm file .toml")
+    fmu.add_argument("--controller", metavar="KIND", help="the law exported with --law-fmu")
+    fmu.add_argument("--observer", metavar="KIND", help="its observer (none: the controller "
+                                                        "reads the whole state)")
+    fmu.add_argument("--Ts", type=_positive, metavar="S", help="control period [s]")
+    fmu.add_argument("--set", action="append", metavar="KEY=VALUE",
+                     help="any scenario field by dotted key, value in TOML syntax")
+    fmu.add_argument("--plant-fmu", metavar="FILE.fmu",
+                     help="write the reduced plant of the scenario's true arm here")
+    fmu.add_argument("--law-fmu", metavar="FILE.fmu",
+                     help="write the scenario's controller and observer here")
+    fmu.set_defaults(func=cmd_export_fmu, like=None, plant=None, duration=None, seed=None,
+                     feedback=None, initial_state=None, name=None)
 
     show = sub.add_parser("show", help="the paper's Figs. 3-8 for one stored run")
     show.add_argument("run", metavar="RESULTS/RUN",

@@ -33,7 +33,7 @@ from .sweep_figures import sweep_figures
 from .verdict_figures import stability_chart, validity_map, waterfall
 from . import linear_figures
 from ..batch.beside import beside, out_of_collection
-from ..batch.fingerprint import fingerprint_of
+from ..batch.fingerprint import fingerprint_of, fmu_of
 from ..batch.store.resimulate import every_signal
 from .render import fmt_number, folded_text, render
 from .bottom_line import bottom_line
@@ -174,8 +174,8 @@ def _included(store: ResultStore, all_rows: list, *, animate: bool,
     with beside([functools.partial(store.verify, all_rows),
                  *(draw for _, draw in maps.values())], stores=[store],
                 progress=False) as done:
-        now = {k: fingerprint_of(*k) for k in {(r.controller, r.observer, r.plant)
-                                               for r in all_rows}}  # once per kind of run
+        made = [(r.controller, r.observer, r.plant, fmu_of(r)) for r in all_rows]
+        now = {k: fingerprint_of(*k) for k in set(made)}  # once per kind of run
         key = content_key(store.out, animate=animate, rows=all_rows)
         result = meanwhile()
         damaged, *pngs = done()
@@ -183,8 +183,8 @@ def _included(store: ResultStore, all_rows: list, *, animate: bool,
                                             in zip(maps.items(), pngs)}, result)
     stale = []
     lists = {"run": found.runs, "evaluation": found.evaluations, "check": found.checks}
-    for r, role in zip(all_rows, roles):  # one pass (10^5 rows: ~20 ms a pass)
-        if r.fingerprint != now[r.controller, r.observer, r.plant]:
+    for r, role, kinds in zip(all_rows, roles, made):  # one pass (10^5 rows: ~20 ms)
+        if r.fingerprint != now[kinds]:
             stale.append(r)
         elif r.run_id not in damaged and role in lists:
             lists[role].append(r)

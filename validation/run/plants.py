@@ -6,7 +6,8 @@ table), its declared role — "truth", the arm every verdict trusts, checked for
 convergence, or "reduced", the paper's model; verdicts, reports, ``verify`` and the time
 limits ask the role, never the name —, its refinements, its linear model and its cost.
 `PLANTS` maps a built-in kind to its class (as SciPy's ``METHODS`` maps a name to an
-``OdeSolver``); ``kind = "package.module:Class"`` names a user's plant, described in the
+``OdeSolver``); ``kind = "fmu"`` runs a co-simulation FMU (`validation.run.fmu`);
+``kind = "package.module:Class"`` names a user's plant, described in the
 scenario by `PluginSettings` (its role written there, so that a stored run says what it
 was without its code being imported, and checked against the class's own).  Adding an
 engine is this file's registration and its own package.
@@ -23,9 +24,11 @@ from plant_exudyn import ExudynPlant
 from reduced_model import LEVELS, ROLES, Plant, PlantSettings, ReducedPlant, Refinement
 
 from .config import ConfigError, check, did_you_mean
+from .fmu import FmuSettings
 from .processes import checked_apart
 
-__all__ = ["PluginSettings", "PlantTable", "PLANTS", "ROLES", "LEVELS", "DEFAULT_TRUTH",
+__all__ = ["PluginSettings", "FmuSettings", "PlantTable", "PLANTS", "ROLES", "LEVELS",
+           "DEFAULT_TRUTH",
            "ENGINE_PACKAGES", "Refinement", "plant_settings", "role_of", "label_of",
            "is_truth", "truth_settings", "plant_for_role", "with_plant"]
 
@@ -127,10 +130,11 @@ def _plugin_class(kind: str) -> type:
     return cls
 
 
-#: The built-in plant kinds; a "package.module:Class" kind is a `PluginSettings`.
+#: The built-in plant kinds; a "package.module:Class" kind is a `PluginSettings`, and
+#: ``kind = "fmu"`` an `FmuSettings` (an FMU's role is its table's, as a plug-in's).
 PLANTS: dict[str, type[Plant]] = {"reduced": ReducedPlant, "exudyn": ExudynPlant}
 #: What a scenario's ``plant`` table is: a tagged choice of the kinds' settings.
-PlantTable = ReducedPlant.Settings | ExudynPlant.Settings | PluginSettings
+PlantTable = ReducedPlant.Settings | ExudynPlant.Settings | PluginSettings | FmuSettings
 #: The truth plant a system on the reduced plant is checked against.
 DEFAULT_TRUTH = "exudyn"
 #: The Python packages of the registered engines (their versions are recorded with runs).
@@ -138,6 +142,8 @@ ENGINE_PACKAGES = ("exudyn",)
 
 
 def _settings_class(kind) -> type[PlantSettings]:
+    if kind == FmuSettings.kind:
+        return FmuSettings
     return PLANTS[kind].Settings if kind in PLANTS else PluginSettings
 
 

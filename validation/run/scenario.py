@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reduced_model import STRAIN_QUANTITIES, ArmParameters, validate_modes_per_link
+from reduced_model import (STRAIN_QUANTITIES, ArmParameters, measured_names,
+                           validate_modes_per_link)
 
 from .arms import (PAPER_ARMS, PARAMETER_TABLES, arm_label, arm_of, check_scales_on_arm,
                    own_parameters, params_from_table)
@@ -227,6 +228,9 @@ def check_scenario(s: Scenario) -> None:
                 raise ConfigError(key, str(exc).removeprefix(key).lstrip(": ")) from None
     for key in PARAMETER_TABLES:
         _check_modelable(getattr(s, key), s.model_modes, key)
+    s.plant.check_with(true, s.model_modes, measured_names(
+        s.model_modes, modal=s.sensors.modal != "none", rates=s.sensors.rates,
+        tip_position=s.sensors.tip_position))
     for name in ("amplitude", "omega", "start", "goal"):
         value = getattr(s.reference, name)
         check(value is None or len(value) == nominal.n_links, f"reference.{name}",

@@ -141,7 +141,7 @@ def render(docs) -> str:
     from plant_exudyn import Mesh
     from reduced_model import ArmParameters
     from validation.run.requirements import Requirement
-    from validation.run.plants import PLANTS, PluginSettings
+    from validation.run.plants import PLANTS, FmuSettings, PluginSettings
     from validation.run.scenario import (ControllerSpec, DisturbanceSpec, DivergenceSpec,
                                          ModelSpec, ObserverSpec, ReferenceSpec, Scenario,
                                          SensorSpec)
@@ -169,6 +169,9 @@ def render(docs) -> str:
         ('``[plant]`` with ``kind = "package.module:Class"``', PluginSettings, {}, None,
          "A plant of your own: a ``reduced_model.Plant`` subclass, or a subclass of a "
          "built-in plant (the guide's *Write your own plant*)."),
+        ('``[plant]`` with ``kind = "fmu"``', FmuSettings, {}, None,
+         "A co-simulation FMU (FMI 2.0 or 3.0) as the plant, its variables mapped to the "
+         "plant contract (the guide's *FMUs: plants and laws that cross tools*)."),
         ("``[plant.mesh]``", Mesh, {}, None,
          'The truth plant\'s finite elements (``kind = "exudyn"`` only).'),
         ("``[true_params]`` and ``[nominal_params]``", ArmParameters, {}, arm_overrides,
