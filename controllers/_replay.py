@@ -1,7 +1,7 @@
 """Open-loop replay of recorded joint torques: the input of a calibration experiment
 reproduced sample for sample (`validation.verdicts.calibration`).
 
-The torques are read from a ``.npy`` file (float64, shape (samples, 2), N m; no pickle)
+The torques are read from a ``.npy`` file (float64, shape (samples, joints), N m; no pickle)
 whose SHA-256 the options name, so a scenario that replays them is identified by their
 content: its run id changes with the data, and a file changed after the fact is refused
 instead of silently replayed.  The torque at t_k = k·Ts is row k, held over
@@ -39,7 +39,8 @@ class TorqueReplay:
     Ts : float
         The control period [s] (the scenario's; row k is applied at t = k·Ts).
     file : str
-        A ``.npy`` file of shape (samples, 2) [N m].
+        A ``.npy`` file of shape (samples, joints) [N m]: one column per joint of the
+        model's arm.
     sha256 : str
         The file's SHA-256 (hex): a file with other content is refused.
     """
@@ -56,33 +57,33 @@ class TorqueReplay:
             raise ValueError(f"file {file}: its SHA-256 is not the one given (the torques "
                              "changed after the scenario was written)")
         torques = np.load(path, allow_pickle=False)
-        if torques.ndim != 2 or torques.shape[1] != 2 or not np.all(np.isfinite(torques)):
-            raise ValueError(f"file {file}: expected finite torques of shape (samples, 2), "
-                             f"got shape {torques.shape}")
+        joints = model.n_joints
+        if torques.ndim != 2 or torques.shape[1] != joints or not np.all(np.isfinite(torques)):
+            raise ValueError(f"file {file}: expected finite torques of shape (samples, "
+                             f"{joints}), got shape {torques.shape}")
         self.torques = np.ascontiguousarray(torques, dtype=np.float64)
         self.model, self.Ts = model, control_period(Ts)
 
     def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
         k = int(round(t / self.Ts))
         if k >= len(self.torques):
-            return np.full(2, np.nan)
+            return np.full(self.torques.shape[1], np.nan)
         return self.torques[k].copy()
 
     def compiled(self) -> CompiledLaw:
-        """The compiled form (`controllers._compiled`): reals = [1/Ts, τ rows...]."""
+        """The compiled form (`controllers._compiled`): ints = [rows, joints], reals =
+        [1/Ts, τ rows...]."""
         return CompiledLaw.of(replay_kernel, CONTROLLER_SIGNATURE, self.model,
-                              ints=[len(self.torques)],
+                              ints=list(self.torques.shape),
                               reals=np.concatenate([[1.0 / self.Ts], self.torques.ravel()]))
 
 
 @njit(cache=True)
 def replay_kernel(t, x, ref, ints, reals, state, mi, mr, wc, wr, tau, residual):
-    """`TorqueReplay` compiled: ints = [rows], reals = [1/Ts, τ1_0, τ2_0, τ1_1, ...]."""
+    """`TorqueReplay` compiled: ints = [rows, joints], reals = [1/Ts, τ1_0, τ2_0, …,
+    τ1_1, …]."""
     k = int(t * reals[0] + 0.5)
-    if k >= ints[0]:
-        tau[0] = np.nan
-        tau[1] = np.nan
-    else:
-        tau[0] = reals[1 + 2 * k]
-        tau[1] = reals[2 + 2 * k]
-    return 2
+    joints = ints[1]
+    for j in range(joints):
+        tau[j] = np.nan if k >= ints[0] else reals[1 + joints * k + j]
+    return joints

@@ -9,6 +9,7 @@ import pytest
 
 from validation.report.verdict_tables import write_attribution
 from validation.verdicts import attribution as att
+from validation.run.config import ConfigError
 from validation.run.scenario import scenario_from_mapping
 
 PLAYERS = ("plant", "parameters", "sensing", "sampling")
@@ -158,3 +159,31 @@ def test_the_joints_are_factors_of_their_own(tmp_path):
         assert sum(phi.values()) == pytest.approx(a.totals[metric], rel=1e-12, abs=1e-15)
         assert phi["bandwidth"] == 0.0
         assert phi["friction"] != 0.0
+
+
+def test_gravity_is_a_factor_of_the_vertical_arm(tmp_path):
+    """The vertical two-link arm on the reduced plant (2.5 s, 16 worlds): 'gravity' is
+    among the default factors, and with it the contributions add up to the gap of the
+    stored runs — exactly, up to the rounding of a sum of 16 terms (rel 1e-12) — and
+    gravity costs something (an arm in gravity sags under its own weight)."""
+    s = scenario_from_mapping({
+        "duration": 2.5, "initial_state": "reference", "arm": "vertical-two-link",
+        "true_params": {"Mp": 0.2}, "observer": {"kind": "smo-bl"},
+        "sensors": {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}})
+    assert "gravity" in att.default_factors(s)
+    factors = ("gravity", "parameters", "sensing", "estimation")
+    a, summary = att.attribute(s, factors, tmp_path, name="v", progress=False)
+    assert summary.ok == 16 and not a.destabilising
+    for metric, phi in a.contributions.items():
+        assert set(phi) == set(factors)
+        assert sum(phi.values()) == pytest.approx(a.totals[metric], rel=1e-12, abs=1e-15)
+    assert a.contributions["vib_rms"]["gravity"] != 0.0
+
+
+def test_the_horizontal_paper_arm_has_no_gravity_factor(tmp_path):
+    """Known bad: the paper's arm is horizontal — no default 'gravity' factor, and asking
+    for one is a one-line error (a factor that cannot act would be a null player)."""
+    s = scenario_from_mapping({})
+    assert "gravity" not in att.default_factors(s)
+    with pytest.raises(ConfigError, match="'gravity' cannot be idealised: the arm is horizontal"):
+        att.parse_factors(["gravity", "sensing"], s)

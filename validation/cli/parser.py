@@ -387,8 +387,8 @@ def build_parser() -> argparse.ArgumentParser:
                                            "(time series, frequency responses), with standard "
                                            "errors, intervals and identifiability")
     cal.add_argument("data", metavar="DATA", nargs="*",
-                     help="experiments: CSV files (t, tau1, tau2, measured signals) or stored "
-                          "runs RESULTS/RUN")
+                     help="experiments: CSV files (t, one torque per joint tau1, tau2, …, "
+                          "measured signals) or stored runs RESULTS/RUN")
     cal.add_argument("--config", required=True, metavar="SCENARIO.toml",
                      help="the scenario the experiments ran (plant, arm and start values; "
                           "[calibrate] settings)")

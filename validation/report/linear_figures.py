@@ -11,30 +11,45 @@ from .figures import plt, png
 
 __all__ = ["frequency_responses", "gap_map", "periods_chart", "validity_figures"]
 
-_CHANNEL_TITLES = {"tau1->theta1": "τ₁ → θ₁ [rad/(N m)]", "tau2->theta2": "τ₂ → θ₂ [rad/(N m)]",
-                   "tau1->tip_defl1": "τ₁ → w₁(L₁) [m/(N m)]",
-                   "tau2->tip_defl2": "τ₂ → w₂(L₂) [m/(N m)]"}
+_SUBSCRIPTS = str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉")
+
+
+def _title(channel: str) -> str:
+    """"tau2->tip_defl2" → "τ₂ → w₂(L₂) [m/(N m)]"."""
+    joint = channel.split("->")[0][3:].translate(_SUBSCRIPTS)
+    if "->theta" in channel:
+        return f"τ{joint} → θ{joint} [rad/(N m)]"
+    return f"τ{joint} → w{joint}(L{joint}) [m/(N m)]"
 
 
 def frequency_responses(arm: dict) -> bytes:
-    """|τ → θ| and |τ → tip deflection| of both plants at three θ2 of the grid."""
+    """|τ_i → θ_i| (top row) and |τ_i → tip deflection| of each flexible link (bottom
+    row) of both plants at three θ2 of the grid."""
     f = np.asarray(arm["frequencies_hz"])
     chosen = arm["responses"][::3]
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), sharex=True, constrained_layout=True)
-    for ax, channel in zip(axes.ravel(), _CHANNEL_TITLES):
+    joints = len(arm["modes"])
+    fig, axes = plt.subplots(2, joints, figsize=(5 * joints, 6.5), sharex=True,
+                             constrained_layout=True, squeeze=False)
+    panels = {f"tau{i}->{out}{i}": axes[row, i - 1] for i in range(1, joints + 1)
+              for row, out in enumerate(("theta", "tip_defl"))}
+    for channel, ax in panels.items():
+        if channel not in chosen[0]["reduced"]:  # a rigid link's tip
+            ax.set_axis_off()
+            continue
         for k, entry in enumerate(chosen):
             ax.loglog(f, entry["reduced"][channel], color=f"C{k}", lw=0.9,
                       label=f"θ₂ = {entry['theta2']:.2f} rad, reduced")
             ax.loglog(f, entry["fe"][channel], color=f"C{k}", lw=1.6, ls=(0, (2, 2)),
                       alpha=0.8, label=f"θ₂ = {entry['theta2']:.2f} rad, FE")
-        ax.set_title(_CHANNEL_TITLES[channel], fontsize=9)
+        ax.set_title(_title(channel), fontsize=9)
         ax.grid(True, which="major", lw=0.3)
     for ax in axes[1]:
         ax.set_xlabel("frequency [Hz]")
     for ax in axes[:, 0]:
         ax.set_ylabel("magnitude")
     axes[0, 0].legend(fontsize=6, ncol=2)
-    fig.suptitle(f"{arm['arm']} arm, θ₁ = 0: reduced model ({arm['modes'][0]}+{arm['modes'][1]} "
+    modes = "+".join(str(m) for m in arm["modes"])
+    fig.suptitle(f"{arm['arm']} arm, θ₁ = 0: reduced model ({modes} "
                  f"modes, solid) vs {arm['truth']} (dashed), linearised at rest", fontsize=10)
     return png(fig)
 

@@ -7,8 +7,9 @@ An experiment is a CSV file::
     t,tau1,tau2,theta1,theta2,q11,...
     0.0,0.731,0.112,0.0,0.0,1.2e-6,...
 
-``t`` [s] at a constant sample period (the scenario's ``Ts``), ``tau1``, ``tau2`` [N m]:
-the joint torques applied over [t_k, t_k+1) (everything the joints received), and any
+``t`` [s] at a constant sample period (the scenario's ``Ts``), ``tau1`` … ``tauN`` [N m],
+one per joint of the arm: the joint torques applied over [t_k, t_k+1) (everything the
+joints received), and any
 readings of the scenario's sensor model by its own names and SI units — ``theta1``,
 ``theta2`` [rad], the modal coordinates ``q11``… (as the sensors derive them), rates
 ``theta1_dot``… [rad/s, m/s], ``tip_x``, ``tip_y`` [m] — each measured at t_k, before
@@ -41,10 +42,7 @@ from .config import ConfigError, check
 from .results import RunResult
 
 __all__ = ["Experiment", "read_experiment", "from_run", "write_experiment", "check_experiment",
-           "FrequencyResponse", "read_frequency_response", "INPUTS"]
-
-#: The columns every experiment has besides its measurements.
-INPUTS = ("t", "tau1", "tau2")
+           "FrequencyResponse", "read_frequency_response", "torque_columns"]
 #: Relative tolerance on the sample period: the text of a CSV keeps 9+ digits.
 _PERIOD_RTOL = 1e-6
 #: The largest file read [bytes] (a 20 s record at 1 kHz with 14 signals is ~5 MB).
@@ -63,7 +61,7 @@ class Experiment:
         Where it was read from (for messages).
     Ts : float
         Sample period [s].
-    torques : ndarray (N, 2)
+    torques : ndarray (N, joints)
         Joint torques applied over [t_k, t_k+1) [N m].
     names : tuple of str
         The measured signals, by the sensor model's names.
@@ -90,6 +88,11 @@ class Experiment:
     def column(self, name: str) -> str:
         """How messages name a column of this experiment."""
         return f"{self.source}: column {name}"
+
+
+def torque_columns(joints: int) -> tuple[str, ...]:
+    """The torque columns of an experiment on an arm of ``joints`` joints: tau1 … tauN."""
+    return tuple(f"tau{i}" for i in range(1, joints + 1))
 
 
 def _float(text: str, where: str, row: int) -> float:
@@ -133,7 +136,7 @@ def read_experiment(path: str | Path, name: str | None = None) -> Experiment:
     Parameters
     ----------
     path : path-like
-        The CSV file: columns ``t``, ``tau1``, ``tau2`` and the measured signals.
+        The CSV file: columns ``t``, ``tau1`` … ``tauN`` and the measured signals.
     name : str, optional
         The experiment's name; the file's stem by default.
 
@@ -149,11 +152,16 @@ def read_experiment(path: str | Path, name: str | None = None) -> Experiment:
     path = Path(path)
     src = str(path)
     columns = _read_table(path)
-    for col in INPUTS:
+    joints = 0
+    while f"tau{joints + 1}" in columns:
+        joints += 1
+    for col in ("t", "tau1"):
         check(col in columns, f"{src}: column {col}", "missing (an experiment needs t [s], "
-                                                      "tau1 and tau2 [N m] and its measurements)")
-    measured = tuple(c for c in columns if c not in INPUTS)
-    check(bool(measured), src, "no measured signal (columns besides t, tau1, tau2)")
+                                                      "one torque per joint tau1, tau2, … "
+                                                      "[N m] and its measurements)")
+    inputs = ("t", *torque_columns(joints))
+    measured = tuple(c for c in columns if c not in inputs)
+    check(bool(measured), src, "no measured signal (columns besides t and the torques)")
     t = columns["t"]
     where = f"{src}: column t"
     check(len(t) >= 2, where, f"{len(t)} sample(s): an experiment needs at least two (one "
@@ -171,7 +179,7 @@ def read_experiment(path: str | Path, name: str | None = None) -> Experiment:
         raise ConfigError(where, f"the sample period is not constant (row {k + 2}: step "
                                  f"{dt[k]:g} s, mean {Ts:g} s)")
     return Experiment(name=name or path.stem, source=src, Ts=Ts,
-                      torques=np.column_stack([columns["tau1"], columns["tau2"]]),
+                      torques=np.column_stack([columns[c] for c in inputs[1:]]),
                       names=measured, signals=np.array([columns[c] for c in measured]))
 
 
@@ -183,8 +191,9 @@ def from_run(result: RunResult, name: str, source: str) -> Experiment:
                                          "a completed run is an experiment")
     check(len(result.time) >= 2, source, "fewer than two samples")
     names = tuple(n.removeprefix("y_") for n in result.names_with("y_"))
-    torques = np.column_stack([result["tau1"] + result["dist_tau1"],
-                               result["tau2"] + result["dist_tau2"]]).astype(np.float64)
+    joints = len(result.names_with("dist_tau"))
+    torques = np.column_stack([result[tau] + result[f"dist_{tau}"]
+                               for tau in torque_columns(joints)]).astype(np.float64)
     return Experiment(name=name, source=source, Ts=float(result.config["Ts"]),
                       torques=torques, names=names,
                       signals=result.select([f"y_{n}" for n in names]).astype(np.float64))
@@ -196,7 +205,7 @@ def write_experiment(exp: Experiment, fh, comment: str = "", *, digits: int = 9)
     9, every float32 the store keeps reads back exactly."""
     for line in comment.splitlines():
         fh.write(f"# {line}\n".replace("# \n", "#\n"))
-    fh.write(",".join((*INPUTS, *exp.names)) + "\n")
+    fh.write(",".join(("t", *torque_columns(exp.torques.shape[1]), *exp.names)) + "\n")
     t = np.arange(exp.samples) * exp.Ts
     table = np.column_stack([t, exp.torques, exp.signals.T])
     for row in table:
@@ -206,7 +215,15 @@ def write_experiment(exp: Experiment, fh, comment: str = "", *, digits: int = 9)
 def check_experiment(exp: Experiment, scenario, measurable: tuple[str, ...]) -> None:
     """Check ``exp`` against the scenario it is fitted with: its sample period is the
     control period, it measures only what the sensors give (``measurable``), and its
-    values have SI magnitudes an arm within the scenario's divergence bounds can have."""
+    values have SI magnitudes an arm within the scenario's divergence bounds can have, with
+    one torque per joint of its arm."""
+    arm = scenario.true_params
+    given = exp.torques.shape[1]
+    check(given >= arm.n_links, exp.column(f"tau{given + 1}"), f"missing (the arm has "
+          f"{arm.n_links} joints: one torque per joint, "
+          f"{', '.join(torque_columns(arm.n_links))})")
+    check(given <= arm.n_links, exp.column(f"tau{arm.n_links + 1}"),
+          f"a torque of joint {arm.n_links + 1}: the arm has {arm.n_links} joints")
     check(math.isclose(exp.Ts, scenario.Ts, rel_tol=_PERIOD_RTOL), exp.column("t"),
           f"sample period {exp.Ts:g} s is not the scenario's Ts = {scenario.Ts:g} s (time in "
           "seconds, one row per control period)")
@@ -214,9 +231,10 @@ def check_experiment(exp: Experiment, scenario, measurable: tuple[str, ...]) -> 
         check(name in measurable, exp.column(name),
               f"not a measurement of the scenario's sensors (measured: {', '.join(measurable)})")
     div = scenario.divergence
-    bounds = {"theta1": div.max_angle, "theta2": div.max_angle,
-              "theta1_dot": div.max_rate, "theta2_dot": div.max_rate}
-    reach = scenario.true_params.L1 + scenario.true_params.L2
+    joints = range(1, arm.n_links + 1)
+    bounds = {f"theta{i}": div.max_angle for i in joints} | \
+        {f"theta{i}_dot": div.max_rate for i in joints}
+    reach = sum(link.length for link in arm.links)
     bounds |= {"tip_x": 2 * reach, "tip_y": 2 * reach}
     for name, values in zip(exp.names, exp.signals):
         if name in bounds:

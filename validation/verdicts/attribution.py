@@ -149,6 +149,9 @@ def parse_factors(names, scenario: Scenario) -> tuple[str, ...]:
     if "estimation" in names:
         check(scenario.uses_estimate, "--factors", "'estimation' cannot be idealised: the "
               "scenario feeds the controller no estimate (no observer, or feedback = 'true')")
+    if "gravity" in names:
+        check(any(scenario.true_params.gravity), "--factors", "'gravity' cannot be "
+              "idealised: the arm is horizontal (no gravity in its plane)")
     if "truncation" in names:
         check(scenario.plant.role == "truth", "--factors",
               "'truncation' needs a truth plant (the scenario's plant is the reduced one)")

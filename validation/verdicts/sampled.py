@@ -3,7 +3,7 @@ zero-order-hold eigenvalues of the law's own linearised loop, and the ν-gap cer
 
 A case (a resolved scenario mapping, as `validation.verdicts.stability` builds them) is
 linearised at `POINTS` points of its run: at time t on the reference, the law is
-linearised about the reference state x_d(t) = [θ_d, 0, θ̇_d, 0] (`linear.law_gain`: every
+linearised about the reference state x_d(t) = [θ_d, 0, θ̇_d, 0] (θ_d: one angle per joint) (`linear.law_gain`: every
 gain it applies, from the law object itself, built exactly as a run builds it), and the
 plant about rest at its configuration [θ_d(t), 0] (frozen time: the plant's
 velocity-dependent Coriolis terms, second order in the reference rates of at most 1.3
@@ -64,8 +64,9 @@ _PREDICTION_RTOL = 1e-3
 @dataclass(frozen=True)
 class Prediction:
     """Largest stable period ``period`` [s] (inf: stable up to 0.1 s; 0: unstable even at
-    0.01 µs; NaN: no prediction), the θ2 [rad] of the operating point that limits it, and
-    a ``note`` (what the prediction leaves out, or why there is none)."""
+    0.01 µs; NaN: no prediction), the θ2 [rad] of the operating point that limits it (NaN
+    on a one-link arm), and a ``note`` (what the prediction leaves out, or why there is
+    none)."""
 
     period: float
     theta2: float
@@ -93,12 +94,12 @@ class _Case:
                                    s.model.kinematics)
         self.reference = make_reference(s.reference)
         self.names = list(self.model.state_names)
-        n = self.model.n
+        n, self.joints = self.model.n, self.model.n_joints
         self.points = []
         for t in np.linspace(0.0, s.duration, POINTS):
             theta, rate, _ = self.reference(float(t))
             x = np.zeros(2 * n)
-            x[:2], x[n:n + 2] = theta, rate
+            x[:self.joints], x[n:n + self.joints] = theta, rate
             self.points.append((float(t), x))
         self._gains: dict = {}
 
@@ -116,7 +117,8 @@ class _Case:
         return self._gains[Ts]
 
     def theta(self, point: int) -> np.ndarray:
-        return self.points[point][1][:2]
+        """The joint angles [rad] of an operating point."""
+        return self.points[point][1][:self.joints]
 
     def reduced_plant(self, point: int, *, nominal: bool = False,
                       forces: bool = False) -> control.StateSpace:
@@ -164,10 +166,10 @@ def _prediction(config_json: str) -> Prediction:
                           f"{type(exc).__name__} while being linearised: {exc}")
     if K0 is None:
         return Prediction(math.nan, math.nan, f"the law does not build at Ts = {PROBE_TS:g} s")
-    forces = K0[0].shape[0] > 2
+    forces = K0[0].shape[0] > case.joints
     if forces and not spec.generalised_forces:
         return Prediction(math.nan, math.nan, "the law applies forces on the modal "
-                          f"coordinates: the {spec.label} has two actuators")
+                          f"coordinates: the {spec.label} has {case.joints} actuators")
     truth = spec if spec.role == "truth" else None
     limit, where = math.inf, math.nan
     for i in range(len(case.points)):
@@ -187,7 +189,8 @@ def _prediction(config_json: str) -> Prediction:
         value = largest_stable_period(growth, low=_SCAN[0], high=_SCAN[1], points=_SCAN[2],
                                       rtol=_PREDICTION_RTOL)
         if value < limit:
-            limit, where = value, float(case.theta(i)[1])
+            theta = case.theta(i)
+            limit, where = value, float(theta[1]) if len(theta) > 1 else math.nan
     return Prediction(limit, where, "")
 
 
@@ -232,13 +235,13 @@ def certificate(config: dict, periods) -> list[CertificateRow]:
         if gains is None:
             rows.append(CertificateRow(Ts, math.nan, 0.0, False))
             continue
-        if gains[0].shape[0] > 2:
+        if gains[0].shape[0] > case.joints:
             return []
         gaps, margins = [], []
         for P_red, P_fe, K in zip(reduced, fe, gains):
             gain = as_statespace(K)
             loop_red = gain * control.sample_system(P_red, Ts)
-            margins.append(margin_detail(loop_red, np.eye(2)).value)
+            margins.append(margin_detail(loop_red, np.eye(case.joints)).value)
             try:
                 gaps.append(gap_detail(loop_red, gain * control.sample_system(P_fe, Ts)).value)
             except FactorisationError:

@@ -15,9 +15,9 @@ runs, are run only where a limit lies below them.  Runs start moving
 with the reference (no start-up kick) and last `DURATION` seconds.  Each run has one
 *outcome*:
 
-- ``stable``: completed, max |θ − θ_d| over its second half ≤ `TRACKING_LIMIT` (0.1 rad,
-  five times the paper's 0.02 rad yardstick: a loop that rings up slowly is caught even if
-  it has not crossed the divergence bounds);
+- ``stable``: completed, max |θ_i − θ_i,d| of every joint over its second half ≤
+  `TRACKING_LIMIT` (0.1 rad, five times the paper's 0.02 rad yardstick: a loop that rings
+  up slowly is caught even if it has not crossed the divergence bounds);
 - ``lost tracking``: completed without diverging, beyond the tracking limit;
 - ``diverged``: left the divergence bounds, or grows faster than `GROWTH_LIMIT` over its
   second half (a loop just beyond its limit grows slowly: 2 s would not take it out of
@@ -205,7 +205,8 @@ def outcome(row) -> tuple[str, str]:
     if growth > GROWTH_LIMIT:
         return "diverged", f"growing at {growth:.2g} 1/s (the torques' second difference " \
                            "over the second half)"
-    worst = max(row.metrics.get("track_max_1", math.inf), row.metrics.get("track_max_2", math.inf))
+    worst = max((value for key, value in row.metrics.items() if key.startswith("track_max_")),
+                default=math.inf)  # every joint's
     if not worst <= TRACKING_LIMIT:
         return "lost tracking", f"max |θ − θd| = {worst:.3g} rad over the second half"
     return "stable", f"max |θ − θd| = {worst:.3g} rad over the second half"

@@ -2,11 +2,13 @@
 design a controller on?  Frequency responses of both plants, the ν-gap over θ2, and per
 stability-map case the predicted, certified and measured largest stable control period.
 
-Per arm (`arm_validity`): on a θ2 grid (θ1 = 0), the reduced model and the FE arm
+Per arm (`arm_validity`, any number of joints N): on a θ2 grid (the other joints at 0; a
+single link at its one pose), the reduced model (the scenario's kinematics) and the FE arm
 linearised (`reduced_linear_model`, `plant_exudyn.linear_model`, the FE modes projected
-on the reduced model's mode shapes), their frequency responses τ → θ and τ → tip
-deflection, and δν of three views of the pair: τ → θ (what the encoders see), τ → tip
-deflections, and the loop of the scenario's controller broken at the plant input at its Ts
+on the reduced model's mode shapes), their frequency responses τ_i → θ_i and τ_i → tip
+deflection of each flexible link, and δν of three views of the pair, N×N transfer
+matrices and their tip rows: τ → θ (what the encoders see), τ → tip deflections of the
+flexible links, and the loop of the scenario's controller broken at the plant input at its Ts
 (what feedback with that law sees, `sampled`).  A view whose coprime factorisation
 cannot be computed (`nugap.FactorisationError`: on Table 1's arm, which has no damping at
 all, the undamped FE modes that two outputs barely see) is left empty, not guessed;
@@ -43,7 +45,7 @@ from .nugap import as_statespace, gap_detail
 from .resolution import UNDECIDED
 from .sampled import POINTS, certificate, certified_period, prediction
 from .stability import _label, _options_key, load_stability
-from .validity_file import CHANNELS
+from .validity_file import channels
 
 __all__ = ["THETA2", "FREQUENCIES_HZ", "CERTIFY_PERIODS", "STEP_CHECK", "arm_validity",
            "case_rows", "validity_analysis"]
@@ -63,37 +65,43 @@ def arm_validity(config: dict) -> dict:
     resolved scenario mapping: its true parameters, FE mesh, model order and Ts), as
     JSON-able data (module docstring)."""
     s = scenario_from_mapping(config)
-    model = ArmModel(s.true_params, s.model.modes_per_link)
+    model = ArmModel(s.true_params, s.model.modes_per_link, s.model.kinematics)
     truth = truth_settings(config)
     names = list(model.state_names)
+    N = model.n_joints
     w = 2 * np.pi * np.asarray(FREQUENCIES_HZ)
     law = build_controller(s, model)
+    arm_channels = channels(model.modes_per_link)
+    encoders = [f"motor{i + 1}" for i in range(N)]  # θ, or a drive's rotor: what they read
+    tips = [o for _, o in arm_channels if o.startswith("tip_defl")]
     responses, gaps = [], []
-    for theta2 in THETA2:
-        red = reduced_linear_model(model, theta=(0.0, theta2))
-        fe = truth.linear_model(s.true_params, theta=(0.0, theta2), model=model)
+    for theta2 in THETA2 if N > 1 else (0.0,):  # one link: its one pose
+        theta = np.zeros(N)
+        theta[1:2] = theta2
+        red = reduced_linear_model(model, theta=tuple(theta))
+        fe = truth.linear_model(s.true_params, theta=tuple(theta), model=model)
         entry = {"theta2": theta2}
         for label, P in (("reduced", red), ("fe", fe)):
             H = P(1j * w)  # (outputs, inputs, frequencies)
             entry[label] = {f"{i}->{o}": np.abs(H[P.output_labels.index(o),
                                                   P.input_labels.index(i)]).tolist()
-                            for i, o in CHANNELS}
+                            for i, o in arm_channels}
         responses.append(entry)
         x = np.zeros(2 * model.n)
-        x[1] = theta2  # the law holding the arm at rest at θ2
+        x[:N] = theta  # the law holding the arm at rest at θ
 
         def hold(t, x=x):
-            return x[:2].copy(), np.zeros(2), np.zeros(2)
+            return x[:N].copy(), np.zeros(N), np.zeros(N)
         gain = as_statespace(law_gain(law, x, 0.0, hold, shared=(model,)))
-        encoders = ["motor1", "motor2"]  # θ, or a drive's rotor: what the encoders read
         views = {"theta": (red[encoders, :], fe[encoders, :]),
-                 "tip": (red[["tip_defl1", "tip_defl2"], :],
-                         fe[["tip_defl1", "tip_defl2"], :]),
+                 "tip": (red[tips, :], fe[tips, :]),
                  "loop": (gain * control.sample_system(red[names, :], s.Ts),
                               gain * control.sample_system(fe[names, :], s.Ts))}
         row = {"theta2": theta2}
         for view, (a, b) in views.items():
             try:
+                if not a.noutputs:  # a rigid arm: no tip deflects
+                    raise ArithmeticError
                 detail = gap_detail(a, b)
             except ArithmeticError:  # FactorisationError: shown as not computed
                 row[view] = row[f"{view}_peak_hz"] = math.nan

@@ -7,16 +7,22 @@ from pathlib import Path
 
 from ..run.results import read_json
 
-__all__ = ["CHANNELS", "GAP_VIEWS", "load_validity"]
+__all__ = ["GAP_VIEWS", "channels", "load_validity"]
 
-#: (input, output) channels of the frequency responses.
-CHANNELS = (("tau1", "theta1"), ("tau2", "theta2"), ("tau1", "tip_defl1"),
-            ("tau2", "tip_defl2"))
+
+def channels(modes_per_link) -> tuple[tuple[str, str], ...]:
+    """(input, output) channels of the frequency responses of an arm with
+    ``modes_per_link``: τ_i → θ_i of every joint, then τ_i → w_i(L_i) of every flexible
+    link (a rigid link's tip does not deflect)."""
+    links = range(1, len(modes_per_link) + 1)
+    return (tuple((f"tau{i}", f"theta{i}") for i in links)
+            + tuple((f"tau{i}", f"tip_defl{i}") for i, m in zip(links, modes_per_link) if m))
+
 #: The views of the reduced and FE plants whose ν-gap the analysis computes.
 GAP_VIEWS = ("theta", "tip", "loop")
 
 _NUMBER = (int, float)
-_CURVES = {f"{i}->{o}": [_NUMBER] for i, o in CHANNELS}
+_CURVES = {str: [_NUMBER]}  # "IN->OUT": |H| per frequency, the arm's `channels`
 #: What the report reads of validity.json (`validation.run.results.read_json`).
 _SCHEMA = {
     "arms": [{"arm": str, "Ts": _NUMBER, "modes": [int], "truth": str, "left_out": [str],

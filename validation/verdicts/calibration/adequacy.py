@@ -97,7 +97,7 @@ _MIN_SAMPLES = 50
 class Block:
     """One signal's residual at the estimate: ``residual`` in units of its weight
     ``sigma`` [SI]; ``noise`` the declared level (None: none declared); ``inputs`` the
-    joint torques (2, n) of its experiment (None for a frequency response); ``rows``
+    joint torques (joints, n) of its experiment (None for a frequency response); ``rows``
     where it lies in the residual vector."""
 
     experiment: str

@@ -12,7 +12,7 @@ import numpy as np
 from reduced_model import output_names
 
 from ...run.config import ConfigError, check
-from ...run.experiments import Experiment, FrequencyResponse, check_experiment
+from ...run.experiments import Experiment, FrequencyResponse, check_experiment, torque_columns
 from ...run.laws import measurement_names, nominal_model
 from ...run.loop import measurement_noise
 from ...run.scenario import Scenario, own_parameters, scenario_from_mapping, scenario_to_mapping
@@ -141,8 +141,9 @@ def plan_calibration(base: Scenario, settings: CalibrationSettings,
         for out, inp in response.pairs:
             check(out in outputs, f"{response.source}: column {out}/{inp}.re",
                   f"{out!r} is not an output of the linear model ({', '.join(outputs)})")
-            check(inp in ("tau1", "tau2"), f"{response.source}: column {out}/{inp}.re",
-                  f"{inp!r} is not an input (tau1, tau2)")
+            inputs = torque_columns(base.true_params.n_links)
+            check(inp in inputs, f"{response.source}: column {out}/{inp}.re",
+                  f"{inp!r} is not an input ({', '.join(inputs)})")
     if responses:  # the plant must have a linearisation (one frequency of one pair)
         try:
             linear_response(base, settings.frf_theta, responses[0].frequency[:1],

@@ -170,9 +170,11 @@ def calibration_settings(table: dict, fit: list[str] | None, base: Scenario) -> 
     experiment = table.get("experiment", {})
     check(isinstance(experiment, dict) and all(isinstance(v, dict) for v in experiment.values()),
           "calibrate.experiment", "must be a table of tables ([calibrate.experiment.NAME])")
-    theta = table.get("frf_theta", [0.0, 0.0])
-    check(isinstance(theta, list) and len(theta) == 2, "calibrate.frf_theta",
-          "must be [theta1, theta2] [rad]")
+    joints = base.true_params.n_links
+    theta = table.get("frf_theta", [0.0] * joints)
+    check(isinstance(theta, list) and len(theta) == joints, "calibrate.frf_theta",
+          f"must be one angle per joint, [{', '.join(f'theta{i + 1}' for i in range(joints))}]"
+          " [rad]")
     iterations = table.get("max_iterations", 100)
     check(isinstance(iterations, int) and not isinstance(iterations, bool) and iterations >= 1,
           "calibrate.max_iterations", f"must be an integer >= 1, got {iterations!r}")

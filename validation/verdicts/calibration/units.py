@@ -19,6 +19,7 @@ two noise ranges says nothing of units).
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -35,8 +36,8 @@ DEGREE = 180.0 / math.pi
 SPREAD = 3.0
 #: A simulated range below this many noise levels is not judged.
 NOISE_MARGIN = 20.0
-#: The channels that carry an angle (or its rate) [rad, rad/s].
-_ANGULAR = ("theta1", "theta2", "theta1_dot", "theta2_dot")
+#: The channels that carry a joint angle (or its rate) [rad, rad/s]: theta1, theta2_dot, …
+_ANGULAR = re.compile(r"theta\d+(_dot)?")
 #: What the replay leaves out of the experiment's scenario: its own noise, laws and limits.
 _OPEN_LOOP = {"observer": {"kind": "none", "options": {}, "initial_error": []},
               "feedback": "true", "disturbances": [], "torque_limit": 0.0, "requirement": [],
@@ -54,7 +55,8 @@ class _Replayed:
 
     def __call__(self, t: float, x: np.ndarray, ref) -> np.ndarray:
         k = int(round(t / self.Ts))
-        return self.torques[k].copy() if k < len(self.torques) else np.full(2, np.nan)
+        return self.torques[k].copy() if k < len(self.torques) else \
+            np.full(self.torques.shape[1], np.nan)
 
 
 def _simulated(target) -> dict[str, np.ndarray]:
@@ -66,7 +68,7 @@ def _simulated(target) -> dict[str, np.ndarray]:
                       None, scenario, reference=setup.reference, model=setup.model)
     done = len(result.time)
     return {name: result[name][:done] for name in exp.names
-            if name in _ANGULAR and name in result.names}
+            if _ANGULAR.fullmatch(name) and name in result.names}
 
 
 def check_units(targets) -> None:
@@ -80,7 +82,7 @@ def check_units(targets) -> None:
     """
     for target in targets:
         exp = target.experiment
-        if not any(name in _ANGULAR for name in exp.names):
+        if not any(_ANGULAR.fullmatch(name) for name in exp.names):
             continue
         simulated = _simulated(target)
         for i, name in enumerate(exp.names):
