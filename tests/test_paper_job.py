@@ -14,7 +14,8 @@ from validation.cli.campaigns import paper_keep
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 from validation.verdicts.claims import CLAIM_RUNS, DISTURBED, SYSTEM
 from validation.verdicts.mesh import CHECK_KEEP
-from validation.verdicts.stability import beyond_every_limit, cases_from_scenarios
+from validation.verdicts.claims import beyond_every_limit
+from validation.verdicts.stability import cases_from_scenarios
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -113,6 +113,34 @@ def _reduced_pbc(out, tolerance):
     return result
 
 
+def _smo_map(out, tolerance):
+    """The map of the PBC with the paper's SMO on the default arm's reduced plant (an
+    observer: its search starts from the 7 grid periods); (result, summary)."""
+    s = scenario_from_mapping({"observer": {"kind": "smo-paper"}})
+    cases = stability.cases_from_scenarios([s], plants=["reduced"], arms=["default"])
+    (result,), summary = stability.stability_map(cases, out, progress=False,
+                                                 tolerance=tolerance)
+    return result, summary
+
+
+def test_a_finer_tolerance_refines_the_map_stored_in_the_folder(tmp_path):
+    """Known good: a 1 % map, then 0.5 % into the same folder: the second runs only the
+    periods inside the 1 % brackets (the lattices nest: every 1 % period is a 0.5 % one),
+    and its brackets are the fresh 0.5 % map's.  Known bad: the 0.5 % map made afresh
+    runs the grid and every bisection again."""
+    coarse, first = _smo_map(tmp_path / "map", 0.01)
+    fine, refine = _smo_map(tmp_path / "map", 0.005)
+    fresh, afresh = _smo_map(tmp_path / "fresh", 0.005)
+    assert set(coarse.tested) <= set(fine.tested) and refine.skipped == 0
+    assert fine.divergence.width <= 0.005
+    for name in ("divergence", "tracking"):
+        a, b = getattr(fine, name), getattr(fresh, name)
+        assert (a.largest, a.first_bad) == (b.largest, b.first_bad), name
+    # each limit's 1 % bracket holds one 0.5 % point: at most one run a limit
+    assert refine.planned <= 2 < afresh.planned, (first.planned, refine.planned,
+                                                  afresh.planned)
+
+
 @pytest.mark.parametrize("tolerance", [0.05, 0.01])
 def test_the_reduced_pbc_limit_to_a_tolerance_contains_the_zoh_prediction(tmp_path, tolerance):
     """Known good: bisected to 5 % and to 1 %, the bracket is within the tolerance and,

@@ -67,7 +67,7 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     from ..report.verdict_tables import write_claims
     from ..verdicts.bisection import tolerance_from
     from ..verdicts.claims import CLAIM_RUNS, claim_columns
-    from ..verdicts.stability import beyond_every_limit
+    from ..verdicts.claims import beyond_every_limit
     from .summaries import claims_summary
     which = "lab" if args.lab else "paper"
     campaign = load_campaign(campaigns_dir() / f"{which}.toml")

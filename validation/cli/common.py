@@ -78,7 +78,7 @@ def finish(summary, name: str, out) -> int:
 def mesh_checks(runner, out: Path, run_ids: set, *, progress: bool,
                 beyond: frozenset = frozenset()) -> int:
     """Run the mesh checks of the truth-plant runs ``run_ids`` stored in ``out`` but those
-    in ``beyond`` (beyond every stability limit: `stability.beyond_every_limit`): level 1
+    in ``beyond`` (beyond every stability limit: `claims.beyond_every_limit`): level 1
     and the other formulation, then level 2 of the runs whose verdict it could still
     change (`claims.finer_runs`).  A non-zero exit status if interrupted or a check
     failed."""

@@ -58,6 +58,9 @@ def cmd_stability(args: argparse.Namespace) -> int:
     scenarios, plants, arms = _stability_scenarios(args)
     out = Path(args.out or Path("results") / f"stability-{Path(args.file).stem}")
     cases = cases_from_scenarios(scenarios, plants=plants, arms=arms)  # what will run
+    if ResultStore(out).exists():
+        print(f"{out} holds runs: a map stored there is refined to {tolerance:g}, reusing "
+              "its runs")
     runner = runner_for(args, [scenario_from_mapping(c.base) for c in cases], out)
     with runner:
         return stability_map_into(runner, scenarios, out, progress=not args.no_progress,

@@ -40,10 +40,13 @@ from ..run.claim_measures import CLAIMS, DISTURBED, SYSTEM, Claim
 from ..run.arms import paper_shaped
 from ..run.plants import is_truth, label_of, plant_settings
 from ..run.metrics import all_metrics
+from ..run.scenario import scenario_from_mapping
 from . import mesh as mesh_check
 from .resolution import UNDECIDED, judged
+from .stability import StabilityResult, cases_from_scenarios
 
 __all__ = ["Claim", "CLAIMS", "Verdict", "Column", "evaluate", "claim_columns", "finer_runs",
+           "beyond_every_limit",
            "SYSTEM", "DISTURBED", "CLAIM_RUNS", "WINDOWS", "column_key", "claims_records",
            "mesh_rows", "MeshRow"]
 
@@ -234,6 +237,26 @@ def finer_runs(rows, signals=None) -> list:
                     value, _measured(first, cache).value(claim)[0], claim.bound):
                 out.append(r)
                 break
+    return out
+
+
+def beyond_every_limit(results: list[StabilityResult], rows) -> set[str]:
+    """The ids of the stored runs among ``rows`` that diverged at a control period at or
+    beyond their case's first divergence on every level of the stability map
+    (``results``): a divergence the map explains (their mesh checks would decide
+    nothing)."""
+    first = {}
+    for r in results:
+        highs = [high for _, _, high in r.resolved["divergence"].levels]
+        if highs and not any(math.isnan(h) for h in highs):
+            first[r.case.key] = max(highs)
+    out = set()
+    for row in rows:
+        if row.status != "diverged":
+            continue
+        (case,) = cases_from_scenarios([scenario_from_mapping(row.config)]) or (None,)
+        if case is not None and float(row.config["Ts"]) >= first.get(case.key, math.inf):
+            out.add(row.run_id)
     return out
 
 

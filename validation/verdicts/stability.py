@@ -69,7 +69,7 @@ from .resolution import ResolvedLimit, resolve_limit
 
 __all__ = ["GRID", "DURATION", "TRACKING_LIMIT", "GROWTH_LIMIT", "MAX_LEVEL", "OUTCOMES",
            "StabilityCase", "Limit", "StabilityResult", "cases_from_scenarios",
-           "stability_map", "load_stability", "outcome", "beyond_every_limit"]
+           "stability_map", "load_stability", "outcome"]
 
 GRID = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2)
 DURATION = 2.0
@@ -103,6 +103,11 @@ class StabilityCase:
     def refined(self) -> "StabilityCase":
         """The same case one level finer."""
         return StabilityCase(self.label, self.plant, self.arm, self.base, self.level + 1)
+
+    @property
+    def key(self) -> tuple:
+        """What makes two cases one: the laws with their options, the plant and the arm."""
+        return self.label, _options_key(self.base), self.plant, self.arm
 
     @property
     def truth(self) -> bool:
@@ -224,8 +229,11 @@ class _Search:
     """One case's bracket search, level by level: {Ts: (outcome, detail)} per level, and
     the level being searched (the finest, or one before it bisected after all)."""
 
-    def __init__(self, case: StabilityCase, start: set[float] | Future) -> None:
-        self.case, self.start, self.levels, self.level = case, start, [{}], 0
+    def __init__(self, case: StabilityCase, start: set[float] | Future, stored=()) -> None:
+        # the levels a map in the folder measured ({Ts: outcome} each) start from there
+        self.case, self.stored, self.level, self.levels = case, list(stored), 0, []
+        self.start = set() if self.stored else start
+        self._add_level()
 
     @property
     def waiting(self) -> bool:
@@ -261,12 +269,16 @@ class _Search:
             if self.level < finest:  # bisected after all: the finest is resolved
                 self.level = finest
             elif deeper and finest < MAX_LEVEL and self._unconverged():
-                self.levels.append({})
+                self._add_level()
                 self.level += 1
             elif (left := self._left_unbisected(lattice)) is not None:
                 self.level = left
             else:
                 return set()
+
+    def _add_level(self) -> None:
+        level = len(self.levels)
+        self.levels.append(dict(self.stored[level]) if level < len(self.stored) else {})
 
     def _limits_at(self, level: int) -> dict[str, Limit]:
         return {name: limit_of(self.levels[level], good) for name, good in GOOD.items()}
@@ -322,21 +334,22 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
                   progress: bool = True, mesh_check: bool = True,
                   tolerance: float = TOLERANCE) -> tuple[list[StabilityResult], object]:
     """Map every case into the results folder ``out`` (resumable like any campaign): from
-    the lattice cell of its predicted limit (or the grid), the bracket searches and
-    bisections to ``tolerance`` and, with ``mesh_check``, the truth-plant cases
-    again on the refined sequence until their limits converge (module docstring).  Every
-    round asks every case's next periods at once (the progress bar names the round); the
+    the outcomes of a map stored there (to any tolerance: the lattices nest, so a coarser
+    map's brackets are bisected on), else from the lattice cell of its predicted limit
+    (or the grid), the bracket searches and bisections to ``tolerance`` and, with
+    ``mesh_check``, the truth-plant cases again on the refined sequence until their
+    limits converge (module docstring).  Every round asks every case's next periods at once (the progress bar names the round); the
     predictions are computed beside the runs (`predictions.Predictions`), and a case that
     starts from its prediction joins the round after it is known.  Returns the results
     and the summary of every round together."""
     from .sampled import predicted_period  # python-control: not for a report without a map
-    lattice = Lattice(GRID, tolerance)
+    lattice, store = Lattice(GRID, tolerance), ResultStore(out)
+    fresh = _rows(out, fresh_only=True) if store.exists() else []
     predictions = Predictions([c.base for c in cases], sorted(
         range(len(cases)), key=lambda i: cases[i].base["observer"]["kind"] != "none"),
         predicted_period)
-    searches = [_Search(case, _start(case, lattice, predictions.futures[i]))
-                for i, case in enumerate(cases)]
-    store = ResultStore(out)
+    searches = [_Search(case, _start(case, lattice, predictions.futures[i]),
+                        _stored(case, fresh)[0]) for i, case in enumerate(cases)]
     summary, round_ = None, 0
     try:
         while summary is None or not summary.interrupted:
@@ -370,62 +383,50 @@ def stability_map(cases: list[StabilityCase], out, *, runner: Runner | None = No
     return load_stability(out, cases=cases), summary
 
 
-def _case_key(case: StabilityCase) -> tuple:
-    return case.label, _options_key(case.base), case.plant, case.arm
-
-
-def beyond_every_limit(results: list[StabilityResult], rows) -> set[str]:
-    """The ids of the stored runs among ``rows`` that diverged at a control period at or
-    beyond their case's first divergence on every level of the map: a divergence the
-    stability map explains (their mesh checks would decide nothing)."""
-    first = {}
-    for r in results:
-        highs = [high for _, _, high in r.resolved["divergence"].levels]
-        if highs and not any(math.isnan(h) for h in highs):
-            first[_case_key(r.case)] = max(highs)
-    out = set()
-    for row in rows:
-        if row.status != "diverged":
-            continue
-        (case,) = cases_from_scenarios([scenario_from_mapping(row.config)]) or (None,)
-        if case is not None and float(row.config["Ts"]) >= first.get(_case_key(case),
-                                                                       math.inf):
-            out.add(row.run_id)
-    return out
-
-
 def load_stability(out, *, fresh_only: bool = False, cases=None) -> list[StabilityResult]:
     """The stability map of a results folder, rebuilt from its stored runs (with
     ``fresh_only``, from the runs made by this code only; with ``cases``, those cases
     only), each case at every level it was mapped at and judged there.  Runs are found by
     what they are, not by the sweep that stored them first."""
-    from ..batch.fingerprint import run_fingerprint
-    all_rows = [r for r in ResultStore(out).rows()
-                if not fresh_only or r.fingerprint == run_fingerprint(r.config)]
+    all_rows = _rows(out, fresh_only=fresh_only)
     if cases is None:  # every case mapped in the folder
         found: dict[tuple, StabilityCase] = {}
         for row in all_rows:
             if row.sweep == "stability" and not row.axes.get("level", 0):
                 case = StabilityCase(_label(row.config), row.config["plant"]["kind"],
                                      row.config["arm"], row.config)
-                found.setdefault(_case_key(case), case)
+                found.setdefault(case.key, case)
         cases = list(found.values())
     cases = sorted(cases, key=lambda c: (c.label, c.truth, c.plant, c.arm != "default",
                                          c.arm))
     stored = read_predictions(out)  # the map's, if made by this code
     results = []
     for case in cases:
-        levels, growth = [], {}
-        for level in range(MAX_LEVEL + 1 if case.refines else 1):
-            rows = _rows_at(StabilityCase(case.label, case.plant, case.arm, case.base, level),
-                            all_rows)
-            if not rows:
-                break
-            levels.append({Ts: outcome(row) for Ts, row in rows.items()})
-            growth = {Ts: row.metrics.get("growth_rate", math.nan) for Ts, row in rows.items()}
+        levels, growth = _stored(case, all_rows)
         if levels:
             results.append(_result(case, levels, growth, stored.get(prediction_key(case.base))))
     return results
+
+
+def _rows(out, *, fresh_only: bool) -> list:
+    """The stored runs of the results folder ``out``; with ``fresh_only``, those made by
+    this code (a campaign runs the others again)."""
+    from ..batch.fingerprint import run_fingerprint
+    return [r for r in ResultStore(out).rows()
+            if not fresh_only or r.fingerprint == run_fingerprint(r.config)]
+
+
+def _stored(case: StabilityCase, rows) -> tuple[list[dict], dict]:
+    """{Ts: outcome} per level of ``case`` among ``rows``, coarsest first, up to the first
+    level without a run; and {Ts: growth rate} of the finest level's runs."""
+    levels, growth = [], {}
+    for level in range(MAX_LEVEL + 1 if case.refines else 1):
+        at = _rows_at(StabilityCase(case.label, case.plant, case.arm, case.base, level), rows)
+        if not at:
+            break
+        levels.append({Ts: outcome(row) for Ts, row in at.items()})
+        growth = {Ts: row.metrics.get("growth_rate", math.nan) for Ts, row in at.items()}
+    return levels, growth
 
 
 def _rows_at(case: StabilityCase, rows) -> dict:
