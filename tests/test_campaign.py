@@ -397,9 +397,11 @@ def test_shipped_campaigns_expand():
     # robust: the three systems flexarm verify judges (the PBC with smo-paper, smo-bl, EKF).
     # lab: the PBC with the sign SMO on the lab arm, with and without the disturbance, on
     # both plants, from rest and on the reference (2 × 2 × 2).  kinematics: the PBC with
-    # the true state and each observer, from rest and on the reference (6 × 2).
+    # the true state and each observer, from rest and on the reference (6 × 2).  arms:
+    # the PBC with the sign SMO and three baselines with the EKF on six arms, both plants.
     assert counts == {"attribution": 3, "mismatch": 29, "paper": 100, "robustness": 26,
-                      "stator": 20, "robust": 3, "lab": 8, "kinematics": 12}
+                      "stator": 20, "robust": 3, "lab": 8, "kinematics": 12,
+                      "arms": 4 * 6 * 2}
 
 
 def test_identifiers_stay_text_in_the_index_and_the_export(tmp_path):

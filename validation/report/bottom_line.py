@@ -140,7 +140,7 @@ def bottom_line(runs, checks, columns, calibration: dict | None = None, *,
         The report's calibration section (`validation.report.calibration`).
     expected : set of str, optional
         The ids of the runs whose divergence the stability map foresees
-        (`validation.verdicts.stability.beyond_every_limit`).
+        (`validation.verdicts.claims.beyond_every_limit`).
 
     Returns
     -------

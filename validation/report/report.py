@@ -259,7 +259,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
     results = found.meanwhile
     expected = frozenset()
     if results:
-        from ..verdicts.stability import beyond_every_limit
+        from ..verdicts.claims import beyond_every_limit
         expected = frozenset(beyond_every_limit(results, runs))
         rows = stability_rows(results)
         data.stability = {"table": table(
