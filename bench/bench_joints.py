@@ -1,13 +1,7 @@
-"""What the arm's joints (issue 41: friction with stiction, drives, current loops) cost
-and how accurately the truth plant holds the torque with friction on, side by side in one
-process.
+"""How accurately the truth plant holds the torque with the arm's joints (issue 41:
+friction with stiction, drives, current loops) on, against the reduced plant (what the
+joints cost: `bench_plants.py`).
 
-- **Cost**: a 5 s closed loop (PBC + sign SMO, the campaigns' noise and observer error)
-  on the default arm (joints off: the floor), with the lab arm's friction and drives
-  (no current loop), and on the whole lab arm, each plant; interleaved, medians of
-  ``REPEATS``.  Target (issue 41): truth plant with friction and drives ≤ 1.2 × off.
-  The current loops are timed too: the truth plant then sets the torque per solver step
-  (one ``SolveSteps`` per step instead of per period).
 - **ZOH replay order with friction**: the torques of a 5 s closed loop on the arm with the
   lab arm's friction (no drive), replayed on the truth plant at steps Ts, Ts/2, Ts/4
   against Ts/64: max |θ − θ_ref| before the first stick–slip transition of the reference
@@ -20,8 +14,6 @@ process.
 from __future__ import annotations
 
 import math
-import statistics
-import sys
 
 import numpy as np
 
@@ -32,7 +24,6 @@ from validation.run.loop import run_scenario
 from validation.run.replay import bare_replay
 from validation.run.scenario import scenario_from_mapping
 
-REPEATS = 3
 TS = 1e-3
 BAND = (0.99, 0.998, 0.999, 0.9999, 0.99999, 1.00001, 1.0001, 1.01)
 LOOP = {"duration": 5.0, "initial_state": "reference", "observer": {"kind": "smo-paper"},
@@ -40,36 +31,11 @@ LOOP = {"duration": 5.0, "initial_state": "reference", "observer": {"kind": "smo
 _LAB = named_arm("lab")
 _FRICTION = {f"{n}{i}": getattr(_LAB, f"{n}{i}") for i in (1, 2)
              for n in ("coulomb", "breakaway", "stribeck_velocity", "viscous")}
-_DRIVES = {f"{n}{i}": getattr(_LAB, f"{n}{i}") for i in (1, 2)
-           for n in ("gear_stiffness", "gear_damping", "rotor_inertia", "backlash")}
-ARMS = {"joints off (default arm)": {},
-        "friction and drives": {"true_params": _FRICTION | _DRIVES},
-        "lab arm (+ current loops)": {"arm": "lab"}}
 
 
 def scenario(extra: dict, kind: str, step: float | None = None):
     plant = {"kind": kind} if step is None else {"kind": kind, "step": step}
     return scenario_from_mapping(LOOP | extra | {"plant": plant})
-
-
-def cost_rows(repeats: int) -> list[dict]:
-    rows = []
-    for kind in ("exudyn", "reduced"):
-        walls = {name: [] for name in ARMS}
-        for _ in range(repeats):  # interleaved: load drifts hit every arm alike
-            for name, extra in ARMS.items():
-                result = run_scenario(scenario(extra, kind))
-                assert result.status == "ok", result.message
-                walls[name].append(result.timings["wall_s"] - result.timings["startup_s"])
-        floor = statistics.median(walls[next(iter(ARMS))])
-        for name, w in walls.items():
-            ratio = statistics.median(w) / floor
-            row = {"plant": kind, "arm": name, "s": statistics.median(w), "ratio": ratio,
-                   "realtime": LOOP["duration"] / statistics.median(w)}
-            if kind == "exudyn" and name == "friction and drives":
-                row.update(target(ratio, "<=", 1.2))
-            rows.append(row)
-    return rows
 
 
 def order_rows() -> list[dict]:
@@ -120,24 +86,16 @@ def band_rows() -> list[dict]:
     return rows
 
 
-def main(repeats: int = REPEATS, order: bool = True) -> None:
-    report("joints_cost", cost_rows(repeats),
-           title=f"5 s closed loop (PBC + smo-paper), medians of {repeats} interleaved "
-                 "repeats, startup excluded",
-           columns=["plant", "arm", "s", "ratio", "target", "met", "realtime"])
-    if order:
-        report("joints_hold_order", order_rows(),
-               title="Replay error with the lab arm's friction against Ts/64 (max |theta - "
-                     "theta_ref|, rad), truth plant ANCF 4 el/link, Ts = 1 ms",
-               columns=["window", "err_Ts", "err_Ts/2", "err_Ts/4", "order", "target",
-                        "met"])
-        report("joints_stiction_band", band_rows(),
-               title="Largest joint motion in 5 s under a constant torque near breakaway, "
-                     "lab arm's friction, default steps",
-               columns=["joint", "x breakaway", "reduced (rad)", "truth (rad)", "target",
-                        "met"])
+def main() -> None:
+    report("joints_hold_order", order_rows(),
+           title="Replay error with the lab arm's friction against Ts/64 (max |theta - "
+                 "theta_ref|, rad), truth plant ANCF 4 el/link, Ts = 1 ms",
+           columns=["window", "err_Ts", "err_Ts/2", "err_Ts/4", "order", "target", "met"])
+    report("joints_stiction_band", band_rows(),
+           title="Largest joint motion in 5 s under a constant torque near breakaway, "
+                 "lab arm's friction, default steps",
+           columns=["joint", "x breakaway", "reduced (rad)", "truth (rad)", "target", "met"])
 
 
-if __name__ == "__main__":  # bench_joints.py [REPEATS] [--cost-only]
-    numbers = [a for a in sys.argv[1:] if a.isdigit()]
-    main(int(numbers[0]) if numbers else REPEATS, order="--cost-only" not in sys.argv)
+if __name__ == "__main__":
+    main()

@@ -117,7 +117,7 @@ class _JointLaw:
         self._ints = np.array(ints, dtype=np.int64)
         self._reals = np.concatenate([self.kp, self.kd])
         self._state = np.zeros(3 * model.n_joints + 2 * model.n)
-        self._work = self._believed.new_workspace()[0]
+        self._work = self._believed.new_workspace()
         self._ref = np.zeros(3 * N)
         self._tau = np.zeros(N)
         self._residual = np.zeros(0)

@@ -135,7 +135,7 @@ class CompiledLaw(NamedTuple):
         TypeError
             When ``kernel`` does not take ``signature``.
         """
-        work_complex, work_real = model.new_workspace()[0]
+        work_complex, work_real = model.new_workspace()
         return cls(kernel_pointer(kernel, signature),
                    np.ascontiguousarray(ints, dtype=np.int64),
                    np.ascontiguousarray(reals, dtype=np.float64),

@@ -127,7 +127,7 @@ class ExtendedKalmanFilter:
         self._x = self._state[:N]
         self._P = self._state[N:N + N * N].reshape(N, N)
         self._P[:] = np.diag(self._p0 ** 2)
-        self._work = model.new_workspace()[0]
+        self._work = model.new_workspace()
         self._x_hat = np.zeros(N)
 
     @property
@@ -181,7 +181,7 @@ class ExtendedKalmanFilter:
         Phi, xn, xp = np.zeros((N, N)), np.zeros(N), np.zeros(N)
         nsub = self._ints[1]
         (ekf_jacobian_exact if self.model.exact else ekf_jacobian)(
-            *self.model.packed, *self.model.new_workspace()[0], x, np.asarray(tau, dtype=float),
+            *self.model.packed, *self.model.new_workspace(), x, np.asarray(tau, dtype=float),
             self.Ts / nsub, nsub, xn, xp, Phi)
         return Phi
 

@@ -190,7 +190,7 @@ class GainScheduledLQR:
         # In gravity: K_ff's Cholesky factor, for the static deflection q_d (as the PBC).
         self._chol = (np.ravel(np.linalg.cholesky(model.stiffness_matrix()[N:, N:]))
                       if gravity and n > N else np.zeros(0))
-        self._work = model.new_workspace()[0]
+        self._work = model.new_workspace()
         W = np.diag(np.concatenate([self.q_theta, self.q_q, self.q_theta_dot, self.q_q_dot]))
         R = np.diag(self.r)
         table = np.empty(tuple(G + 1 for G in counts) + (N, 2 * n))

@@ -96,7 +96,7 @@ class PassivityBasedController:
             stiffness = np.ravel(np.linalg.cholesky(model.stiffness_matrix()[N:, N:]))
         self._reals = np.concatenate([self.lam, self.kv, stiffness])
         self._state = np.zeros(2 * n * n + 5 * n + (2 * n if self.gravity_compensation else 0))
-        self._work = model.new_workspace()[0]
+        self._work = model.new_workspace()
         self._ref = np.zeros(3 * N)
         self._tau = np.zeros(n)
         self._residual = np.zeros(n - self._rows())

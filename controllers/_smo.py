@@ -109,7 +109,7 @@ class _SlidingModeObserver:
         self._reals = np.concatenate([self.lp, self.lv, [
             self.boundary_layer, min(1.0, self.Ts / self.filter_time), self.gate, self.Ts]])
         self._state = np.zeros(3 * n)  # [x̂, ν̄]
-        self._work = model.new_workspace()[0]
+        self._work = model.new_workspace()
         self._x_hat = np.zeros(2 * n)
 
     @property

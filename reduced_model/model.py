@@ -16,7 +16,7 @@ import numpy as np
 from .arm import ArmParameters, MAX_MODES
 from .code.cache_guard import fresh_kernel_caches
 from .contract.signals import coordinate_names
-from .dynamics import LinkPack, kernels, new_workspace, pack_model, unpack_model, unpack_workspace
+from .dynamics import LinkPack, kernels, new_workspace, pack_model
 from .shapes import InextensibleLink, LinkModes, gauss_legendre, interpolation_nodes
 
 __all__ = ["ArmModel", "validate_modes_per_link", "validate_kinematics", "cached_model",
@@ -177,10 +177,10 @@ class ArmModel:
         #: The model packed for compiled code (`reduced_model.dynamics.layout`).
         self.packed = pack_model([self._link_pack(i) for i in range(N)], M_rotors=M_rotors,
                                  K=K, D=D, gravity=p.gravity)
-        self.data = unpack_model(*self.packed)
+        self._K, self._D = K, D
         #: The compiled entry points of this model's kinematics.
         self.kernels = kernels(self.exact)
-        self._work = self.new_workspace()[0]
+        self._work = self.new_workspace()
 
     def _link_pack(self, i: int) -> LinkPack:
         """Link ``i``'s constants for `pack_model`: its Gram matrix (link 0's basis has no
@@ -210,10 +210,9 @@ class ArmModel:
                         ddphi=exact.ddphi if exact is not None else empty,
                         w=exact.weights if exact is not None else np.zeros(0), moment=moment)
 
-    def new_workspace(self):
-        """Fresh scratch space for the kernels: (packed buffers, unpacked `Workspace`)."""
-        buffers = new_workspace(self.packed[0])
-        return buffers, unpack_workspace(self.packed[0], *buffers)
+    def new_workspace(self) -> tuple[np.ndarray, np.ndarray]:
+        """Fresh scratch space for the kernels: the packed (complex, real) buffers."""
+        return new_workspace(self.packed[0])
 
     # --- names -------------------------------------------------------------------
     @property
@@ -247,11 +246,11 @@ class ArmModel:
 
     def stiffness_matrix(self) -> np.ndarray:
         """K = blockdiag(0, K_1, …), K_i = EI_i ∫φ_i''φ_i''ᵀ (diag(m_i ω_ij²))."""
-        return self.data.K.copy()
+        return self._K.copy()
 
     def damping_matrix(self) -> np.ndarray:
         """D = blockdiag(0, d_1/EI_1 K_1, …) (Kelvin–Voigt bending damping)."""
-        return self.data.D.copy()
+        return self._D.copy()
 
     def input_matrix(self) -> np.ndarray:
         """B = [I_N; 0] (n, N): only the joints are actuated."""
@@ -297,7 +296,7 @@ class ArmModel:
         plus the potential of gravity, −Σ ∫ ρ g·r − Σ m g·r over every link and point mass
         (zero at the base; 0 for a horizontal arm)."""
         Q = self._vec(Q, self.n, "Q")
-        energy = 0.5 * float(Q @ self.data.K @ Q)
+        energy = 0.5 * float(Q @ self._K @ Q)
         for link, (q, _), lp in zip(self.links, self._link_coordinates(Q, Q), self.params.links):
             if link is not None:
                 energy += link.energy_correction(q, lp.bending_stiffness)
@@ -345,7 +344,7 @@ class ArmModel:
     def _elastic_matrices(self, Q) -> tuple[np.ndarray, np.ndarray]:
         """The tangent stiffness and the damping matrix at rest at ``Q``: K and D, plus the
         exact bending terms' for exact kinematics."""
-        K, D = self.data.K.copy(), self.data.D.copy()
+        K, D = self._K.copy(), self._D.copy()
         c = self.n_joints
         for link, (q, _), lp, m in zip(self.links or (None,) * self.n_joints,
                                        self._link_coordinates(Q, Q), self.params.links,

@@ -40,7 +40,7 @@ def bias_forces(model: ArmModel, Q, Qd) -> np.ndarray:
     the equations of motion add them (`reduced_model.dynamics.bias_forces_into`): the
     model's bias kernel plus its elastic force."""
     M, h = np.empty((model.n, model.n)), np.empty(model.n)
-    model.kernels.bias(*model.packed, *model.new_workspace()[0], Q, Qd, M, h)
+    model.kernels.bias(*model.packed, *model.new_workspace(), Q, Qd, M, h)
     return h + model.elastic_force(Q, Qd)
 
 

@@ -272,7 +272,7 @@ def rk4_map(model, x, tau, Ts):
     """F(x): the RK4 prediction over Ts in sub-steps of at most 1 ms (the EKF's rule)."""
     nsub = max(1, math.ceil(Ts / 1e-3 - 1e-9))
     out = np.array(x, dtype=float)
-    advance_linear(*model.packed, *model.new_workspace()[0], out, tau, Ts / nsub, nsub)
+    advance_linear(*model.packed, *model.new_workspace(), out, tau, Ts / nsub, nsub)
     return out
 
 

@@ -95,7 +95,7 @@ def test_structured_bias_equals_dense_coriolis(modes):
     """The rhs's structured h must equal the dense Christoffel C times Q̇."""
     model, rng = ArmModel(GENERAL, modes), np.random.default_rng(3)
     M, h = np.empty((model.n, model.n)), np.empty(model.n)
-    buffers = model.new_workspace()[0]
+    buffers = model.new_workspace()
     for _ in range(10):
         Q, Qd = random_state(model, rng)
         model.kernels.bias(*model.packed, *buffers, Q, Qd, M, h)  # no gravity: h = C Q̇
@@ -167,7 +167,7 @@ def test_free_undamped_motion_conserves_energy():
     x = np.concatenate([Q, 2.0 * Qd])
     energy = lambda x: model.kinetic_energy(x[:6], x[6:]) + model.potential_energy(x[:6])  # noqa
     e0 = energy(x)
-    buffers = model.new_workspace()[0]
+    buffers = model.new_workspace()
     model.kernels.advance(*model.packed, *buffers, x, np.zeros(2), 1e-4, 100_000)  # 10 s
     # RK4 at h = 0.1 ms resolves the top mode (ωh ≈ 0.02) with energy error ~(ωh)⁶ per
     # period; the issue asks for < 1e-6 relative drift over 10 s.
@@ -179,7 +179,7 @@ def test_work_energy_balance_with_torque_and_damping():
     model = ArmModel(GENERAL.replace(bending_damping1=0.02, bending_damping2=0.01))
     n, h, steps = model.n, 1e-4, 20_000
     x = np.zeros(2 * n)
-    buffers = model.new_workspace()[0]
+    buffers = model.new_workspace()
     energy = lambda x: model.kinetic_energy(x[:n], x[n:]) + model.potential_energy(x[:n])  # noqa
     D = model.damping_matrix()
     net = 0.0

@@ -6,13 +6,13 @@ from .entries import Kernels, kernels
 from .layout import (LinkData, LinkPack, ModelData, Workspace, link_data, new_workspace,
                      pack_model, unpack_model, unpack_workspace)
 from .linalg import (cholesky_factor_inplace, cholesky_solve_factored, cholesky_solve_inplace,
-                     matrix_view)
+                     matrix_view, vector_view)
 from .motion import (acceleration_into, bias_forces_into, coriolis_matrix_into, elastic_into,
                      mass_bias_into, mass_matrix_into, rhs_into, rk4_advance, tips_into)
 
 __all__ = ["Kernels", "kernels", "LinkData", "LinkPack", "ModelData", "Workspace", "link_data",
            "new_workspace", "pack_model", "unpack_model", "unpack_workspace",
            "cholesky_factor_inplace", "cholesky_solve_factored", "cholesky_solve_inplace",
-           "matrix_view", "acceleration_into", "bias_forces_into", "coriolis_matrix_into",
-           "elastic_into", "mass_bias_into", "mass_matrix_into", "rhs_into", "rk4_advance",
-           "tips_into"]
+           "matrix_view", "vector_view", "acceleration_into", "bias_forces_into",
+           "coriolis_matrix_into", "elastic_into", "mass_bias_into", "mass_matrix_into",
+           "rhs_into", "rk4_advance", "tips_into"]

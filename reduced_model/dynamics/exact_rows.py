@@ -213,13 +213,32 @@ def tip_turn(ld, link, Q, Qd, ws):
 
 @njit(cache=True, inline="always")
 def gram_rows(G, A, GA, first, last, nb):
-    """GA[r] = G A[r] for rows first..last−1 (G symmetric)."""
+    """GA[r] = G A[r] for rows first..last−1 (G real): each entry's sum over c in order,
+    in real arithmetic, four entries at a time (independent sums, not one long chain)."""
     for r in range(first, last):
-        for b in range(nb):
-            acc = 0j
+        for b in range(0, nb - 3, 4):
+            r0 = i0 = r1 = i1 = r2 = i2 = r3 = i3 = 0.0
             for c in range(nb):
-                acc += G[b, c] * A[r, c]
-            GA[r, b] = acc
+                ar, ai = A[r, c].real, A[r, c].imag
+                g0, g1, g2, g3 = G[b, c], G[b + 1, c], G[b + 2, c], G[b + 3, c]
+                r0 += g0 * ar
+                i0 += g0 * ai
+                r1 += g1 * ar
+                i1 += g1 * ai
+                r2 += g2 * ar
+                i2 += g2 * ai
+                r3 += g3 * ar
+                i3 += g3 * ai
+            GA[r, b] = complex(r0, i0)
+            GA[r, b + 1] = complex(r1, i1)
+            GA[r, b + 2] = complex(r2, i2)
+            GA[r, b + 3] = complex(r3, i3)
+        for b in range(nb - nb % 4, nb):
+            re = im = 0.0
+            for c in range(nb):
+                re += G[b, c] * A[r, c].real
+                im += G[b, c] * A[r, c].imag
+            GA[r, b] = complex(re, im)
 
 
 @njit(cache=True, inline="always")

@@ -4,7 +4,8 @@ its kernels work in.
 
 From Python, numba checks a namedtuple argument field by field (~5 µs per call), so a
 model and its workspace travel as flat buffers and the kernels `unpack_model` and
-`unpack_workspace` them into views (no copy).  Per link the buffers hold its modes, its
+`unpack_workspace` them into views (no copy, no reference: `reduced_model.dynamics.
+linalg.matrix_view`), which live only inside the kernel that unpacked them.  Per link the buffers hold its modes, its
 first modal coordinate, its interpolation nodes (exact kinematics), its Gram matrix, its
 tip values and, for the exact kinematics, the slopes and curvatures of its modes at the
 nodes; then the constant rotor mass matrix, K and D.
@@ -16,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .linalg import matrix_view
+from .linalg import matrix_view, vector_view
 
 __all__ = ["ModelData", "LinkData", "Workspace", "pack_model", "unpack_model", "link_data",
            "new_workspace", "unpack_workspace", "LinkPack"]
@@ -132,11 +133,11 @@ def link_data(d, i):
     s = ints[o + 4]
     return LinkData(nl, c, nodes, reals[s], reals[s + 1], reals[s + 2], reals[s + 3], reals[s + 4],
                     matrix_view(reals, ints[o + 5], nb, nb),
-                    reals[ints[o + 6]:ints[o + 6] + nl], reals[ints[o + 7]:ints[o + 7] + nl],
+                    vector_view(reals, ints[o + 6], nl), vector_view(reals, ints[o + 7], nl),
                     matrix_view(reals, ints[o + 8], nl, nodes),
                     matrix_view(reals, ints[o + 9], nl, nodes),
-                    reals[ints[o + 10]:ints[o + 10] + nodes],
-                    reals[ints[o + 11]:ints[o + 11] + nb])
+                    vector_view(reals, ints[o + 10], nodes),
+                    vector_view(reals, ints[o + 11], nb))
 
 
 class Workspace(NamedTuple):
@@ -190,7 +191,7 @@ def new_workspace(ints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @njit(cache=True, inline="always")
 def _cut(buffer, o, length):
-    return buffer[o:o + length], o + length
+    return vector_view(buffer, o, length), o + length
 
 
 @njit(cache=True, inline="always")

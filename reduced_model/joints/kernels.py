@@ -43,7 +43,7 @@ from numba import njit
 
 from ..dynamics import (bias_forces_into, cholesky_factor_inplace, cholesky_solve_factored,
                         cholesky_solve_inplace, mass_matrix_into, unpack_model,
-                        unpack_workspace)
+                        unpack_workspace, vector_view)
 
 __all__ = ["PARAMETERS", "new_joint_buffers", "joints_active", "reset_joints",
            "advance_joints_linear", "advance_joints_exact", "motor_state_into", "lag_step"]
@@ -80,9 +80,11 @@ def _work(jw, n, N):
     b = a + N * n
     c = b + N * n
     o = c + n
-    return (jw[:n], jw[n:n + N], jw[n + N:a], jw[a:b], jw[b:c], jw[c:o], jw[o:o + 2 * N],
-            jw[o + 2 * N:o + 4 * N], jw[o + 4 * N:o + 6 * N], jw[o + 6 * N:o + 7 * N],
-            jw[o + 7 * N:o + 8 * N])
+    return (vector_view(jw, 0, n), vector_view(jw, n, N), vector_view(jw, n + N, N),
+            vector_view(jw, a, N * n), vector_view(jw, b, N * n), vector_view(jw, c, n),
+            vector_view(jw, o, 2 * N), vector_view(jw, o + 2 * N, 2 * N),
+            vector_view(jw, o + 4 * N, 2 * N), vector_view(jw, o + 6 * N, N),
+            vector_view(jw, o + 7 * N, N))
 
 
 def joints_active(jp: np.ndarray) -> bool:
@@ -324,7 +326,7 @@ def advance_joints(d, x, tau, ext, h, nsteps, ws, jp, js, jw, exact):
     N = d.links
     k, acc, xt = ws.k1, ws.k2, ws.xt
     _, lam, _, _, _, fext, rk, racc, rt, u, u_end = _work(jw, n, N)
-    rot = js[N * _ROT:N * _ROT + 2 * N]
+    rot = vector_view(js, N * _ROT, 2 * N)
     for _ in range(nsteps):
         for i in range(N):  # the lag: this step's mean torque and its value at the end
             u[i], u_end[i] = lag_step(tau[i], js[N * _APPLIED + i], _p(jp, _T, i, N), h)

@@ -209,7 +209,7 @@ class ReducedPlant(Plant):
         state = np.concatenate([np.zeros(2 * n), js, jw])
         kernel = _KERNELS[self.model.exact, self._joints_on]
         self._form = CompiledPlant(kernel_pointer(kernel, PLANT_SIGNATURE), ints, reals, state,
-                                   *self.model.packed, *self.model.new_workspace()[0])
+                                   *self.model.packed, *self.model.new_workspace())
         self._kernel = kernel
         self._x = state[:2 * n]  # views of the form's buffers: what a compiled run does
         self._js = state[2 * n:2 * n + 4 * N]
