@@ -266,7 +266,8 @@ def test_a_compiled_plugin_never_runs_its_helpers_old_code(tmp_path, cache_dir):
     lab = write_files(tmp_path / "lab", {
         "labkernlaw.py": KERNEL_LAW, "probe.py": PROBE,
         "labkern.py": "from numba import njit\n\n@njit(cache=True)\ndef gain():\n    return 2.0\n"})
-    env = {**os.environ, "PYTHONPATH": f"{lab}:{_ROOT}"}
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["PYTHONPATH"] = f"{lab}:{_ROOT}"
     if cache_dir:
         env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba-cache")
 
@@ -282,6 +283,8 @@ def test_a_compiled_plugin_never_runs_its_helpers_old_code(tmp_path, cache_dir):
     assert probe("resolve") == 3.0  # the guard deleted it: the edited helper runs
     cached = (tmp_path / "numba-cache") if cache_dir else (lab / "__pycache__")
     assert list(cached.rglob("labkernlaw.*.nbi"))  # the caches are where we looked
+
+
 ZIP_LAW = textwrap.dedent('''
     class ZipPD:
         """A PD law shipped in a zip archive."""
