@@ -324,6 +324,48 @@ def test_a_level_left_unbisected_is_bisected_when_the_finer_one_brackets_the_lim
         assert limit.width <= 0.01 and limit.largest <= thresholds[level] < limit.first_bad
 
 
+def test_a_limit_beyond_the_grid_on_every_level_says_so():
+    """Known good: a truth-plant limit above 10 ms (20 ms: the synthetic loop of
+    `_threshold`) is mapped one level finer all the same — a finer mesh may bring it
+    inside the grid — in one run at 10 ms, stays above it, and reads "beyond the grid"
+    naming both levels, in the verdict, the stability table and stability.csv (before:
+    "unresolved … on every level" after level 0 alone).  Below 0.1 ms on every level,
+    "below the grid"."""
+    search, runs = _refined_search((0.02, 0.02, 0.02))
+    assert runs == len(stability.GRID) + 1 and len(search.levels) == 2
+    assert search.levels[1] == {1e-2: ("stable", "")}
+    result = stability._result(search.case, search.levels, predicted=math.nan)
+    for name in ("divergence", "tracking"):
+        resolved = result.resolved[name]
+        assert resolved.verdict == "beyond the grid", resolved.text()
+        assert resolved.text().startswith("beyond the grid: above 10 ms, the largest period "
+                                          "tested, on every level (ANCF 4 el/link")
+        assert "ANCF 8 el/link" in resolved.text() and "not converged" not in resolved.text()
+        assert resolved.interval() == (1e-2, math.inf)  # no band: nothing diverged
+    row = stability_rows([result])[0]
+    assert row["divergence_convergence"] == row["tracking_convergence"] == "beyond the grid"
+    assert "divergence: beyond the grid" in row["mesh"]
+    below, _ = _refined_search((5e-5, 5e-5, 5e-5))
+    (lims,) = [stability._limits(below.levels)["divergence"]]
+    assert stability._resolve(below.case, lims, final=True).verdict == "below the grid"
+
+
+@pytest.mark.parametrize("thresholds", [
+    (0.02, 0.005, 0.02),  # above the grid, inside it one level finer, above again
+    (0.005, 0.02, 0.02),  # inside the grid, then above it
+])
+def test_a_limit_the_levels_disagree_about_is_not_converged(thresholds):
+    """Known bad for the rule above: a limit above the grid on some levels and bracketed
+    on another is mapped to the finest level and reads "not converged", the levels'
+    brackets side by side — never "beyond the grid"."""
+    search, _ = _refined_search(thresholds)
+    assert len(search.levels) == stability.MAX_LEVEL + 1
+    lims = stability._limits(search.levels)["divergence"]
+    resolved = stability._resolve(search.case, lims, final=True)
+    assert resolved.verdict == "not converged" and "beyond the grid" not in resolved.text()
+    assert "(10, —]" in resolved.text() and "(5, 5.027]" in resolved.text()
+
+
 def test_table1_on_one_element_per_link_is_not_converged(tmp_path, monkeypatch):
     """Known bad mesh: Table 1's arm (no stator inertia: the joint-2 mobility grows as
     elements³) on ANCF 1 el/link, the PBC fed the true state.  Bisected to 1 % its limit
@@ -406,6 +448,14 @@ def test_the_refined_sequence_rule():
     assert shrinking.interval()[0] < shrinking.estimate < shrinking.interval()[1]
     to_zero = resolve_limit(ms((1.6, 1.61), (0.2, 0.201), (0.025, 0.0252)), final=True)
     assert to_zero.verdict == "not converged" and "level 2" in to_zero.text()
+    # outside the grid: on one level, not checked (the reduced plant: no verdict); on
+    # every level, beyond (or below) it; on one side and then the other, not converged
+    nan = math.nan
+    assert resolve_limit(ms((10, nan)), final=False).verdict == "not checked"
+    assert resolve_limit(ms((10, nan)), final=True, refined=False).verdict == ""
+    assert resolve_limit(ms((10, nan), (10, nan)), final=False).verdict == "beyond the grid"
+    assert resolve_limit(ms((nan, 0.1), (nan, 0.1)), final=False).verdict == "below the grid"
+    assert resolve_limit(ms((10, nan), (nan, 0.1)), final=True).verdict == "not converged"
 
 
 def test_a_growing_run_is_diverging_before_it_leaves_the_bounds():

@@ -32,7 +32,7 @@ def _fit_names(text: str | None) -> list[str] | None:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from ..verdicts.calibration import (RESULT_FILES, base_scenario, calibrate,
+    from ..verdicts.calibration import (RESULT_FILES, FitFailed, base_scenario, calibrate,
                                         calibration_settings, data_fingerprint,
                                         plan_calibration, read_fits, refuse_links)
     base, table = base_scenario(args.config)
@@ -49,8 +49,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(f"calibrating {', '.join(settings.names)} on {len(plan.targets)} experiment(s)"
               f"{f' and {len(responses)} frequency response(s)' if responses else ''} "
               f"({settings.inputs}, {base.plant.kind} plant) into {out}")
-        result = calibrate(plan, out, runner=runner, compare=fits, search=not args.no_search,
-                           export_inadequate=args.export_inadequate)
+        try:
+            result = calibrate(plan, out, runner=runner, compare=fits,
+                               search=not args.no_search,
+                               export_inadequate=args.export_inadequate)
+        except FitFailed as exc:  # a failed computation, not bad input: status 1
+            print(f"flexarm: error: {exc}; no result written (the simulations are in "
+                  f"{out})", file=sys.stderr)
+            return EXIT_FAILED
     print(f"{result['iterations']} iterations, {result['simulations']} simulations, cost "
           f"{result['cost']:.6g} (residual variance {result['residual_variance']:.3g}, in units "
           "of the noise levels)")
@@ -73,8 +79,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print(f"wrote {', '.join(str(out / f) for f in written)}; report: flexarm report {out}")
     _print_next(result, out)
     if result["failed_runs"]:
-        print(f"flexarm: {len(result['failed_runs'])} simulation(s) failed: "
-              f"{', '.join(result['failed_runs'][:8])}", file=sys.stderr)
+        print(f"flexarm: {len(result['failed_runs'])} simulation(s) failed, read as no data "
+              "(trial points rejected, screen probes left out); the estimate and its "
+              f"intervals rest on none of them: {', '.join(result['failed_runs'][:8])}",
+              file=sys.stderr)
         return EXIT_FAILED
     return 0
 

@@ -16,8 +16,12 @@ On the refined sequence (level k: 2^k times the elements per link and 1/2^k of t
   level, a Richardson estimate of the converged limit from the brackets' midpoints
   (*extrapolated*), if the sequence is in its asymptotic range and the estimate's error is
   small against it (`SMALL`); else *not converged*, the levels' brackets side by side.
-  A limit beyond the tested periods is no bracket: *unresolved* when it is so on every
-  level, *not converged* when it is bracketed on some.
+  A limit outside the tested periods is no bracket: on every level of two or more, above
+  the largest period tested it is *beyond the grid* (`BEYOND`), below the smallest *below
+  the grid* (`BELOW`) — the refined sequence keeps it there, as an overlap keeps a
+  bracket; *not converged* when it is bracketed on some levels, or above on one and below
+  on another.  A truth plant's first level alone is *not checked*, outside the grid or
+  not (a limit beyond a coarse mesh's grid may come inside it on a finer mesh).
 - a **ρ** on levels 0, 1, 2 (`resolve_rho`) is *undecided* when it changes sign under
   refinement or its margin |ρ| is inside its error; *converged* when the error of the
   Richardson ρ is small against |ρ| (`SMALL`); else *not converged* (the sign stands, the
@@ -30,14 +34,18 @@ from dataclasses import dataclass
 
 from .mesh import MESH_RTOL
 
-__all__ = ["UNDECIDED", "SMALL", "judged", "extrapolate", "ResolvedLimit", "resolve_limit",
-           "resolve_rho"]
+__all__ = ["UNDECIDED", "SMALL", "BEYOND", "BELOW", "judged", "extrapolate", "ResolvedLimit",
+           "resolve_limit", "resolve_rho"]
 
 #: What a verdict whose margin lies inside its number's resolution and error reads.
 UNDECIDED = "undecided at this resolution"
 #: An error is small against a value when it is at most this fraction of it: the
 #: tolerance a claim's value is held to between meshes (`mesh.MESH_RTOL`, 10 %).
 SMALL = MESH_RTOL
+#: What a limit above the largest period tested on every level reads (no bad run there).
+BEYOND = "beyond the grid"
+#: What a limit below the smallest period tested on every level reads (no good run there).
+BELOW = "below the grid"
 
 
 def judged(verdict: str, margin: float, error: float) -> str:
@@ -68,13 +76,13 @@ def extrapolate(values) -> tuple[float, float, float]:
 @dataclass(frozen=True)
 class ResolvedLimit:
     """A limit judged on the refined sequence.  ``low``/``high``: the finest level's
-    bracket [s] (NaN: beyond the grid); ``verdict``: "converged" | "extrapolated" | "not
-    converged" | "unresolved" (beyond the grid on every level: no bracket) | "not checked"
-    (a truth plant's first level alone) | "" (no refined sequence: the reduced plant);
-    ``error`` [s] of the
-    converged limit (NaN: none stated); ``estimate``: the Richardson estimate of the
-    converged limit (extrapolated only); ``order``; ``levels``: (discretisation, low,
-    high) per level."""
+    bracket [s] (``high`` NaN: no bad run, the limit above the largest period tested;
+    ``low`` NaN: no good run, below the smallest); ``verdict``: "converged" |
+    "extrapolated" | "not converged" | `BEYOND` | `BELOW` (outside the grid on every
+    level: no bracket) | "not checked" (a truth plant's first level alone) | "" (no
+    refined sequence: the reduced plant); ``error`` [s] of the converged limit (NaN: none
+    stated); ``estimate``: the Richardson estimate of the converged limit (extrapolated
+    only); ``order``; ``levels``: (discretisation, low, high) per level."""
 
     low: float
     high: float
@@ -107,16 +115,20 @@ class ResolvedLimit:
         return low - error - band, high + error
 
     def text(self) -> str:
-        """"converged ±0.02 ms", "extrapolated 2.742 ± 0.003 ms", or the levels' brackets
-        side by side."""
+        """"converged ±0.02 ms", "extrapolated 2.742 ± 0.003 ms", "beyond the grid: above
+        10 ms, the largest period tested, on every level (ANCF 4 el/link, …)", or the
+        levels' brackets side by side."""
         ms = lambda v: f"{1e3 * v:.4g}"  # noqa: E731
         if self.verdict == "converged":
             return f"converged (error ≤ {ms(self.error)} ms)"
         if self.verdict == "extrapolated":
             order = f", order {self.order:.2g}" if math.isfinite(self.order) else ""
             return f"extrapolated {ms(self.estimate)} ± {ms(self.error)} ms{order}"
-        if self.verdict == "unresolved":
-            return "unresolved: beyond the tested periods on every level"
+        if self.verdict in (BEYOND, BELOW):
+            where = f"above {ms(self.low)} ms, the largest" if self.verdict == BEYOND else \
+                f"below {ms(self.high)} ms, the smallest"
+            return (f"{self.verdict}: {where} period tested, on every level ("
+                    + "; ".join(label for label, _, _ in self.levels) + ")")
         if self.verdict == "not converged":
             return "not converged: " + "; ".join(
                 f"{label}: ({'—' if math.isnan(lo) else ms(lo)}, "
@@ -126,20 +138,22 @@ class ResolvedLimit:
 
 def resolve_limit(levels, *, final: bool, refined: bool = True) -> ResolvedLimit:
     """A limit's verdict on the refined sequence (module docstring) from its brackets per
-    level, coarsest first: ``levels`` = [(discretisation, low, high), ...].  A limit
-    beyond the grid on every level is "unresolved" (no bracket to refine); one bracketed
-    on some levels only, "not converged".  Without a refined sequence (``refined`` false: the reduced plant) the bracket alone, verdict "";
-    a truth plant's single level is "not checked".  ``final``: no finer level will be
+    level, coarsest first: ``levels`` = [(discretisation, low, high), ...].  Without a
+    refined sequence (``refined`` false: the reduced plant) the bracket alone, verdict "";
+    a truth plant's single level is "not checked" (mapped one level finer, inside the
+    grid or not).  A limit above the largest period tested on every level is `BEYOND`,
+    below the smallest on every level `BELOW`; one that is outside the grid on some
+    levels only (or on both sides), "not converged".  ``final``: no finer level will be
     mapped (a sequence that has not converged by then is extrapolated or not converged;
     before, it is "not converged" and mapped one level finer)."""
     levels = tuple(levels)
     _, low, high = levels[-1]
-    beyond = {(math.isnan(a), math.isnan(b)) for _, a, b in levels}
-    if len(beyond) == 1 and beyond != {(False, False)}:
-        return ResolvedLimit(low, high, "unresolved", levels=levels)
     if len(levels) == 1:
         return ResolvedLimit(low, high, "not checked" if refined else "", levels=levels)
-    if len(beyond) > 1:  # bracketed on one level, beyond the grid on another
+    sides = {_side(a, b) for _, a, b in levels}
+    if sides in ({BEYOND}, {BELOW}):
+        return ResolvedLimit(low, high, sides.pop(), levels=levels)
+    if len(sides) > 1:  # the levels disagree about where the limit lies
         return ResolvedLimit(low, high, "not converged", levels=levels)
     _, low0, high0 = levels[-2]
     if low0 < high and low < high0:  # the brackets overlap
@@ -151,6 +165,12 @@ def resolve_limit(levels, *, final: bool, refined: bool = True) -> ResolvedLimit
         if math.isfinite(order) and error <= SMALL * estimate:
             return ResolvedLimit(low, high, "extrapolated", error, estimate, order, levels)
     return ResolvedLimit(low, high, "not converged", levels=levels)
+
+
+def _side(low: float, high: float) -> str:
+    """Where one level puts a limit: `BEYOND` the grid (no bad run), `BELOW` it (no good
+    run), or "" (bracketed)."""
+    return BEYOND if math.isnan(high) else BELOW if math.isnan(low) else ""
 
 
 def resolve_rho(values: dict, others: dict | None = None) -> dict:

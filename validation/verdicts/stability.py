@@ -35,11 +35,12 @@ on the refined sequence at that resolution: the case is bisected again one level
 (twice the elements per link, half the step), starting from the brackets of the level
 before, until every limit's bracket moved by less than its width ("converged") or up to
 `MAX_LEVEL`, where a limit still moving carries a Richardson estimate of the converged
-limit and its error, or reads "not converged" with the levels' brackets side by side
-(`validation.verdicts.resolution.resolve_limit`).  A level's bracket that runs off the
-grid (`validation.verdicts.bisection.Lattice.runs_off`: Table 1's arm with a sign SMO,
-0.29 → 0.13 ms → below 0.1 ms) is left unbisected while the finer level finds no
-bracket — 26 runs a case instead of 38 —, and bisected after all if it does.
+limit and its error, or reads "not converged" with the levels' brackets side by side —
+"beyond the grid" where every level, one finer at least, finds no bad run up to the
+largest period (`validation.verdicts.resolution.resolve_limit`).  A level's bracket that
+runs off the grid (`validation.verdicts.bisection.Lattice.runs_off`: Table 1's arm with a
+sign SMO, 0.29 → 0.13 ms → below 0.1 ms) is left unbisected while the finer level finds
+no bracket — 26 runs a case instead of 38 —, and bisected after all if it does.
 
 The *predicted* limit is the exact zero-order-hold eigenvalue analysis of the case's own
 linearised sampled loop (`validation.verdicts.sampled`): the law linearised from its

@@ -23,8 +23,10 @@ weight) besides the fitted parameters' own directions J,
     Δ = (gᵀe)² / gᵀg   where e, g = (I − P_WJ) W r, (I − P_WJ) W d   (0 if gᵀe > 0),
 
 a score statistic: χ²(1) when the model is right and its residual is the modelled
-noise.  The largest Δ over a candidate's probes is its score; a score beyond the χ²(1)
-quantile at `FAMILY_ALPHA` over the number of probes is *significant*.  A residual the
+noise.  The largest Δ over a candidate's probes is its score (a probe whose simulation
+failed is no evidence and is left out; a candidate with none left is not screened); a
+score beyond the χ²(1) quantile at `FAMILY_ALPHA` over the number of probes is
+*significant*.  A residual the
 tests found correlated but at the stated level and independent of the inputs — coloured
 noise, or a mild model error — is called coloured noise only if no candidate is
 significant (`validation.verdicts.calibration.adequacy`).
@@ -226,6 +228,8 @@ def screen(plan: Plan, residuals_of, u: np.ndarray, r: np.ndarray, J: np.ndarray
     threshold = float(scipy.stats.chi2.ppf(1 - FAMILY_ALPHA / len(probes), 1))
     best: dict[str, dict] = {}
     for (extension, probe), value in zip(probes, values):
+        if not np.isfinite(value).all():
+            continue  # its simulation failed: no evidence for or against the candidate
         delta = score(r, J, value - r, rows, models)
         if extension.name not in best or delta > best[extension.name]["score"]:
             best[extension.name] = {"name": extension.name, "score": delta, "probe": probe,

@@ -59,6 +59,15 @@ where stick–slip makes the outputs jump, the fit's own steps are secants over 
 them.  The verdict on the model, the noise model, the intervals and the physics a
 model lacks: `adequacy`, `noise`, `intervals` and `extensions` of
 `validation.verdicts.calibration`.
+
+**Failed simulations.**  The optimiser reads a sample a simulation did not reach as a
+penalty, so a trial point whose simulation failed (or diverged early) is rejected and the
+fit goes on; so does the Jacobian of the fit's steps at the estimate, which only sets the
+scale of the refinement's.  The result is not computed from one: where the residual at
+the estimate or the Jacobian its intervals rest on (the refinement's) lacks a sample, the
+fit is refused with `FitFailed` — every simulation failed (the first's reason), or the
+latest that did (`Problem.failure`) — and no verdict is given
+(`validation.verdicts.calibration.problem`).
 """
 from __future__ import annotations
 
@@ -77,7 +86,7 @@ from .intervals import parameter_uncertainty
 from .noise import sandwich_meat
 from .plan import Plan
 from .polish import polish
-from .problem import Problem, together
+from .problem import FitFailed, Problem, together
 
 __all__ = ["fit_plan"]
 
@@ -120,7 +129,7 @@ def _solve(problem: Problem, u: np.ndarray, lower, upper, log) -> tuple[np.ndarr
     def fun(v):
         key = v.tobytes()
         if key not in cache:
-            cache[key] = problem.residuals([v])[0]
+            cache[key] = problem.penalised([v])[0]
         return cache[key]
 
     def jac(v):
@@ -155,6 +164,14 @@ def _floor(problem: Problem, steps: list[dict]) -> np.ndarray:
                      / s["step"] for s in steps])
 
 
+def _complete(problem: Problem, values: np.ndarray, what: str) -> np.ndarray:
+    """``values`` (the residual or the Jacobian of the result) if every sample they rest
+    on was simulated; else `FitFailed`, saying why (module docstring)."""
+    if not np.isfinite(values).all():
+        raise FitFailed(problem.failure(what))
+    return values
+
+
 def fit_plan(plan: Plan, problem: Problem, log, start: np.ndarray | None = None, *,
              screened: bool = True) -> dict:
     """Fit ``plan`` on ``problem`` from its starts (or ``start``, in units of the
@@ -162,22 +179,27 @@ def fit_plan(plan: Plan, problem: Problem, log, start: np.ndarray | None = None,
     results folder adds (the comparison, the extensions' fits).  With ``screened``, a
     model whose residual is correlated has the physics it may lack screened
     (`extensions.screen`: a correlated residual at the stated level is coloured noise
-    only if no candidate explains it), the screen kept under ``screen``."""
+    only if no candidate explains it), the screen kept under ``screen``.  `FitFailed`
+    where the result would rest on a failed simulation (module docstring)."""
     settings = plan.settings
     lower = np.array([q.lower for q in settings.parameters]) / problem.scale
     upper = np.array([q.upper for q in settings.parameters]) / problem.scale
     u = np.array([q.start for q in settings.parameters]) / problem.scale if start is None \
         else start
     u, stages = _solve(problem, u, lower, upper, log)
-    r = problem.residuals([u])[0]
+    r = _complete(problem, problem.residuals([u])[0], "the residual at its estimate")
     fd = settings.fd_step
     widest = fd * np.maximum(np.abs(u), 1.0)
     halves_noise = _RESOLUTION_MARGIN * problem.resolution(STENCILS["halves"]) * fd
-    J, steps = jacobian(problem.residuals, u, r, widest, lower, upper, halves_noise)
+    # the fit's steps set only the scale of the refinement's: a column whose simulations
+    # failed is read penalised there, as the optimiser reads it (its standard error
+    # reads tiny: the refinement starts at its narrowest steps)
+    J, steps = jacobian(problem.penalised, u, r, widest, lower, upper, halves_noise)
     u, r, J, steps, refined = polish(
         problem.residuals, u, r, J, lower, upper, largest=widest,
         column_noise=problem.resolution(STENCILS["central"]) * fd,
         halves_noise=halves_noise, floor=_floor(problem, steps), collinear=fd)
+    _complete(problem, J, "the Jacobian of its intervals")
     if refined:
         log(f"  refined at the scale of the uncertainty: {refined} step(s), cost "
             f"{0.5 * float(r @ r):.6g}")

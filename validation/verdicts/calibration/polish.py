@@ -23,7 +23,9 @@ the fit's step; no narrower than the step at which the float32 rounding of the s
 signals reaches `ROUNDING` of the column, nor than `NARROWEST` of the fit's step): a
 step is taken when it lowers the cost, until every parameter moves less than `SETTLED`
 of its standard error, at most `STEPS` times.  The uncertainty rests on the last
-Jacobian (`validation.verdicts.calibration.intervals`).
+Jacobian (`validation.verdicts.calibration.intervals`).  A Jacobian with a sample no
+simulation reached (NaN) ends the refinement there, for the fit to refuse; a trial point
+with one is not taken.
 """
 from __future__ import annotations
 
@@ -104,7 +106,7 @@ def polish(residuals, u: np.ndarray, r: np.ndarray, J: np.ndarray, lower, upper,
         h = np.clip(SCALE * std, np.minimum(np.maximum(smallest, NARROWEST * largest),
                                             largest), largest)
         J, report = jacobian(residuals, u, r, h, lower, upper, halves_noise)
-        if taken == STEPS:
+        if taken == STEPS or not np.isfinite(J).all():
             return u, r, J, report, taken
         std = _standard_errors(J, r, floor)
         free = (u > lower + 1e-9 * np.abs(u)) & (u < upper - 1e-9 * np.abs(u))
@@ -117,6 +119,6 @@ def polish(residuals, u: np.ndarray, r: np.ndarray, J: np.ndarray, lower, upper,
             return u, r, J, report, taken
         trial = np.clip(u + step, lower, upper)
         r_trial = residuals([trial])[0]
-        if float(r_trial @ r_trial) >= float(r @ r):
+        if not np.isfinite(r_trial).all() or float(r_trial @ r_trial) >= float(r @ r):
             return u, r, J, report, taken
         u, r, taken = trial, r_trial, taken + 1

@@ -10,7 +10,17 @@ The weighted output error::
 x are scenario fields (``true_params.EI1``…) in units of their starting values (u = x /
 scale); σ_s is the noise level of signal s (the scenario's sensor noise, or
 ``[calibrate.noise]``); σ_frf the relative error of a measured response (``frf_noise``,
-1 %).  A simulation that does not reach a sample leaves `PENALTY` there.
+1 %).
+
+**Failed evaluations are no data.**  A sample a simulation did not reach (the run
+failed, or diverged before it) and a response that could not be linearised are NaN in
+r, and the reason is kept (`Problem.failure`).  The optimiser's trial points read them
+as `PENALTY` (`penalised`): far beyond any fit, so a step there is rejected.  What a
+fit's *result* rests on — the residual at its estimate and the Jacobian its intervals
+come from — must have every sample: where it does not, the fit is refused
+(`FitFailed`, `validation.verdicts.calibration.fit`), never computed from the penalty.
+A screen's probe that failed is left out of its candidate's score
+(`validation.verdicts.calibration.extensions.screen`).
 """
 from __future__ import annotations
 
@@ -27,11 +37,23 @@ from ...run.tomlfiles import deep_merge, set_dotted
 from ..evaluations import FIT_SWEEP, Evaluations
 from .plan import Plan, linear_response
 
-__all__ = ["Problem", "together", "samples", "PENALTY"]
+__all__ = ["Problem", "FitFailed", "together", "samples", "penalised", "PENALTY"]
 
-#: Residual, in noise levels, of a sample a simulation did not reach (it diverged or
-#: failed at a trial point): far beyond any fit, so the step is rejected.
+#: Residual, in noise levels, that the optimiser reads at a sample a simulation did not
+#: reach (it diverged or failed at a trial point): far beyond any fit, so the step is
+#: rejected.
 PENALTY = 1e3
+
+
+class FitFailed(RuntimeError):
+    """A fit that could not be computed: what its result rests on failed to simulate
+    (the reason in the message)."""
+
+
+def penalised(r: np.ndarray) -> np.ndarray:
+    """The residual ``r`` as the optimiser reads it: a sample without data (NaN) is
+    `PENALTY`."""
+    return np.where(np.isnan(r), PENALTY, r)
 
 
 def samples(exp: Experiment, horizon: float) -> int:
@@ -51,6 +73,10 @@ class Problem:
         self.scale = np.array([p.scale for p in plan.settings.parameters])
         self.inputs = inputs  # per target: the scenario keys that reproduce its input
         self.horizon = self.band = math.inf
+        # what gave no data and why, latest last (run id or response name → reason), and
+        # the simulations and responses that gave every sample asked of them
+        self.missing: dict[str, str] = {}
+        self.reached: set[str] = set()
 
     # scenarios
     def scenario(self, i: int, u: np.ndarray, horizon: float) -> Scenario | None:
@@ -77,8 +103,12 @@ class Problem:
     # residuals
     def residuals(self, points: list[np.ndarray]) -> list[np.ndarray]:
         """The weighted residual vector at each of ``points`` (their simulations run as
-        one batch)."""
+        one batch); NaN where a simulation gave no data (module docstring)."""
         return together([(self, u) for u in points])
+
+    def penalised(self, points: list[np.ndarray]) -> list[np.ndarray]:
+        """The residuals of ``points`` as the optimiser reads them (`penalised`)."""
+        return [penalised(r) for r in self.residuals(points)]
 
     def requests(self, points: list[np.ndarray]) -> tuple[list, dict]:
         """The simulations of ``points``: (scenario, sweep, axes) items and where each
@@ -110,13 +140,40 @@ class Problem:
         target, k = self.plan.targets[i], self.samples(i)
         exp = target.experiment
         measured = exp.signals[:, :k]
-        r = np.full(measured.shape, PENALTY)
+        r = np.full(measured.shape, np.nan)
+        done = 0
         if row is not None and row.status != "failed":
             result = every_signal(self.evals.store, row)
             done = min(k, len(result.time))
             sim = result.select([f"y_{n}" for n in exp.names])[:, :done].astype(np.float64)
             r[:, :done] = (sim - measured[:, :done]) / target.sigma[:, None]
+        if row is None:
+            self._record(exp.name, f"experiment {exp.name}: the arm at this point cannot be "
+                                   "modelled")
+        elif done < k:
+            self._record(row.run_id, f"run {row.run_id} {row.status} after {row.end_time:g} "
+                                     f"of {row.config['duration']:g} s"
+                                     + (f": {row.message}" if row.message else ""))
+        else:
+            self.reached.add(row.run_id)
         return r.ravel()
+
+    def _record(self, key: str, reason: str) -> None:
+        self.missing.pop(key, None)  # read again: the latest
+        self.missing[key] = reason
+
+    def failure(self, what: str) -> str:
+        """Why the fit could not be computed, ``what`` (the part of its result that
+        lacks data: "the residual at its estimate", …) lacking data: every simulation
+        failed (the first's reason), or the latest failure (the one ``what`` read)."""
+        noun = "simulation" if self.plan.targets else "linearisation"
+        reasons = list(self.missing.values())
+        total = len(reasons) + len(self.reached)
+        if not self.reached:
+            return (f"the fit could not be computed: every {noun} failed ({total} of "
+                    f"{total}; the first: {reasons[0]})")
+        return (f"the fit could not be computed: {what} rests on {noun}s that failed "
+                f"({len(reasons)} of {total}; the latest: {reasons[-1]})")
 
     def _frf_residual(self, response: FrequencyResponse, u: np.ndarray) -> np.ndarray:
         data = copy.deepcopy(self.plan.base)
@@ -125,8 +182,10 @@ class Problem:
         try:
             s = scenario_from_mapping(data)
             G = linear_response(s, self.settings.frf_theta, response.frequency, response.pairs)
-        except (ConfigError, ArithmeticError, np.linalg.LinAlgError):
-            return np.full(2 * response.values.size, PENALTY)
+        except (ConfigError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            self._record(response.name, f"frequency response {response.name}: {exc}")
+            return np.full(2 * response.values.size, np.nan)
+        self.reached.add(response.name)
         e = np.log(G / response.values) / self.settings.frf_noise
         e = e[:, :self.frequencies(response)]
         return np.concatenate([e.real.ravel(), e.imag.ravel()])
@@ -137,14 +196,15 @@ class Problem:
 
     # the fit's callables
     def jacobian(self, u: np.ndarray, f: np.ndarray, upper) -> np.ndarray:
-        """Forward differences at ``u`` (``f`` its residual), one batch of simulations (a
-        step that would cross the upper bound goes down); the fit's steps.  The Jacobian
-        the uncertainty rests on is `polish`'s."""
+        """Forward differences at ``u`` (``f`` its residual as the optimiser reads it,
+        `penalised`: so are the steps'), one batch of simulations (a step that would
+        cross the upper bound goes down); the fit's steps.  The Jacobian the uncertainty
+        rests on is `polish`'s."""
         p = len(u)
         h = self.settings.fd_step * np.maximum(np.abs(u), 1.0)
         h = np.where(u + h > upper, -h, h)
         unit = np.eye(p)
-        values = self.residuals([u + h[j] * unit[j] for j in range(p)])
+        values = self.penalised([u + h[j] * unit[j] for j in range(p)])
         return np.column_stack([(values[j] - f) / h[j] for j in range(p)])
 
     def resolution(self, stencil: float) -> float:

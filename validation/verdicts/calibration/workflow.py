@@ -15,7 +15,12 @@ errors off).  An inadequate model's intervals are of effective parameters and ne
 hold the physical arm (the drive with backlash left out: the payload 38 % high), so its
 ``uncertainty.toml`` — the set ``flexarm verify`` draws the arm from — is not written
 unless asked for (``export_inadequate``, ``--export-inadequate``), and then with a
-warning in it.
+warning in it.  An extension whose fit cannot be computed (`FitFailed`: its simulations
+failed) is named in the search's record and verdict, and the next one is tried.
+
+A calibration whose own fit cannot be computed — every simulation failed, or those its
+estimate or intervals rest on did — raises `FitFailed` and writes no result files (the
+simulations stay in the folder, as runs).
 """
 from __future__ import annotations
 
@@ -27,7 +32,7 @@ from .extensions import FITTED, candidates, extended
 from .fit import fit_plan
 from .outputs import EXTENDED, write_inputs, write_results
 from .plan import Plan
-from .problem import Problem
+from .problem import FitFailed, Problem
 
 __all__ = ["calibrate"]
 
@@ -55,19 +60,25 @@ def _search(plan: Plan, evals: Evaluations, inputs: list[dict], result: dict, lo
     found = {e.name: e for e in candidates(plan, estimate)}
     probes = {r["name"]: r["probe"] for r in result["screen"]}
     fits: dict[str, tuple] = {}
+    failed: dict[str, str] = {}  # name → why its fit could not be computed
     for row in [r for r in result["screen"] if r["significant"]]:
         chain = [found[row["name"]]]
         while chain[0].builds_on in found and chain[0].builds_on not in fits:
             chain.insert(0, found[chain[0].builds_on])
         for extension in chain:
-            if extension.name in fits or len(fits) == FITTED:
+            if extension.name in fits or extension.name in failed or len(fits) == FITTED:
                 continue
             below = fits.get(extension.builds_on)
             start = estimate if below is None else _estimate(below[0], below[1])
             probe = probes[extension.name] if below is None else \
                 {**{k: start[k] for k in extension.fitted if k in start},
                  **{k: v for k, v in extension.changes.items() if k not in start}}
-            fits[extension.name] = _fit(plan, extension, probe, start, evals, inputs, log)
+            try:
+                fits[extension.name] = _fit(plan, extension, probe, start, evals, inputs, log)
+            except FitFailed as exc:
+                failed[extension.name] = str(exc)
+                log(f"  {extension.name}: {exc}")
+                continue
             if fits[extension.name][1]["model_adequate"]:
                 break
         if any(f[1]["model_adequate"] for f in fits.values()) or len(fits) == FITTED:
@@ -93,9 +104,14 @@ def _search(plan: Plan, evals: Evaluations, inputs: list[dict], result: dict, lo
                    f"{tried[0]['name']}, lowers AIC from {without:.6g} to "
                    f"{tried[0]['aic']:.6g} (fitted: {', '.join(r['name'] for r in tried)}; "
                    f"screened: {names})")
+    elif failed:
+        verdict = f"no extension could be fitted (screened: {names})"
     else:
         verdict = ("no physics extension the toolkit has explains the residual (screened: "
                    f"{names}): the model misses something else")
+    if failed:
+        verdict += "; not fitted, their simulations failed: " + "; ".join(
+            f"{name} ({why})" for name, why in failed.items())
     best = fits[adequate[0]["name"]][:2] if adequate else None
     if best is not None:
         # an unidentifiable parameter's partners have intervals conditional on its
@@ -105,7 +121,7 @@ def _search(plan: Plan, evals: Evaluations, inputs: list[dict], result: dict, lo
         if blind:
             best[1]["interval_kind"] += (f"; conditional on {', '.join(blind)} (not "
                                          "identifiable): not exported to uncertainty.toml")
-    return {"screen": result["screen"], "fits": tried,
+    return {"screen": result["screen"], "fits": tried, "failed": failed,
             "adequate": adequate[0]["name"] if adequate else None, "verdict": verdict}, best
 
 
@@ -146,21 +162,29 @@ def calibrate(plan: Plan, out, *, runner, log=print, compare=(), store=None,
     dict
         What ``calibration.json`` holds: estimates, standard errors, correlations,
         residuals, the verdict on the fit and, for an inadequate model, ``extensions``.
+
+    Raises
+    ------
+    FitFailed
+        The fit could not be computed: every simulation failed, or those its estimate or
+        its intervals rest on did (module docstring); no result file is written.
     """
     out = Path(out)
     inputs = write_inputs(plan, out)
     evals = Evaluations(store or out, runner, FIT_SWEEP, description=(
         "the plant's parameters fitted to measured experiments (flexarm calibrate)"))
-    result = fit_plan(plan, Problem(plan, evals, inputs), log)
-    better = None
-    if result["model_adequate"] is False and search:
-        result["extensions"], better = _search(plan, evals, inputs, result, log)
+    try:  # a fit that cannot be computed (FitFailed) leaves its simulations, indexed
+        result = fit_plan(plan, Problem(plan, evals, inputs), log)
+        better = None
+        if result["model_adequate"] is False and search:
+            result["extensions"], better = _search(plan, evals, inputs, result, log)
+    finally:
+        if plan.targets:  # a fit of frequency responses alone simulates nothing: no store
+            evals.finish()
     result["simulations"] = len(evals.seen)
     result["failed_runs"] = evals.failed
     result["exported"] = result["model_adequate"] is not False or export_inadequate
     if compare:
         result["comparison"] = comparison([(str(out), result), *compare])
-    if plan.targets:  # a fit of frequency responses alone simulates nothing: no store
-        evals.finish()
     write_results(out, plan, result, better)
     return result
