@@ -2,7 +2,9 @@
 times of the phases to come, scaled by this machine's pace on the phases that ran."""
 import io
 
-from validation.cli.job_clock import PAPER, RESUMED, JobClock
+import pytest
+
+from validation.cli.job_clock import LAB, PAPER, RESUMED, JobClock
 
 PHASES = (("a", 100.0), ("b", 200.0), ("c", 50.0))
 
@@ -50,3 +52,16 @@ def test_skipped_phases_are_left_out_and_the_paper_has_its_phases():
     assert said[0].startswith("job: 2 phases (a, c), about 2 min")  # 150 s
     assert [p for p, _ in PAPER][:2] == ["the paper's runs", "the stability map"]
     assert all(seconds > 0 for _, seconds in PAPER)
+
+
+def test_the_lab_job_names_the_paper_jobs_phases_but_its_runs():
+    """``reproduce-paper --lab`` says its plan and time left through the same clock and
+    the same calls as the paper's job: its profile names every phase the command ends
+    (and skips) but the first, its runs.  Known-bad: a profile without a phase the
+    command ends fails at that phase's end."""
+    assert [p for p, _ in LAB][1:] == [p for p, _ in PAPER][1:]
+    assert LAB[0][0] != PAPER[0][0] and all(seconds > 0 for _, seconds in LAB)
+    said = lines(LAB, [(LAB[0][0], 60.0)], skipped=["the stability map"])
+    assert said[0].startswith(f"job: {len(LAB) - 1} phases ({LAB[0][0]}, the mesh checks")
+    with pytest.raises(KeyError):
+        lines(LAB[1:], [(PAPER[0][0], 60.0)])

@@ -11,7 +11,7 @@ from ..batch.store.resimulate import every_signal
 from ..batch.store.folder import ResultStore
 
 from .common import EXIT_FAILED, finish, mesh_checks, runner_for
-from .job_clock import PAPER, JobClock
+from .job_clock import LAB, PAPER, JobClock
 from .results import render_report
 from .verdicts import stability_map_into
 
@@ -76,9 +76,9 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
     out = Path(args.out or Path("results") / which)
     scenarios = [r.scenario for r in runs]
     runner = runner_for(args, scenarios, out, *([] if args.no_stability else [out / "stability"]))
-    # The profile is the paper campaign's: the lab campaign's (8 runs) is not measured.
-    clock = JobClock("reproduce-paper", PAPER,
-                     stream=None if args.no_progress or args.lab else sys.stderr)
+    profile = LAB if args.lab else PAPER
+    clock = JobClock("reproduce-paper" + " --lab" * args.lab, profile,
+                     stream=None if args.no_progress else sys.stderr)
     clock.begin(skipped=(["the stability map"] if args.no_stability else [])
                 + (["the report"] if args.no_report else []))
     with runner:
@@ -87,7 +87,7 @@ def cmd_reproduce_paper(args: argparse.Namespace) -> int:
         if summary.interrupted:
             return finish(summary, campaign.name, out)
         print(summary.line(campaign.name, out))
-        clock.done("the paper's runs")
+        clock.done(profile[0][0])  # the campaign's runs, the profile's first phase
         stability, explained = 0, set()
         if not args.no_stability:
             stability, results = stability_map_into(

@@ -2,7 +2,7 @@
 nothing of how long the whole will take.
 
 A command names its phases with their wall times on the reference machine (`PAPER`,
-measured by ``bench/bench_paper.py``); `JobClock` says the total when the command
+`LAB`, measured by ``bench/bench_paper.py``); `JobClock` says the total when the command
 starts and, after each phase, the time it took and about how long is left: the reference
 times of the phases to come, scaled by how fast this machine has been on the phases so
 far — but a phase over in under a tenth of its reference time, which read runs stored
@@ -15,7 +15,7 @@ import sys
 import time
 from typing import Callable, TextIO
 
-__all__ = ["JobClock", "PAPER", "PAPER_COLD_START", "PAPER_DISK_MB", "RESUMED"]
+__all__ = ["JobClock", "PAPER", "LAB", "PAPER_COLD_START", "PAPER_DISK_MB", "RESUMED"]
 
 #: A phase over in less than this share of its reference time read stored runs.
 RESUMED = 0.1
@@ -26,7 +26,13 @@ RESUMED = 0.1
 PAPER = (("the paper's runs", 80.0), ("the stability map", 109.0), ("the mesh checks", 37.0),
          ("the claims", 2.0), ("the report", 13.0))
 
-#: The same run's start-up and first compile of the kernels [s] (a fresh checkout), and
+#: ``flexarm reproduce-paper --lab``'s phases, the same but for its runs (8, on the lab
+#: arm): the mean of two runs on a quiet 2-core machine, kernels compiled
+#: (bench/bench_paper.py --lab of 2026-12-05 and one more that day).
+LAB = (("the lab arm's runs", 12.0), ("the stability map", 14.0), ("the mesh checks", 59.0),
+       ("the claims", 1.0), ("the report", 4.0))
+
+#: The paper's job's start-up and first compile of the kernels [s] (a fresh checkout), and
 #: the disk its results folder took [MB]: what the README states.
 PAPER_COLD_START = 48.0
 PAPER_DISK_MB = 77.0

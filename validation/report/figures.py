@@ -7,15 +7,16 @@ Conventions every figure follows, so that none misleads its reader:
 - what was run (arm, plant, control period, initial condition) in a title wrapped to the
   figure's width, so a long title never squeezes the plots;
 - the bound a claim is judged against is drawn, or, where it lies far off the data's
-  scale, named in the panel;
+  scale, named in the panel, in headroom above the data (never over them);
 - truth and reduced plant both stay visible: the reduced plant wide and light
   underneath, the truth plant thin and dark on top;
 - a dense series (more samples than the panel has pixel columns) is drawn as its
-  envelope — min and max per pixel column, light — with the column mean as a line, so
-  chatter reads as a band of known width around the signal it rides on;
+  envelope — min and max per pixel column, a faint fill between thin edges — with the
+  column mean as a line, so chatter reads as a band of known width around the signal
+  it rides on;
 - diverged and failed runs are never drawn as data: the paper's figures name them in
   the title, sweeps mark them in a strip of their own above the data (its own y-range);
-- legends sit outside the panels.
+- legends sit outside the panels, and every shaded band has its entry.
 """
 from __future__ import annotations
 
@@ -155,10 +156,21 @@ def rates(group, title: str, transient: float) -> bytes:
     return png(fig)
 
 
+#: The edges of the measurement error's band: dotted, drawn over the data.
+_SIGMA_EDGE = dict(lw=0.7, ls=":")
+
+
 def estimation_errors(group, title: str, transient: float, bound: float | None = None) -> bytes:
     """Fig. 7 analogue: x̂ − x per state (mrad, mm, mrad/s, mm/s), y-range after the
-    transient, with ±1 RMS of the raw measurement's error (grey band) where the state is
-    measured, and the angle-estimation claim's bound ``bound`` [rad] on θ₁, θ₂."""
+    transient, with ±1 RMS of the raw measurement's error (grey band, dotted edges) where
+    the state is measured, and the angle-estimation claim's bound ``bound`` [rad] on θ₁,
+    θ₂ (named in the panel where it is off the errors' scale).
+
+    Each plant's error is a line, its mean per pixel column, inside its envelope (min
+    and max per column: a faint band between thin edges).  Where the sign observer
+    chatters, the envelope is the chatter: on the paper's arm the q₂₂ error flips sign
+    every sample on both plants, so its panel is a band of constant width, twice the
+    error's amplitude, with the mean, near zero, inside it."""
     observed = [(r, res) for r, res in group if "xhat_theta1" in res]
     states = [n.removeprefix("xhat_") for n in observed[0][1].names_with("xhat_")]
     fig, axes = _state_grid(states)
@@ -174,10 +186,10 @@ def estimation_errors(group, title: str, transient: float, bound: float | None =
                 sigma = scale * float(np.sqrt(np.mean(
                     (res[f"y_{s}"][late].astype(float) - res[s][late]) ** 2)))
                 if sigma > 0:  # a band under the data, its edges on top of it
-                    ax.axhspan(-sigma, sigma, color="0.85", zorder=0)
+                    ax.axhspan(-sigma, sigma, facecolor="0.85", edgecolor="0.35", zorder=0,
+                               label="measurement error, ±1 RMS (grey band)", **_SIGMA_EDGE)
                     for y in (sigma, -sigma):
-                        ax.axhline(y, color="0.35", lw=0.7, ls=":", zorder=5,
-                                   label="measurement error, ±1 RMS" if y > 0 else None)
+                        ax.axhline(y, color="0.35", zorder=5, **_SIGMA_EDGE)
         angle_bound = bound is not None and s in ("theta1", "theta2")
         if angle_bound:
             bound_lines(ax, 1e3 * bound, f"angle-estimation bound ±{1e3 * bound:g} mrad")

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import json
 import math
-import textwrap
+import re
 
 from .figures import BOUND_STYLE, figure_title, plt, png
 
-__all__ = ["sweep_figures", "SWEEP_METRICS", "AXIS_UNITS", "axis_label", "short_value"]
+__all__ = ["sweep_figures", "SWEEP_METRICS", "AXIS_UNITS", "axis_label", "short_value",
+           "fit_tick_labels"]
 
 #: Units of the scenario keys a sweep may vary (shown on the x axes).
 AXIS_UNITS = {
@@ -72,9 +73,13 @@ def sweep_figures(sweep: str, runs, bounds: dict | None = None) -> list[tuple[st
     group of three or more values (the other groups become series, one per combination
     and plant); with no such group, the largest group is the x axis.  Constant axes are
     not drawn; list-valued axes are categories labelled by their value; diverged and
-    failed runs are a crimson × in a strip above the panel, never a data point, on a row
+    failed runs are a crimson × in a strip above the panels, never a data point, on a row
     naming their series (plant and the other axes).  The plant (``plant.kind``, or whole
-    plant tables, one per plant) is a series, not an axis."""
+    plant tables, one per plant) is a series, not an axis.
+
+    The metrics are panels one above the other, sharing the x axis: its labels are
+    written once, under the last, at the report's type size, horizontal where they fit
+    (`fit_tick_labels`)."""
     axes = sorted({a for r in runs for a in r.axes})
     plants = len({r.plant_label for r in runs})
     varying = [a for a in axes if a != "plant.kind"
@@ -105,18 +110,23 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
         series.setdefault((other, r.plant_label, r.role), []).append(r)
     keys = sorted(series)
     others_order = sorted({k[0] for k in keys})
-    # A row of the strip per series with a run that diverged or failed, named.
+    # A row of the strip per series with a run that diverged or failed, named: a run's
+    # status is the same for every metric, so one strip heads the column of panels.
     bad_rows = [k for k in keys if any(r.status != "ok" for r in series[k])]
     any_bad = bool(bad_rows)
-    fig = plt.figure(figsize=(2.6 * len(metrics) + 2.8, 3.6 + 0.2 * len(bad_rows)),
+    # As wide as the report's page (11 in at the saved 110 dpi: ~1200 px) for many
+    # categories, their labels side by side; narrower for a few or a number line.
+    width = 9.0 if numeric else min(11.0, 6.0 + 0.5 * len(xs))
+    fig = plt.figure(figsize=(width, 1.45 * len(metrics) + 1.9 + 0.3 * len(bad_rows)),
                      layout="constrained")
-    grid = fig.add_gridspec(2 if any_bad else 1, len(metrics),
-                            height_ratios=[0.4 + 0.6 * len(bad_rows), 7] if any_bad else [1])
-    legend_from = None
-    for col, (key, title, names, factor, unit) in enumerate(metrics):
-        ax = fig.add_subplot(grid[-1, col])
-        strip = fig.add_subplot(grid[0, col], sharex=ax) if any_bad else None
-        legend_from = legend_from or ax
+    grid = fig.add_gridspec(len(metrics) + any_bad, 1, height_ratios=(
+        [0.25 + 0.2 * len(bad_rows)] if any_bad else []) + [1] * len(metrics))
+    panels = []
+    for row in range(len(metrics)):
+        panels.append(fig.add_subplot(grid[row + any_bad, 0],
+                                      sharex=panels[0] if panels else None))
+    strip = fig.add_subplot(grid[0, 0], sharex=panels[0]) if any_bad else None
+    for ax, (key, title, names, factor, unit) in zip(panels, metrics):
         for n, (other, plant, role) in enumerate(keys):
             color = f"C{others_order.index(other) % 10}"
             pts, bad = [], []
@@ -141,7 +151,7 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
                 pts.sort()
                 ax.plot(*zip(*pts), ls=("--" if truth else "-") if numeric
                         else "none", lw=1, **style)
-            if bad:
+            if bad and ax is panels[0]:
                 row = bad_rows.index((other, plant, role))
                 strip.plot(bad, [row] * len(bad), "x", color="crimson", ms=7, mew=2)
         bound = bounds.get(key)
@@ -153,39 +163,77 @@ def _sweep_figure(sweep, runs, group, others, xs, numeric, metrics, bounds) -> t
                 ax.set_ylim(lo, hi)
                 ax.text(0.99, 0.97, f"bound {factor * bound:g} {unit}: above", ha="right",
                         va="top", transform=ax.transAxes, fontsize=7, color="crimson")
-        heading = textwrap.fill(f"{title} [{unit}]", 30)
-        ax.set_title(heading, fontsize=9)
-        if numeric:
-            lo = min(json.loads(x)[0] for x in xs) * scale
-            hi = max(json.loads(x)[0] for x in xs) * scale
-            if lo > 0 and hi / lo > 20:
-                ax.set_xscale("log")
-        else:
-            ax.set_xticks(range(len(xs)))
-            idx = group.index(label_axis)
-            ax.set_xticklabels([short_value(json.loads(x)[idx]).split("/")[-1] for x in xs],
-                               rotation=60, ha="right", fontsize=7)
-        ax.tick_params(labelsize=7)
-        if strip is not None:
-            strip.set_ylim(len(bad_rows) - 0.4, -0.6)
-            strip.set_yticks(range(len(bad_rows)))
-            strip.set_yticklabels([_series_label(k) for k in bad_rows] if col == 0 else [],
-                                  fontsize=7, color="crimson")
-            strip.tick_params(labelbottom=False, labelsize=7, left=False)
-            strip.set_title(heading, fontsize=9)
-            ax.set_title("")
+        ax.set_title(f"{title} [{unit}]", fontsize=9, loc="left")
+        ax.tick_params(labelsize=8, labelbottom=ax is panels[-1])
+    if numeric:
+        lo = min(json.loads(x)[0] for x in xs) * scale
+        hi = max(json.loads(x)[0] for x in xs) * scale
+        if lo > 0 and hi / lo > 20:
+            panels[0].set_xscale("log")
+    else:
+        panels[0].set_xticks(range(len(xs)))
+    if strip is not None:
+        strip.set_ylim(len(bad_rows) - 0.4, -0.6)
+        strip.set_yticks(range(len(bad_rows)))
+        # names in lines of a legend entry's width at most: the strip's margin is
+        # every panel's, its width taken from the categories' slots
+        strip.set_yticklabels([_wrapped(_series_label(k), 36) for k in bad_rows], fontsize=8,
+                              color="crimson", linespacing=1.0)
+        strip.tick_params(labelbottom=False, left=False)
+        strip.set_title("diverged / failed: no value", fontsize=9, loc="left")
     zipped = [a for a in group if a != label_axis]
-    fig.supxlabel(axis_label(label_axis) + (f" (zipped with {', '.join(zipped)})"
-                                            if zipped else ""), fontsize=8)
-    handles, labels = legend_from.get_legend_handles_labels()
+    panels[-1].set_xlabel(axis_label(label_axis) + (f" (zipped with {', '.join(zipped)})"
+                                                    if zipped else ""), fontsize=9)
+    handles, labels = panels[0].get_legend_handles_labels()
     if any_bad:
         handles.append(plt.Line2D([], [], ls="none", marker="x", color="crimson", mew=2))
         labels.append("diverged / failed (no value; top strip, a row per series)")
-    fig.legend(handles, labels, loc="outside right center", fontsize=7,
-               title="filled: truth plant; hollow: reduced", title_fontsize=7)
+    fig.legend(handles, labels, loc="outside lower center", fontsize=8, ncol=2,
+               title="filled: truth plant; hollow: reduced", title_fontsize=8)
     caption = f"sweep '{sweep}': metrics vs {' / '.join(group)}"
     figure_title(fig, caption)
+    if not numeric:  # measured in the figure's final layout: last
+        idx = group.index(label_axis)
+        fit_tick_labels(panels[-1], [short_value(json.loads(x)[idx]).split("/")[-1]
+                                     for x in xs])
     return caption, png(fig)
+
+
+def fit_tick_labels(ax, labels: list[str], gap: float = 4.0) -> None:
+    """Category labels on ``ax``'s ticks, horizontal: each on one line where they all fit
+    side by side, else broken into lines at each "+", ",", ";" or space, and tilted only
+    where even those overlap (measured in the figure's layout, with ``gap`` points
+    between neighbours: call it once the figure is complete)."""
+    def overlap() -> bool:
+        fig = ax.figure
+        fig.canvas.draw()
+        boxes = sorted((t.get_window_extent() for t in ax.get_xticklabels()
+                        if t.get_text()), key=lambda b: b.x0)
+        pixels = gap * fig.dpi / 72
+        return any(b.x0 < a.x1 + pixels for a, b in zip(boxes, boxes[1:]))
+    ticks = ax.get_xticks()
+    ax.set_xticks(ticks, labels, fontsize=8)
+    if len(labels) < 2 or not overlap():
+        return
+    ax.set_xticks(ticks, [_wrapped(label, 0) for label in labels], fontsize=8)
+    if overlap():
+        ax.set_xticks(ticks, labels, fontsize=8, rotation=40, ha="right",
+                      rotation_mode="anchor")
+
+
+def _wrapped(label: str, chars: int) -> str:
+    """``label`` in lines of at most ``chars`` characters where it can break: after a
+    ", " or ";", before a "+", at a space (a word longer than a line stays whole; 0:
+    a line per word)."""
+    words = re.split(r"(?<=[,;])\s*|\s+|(?=\+)", label)
+    lines: list[str] = []
+    for word in filter(None, words):
+        joint = "" if word.startswith("+") or not lines else " "
+        if lines and len(lines[-1]) + len(joint) + len(word) <= chars:
+            lines[-1] += joint + word
+        else:
+            lines.append(word)
+    return "\n".join(lines)
 
 
 def _series_label(key: tuple) -> str:

@@ -12,9 +12,9 @@ import textwrap
 
 import numpy as np
 
-__all__ = ["PLANT_STYLE", "BOUND_STYLE", "SUB", "DPI", "figure_title", "figure_legend",
-           "pixel_columns", "envelope", "trace", "plant_trace", "fit_ylim", "bound_lines", "draw_tracking",
-           "draw_deflections", "plot_results"]
+__all__ = ["PLANT_STYLE", "BOUND_STYLE", "SUB", "DPI", "NOTE_PT", "ENVELOPE_LABEL",
+           "figure_title", "figure_legend", "pixel_columns", "envelope", "trace", "plant_trace",
+           "fit_ylim", "bound_lines", "draw_tracking", "draw_deflections", "plot_results"]
 
 #: Reduced plant wide and light underneath, truth plant thin and dark on top.
 PLANT_STYLE = {"reduced": dict(color="tab:blue", lw=2.4, alpha=0.45, zorder=2),
@@ -24,6 +24,11 @@ SUB = str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉")
 #: Resolution of the saved figures [dots per inch]: a dense series is binned to its
 #: pixel columns at it.
 DPI = 110
+#: Type size of a note in a panel [pt], and its margin to the frame [pt].
+NOTE_PT = 6.5
+_NOTE_MARGIN = 2.0
+#: The legend's entry for the envelopes of dense series (`trace`), drawn as a neutral patch.
+ENVELOPE_LABEL = "shaded: min–max per pixel column"
 
 
 def figure_title(fig, text: str, fontsize: float = 10) -> None:
@@ -35,10 +40,14 @@ def figure_title(fig, text: str, fontsize: float = 10) -> None:
 def figure_legend(fig, axes) -> None:
     """One legend for a grid of panels, below them (never over the data); entries of
     every panel, each label once."""
+    from matplotlib.patches import Patch
     seen = {}
     for ax in np.ravel(axes):
         for h, label in zip(*ax.get_legend_handles_labels()):
             seen.setdefault(label, h)
+    if ENVELOPE_LABEL in seen:  # one entry for the bands of every colour, at the end
+        del seen[ENVELOPE_LABEL]
+        seen[ENVELOPE_LABEL] = Patch(facecolor=(0.5, 0.5, 0.5, 0.15), edgecolor="0.3", lw=0.5)
     if seen:  # as many columns as the figure's width holds (8 pt: ~0.06 in a character)
         fits = int(fig.get_figwidth() / (0.06 * (max(map(len, seen)) + 6)))
         fig.legend(list(seen.values()), list(seen), loc="outside lower center",
@@ -63,15 +72,25 @@ def envelope(t: np.ndarray, y: np.ndarray, columns: int):
 
 def trace(ax, t, y, *, color, lw=0.8, alpha=1.0, zorder=2, label=None, ls="-"):
     """A time series: a plain line if it has at most two samples per pixel column, else
-    its min/max envelope (light) and the column mean (line)."""
+    its envelope and the column mean (line).
+
+    The envelope is the min and max per pixel column: a faint fill between two thin
+    edges in the series' colour (fainter edges for a faint series).  A series that
+    chatters at the sampling rate (an observer's sign term: its error flips sign every
+    sample) has an envelope as wide as the chatter in every column, a band of constant
+    width filling the panel: faint, it leaves the mean lines of both plants readable
+    inside it, and the edges tell the two plants' bands apart.  The fill is labelled
+    `ENVELOPE_LABEL`, the legend's one entry for every such band (`figure_legend`)."""
     y = np.asarray(y, dtype=float)
     columns = pixel_columns(ax)
     if t.size <= 2 * columns:
         ax.plot(t, y, color=color, lw=lw, alpha=alpha, zorder=zorder, label=label, ls=ls)
         return
     tc, lo, hi, mean = envelope(np.asarray(t, float), y, columns)
-    ax.fill_between(tc, lo, hi, color=color, alpha=0.25 if alpha == 1.0 else 0.5 * alpha,
-                    lw=0, zorder=zorder - 0.5)
+    ax.fill_between(tc, lo, hi, color=color, alpha=0.06, lw=0, zorder=zorder - 0.5,
+                    label=ENVELOPE_LABEL)
+    for edge in (lo, hi):
+        ax.plot(tc, edge, color=color, lw=0.5, alpha=0.8 * alpha, zorder=zorder - 0.4)
     ax.plot(tc, mean, color=color, lw=lw, alpha=alpha, zorder=zorder, label=label, ls=ls)
 
 
@@ -84,21 +103,38 @@ def plant_trace(ax, run, t, y, *, label=True, suffix="") -> None:
 def fit_ylim(ax, series, transient: float, bound: float | None = None, unit: str = "") -> None:
     """y-range from the samples after the transient (the start-up may leave the frame);
     a symmetric ±bound joins the range if it is within 4× the data's extent, else it
-    is named in the panel."""
+    is named in the panel: a note under the frame's top edge, in headroom the y-range
+    leaves above the data after the transient (`NOTE_PT` type), so that it sits over
+    none of them."""
     late = [y[t >= transient] for t, y in series if (t >= transient).any()]
     if not late:
         return
     lo = min(float(np.nanmin(s)) for s in late)
     hi = max(float(np.nanmax(s)) for s in late)
+    note = None
     if bound is not None:
         extent = max(abs(lo), abs(hi), 1e-300)
         if bound <= 4 * extent:
             lo, hi = min(lo, -bound), max(hi, bound)
         else:
-            ax.text(0.99, 0.97, f"bound ±{bound:.3g} {unit} off scale", ha="right",
-                    va="top", transform=ax.transAxes, fontsize=6.5, color=BOUND_STYLE["color"])
+            note = f"bound ±{bound:.3g} {unit} off scale"
     pad = 0.08 * (hi - lo) or 1e-12
-    ax.set_ylim(lo - pad, hi + pad)
+    lo, hi = lo - pad, hi + pad
+    if note is not None:
+        # The note wrapped to the panel's width and its lines with their margins as a
+        # share of the panel's height (at most 0.45: the data keep the rest).  The layout
+        # engine shrinks a panel after this, for titles, labels and the legend (Fig. 7's:
+        # 75 -> 52 pt high, 85 -> 59 pt wide): both are taken 1.5x what the panel's size
+        # now asks (a character: ~0.6 of the type size).
+        size = ax.get_position().size * ax.figure.get_size_inches() * 72  # [pt]
+        note = textwrap.fill(note, max(10, int(size[0] / 1.5 / (0.6 * NOTE_PT))))
+        lines = note.count("\n") + 1
+        share = min(0.45, 1.5 * (1.2 * NOTE_PT * lines + 2 * _NOTE_MARGIN) / size[1])
+        hi += share * (hi - lo) / (1 - share)
+        ax.annotate(note, (1.0, 1.0), xycoords="axes fraction", ha="right", va="top",
+                    xytext=(-_NOTE_MARGIN, -_NOTE_MARGIN), textcoords="offset points",
+                    fontsize=NOTE_PT, color=BOUND_STYLE["color"], linespacing=1.1)
+    ax.set_ylim(lo, hi)
 
 
 def bound_lines(ax, bound: float, label: str) -> None:
