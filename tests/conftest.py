@@ -1,5 +1,6 @@
-"""What the plug-in tests share: a folder of plug-in modules importable by this process
-(and by the `flexarm` commands the tests start there)."""
+"""What the tests share: a folder of plug-in modules importable by this process (and by
+the `flexarm` commands the tests start there), and a small results folder with its
+report."""
 import sys
 import textwrap
 from pathlib import Path
@@ -60,3 +61,29 @@ def plugin_lab(tmp_path, monkeypatch):
         return tmp_path
     yield make
     forget_plugins()
+
+
+#: A small campaign with its report: the paper's system (so named, that the claims and the
+#: summary are drawn) on both plants, and a sweep of the control period.
+REPORT_SPEC = {
+    "name": "rep", "description": "report test",
+    "scenario": {"duration": 3.0, "transient": 1.0, "observer": {"kind": "smo-bl"},
+                 "sensors": {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}},
+    "report": {"figures": ["pbc+smo-paper"]},
+    "sweep": [{"name": "both", "grid": {"plant.kind": ["reduced", "exudyn"]},
+               "zip": {"name": ["pbc+smo-paper"]}},
+              # Ts = 8 ms is beyond the sampled loop's limit (~2.8 ms): it diverges.
+              {"name": "ts", "grid": {"Ts": [5e-4, 1e-3, 8e-3], "plant.step": [5e-4]}}]}
+
+
+@pytest.fixture(scope="session")
+def reported(tmp_path_factory) -> Path:
+    """A results folder of `REPORT_SPEC` with its report (the report's tests and the docs'
+    findings page read it)."""
+    from validation.batch.campaign import campaign_from_mapping
+    from validation.batch.queue import run_campaign
+    from validation.report.report import write_report
+    out = tmp_path_factory.mktemp("report")
+    run_campaign(campaign_from_mapping(REPORT_SPEC), out, progress=False)
+    write_report(out, progress=False)
+    return out

@@ -5,6 +5,7 @@ commands they show exist, and the gallery's examples run (slow: ``make docs`` ru
 too).  Runs without the docs extra: the docstrings are read by the same small reader the
 site's generators use."""
 import dataclasses
+import functools
 import importlib
 import inspect
 import os
@@ -215,6 +216,107 @@ def test_the_cli_reference_has_no_flag_or_address_in_prose():
     assert not re.findall(r"\w@\w", text)
     conf = (DOCS / "conf.py").read_text()
     assert 'smartquotes_action = "qe"' in conf and "mathjax_path = COMPONENT" in conf
+
+
+#: A number as a page prints it: digits, a fraction, an exponent ("0.00963", "1e-05"); not
+#: the digits inside a word ("smo2", "a3f9").
+NUMBER = re.compile(r"(?<![\w.])(\d+)(?:\.(\d+))?(?:[eE][-+]?\d+)?(?![\w.]*\w)")
+#: The significant digits a table may print: the report rounds to 3 (``fmt_number``), a
+#: discretisation error to 2; 4 leaves room for a count ("1250 runs").
+MAX_DIGITS = 4
+
+
+def significant_digits(whole: str, fraction: str | None) -> int:
+    """How many significant digits a printed number shows ("0.009627" → 4, "1000" → 1)."""
+    digits = (whole + (fraction or "")).lstrip("0")
+    return len(digits if fraction else digits.rstrip("0"))
+
+
+def table_cells(rst: str) -> list[str]:
+    """The text of every cell of the page's list-tables (header cells included)."""
+    cells, inside = [], False
+    for line in rst.splitlines():
+        if line.startswith(".. list-table::"):
+            inside = True
+        elif inside and line and not line.startswith(" "):
+            inside = False
+        elif inside and (cell := re.match(r"   (?:\* |  )-(?: (.*))?$", line)):
+            cells.append(cell.group(1) or "")
+        elif inside and line.startswith("       ") and cells:
+            cells[-1] += " " + line.strip()
+    return cells
+
+
+def findings_problems(rst: str) -> list[str]:
+    """What makes a findings page a raw dump rather than a report (issue 58): a table cell
+    with a number of more than `MAX_DIGITS` significant digits, a "nan" anywhere (a value
+    not given must say why), a figure captioned by its file name or not at all."""
+    problems = [f"number in a table with more than {MAX_DIGITS} significant digits: "
+                f"{n.group(0)!r}"
+                for c in table_cells(rst) for n in NUMBER.finditer(c)
+                if significant_digits(n.group(1), n.group(2)) > MAX_DIGITS]
+    problems += [f"'nan' in {line.strip()!r}" for line in rst.splitlines()
+                 if re.search(r"\bnan\b", line, flags=re.I)]
+    for _, path, caption in re.findall(r"^( *)\.\. figure:: (\S+)\n(?:\1   :.*\n)*\n"
+                                       r"(?:\1   (.*))?", rst, flags=re.M):
+        bare = caption.strip("`* ")
+        if not bare or bare == Path(path).name or re.fullmatch(r"[\w.+-]+\.(png|gif|svg)",
+                                                                bare):
+            problems.append(f"figure {path} captioned {caption!r}: not what it shows")
+    return problems
+
+
+def test_the_findings_page_reads_like_the_report(reported, tmp_path, monkeypatch):
+    """Issue 58: the findings page dumped stored CSV files — 17-digit floats in rad and m,
+    "nan" cells, figures captioned by their file names.  Generated from a stored results
+    folder, it opens with the report's answer (one sentence per arm and plant), then its
+    tables in the report's units and rounding and its figures with their captions; the
+    lab arm's and the kinematics' parts, not stored, say how to produce them.  Known-bad:
+    the old page's dump of the claims' records and a figure captioned by its file."""
+    from flexarm_docs import findings
+    from flexarm_docs.rst import list_table
+    from validation.batch.store.folder import ResultStore
+    from validation.batch.store.resimulate import every_signal
+    from validation.report.record import load_record
+    from validation.verdicts.claims import claim_columns, claims_records
+    monkeypatch.setenv("FLEXARM_FINDINGS", str(reported))
+    monkeypatch.setenv("FLEXARM_FINDINGS_LAB", str(tmp_path / "lab"))
+    kinematics = tmp_path / "kinematics"
+    kinematics.mkdir()
+    # An attribution as `flexarm attribute` stores it: SI units, every digit a float has.
+    (kinematics / "attribution.csv").write_text(
+        "study,metric,factor,contribution,share\n"
+        + "".join(f"pbc+smo-paper@rest,{metric},{factor},{value!r},\n"
+                  for metric, values in (("track_rms", (0.009627723588051751,
+                                                        0.0041372958823005, 0.00549042770575125)),
+                                         ("vib_rms", (0.0014273958235833857, float("nan"),
+                                                      float("nan"))))
+                  for factor, value in zip(("total", "kinematics", "plant"), values)))
+    monkeypatch.setenv("FLEXARM_FINDINGS_KINEMATICS", str(kinematics))
+    docs = tmp_path / "docs"
+    page = findings.render(docs)
+    assert findings_problems(page) == []
+    record = load_record(reported)
+    answers = "".join(f"* {line}\n" for line in record["answers"])
+    assert len(record["answers"]) == 2  # one arm on two plants
+    assert page.split("\n\n", 2)[2].startswith(answers + "* No report of the lab arm at ")
+    assert "flexarm reproduce-paper --lab --no-stability" in page
+    kinematics_cells = table_cells(page.split("its kinematics\n")[1])
+    assert {"tracking error, RMS [mrad]", "9.63", "85.9 %", "vibration RMS [mm]", "1.43",
+            "— (diverged)"} <= set(kinematics_cells)
+    shown = re.findall(r"^ *\.\. figure:: /_generated/findings/paper/(\S+)", page, flags=re.M)
+    assert len(shown) == 5 and all((docs / "_generated" / "findings" / "paper" / f).is_file()
+                                   for f in shown)
+    assert "mrad" in " ".join(table_cells(page))  # the report's units, not rad and m
+
+    store = ResultStore(reported)
+    records = claims_records(claim_columns(store.rows(), functools.partial(every_signal, store)))
+    dump = list_table(list(records[0]), [[str(v) for v in r.values()] for r in records])
+    dump += f".. figure:: /_generated/findings/{shown[0]}\n   :width: 100%\n\n   ``{shown[0]}``\n"
+    problems = findings_problems(dump)
+    assert any("number in a table" in p for p in problems)
+    assert any(p.startswith("'nan'") for p in problems)
+    assert any("not what it shows" in p for p in problems)
 
 
 def test_the_site_ships_its_math_renderer():

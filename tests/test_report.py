@@ -16,17 +16,6 @@ from validation.report.sweep_figures import sweep_figures
 from validation.report.report import write_report
 from validation.batch.store.folder import ResultStore
 
-SPEC = {"name": "rep", "description": "report test",
-        "scenario": {"duration": 3.0, "transient": 1.0, "observer": {"kind": "smo-bl"},
-                     "sensors": {"encoder_noise": 1e-4, "modal_noise": 1e-5, "rate_noise": 1e-3}},
-        "report": {"figures": ["pbc+smo-paper"]},
-        # Named as the paper's system, so that the claims and the summary are drawn.
-        "sweep": [{"name": "both", "grid": {"plant.kind": ["reduced", "exudyn"]},
-                   "zip": {"name": ["pbc+smo-paper"]}},
-                  # Ts = 8 ms is beyond the sampled loop's limit (~2.8 ms): it diverges.
-                  {"name": "ts", "grid": {"Ts": [5e-4, 1e-3, 8e-3], "plant.step": [5e-4]}}]}
-
-
 class Tables(HTMLParser):
     """Every <table>: its header cells (count and texts), the cell count of each body row,
     and whether it is printed (not inside an element the print stylesheet leaves out:
@@ -77,11 +66,9 @@ class Tables(HTMLParser):
 
 
 @pytest.fixture(scope="module")
-def report(tmp_path_factory):
-    out = tmp_path_factory.mktemp("report")
-    run_campaign(campaign_from_mapping(SPEC), out, progress=False)
-    html_path, md_path = write_report(out, progress=False)
-    return out, html_path.read_text(), md_path.read_text()
+def report(reported):
+    html_path, md_path = write_report(reported, progress=False)
+    return reported, html_path.read_text(), md_path.read_text()
 
 
 def test_every_html_table_row_has_as_many_cells_as_its_header(report):

@@ -11,7 +11,7 @@ from collections import Counter
 
 from ..run.plants import is_truth
 
-__all__ = ["bottom_line", "UNDECIDED"]
+__all__ = ["bottom_line", "claims_sentences", "UNDECIDED"]
 
 #: What stops a claim's verdict, by the verdict given instead (`verdicts.claims.Verdict`).
 UNDECIDED = {
@@ -89,9 +89,21 @@ def _stops_sentence(runs, checks, expected: frozenset = frozenset()) -> str:
     return text[0].upper() + text[1:] + "."
 
 
-def _claims_sentences(columns) -> list[str]:
-    """Per plant (the truth plant first) and arm: the paper's claims that hold and fail,
-    the ones not given named with what stops them."""
+def claims_sentences(columns) -> list[str]:
+    """The bottom line's answer: per plant (the truth plant first) and arm, one sentence
+    counting the paper's claims that hold and fail, the ones not given named with what
+    stops them.
+
+    Parameters
+    ----------
+    columns : list of Column
+        The claims' columns (`validation.verdicts.claims.claim_columns`).
+
+    Returns
+    -------
+    list of str
+        One sentence per plant and arm that has a verdict.
+    """
     from ..verdicts.claims import CLAIMS
     lines = []
     for role, name in (("truth", "the truth plant"), ("reduced", "the reduced model")):
@@ -157,7 +169,7 @@ def bottom_line(runs, checks, columns, calibration: dict | None = None, *,
     3 runs: 1 completed, 2 diverged, 0 failed.
     All 2 divergences are on the table1 arm at Ts = 1 ms, reduced plant.
     """
-    lines = _claims_sentences(columns) if columns else []
+    lines = claims_sentences(columns) if columns else []
     if runs:
         lines += [_runs_sentence(runs, checks), _stops_sentence(runs, checks, expected)]
     if calibration:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 from ..batch.fingerprint import fingerprint_of, source_fingerprint
 from ..batch.store.folder import ResultStore
+from .record import RECORD_FILE
 
 __all__ = ["content_key", "report_is_current", "paths"]
 
@@ -68,15 +69,18 @@ def content_key(results_dir, *, animate: bool, rows: list | None = None) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def paths(results_dir) -> tuple[Path, Path, Path]:
-    out = ResultStore(results_dir).out / "report"
-    return out / "report.html", out / "report.md", out / _KEY_FILE
+def paths(results_dir) -> tuple[Path, Path, Path, Path]:
+    """report.html, report.md, the report's record (`record.RECORD_FILE`) and its
+    content key's file in ``results_dir``."""
+    out = ResultStore(results_dir).out
+    return (out / "report" / "report.html", out / "report" / "report.md", out / RECORD_FILE,
+            out / "report" / _KEY_FILE)
 
 
 def report_is_current(results_dir, *, animate: bool = True) -> bool:
     """Whether the report of ``results_dir`` exists and shows what the folder holds now
     (the same content key)."""
-    html_path, md_path, key_path = paths(results_dir)
-    return (html_path.is_file() and md_path.is_file() and key_path.is_file()
+    *reports, key_path = paths(results_dir)
+    return (all(p.is_file() for p in reports) and key_path.is_file()
             and key_path.read_text().strip() == content_key(results_dir, animate=animate))
 

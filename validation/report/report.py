@@ -3,7 +3,9 @@
 ``write_report(results_dir)`` assembles the report as data — tables of values and
 figures — and renders it through two templates: ``report/report.html`` (self-contained:
 figures embedded, no network; a print stylesheet keeps every table on the page) and
-``report/report.md`` (figures in ``report/figures/``), plus ``report/arm.gif``.
+``report/report.md`` (figures in ``report/figures/``), plus ``report/arm.gif`` and the
+report's sentences and tables as data, ``report/report.json`` (`record`: the docs'
+findings page reads it).
 Sections: what was run and its bottom line (`bottom_line`: sentences a reviewer can
 quote, computed from the results); the summary (each claim, its margin and the truth
 plant's difference from the reduced one; the main metrics of every system run on both
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import base64
 import functools
+import json
 import re
 import shutil
 from dataclasses import dataclass, field
@@ -36,10 +39,11 @@ from ..batch.beside import beside, out_of_collection
 from ..batch.fingerprint import fingerprint_of, fmu_of
 from ..batch.store.resimulate import every_signal
 from .render import fmt_number, folded_text, render
-from .bottom_line import bottom_line
+from .bottom_line import bottom_line, claims_sentences
 from .arms import arms_answers, arms_table
 from .calibration import calibration_section
 from .content_key import content_key, paths, report_is_current
+from .record import report_record
 from .groups import animation, claim_bounds, figure_groups, paper_figure_tasks
 from .many import completed, distributions, histograms, is_many, read_metrics, windows_of
 from .robust import robust_section
@@ -73,6 +77,7 @@ class ReportData:
     description: str
     folder: str
     scope: list
+    answers: list = field(default_factory=list)  # the bottom line's claims sentences
     bottom_line: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
     arms_answers: list = field(default_factory=list)
@@ -345,6 +350,7 @@ def report_data(results_dir, *, animate: bool = True, progress: bool = True,
         data.pairs = pairs_table(runs, fig.describe_run) if len({r.role for r in runs}) > 1 \
             else None
         data.arms_answers, data.arms = arms_answers(runs), arms_table(runs)
+        data.answers = claims_sentences(columns) if columns else []
         data.bottom_line = bottom_line(counted, checks, columns, data.calibration,
                                        expected=expected)
         if many:
@@ -415,11 +421,12 @@ def contents(data: ReportData) -> list[tuple[str, str]]:
 
 def write_report(results_dir, *, animate: bool = True, progress: bool = True,
                  force: bool = False) -> tuple[Path, Path]:
-    """Write report.html and report.md for ``results_dir``, unless they are current
-    (`report_is_current`; ``force`` renders anyway); returns their paths."""
+    """Write report.html, report.md and report.json (`record`) for ``results_dir``,
+    unless they are current (`report_is_current`; ``force`` renders anyway); returns the
+    paths of the first two."""
     store = ResultStore(results_dir)
     store.check()
-    html_path, md_path, key_path = paths(results_dir)
+    html_path, md_path, _, key_path = paths(results_dir)
     if not force and report_is_current(results_dir, animate=animate):
         return html_path, md_path
     rows = report_rows(store)
@@ -431,7 +438,7 @@ def _write(store: ResultStore, rows: list, *, animate: bool, progress: bool
            ) -> tuple[Path, Path]:
     """`write_report` of the folder of ``store`` from its ``rows`` (`report_rows`)."""
     results_dir = store.out
-    html_path, md_path, key_path = paths(results_dir)
+    html_path, md_path, json_path, key_path = paths(results_dir)
     out = html_path.parent
     created = not out.exists()
     try:
@@ -463,5 +470,7 @@ def _write(store: ResultStore, rows: list, *, animate: bool, progress: bool
     write_atomic(html_path, lambda fh: fh.write(page))
     text = render("report.md.j2", d=data, sections=SECTIONS)
     write_atomic(md_path, lambda fh: fh.write(text))
+    write_atomic(json_path, lambda fh: json.dump(report_record(data), fh, ensure_ascii=False,
+                                                 indent=1))
     write_atomic(key_path, lambda fh: fh.write(data.content_key + "\n"))
     return html_path, md_path

@@ -60,9 +60,9 @@ def mesh_status(run, checks: dict | None, verdicts: dict) -> str:
 
 
 def claims_tables(columns: list[Column]) -> list[dict]:
-    """Per arm: column labels, the run row and the mesh row, one row per claim (its bound
-    and cells in the units a reader expects, with the margin: `summary.verdict_parts`,
-    a long note `folded`; the
+    """Per arm: column labels (and each column's plant and condition apart), the run row
+    and the mesh row, one row per claim (its bound and cells in the units a reader
+    expects, with the margin: `summary.verdict_parts`, a long note `folded`; the
     failure it guards against) and one per requirement — for claims.md and the report."""
     tables = []
     for arm in dict.fromkeys(c.arm for c in columns):
@@ -80,7 +80,9 @@ def claims_tables(columns: list[Column]) -> list[dict]:
                  for claim in CLAIMS]
         rows += _requirement_rows(cols)
         tables.append({"arm": arm, "arm_text": arm_description(arm),
-                       "columns": [c.label for c in cols], "rows": rows,
+                       "columns": [c.label for c in cols],
+                       "plants": [c.plant for c in cols],
+                       "conditions": [c.condition for c in cols], "rows": rows,
                        "notes": arm_notes(cols)})
     return tables
 

@@ -94,11 +94,20 @@ class Column:
         return self.key[0]
 
     @property
-    def label(self) -> str:
+    def plant(self) -> str:
+        """The plant, as tables name it: "truth plant (Exudyn)"."""
+        return label_of(next(iter(self.runs.values())).config)
+
+    @property
+    def condition(self) -> str:
+        """The control period and the initial condition: "Ts = 1 ms, from rest"."""
         _, _, Ts, ic = self.key
-        plant = label_of(next(iter(self.runs.values())).config)
         start = "from rest" if ic == "rest" else "moving with the reference"
-        return f"{plant}, Ts = {Ts * 1e3:g} ms, {start}"
+        return f"Ts = {Ts * 1e3:g} ms, {start}"
+
+    @property
+    def label(self) -> str:
+        return f"{self.plant}, {self.condition}"
 
 
 class _Measured:

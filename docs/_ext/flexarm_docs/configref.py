@@ -139,7 +139,7 @@ def _table(cls, required: dict, special: dict, overrides=None) -> str:
 def render(docs) -> str:
     from controllers import CONTROLLERS, OBSERVERS
     from plant_exudyn import Mesh
-    from reduced_model import ArmParameters
+    from reduced_model import ArmParameters, named_arm
     from validation.run.requirements import Requirement
     from validation.run.plants import PLANTS, FmuSettings, PluginSettings
     from validation.run.scenario import (ControllerSpec, DisturbanceSpec, DivergenceSpec,
