@@ -1,13 +1,33 @@
 """What the tests share: a folder of plug-in modules importable by this process (and by
-the `flexarm` commands the tests start there), and a small results folder with its
-report."""
+the `flexarm` commands the tests start there), a small results folder with its report,
+and the kernels compiled once before the test processes start."""
+import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
 
 from validation.batch.fingerprint import forget_plugins
+
+
+def pytest_configure(config):
+    """Before pytest-xdist starts its test processes: compile the kernels most tests use
+    in two processes side by side (`warm_kernels`), so that no test process pays for a
+    compile another has paid for.  A serial run compiles as it goes."""
+    if hasattr(config, "workerinput") or not config.getoption("numprocesses", None) \
+            or config.getoption("collectonly"):
+        return
+    start = time.perf_counter()
+    script = Path(__file__).with_name("warm_kernels.py")
+    parts = [subprocess.Popen([sys.executable, str(script), str(k)], stderr=subprocess.PIPE,
+                              text=True) for k in (0, 1)]
+    failed = [err for p in parts if (err := p.communicate()[1]) and p.returncode]
+    print(f"kernels compiled or loaded in {time.perf_counter() - start:.0f} s "
+          "(tests/warm_kernels.py)", file=sys.stderr)
+    for err in failed:  # the tests that use the kernel will say what is wrong
+        print("tests/warm_kernels.py failed:", err.strip().splitlines()[-1], file=sys.stderr)
 
 
 

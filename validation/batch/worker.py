@@ -149,10 +149,11 @@ def kernel_groups(scenarios) -> list[tuple[str, object]]:
     kinematics and joints a run steps, each distinct built-in law on each kinematics of
     its model, the closed loop on each built-in plant (the sample kernels, the FE plant's
     readout).  Each piece is compiled once per checkout (numba's cache) and loaded in well
-    under a second afterwards.  A plug-in's own code (whose import may exit, crash or
-    hang) is left to its run; what a plug-in run uses of the project — the built-in laws
-    beside it, the reduced model's kernels a plug-in plant built on `ReducedPlant` steps
-    with — is compiled here, so a run's time limit counts simulation, not compilation."""
+    under a second afterwards.  A plug-in's own code and an FMU plant (whose import or
+    instantiation may exit, crash or hang) are left to their runs; what a plug-in run
+    uses of the project — the built-in laws beside it, the reduced model's kernels a
+    plug-in plant built on `ReducedPlant` steps with — is compiled here, so a run's time
+    limit counts simulation, not compilation."""
     from controllers import compiled_form
     from reduced_model import ReducedPlant
 
@@ -187,8 +188,9 @@ def kernel_groups(scenarios) -> list[tuple[str, object]]:
                                             if s.model.kinematics != "linear" else "")
             groups.append((label, lambda b=build, s=s, m=model, r=role: compiled_form(b(s, m), r)))
     examples = {}
-    for s in scenarios:
-        if ":" not in s.controller.kind + s.observer.kind + s.plant.kind:
+    for s in scenarios:  # a user's FMU is a user's code too: it runs in its runs only
+        if ":" not in s.controller.kind + s.observer.kind + s.plant.kind and \
+                s.plant.kind != "fmu":
             examples.setdefault(s.plant.kind, s)
     for plant, example in sorted(examples.items()):
         groups.append((f"closed loop on the {plant} plant", lambda e=example: _short_run(e)))
