@@ -77,7 +77,7 @@ def _without_gravity(model: ArmModel) -> ArmModel:
                     model.kinematics)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def rigid_inverse_dynamics(d, ws, theta, dtheta, ddtheta, Qs, tau):
     """τ = M_θθ θ̈ + C_θθ θ̇ + g_θ of the arm at Q = [θ, q₀], Q̇ = [θ̇, 0] into
     ``tau[:N]``, from the model's kernels (paper's kinematics: at rest both kinematics

@@ -29,7 +29,7 @@ from numba import njit
 from reduced_model import ArmModel
 from reduced_model.dynamics import (coriolis_matrix_into, mass_bias_into, mass_matrix_into,
                                     matrix_view, unpack_model, unpack_workspace)
-from reduced_model.dynamics.exact import exact_elastic_into
+from reduced_model.dynamics.exact import exact_elastic
 
 from ._compiled import CONTROLLER_SIGNATURE, CompiledLaw
 from ._gains import arm_gains, control_period, gain_vector
@@ -222,7 +222,7 @@ def _pbc_torque(ints, reals, wc, wr, M, C, scratch, x_hat, ref, lam, kv, with_da
                 acc += d.D[i, j] * Qd[j]
         tau[i] = acc - kv[i] * (de[i] + lam[i] * e[i])  # eq. (20), s from eq. (5)
     if exact:  # exact kinematics: the bending forces beyond K Q (and D Q̇)
-        exact_elastic_into(d, Q, Qd, tau, with_damping)
+        exact_elastic(ints, reals, Q, Qd, tau, with_damping)
     if gravity:  # ∂V_g/∂Q at the state (at rest: M is formed again)
         zero = qs[n:]
         for j in range(n):

@@ -38,7 +38,7 @@ from .exact_rows import (fill_link, fill_root_link, gram_rows, gravity_rows, re_
 from .layout import link_data, unpack_model, unpack_workspace
 from .linear import row_of
 
-__all__ = ["exact_mass_bias", "exact_coriolis", "exact_elastic_into", "exact_tips_into",
+__all__ = ["exact_mass_bias", "exact_coriolis", "exact_elastic", "exact_tips",
            "exact_tip_jacobian"]
 
 
@@ -175,10 +175,11 @@ def exact_coriolis(ints, reals, wc, wr, Q, Qd, C):
                 C[i, j] += a_ * ws.axd[r, j]
 
 
-@njit(cache=True, inline="always")
-def exact_elastic_into(d, Q, Qd, f, with_damping):
+@njit(cache=True, forceinline=True)
+def exact_elastic(ints, reals, Q, Qd, f, with_damping):
     """Add the exact bending forces beyond K Q (and, ``with_damping``, beyond D Q̇) to
     ``f``: ∂/∂q of ½ EI ∫ (κ² − w''²) and d ∫ (κ̇ ∂κ/∂q − ẇ'' φ'')."""
+    d = unpack_model(ints, reals)
     for link in range(d.links):
         ld = link_data(d, link)
         c, EI, damping = ld.c, ld.EI, ld.damping
@@ -197,7 +198,7 @@ def exact_elastic_into(d, Q, Qd, f, with_damping):
                 f[c + k] += ld.w[h] * (along_dd * ld.ddphi[k, h] + along_d * ld.dphi[k, h])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _link_end(ld, Q):
     """ρ(L) of a link, in its root frame."""
     z = ld.L + 0j
@@ -209,10 +210,11 @@ def _link_end(ld, Q):
     return z
 
 
-@njit(cache=True, inline="always")
-def exact_tips_into(d, Q, out):
+@njit(cache=True)
+def exact_tips(ints, reals, Q, out):
     """``out`` = [x, y of each link's tip (base frame)…, each tip's displacement across
     its root frame (its transverse position)…] (3N values)."""
+    d = unpack_model(ints, reals)
     N = d.links
     z = 0j
     alpha = 0.0

@@ -14,7 +14,7 @@ __all__ = ["slope", "fill_root_link", "fill_link", "tip_rows", "tip_turn", "gram
            "re_dot", "re_dot_vector", "start_rotors", "gravity_rows"]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def slope(dphi, Q, Qd, c, k):
     """p and ṗ of the field with slopes ``dphi[:, k]`` of the coordinates from ``c``."""
     p = 0.0
@@ -25,7 +25,7 @@ def slope(dphi, Q, Qd, c, k):
     return p, pd
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _nodes(dphi, Q, Qd, c, ws):
     """g(p), g'(p), g''(p) and ṗ at a link's nodes into ``ws`` (e^{iβ} = (1 + i p)/√(1 + p²))."""
     for k in range(dphi.shape[1]):
@@ -38,7 +38,7 @@ def _nodes(dphi, Q, Qd, c, ws):
         ws.pd[k] = pd
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def fill_root_link(ld, Q, Qd, ws, rates):
     """Link 0's rows [θ1, q*] (basis [s, φ*, r*], its own frame) into ws.A (and Ȧ), its
     velocity-product coefficients into ws.v; returns its rows and basis size."""
@@ -80,7 +80,7 @@ def fill_root_link(ld, Q, Qd, ws, rates):
     return m, nb
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def fill_link(link, links, ld, Q, Qd, ws, rates, eg, alphad, alpha_vp, u_prev):
     """Link ``link`` ≥ 1's rows (upstream, then its own modes; basis [1, s, φ*, r*], its
     root frame) into ws.A (and Ȧ), ζ = i a into ws.a, its velocity-product coefficients
@@ -148,7 +148,7 @@ def fill_link(link, links, ld, Q, Qd, ws, rates, eg, alphad, alpha_vp, u_prev):
     return m, up, nb
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def tip_rows(ld, root, m, ws, rates):
     """The link's tip rows A·b(L) into ws.t (ws.td) and its tip's velocity-product
     acceleration v·b(L) (returned); ``root``: its basis has the constant 1."""
@@ -182,7 +182,7 @@ def tip_rows(ld, root, m, ws, rates):
     return u
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def tip_turn(ld, link, Q, Qd, ws):
     """The rotor rows of the link's tip (its slope β = atan p(L) on top of its frame's)
     and of the next hub; returns (b, ḃ/ṗ, ṗ(L), β̈'s velocity product) of the tip."""
@@ -211,7 +211,7 @@ def tip_turn(ld, link, Q, Qd, ws):
     return pe, b, ped, bd * ped * ped
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def gram_rows(G, A, GA, first, last, nb):
     """GA[r] = G A[r] for rows first..last−1 (G real): each entry's sum over c in order,
     in real arithmetic, four entries at a time (independent sums, not one long chain)."""
@@ -241,7 +241,7 @@ def gram_rows(G, A, GA, first, last, nb):
             GA[r, b] = complex(re, im)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def re_dot(A, r, B, s, nb):
     """Re(Σ_c conj(A[r, c]) B[s, c])."""
     acc = 0.0
@@ -250,7 +250,7 @@ def re_dot(A, r, B, s, nb):
     return acc
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def re_dot_vector(A, r, v, nb):
     """Re(Σ_c conj(A[r, c]) v[c])."""
     acc = 0.0
@@ -259,7 +259,7 @@ def re_dot_vector(A, r, v, nb):
     return acc
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def start_rotors(ws, n):
     ws.ax[:, :] = 0.0
     ws.axd[:, :] = 0.0
@@ -267,7 +267,7 @@ def start_rotors(ws, n):
     ws.vp[0] = 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def gravity_rows(G, ws, link, links, m, nb, g_hat, h, moment, with_constant):
     """h −= Re(conj(ĝ) A[r]·μ) for the link's ``m`` rows (μ: G's first column, or link
     0's first moments)."""

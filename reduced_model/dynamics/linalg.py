@@ -68,7 +68,7 @@ def vector_view(typingctx, flat, start, length):
     return _borrowed_view(flat, start, (length,))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def cholesky_factor_inplace(M):
     """Overwrite symmetric positive definite M by its lower Cholesky factor L, with
     1/L_jj on the diagonal (for `cholesky_solve_factored`).  False if M is not
@@ -90,7 +90,7 @@ def cholesky_factor_inplace(M):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def cholesky_solve_factored(L, b):
     """Solve L Lᵀ y = b in place (``b`` becomes y), L from `cholesky_factor_inplace`."""
     n = L.shape[0]
@@ -106,7 +106,7 @@ def cholesky_solve_factored(L, b):
         b[i] = s * L[i, i]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def cholesky_solve_inplace(M, b):
     """Solve M y = b for symmetric positive definite M; M is overwritten by its factor,
     b by y.  False if M is not positive definite."""

@@ -17,8 +17,8 @@ and, in a uniform gravity field g, ∂V/∂Q_j = −Σ_l Re(conj(g) e^{iα_l} A_
 Because z is a true position, this C is the Christoffel matrix: Ṁ − 2C is skew.  Rotors
 (hubs, stators, payload) turn by angles linear in Q: J a aᵀ is constant (``M_rotors``).
 
-Two evaluations of the same formulas.  `coriolis_matrix_into` forms the dense A, Ȧ (base
-frame) and C (the controller needs the matrix).  `mass_bias_into` needs only M and
+Two evaluations of the same formulas.  `linear_coriolis` forms the dense A, Ȧ (base
+frame) and C (the controller needs the matrix).  `linear_mass_bias` needs only M and
 h = C Q̇ (+ gravity), and writes the structure of A out in each link's frame: link l's
 rows are c_j e_0 + a_j ζ for the coordinates upstream of it (c_j the root's velocity
 Jacobian, a_j the frame's angular one, ζ = [0, i, −q_l]) and i e_k for its own modes, so
@@ -29,33 +29,33 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .layout import link_data
+from .layout import link_data, unpack_model, unpack_workspace
 
-__all__ = ["linear_mass_bias_into", "linear_coriolis_into", "linear_tips_into",
+__all__ = ["linear_mass_bias", "linear_coriolis", "linear_tips",
            "upstream_rows", "link_rows", "row_of"]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def row_of(link, links, r):
     """The coordinate of local row ``r`` of link ``link``'s rows: the joints 0..link, then
     the modal coordinates of links 0..link (contiguous from ``links``)."""
     return r if r <= link else links + r - link - 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def upstream_rows(link, links, c):
     """How many rows move link ``link``'s frame: its joint and those before, and the modes
     of the links before it (its own modes start at coordinate ``c``)."""
     return link + 1 + c - links
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def link_rows(link, links, c, n_own):
     """Rows of link ``link``'s coefficients: `upstream_rows` and its own modes."""
     return link + 1 + c + n_own - links
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _tip_sums(ld, Q, Qd):
     """w(L), ẇ(L), w'(L), ẇ'(L) of the link ``ld``."""
     we = 0.0
@@ -70,7 +70,7 @@ def _tip_sums(ld, Q, Qd):
     return we, wed, se, sed
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _gram_vector(G, v, Gv, nb):
     """Gv = G v (complex v, real symmetric G), the first ``nb`` entries."""
     for b in range(nb):
@@ -80,10 +80,11 @@ def _gram_vector(G, v, Gv, nb):
         Gv[b] = acc
 
 
-@njit(cache=True, inline="always")
-def linear_mass_bias_into(d, Q, Qd, M, h, ws, with_bias):
+@njit(cache=True, forceinline=True)
+def linear_mass_bias(ints, reals, wc, wr, Q, Qd, M, h, with_bias):
     """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇) Q̇ + ∂V_gravity/∂Q into ``h``
     (module docstring: structured, link by link)."""
+    d, ws = unpack_model(ints, reals), unpack_workspace(ints, wc, wr)
     N, n = d.links, d.n
     v, Gv, c_hat, arow = ws.v, ws.Gv, ws.c_hat, ws.arow
     gravity = with_bias and (d.gx != 0.0 or d.gy != 0.0)
@@ -197,7 +198,7 @@ def linear_mass_bias_into(d, Q, Qd, M, h, ws, with_bias):
             M[i, j] = M[j, i]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _add_gram(A, G, B, link, links, m, nb, out, gb):
     """out[row i, row j] += Re(conj(A) G Bᵀ)[i, j] over link ``link``'s ``m`` rows, for
     real symmetric G (``nb`` columns); ``gb``: complex scratch (nb,)."""
@@ -215,10 +216,11 @@ def _add_gram(A, G, B, link, links, m, nb, out, gb):
             out[row_of(link, links, i), row_of(link, links, j)] += s
 
 
-@njit(cache=True, inline="always")
-def linear_coriolis_into(d, Q, Qd, C, ws):
+@njit(cache=True, forceinline=True)
+def linear_coriolis(ints, reals, wc, wr, Q, Qd, C):
     """The Christoffel-form C(Q, Q̇) into ``C`` (n, n): dense A and Ȧ in the base frame,
     link by link."""
+    d, ws = unpack_model(ints, reals), unpack_workspace(ints, wc, wr)
     N = d.links
     C[:, :] = 0.0
     A, Ad, zr, zrd, zt, ztd = ws.A, ws.Ad, ws.zr, ws.zrd, ws.zt, ws.ztd
@@ -307,10 +309,11 @@ def linear_coriolis_into(d, Q, Qd, C, ws):
         prev = cur
 
 
-@njit(cache=True, inline="always")
-def linear_tips_into(d, Q, out):
+@njit(cache=True)
+def linear_tips(ints, reals, Q, out):
     """``out`` = [x, y of each link's tip (base frame)…, each tip's deflection w_l(L_l)
     across its root frame…] (3N values)."""
+    d = unpack_model(ints, reals)
     N = d.links
     x = 0.0
     y = 0.0

@@ -3,19 +3,23 @@
     M(Q) Q̈ + C(Q, Q̇) Q̇ + D Q̇ + K Q + ∂V_g/∂Q = B τ,   B = [I_N; 0],
 
 for either kinematics, and their integration by RK4 at a zero-order hold.  Each
-function takes ``exact`` as a constant: the kernels that call them are compiled once per
-kinematics (`reduced_model.dynamics.entries`), and numba drops the other kinematics'
-branch before it compiles anything of it (the functions here are inlined), so a process
-that never builds an exact model never compiles the exact kinematics.
+function takes ``exact`` as a constant and is inlined into the kernels that call it,
+compiled once per kinematics (`reduced_model.dynamics.entries`, the laws): numba drops
+the other kinematics' branch before it compiles anything of it, so a process that never
+builds an exact model never compiles the exact kinematics.  The kinematics themselves
+(`linear_mass_bias`, `exact_mass_bias`, …) are called, not inlined: each is compiled
+once, on the packed buffers, and linked into every kernel that calls it.  numba inlines
+by copying a function's IR into each call site, and the inlined kinematics made a cold
+compile of the kernels ~4× longer (bench/bench_compile.py).
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from .exact import exact_coriolis, exact_elastic_into, exact_mass_bias, exact_tips_into
+from .exact import exact_coriolis, exact_elastic, exact_mass_bias, exact_tips
 from .linalg import cholesky_solve_inplace
-from .linear import linear_coriolis_into, linear_mass_bias_into, linear_tips_into
+from .linear import linear_coriolis, linear_mass_bias, linear_tips
 
 __all__ = ["mass_bias_into", "mass_matrix_into", "coriolis_matrix_into", "elastic_into",
            "bias_forces_into", "acceleration_into", "rhs_into", "rk4_advance", "tips_into"]
@@ -27,7 +31,7 @@ def mass_bias_into(d, Q, Qd, M, h, ws, with_bias, exact):
     if exact:
         exact_mass_bias(d.ints, d.reals, ws.wc, ws.wr, Q, Qd, M, h, with_bias)
     else:
-        linear_mass_bias_into(d, Q, Qd, M, h, ws, with_bias)
+        linear_mass_bias(d.ints, d.reals, ws.wc, ws.wr, Q, Qd, M, h, with_bias)
 
 
 @njit(cache=True, inline="always")
@@ -42,7 +46,7 @@ def coriolis_matrix_into(d, Q, Qd, C, ws, exact):
     if exact:
         exact_coriolis(d.ints, d.reals, ws.wc, ws.wr, Q, Qd, C)
     else:
-        linear_coriolis_into(d, Q, Qd, C, ws)
+        linear_coriolis(d.ints, d.reals, ws.wc, ws.wr, Q, Qd, C)
 
 
 @njit(cache=True, inline="always")
@@ -56,7 +60,7 @@ def elastic_into(d, Q, Qd, f, with_damping, exact):
             s += d.K[i, j] * Q[j] + d.D[i, j] * Qd[j] if with_damping else d.K[i, j] * Q[j]
         f[i] += s
     if exact:
-        exact_elastic_into(d, Q, Qd, f, with_damping)
+        exact_elastic(d.ints, d.reals, Q, Qd, f, with_damping)
 
 
 @njit(cache=True, inline="always")
@@ -118,6 +122,6 @@ def tips_into(d, Q, out, exact):
     """The tips: [x, y of each link's tip…, each tip's deflection across its root
     frame…] into ``out`` (3N)."""
     if exact:
-        exact_tips_into(d, Q, out)
+        exact_tips(d.ints, d.reals, Q, out)
     else:
-        linear_tips_into(d, Q, out)
+        linear_tips(d.ints, d.reals, Q, out)

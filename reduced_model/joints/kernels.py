@@ -92,7 +92,7 @@ def joints_active(jp: np.ndarray) -> bool:
     return bool(np.any(jp != 0.0))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _p(jp, field, i, N):
     """Parameter ``field`` (`PARAMETERS` index) of joint ``i``."""
     return jp[N * field + i]
@@ -135,7 +135,7 @@ def lag_step(command, start, T, h):
     return command + (start - command) * T / h * (1.0 - a), command + (start - command) * a
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _friction(jp, i, N, mode, v):
     """Friction torque of joint ``i``'s sliding coordinate moving at ``v`` in ``mode``
     (±1; 0 with no dry friction: viscous only)."""
@@ -147,7 +147,7 @@ def _friction(jp, i, N, mode, v):
     return f
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _gear(jp, i, N, deflection, rate):
     """Gear torque on the hub of joint ``i`` (the rotor gets its reaction)."""
     half = 0.5 * _p(jp, _BL, i, N)
@@ -160,7 +160,7 @@ def _gear(jp, i, N, deflection, rate):
     return _p(jp, _K, i, N) * d + _p(jp, _D, i, N) * rate
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _arm_stuck(jp, js, i, N):
     """Whether joint ``i``'s arm coordinate is held by its friction (dry friction, stuck,
     no drive: with a drive the rotor sticks, not the arm)."""
