@@ -25,22 +25,21 @@ __all__ = ["compile_groups", "compile_for", "REFERENCE_SECONDS", "COMPILE_NOTE"]
 COMPILE_NOTE = "once per checkout: numba keeps the machine code in its __pycache__ folders"
 
 #: Cold compile time [s] of each group, by the label `kernel_groups` gives it, measured
-#: on the reference machine (2 quiet cores, 2026-11-28: 40 s for all 13 groups); laws
-#: that share a compiled kernel with one compiled before them load in well under a
-#: second.  A group not listed counts as the mean of those that are.
+#: on the reference machine (2 quiet cores, 2026-12-05, every group of
+#: tests/warm_kernels.py in that order in one process: 90 s for all 17); laws that share
+#: a compiled kernel with one compiled before them load in well under a second.  A group
+#: not listed counts as the mean of those that are.  bench/bench_compile.py checks the
+#: estimate against cold runs of each entry point.
 REFERENCE_SECONDS = {
-    "reduced plant (the paper's kinematics)": 10.0,
-    "controller pbc": 6.0, "controller pbc-idealised": 0.5, "controller pd": 0.5,
-    "controller ct": 0.5, "controller lqr": 1.0,
-    "observer smo-paper": 2.0, "observer smo-bl": 0.5, "observer smo-pos": 0.5,
-    "observer ekf": 8.0, "observer ekf-pos": 0.5,
-    "closed loop on the exudyn plant": 7.0, "closed loop on the reduced plant": 6.0,
-    # scaled from one cold compile of every group in one process on a loaded machine
-    # (2026-12-05: the paper's kinematics took 4.8× its reference): the joints and the
-    # exact kinematics compile their own kernels
-    "reduced plant (the paper's kinematics, joints)": 34.0,
-    "reduced plant (exact kinematics)": 17.0, "controller pbc (exact kinematics)": 14.0,
-    "observer smo-paper (exact kinematics)": 2.0,
+    "reduced plant (the paper's kinematics)": 6.0,
+    "controller pbc": 4.5, "controller pbc-idealised": 0.5, "controller pd": 2.3,
+    "controller ct": 1.0, "controller lqr": 2.6,
+    "observer smo-paper": 3.0, "observer smo-bl": 0.5, "observer smo-pos": 0.5,
+    "observer ekf": 4.3, "observer ekf-pos": 0.5,
+    "closed loop on the exudyn plant": 9.6, "closed loop on the reduced plant": 2.0,
+    "reduced plant (the paper's kinematics, joints)": 12.3,
+    "reduced plant (exact kinematics)": 15.0, "controller pbc (exact kinematics)": 18.2,
+    "observer smo-paper (exact kinematics)": 4.4,
 }
 
 
