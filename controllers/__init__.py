@@ -9,6 +9,7 @@ from ._baselines import JointPD, RigidComputedTorque
 from ._compiled import (CONTROLLER_SIGNATURE, OBSERVER_SIGNATURE, CompiledLaw, absent,
                         compiled_form)
 from ._ekf import ExtendedKalmanFilter, PositionEKF
+from ._gains import ArmGains, arm_gains
 from ._interface import Controller, Observer, ObserverFailure
 from ._lqr import GainScheduledLQR
 from ._pbc import IdealisedPBC, PassivityBasedController
@@ -23,4 +24,4 @@ __all__ = ["Controller", "Observer", "PassivityBasedController", "IdealisedPBC",
            "PaperReference", "QuinticMove", "ReferenceKind", "reference_into", "CONTROLLERS",
            "OBSERVERS", "PluginError", "resolve", "accepted_options", "CompiledLaw",
            "compiled_form", "absent", "CONTROLLER_SIGNATURE", "OBSERVER_SIGNATURE",
-           "ObserverFailure"]
+           "ObserverFailure", "arm_gains", "ArmGains"]

@@ -24,14 +24,30 @@ SAMPLING_BANDWIDTH = 0.05
 
 
 class ArmGains(NamedTuple):
-    """The default gains of an arm (`arm_gains`)."""
+    """The default gains of an arm (`arm_gains`).
 
-    bandwidth: float  # ω [rad/s]: the first locked frequency, capped
-    inertia: np.ndarray  # M_ii: the arm's inertia about each joint, straight, at rest [kg m²]
-    lambda_joint: np.ndarray  # Λ on θ [1/s]
-    lambda_flex: float  # Λ on q [1/s]
-    kv_joint: np.ndarray  # K_v on θ [N m s/rad]
-    l_position_flex: float  # the observers' L_P on q [m/s]
+    Parameters
+    ----------
+    bandwidth : float
+        ω [rad/s]: the first locked frequency, capped.
+    inertia : ndarray
+        M_ii: the arm's inertia about each joint, straight, at rest [kg m²].
+    lambda_joint : ndarray
+        Λ on θ [1/s].
+    lambda_flex : float
+        Λ on q [1/s].
+    kv_joint : ndarray
+        K_v on θ [N m s/rad].
+    l_position_flex : float
+        The observers' L_P on q [m/s].
+    """
+
+    bandwidth: float
+    inertia: np.ndarray
+    lambda_joint: np.ndarray
+    lambda_flex: float
+    kv_joint: np.ndarray
+    l_position_flex: float
 
 
 def _round(value: float) -> float:
