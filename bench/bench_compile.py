@@ -4,16 +4,16 @@ numba cache.
 Each command runs in a subprocess with its own empty ``NUMBA_CACHE_DIR`` (numba then
 neither reads nor writes the checkout's ``__pycache__``).  From its progress lines
 (`validation.batch.compiling`) the bench takes the announced estimate ("about X") and
-the groups' measured times; a command whose work goes on after compiling (calibration,
-the paper's job) is stopped once its last group is ready.  A run (``flexarm run``) is
+the groups' measured times; a command whose work goes on after compiling (calibration)
+is stopped once its last group is ready.  A run (``flexarm run``) is
 then run again warm: its cold wall time less the compile, less the warm wall time, is
 what compiled outside the announced groups ("uncounted").
 
 Targets (issue 61): each estimate within 2× of the measured compile on a quiet machine;
 nothing uncounted beyond a few seconds (5 s: a cold process also writes its caches
-and checks them).  The plug-in plant is the reduced plant under another name, the laws on
-exact kinematics (a plug-in compiles in its run: what it uses of the
-project is compiled before).
+and checks them).  The plug-in plant is the reduced plant under another name, the laws
+on exact kinematics: its own closed loop compiles in its run, what it uses of the
+project before.
 
     python bench/bench_compile.py
 """
@@ -45,7 +45,8 @@ ENTRIES = {
 #: Seconds a cold run may take beyond its announced compile and its warm time.
 UNCOUNTED = 5.0
 #: The plug-in plant: the reduced plant under another name (written beside the cache).
-PLUGIN = 'from reduced_model import ReducedPlant\n\n\nclass BarPlant(ReducedPlant):\n    """Mine."""\n'
+PLUGIN = ('from reduced_model import ReducedPlant\n\n\n'
+          'class BarPlant(ReducedPlant):\n    """Mine."""\n')
 _ANNOUNCED = re.compile(r"(\d+) groups, about ([\d.]+) (s|min)")
 _GROUP = re.compile(r"^  (.+): ([\d.]+) (s|min) — (\d+) of (\d+) groups ready")
 
@@ -54,13 +55,16 @@ def _seconds(value: str, unit: str) -> float:
     return float(value) * (60.0 if unit == "min" else 1.0)
 
 
+def _environment(cache: Path) -> dict:
+    """The commands' environment: numba's cache in ``cache``, the plug-in beside it."""
+    return dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=f"{ROOT}:{cache.parent}")
+
+
 def cold(command: list[str], out: Path, cache: Path, *, stop_after_compile: bool):
     """(wall, announced, measured compile, groups) of ``command`` from an empty cache."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache),
-               PYTHONPATH=f"{ROOT}:{cache.parent}")
     t0 = time.perf_counter()
-    proc = subprocess.Popen(command + ["--out", str(out)], cwd=ROOT, env=env, text=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(command + ["--out", str(out)], cwd=ROOT, env=_environment(cache),
+                            text=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     announced, measured, groups = None, 0.0, []
     for line in proc.stderr:
         if (m := _ANNOUNCED.search(line)):
@@ -80,11 +84,9 @@ def cold(command: list[str], out: Path, cache: Path, *, stop_after_compile: bool
 
 def warm(command: list[str], out: Path, cache: Path) -> float:
     """Wall time of ``command`` once its kernels are in ``cache``."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache),
-               PYTHONPATH=f"{ROOT}:{cache.parent}")
     t0 = time.perf_counter()
-    subprocess.run(command + ["--out", str(out)], cwd=ROOT, env=env, check=True,
-                   capture_output=True)
+    subprocess.run(command + ["--out", str(out)], cwd=ROOT, env=_environment(cache),
+                   check=True, capture_output=True)
     return time.perf_counter() - t0
 
 

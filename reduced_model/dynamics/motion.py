@@ -8,9 +8,9 @@ compiled once per kinematics (`reduced_model.dynamics.entries`, the laws): numba
 the other kinematics' branch before it compiles anything of it, so a process that never
 builds an exact model never compiles the exact kinematics.  The kinematics themselves
 (`linear_mass_bias`, `exact_mass_bias`, …) are called, not inlined: each is compiled
-once, on the packed buffers, and linked into every kernel that calls it.  numba inlines
-by copying a function's IR into each call site, and the inlined kinematics made a cold
-compile of the kernels ~4× longer (bench/bench_compile.py).
+once, on the packed buffers, and linked into every kernel that calls it: numba inlines
+by copying a function's IR into each call site, a cost paid at every site of every
+kernel's first compile (small helpers are inlined by LLVM instead: ``forceinline``).
 """
 from __future__ import annotations
 
