@@ -9,6 +9,7 @@ import subprocess
 import sys
 import textwrap
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -166,6 +167,21 @@ def test_the_exported_fmus_pass_fmpys_validation(lab):
     result = fmpy.simulate_fmu(str(lab / "arm.fmu"), stop_time=0.1, step_size=1e-3,
                                output_interval=1e-3)
     assert result["theta1"][-1] == 0.0  # no torque: the arm stays at rest
+
+
+def test_a_child_that_unpacked_an_fmu_removes_it(lab, monkeypatch):
+    """A `contained` child ends by ``os._exit`` (no ``atexit``): the folder it unpacked an
+    FMU into is removed all the same.  Known good: the folder existed in the child."""
+    from validation.run.fmu import description
+    from validation.run.fmu.description import unpacked
+    monkeypatch.setattr(description, "_UNPACKED", {})  # none inherited from this process
+
+    def unpack_and_look():
+        folder = Path(unpacked(str(lab / "arm.fmu")))
+        return str(folder), (folder / "modelDescription.xml").is_file()
+    folder, there = contained(unpack_and_look, timeout=60, during="the unpacking")
+    assert there
+    assert not Path(folder).exists()
 
 
 @apart

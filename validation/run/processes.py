@@ -36,7 +36,7 @@ from .config import ConfigError
 
 __all__ = ["die_with_parent", "lead_process_group", "kill_group", "describe_exit",
            "contained", "ContainedFault", "contain_checks", "checked_apart", "CHECK_TIMEOUT",
-           "signals_held", "release_signals", "between_forks"]
+           "signals_held", "release_signals", "between_forks", "at_child_exit"]
 
 #: How long importing and constructing a plug-in in its check may take by default [s]:
 #: a plug-in that compiles a numba kernel on construction takes 10–45 s on a busy 2-core
@@ -157,6 +157,17 @@ def _safe_repr(value) -> str:
         return f"<{type(value).__name__} object>"
 
 
+_AT_CHILD_EXIT: list = []
+
+
+def at_child_exit(fn) -> None:
+    """Call ``fn()`` (once, however often registered) when a `contained` child ends: it
+    leaves by ``os._exit``, which skips the ``atexit`` handlers, so what a child made for
+    itself alone (an unpacked FMU) is removed here."""
+    if fn not in _AT_CHILD_EXIT:
+        _AT_CHILD_EXIT.append(fn)
+
+
 def _child(conn, parent: int, fn, args) -> None:
     lead_process_group()
     die_with_parent(parent)
@@ -171,6 +182,8 @@ def _child(conn, parent: int, fn, args) -> None:
             outcome = ("fault", f"it called sys.exit({_safe_repr(exc.code)})")
         except BaseException as exc:  # noqa: BLE001 - a KeyboardInterrupt raised by code too
             outcome = ("fault", f"it raised {type(exc).__name__}: {_safe_repr(exc)}")
+        for clean in _AT_CHILD_EXIT:  # before the answer: the parent then kills this process
+            clean()
         conn.send(outcome)
     finally:
         os._exit(0)  # no atexit handler, no buffered output of the parent's flushed twice

@@ -16,6 +16,7 @@ from pathlib import Path
 from reduced_model import coordinate_names, truth_extras
 
 from ..config import ConfigError, check, did_you_mean, short_str
+from ..processes import at_child_exit
 
 __all__ = ["fmpy", "read_description", "variable", "signal_names", "file_sha256", "unpacked", "REAL_TYPES",
            "FMI_VERSIONS"]
@@ -111,13 +112,14 @@ _UNPACKED: dict[str, tuple[str, int]] = {}  # sha256 -> (folder, the pid that ma
 def unpacked(path: str) -> str:
     """A folder holding the FMU at ``path`` unpacked, once per FMU version: a worker
     forked after the scenario check (which unpacks it) reads its parent's; the process
-    that made a folder removes it when it exits."""
+    that made a folder removes it when it exits (a `contained` child too)."""
     sha = file_sha256(path)
     if sha not in _UNPACKED:
         folder = tempfile.mkdtemp(prefix="flexarm-fmu-")
         fmpy().extract(path, unzipdir=folder)
         if not any(pid == os.getpid() for _, pid in _UNPACKED.values()):
             atexit.register(_remove_own)
+            at_child_exit(_remove_own)
         _UNPACKED[sha] = (folder, os.getpid())
     return _UNPACKED[sha][0]
 
