@@ -44,13 +44,30 @@ def imports(path: Path, module: str, *, nested: bool = True) -> list[tuple[str, 
         return []
     tree = ast.parse(path.read_bytes(), filename=str(path))
     out = []
-    for node in (ast.walk(tree) if nested else tree.body):
+    for node in (_statements(tree.body) if nested else tree.body):
         if isinstance(node, ast.Import):
             out += [(alias.name, ()) for alias in node.names]
         elif isinstance(node, ast.ImportFrom):
             out.append((_absolute(package, node.level, node.module or ""),
                         tuple(alias.name for alias in node.names)))
     return out
+
+
+#: The fields of a node that hold statements: an import is a statement, so it stands only
+#: in these (a function's or class's body, a branch, a handler, a ``case``), never in an
+#: expression.
+_STATEMENT_LISTS = ("body", "orelse", "finalbody", "handlers", "cases")
+
+
+def _statements(body: list):
+    """Every statement of ``body`` and of the statement lists nested in it, expressions
+    not entered (a tenth of the nodes of a whole-tree walk)."""
+    for node in body:
+        yield node
+        for name in _STATEMENT_LISTS:
+            inner = getattr(node, name, None)
+            if isinstance(inner, list):
+                yield from _statements(inner)
 
 
 def _absolute(package: str, level: int, name: str) -> str:

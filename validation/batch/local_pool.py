@@ -16,6 +16,7 @@ from typing import TextIO
 
 from ..run.processes import describe_exit, kill_group, signals_held
 from ..run.threads import ONE_THREAD
+from .fingerprint import code_fingerprint
 from .interrupts import Interrupted, signals_interrupt
 from .limits import default_memory_limit
 from .runner import Runner, run_time_limit
@@ -85,6 +86,7 @@ class LocalPoolRunner(Runner):
             else:
                 load_run_libraries()
                 compile_for(scenarios, stream=progress)
+            code_fingerprint()  # read once here (0.1-0.6 s), not again in every worker
         self._ctx = multiprocessing.get_context("fork" if self._warm else "spawn")
         self._pool: list[_Worker | None] = [None] * workers
         for i in range(workers):  # all now, before any other thread exists here
