@@ -12,6 +12,7 @@ from ..run.experiments import from_run, read_experiment, read_frequency_response
 
 from .common import EXIT_FAILED, runner_for
 from .one_run import stored_run
+from ..batch.compiling import compile_for
 from ..batch.store.resimulate import every_signal
 
 #: Failing residual tests listed on the terminal (all are in calibration.json).
@@ -39,6 +40,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     settings = calibration_settings(table, _fit_names(args.fit), base)
     experiments = [_experiment(spec) for spec in args.data]
     responses = [read_frequency_response(f) for f in args.frf or []]
+    # The plan's units check replays each experiment on the plant here: its kernels are
+    # compiled first, with progress, not silently inside the check.
+    compile_for([base] if experiments else [])
     plan = plan_calibration(base, settings, experiments, responses)
     out = Path(args.out or Path("results") / f"calibrate-{Path(args.config).stem}")
     others = [f for f in args.compare or [] if Path(f).resolve() != out.resolve()]
