@@ -29,13 +29,39 @@ SCENARIOS = [
 SECOND = ("joints", "exact kinematics")
 
 
+def model_methods() -> None:
+    """What the physics tests call outside any run: the reduced model's own methods on
+    both kinematics and the EKF's Jacobian (their kernels: `reduced_model.dynamics.entries`,
+    `controllers._ekf`)."""
+    import numpy as np
+
+    from controllers import ExtendedKalmanFilter
+    from reduced_model import ArmParameters
+    from validation.run.laws import nominal_model
+    for kinematics in ("linear", "exact"):
+        model = nominal_model(ArmParameters(), None, kinematics)
+        Q, Qd = np.full(model.n, 1e-3), np.zeros(model.n)
+        model.mass_matrix(Q)
+        model.coriolis_matrix(Q, Qd)
+        model.acceleration(Q, Qd, np.zeros(model.n_joints))
+        model.elastic_force(Q, Qd)
+        model.gravity_force(Q)
+        model.tip_position(Q)
+        model.tip_jacobian(Q)
+        if kinematics == "linear":
+            ekf = ExtendedKalmanFilter(model, Ts=1e-3)
+            ekf.jacobian(np.zeros(2 * model.n), np.zeros(model.n_joints))
+
+
 def parts():
-    """The kernel groups of `SCENARIOS`, split in two ([first, second])."""
+    """The kernel groups of `SCENARIOS`, split in two ([first, second]); the first also
+    compiles `model_methods` (the smaller half, by the compile times measured)."""
     from validation.batch.worker import kernel_groups
     from validation.run.scenario import scenario_from_mapping
     groups = kernel_groups([scenario_from_mapping(s) for s in SCENARIOS])
     second = [g for g in groups if any(word in g[0] for word in SECOND)]
-    return [[g for g in groups if g not in second], second]
+    return [[g for g in groups if g not in second] + [("model methods", model_methods)],
+            second]
 
 
 if __name__ == "__main__":
