@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit
 
 from .exact_rows import (fill_link, fill_root_link, gram_rows, mode_rows, moment_dot,
-                         nodes_into, position_row, re_dot, slope, start_rotors,
+                         nodes_into, position_row, re_dot, start_rotors,
                          tip_rows, tip_turn, tip_value, velocity_products)
 from .layout import link_data, unpack_model, unpack_workspace
 from .linear import row_of, upstream_rows
@@ -170,7 +170,7 @@ def exact_mass_bias(ints, reals, wc, wr, Q, Qd, M, h, with_bias):
             for r in range(upstream_rows(link, N, ld.c)):
                 j = row_of(link, N, r)
                 ws.c_hat[j] = eg * ws.c_hat[j]
-        pe, b, ped, vp = tip_turn(ld, link, Q, Qd, ws)
+        pe, b, ped, vp = tip_turn(ld, link, Q, Qd, ws, False)
         root = _link_terms(link, N, ld, Q, Qd, M, h, ws, with_bias, gravity, alphad,
                            alpha_vp, root, g_hat)
     for i in range(n):
@@ -195,7 +195,7 @@ def exact_coriolis(ints, reals, wc, wr, Q, Qd, C):
     alphad = Qd[0]
     for link in range(1, N):
         tip_rows(ld, link > 1, m, ws, True)
-        pe, b, ped, _ = tip_turn(ld, link - 1, Q, Qd, ws)
+        pe, b, ped, _ = tip_turn(ld, link - 1, Q, Qd, ws, True)
         gamma = Q[link] + np.arctan(pe)
         eg = np.cos(gamma) - 1j * np.sin(gamma)
         alphad = alphad + Qd[link] + b * ped
@@ -214,7 +214,7 @@ def exact_coriolis(ints, reals, wc, wr, Q, Qd, C):
             i = row_of(link, N, r)
             for s in range(m):
                 C[i, row_of(link, N, s)] += re_dot(GA[r], ws.Ad[s], 0, nb)
-    tip_turn(ld, N - 1, Q, Qd, ws)
+    tip_turn(ld, N - 1, Q, Qd, ws, True)
     for r in range(2 * N):
         J = link_data(d, r // 2).J_hub if r % 2 == 0 else link_data(d, r // 2).J_tip
         for i in range(n):
@@ -254,14 +254,19 @@ def exact_elastic(ints, reals, Q, Qd, f, with_damping):
 
 @njit(cache=True, forceinline=True, fastmath={"contract"})
 def _link_end(ld, Q):
-    """ρ(L) of a link, in its root frame."""
-    z = ld.L + 0j
+    """ρ(L) = L + i w(L) + Σ_h w_h g(p_h) of a link, in its root frame (real arithmetic:
+    g = (1 + i p)/√(1 + p²) − 1 − i p)."""
+    x, y = ld.L, 0.0
     for k in range(ld.n):
-        z += 1j * ld.phi_tip[k] * Q[ld.c + k]
+        y += ld.phi_tip[k] * Q[ld.c + k]
     for h in range(ld.nodes):
-        p, _ = slope(ld.dphi, Q, Q, ld.c, h)
-        z += ld.w[h] * ((1.0 + 1j * p) / np.sqrt(1.0 + p * p) - 1.0 - 1j * p)
-    return z
+        p = 0.0
+        for k in range(ld.n):
+            p += ld.dphi[k, h] * Q[ld.c + k]
+        c = 1.0 / np.sqrt(1.0 + p * p)
+        x += ld.w[h] * (c - 1.0)
+        y += ld.w[h] * (p * c - p)
+    return complex(x, y)
 
 
 @njit(cache=True, fastmath={"contract"})
@@ -300,7 +305,7 @@ def exact_tip_jacobian(ints, reals, wc, wr, Q, J):
     alpha = Q[0]
     for link in range(1, N):
         tip_rows(ld, link > 1, m, ws, False)
-        pe, _, _, _ = tip_turn(ld, link - 1, Q, Q, ws)
+        pe, _, _, _ = tip_turn(ld, link - 1, Q, Q, ws, False)
         gamma = Q[link] + np.arctan(pe)
         eg = np.cos(gamma) - 1j * np.sin(gamma)
         alpha = alpha + Q[link] + np.arctan(pe)

@@ -204,9 +204,10 @@ def tip_rows(ld, root, m, ws, rates):
 
 
 @njit(cache=True, forceinline=True, fastmath={"contract"})
-def tip_turn(ld, link, Q, Qd, ws):
+def tip_turn(ld, link, Q, Qd, ws, rates):
     """The rotor rows of the link's tip (its slope β = atan p(L) on top of its frame's)
-    and of the next hub; returns (b, ḃ/ṗ, ṗ(L), β̈'s velocity product) of the tip."""
+    and of the next hub (``rates``: and their rates); returns (b, ḃ/ṗ, ṗ(L), β̈'s
+    velocity product) of the tip."""
     ax, axd, vp = ws.ax, ws.axd, ws.vp
     pe, ped = 0.0, 0.0
     for k in range(ld.n):
@@ -218,15 +219,18 @@ def tip_turn(ld, link, Q, Qd, ws):
     hub, tip = 2 * link, 2 * link + 1
     for j in range(n):
         ax[tip, j] = ax[hub, j]
-        axd[tip, j] = axd[hub, j]
+        if rates:
+            axd[tip, j] = axd[hub, j]
     for k in range(ld.n):
         ax[tip, ld.c + k] = b * ld.dphi_tip[k]
-        axd[tip, ld.c + k] = bd * ped * ld.dphi_tip[k]
+        if rates:
+            axd[tip, ld.c + k] = bd * ped * ld.dphi_tip[k]
     vp[tip] = vp[hub] + bd * ped * ped
     if tip + 1 < ax.shape[0]:
         for j in range(n):
             ax[tip + 1, j] = ax[tip, j]
-            axd[tip + 1, j] = axd[tip, j]
+            if rates:
+                axd[tip + 1, j] = axd[tip, j]
         ax[tip + 1, link + 1] = 1.0
         vp[tip + 1] = vp[tip]
     return pe, b, ped, bd * ped * ped
