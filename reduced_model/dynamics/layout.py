@@ -146,7 +146,6 @@ class Workspace(NamedTuple):
     c_hat: np.ndarray  # complex (n,) a link root's velocity Jacobian, in its frame
     v: np.ndarray  # complex (nb_max,) velocity-product acceleration coefficients
     Gv: np.ndarray  # complex (nb_max,) G v
-    a: np.ndarray  # complex (nb_max,) i × a link's position coefficients (exact)
     A: np.ndarray  # complex (n, nb_max) a link's coefficient rows
     Ad: np.ndarray  # complex (n, nb_max) their rates
     GA: np.ndarray  # complex (n, nb_max) G A, row by row
@@ -179,7 +178,7 @@ class Workspace(NamedTuple):
 
 def _sizes(ints) -> tuple[int, int]:
     N, n, nodes, nb = (int(v) for v in ints[:4])
-    return (3 * nb + 3 * n * nb + 3 * n + 3 * nodes + 5 * N,
+    return (2 * nb + 3 * n * nb + 3 * n + 3 * nodes + 5 * N,
             n * n + n + 10 * n + n + N + nodes + 4 * N * n + 2 * N)
 
 
@@ -201,7 +200,6 @@ def unpack_workspace(ints, wc, wr):
     c_hat, o = _cut(wc, 0, n)
     v, o = _cut(wc, o, nb)
     Gv, o = _cut(wc, o, nb)
-    a, o = _cut(wc, o, nb)
     A = matrix_view(wc, o, n, nb)
     Ad = matrix_view(wc, o + n * nb, n, nb)
     GA = matrix_view(wc, o + 2 * n * nb, n, nb)
@@ -231,5 +229,5 @@ def unpack_workspace(ints, wc, wr):
     axd = matrix_view(wr, o + 2 * N * n, 2 * N, n)
     o += 4 * N * n
     vp, o = _cut(wr, o, 2 * N)
-    return Workspace(c_hat, v, Gv, a, A, Ad, GA, t, td, g, g1, g2, zr, zrd, zt, ztd, E, M, f,
+    return Workspace(c_hat, v, Gv, A, Ad, GA, t, td, g, g1, g2, zr, zrd, zt, ztd, E, M, f,
                      k1, k2, k3, k4, xt, arow, alphad, pd, ax, axd, vp, wc, wr)

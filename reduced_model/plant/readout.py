@@ -21,7 +21,7 @@ from ..dynamics import link_data
 __all__ = ["modal_readout_into"]
 
 
-@njit(cache=True)
+@njit(cache=True, forceinline=True)
 def _exact_link_features(ld, readout, col, x, npl, q, qd):
     """Add one link's feature terms readout[:, col…] · z (and ż) to ``q`` (``qd``)."""
     nb = readout.shape[0]
