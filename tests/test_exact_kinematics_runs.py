@@ -137,8 +137,9 @@ def _flexarm_run(folder, name, *settings):
          "--duration", "1", "--out", name, *settings],
         cwd=folder, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
-    (row,) = ResultStore(folder / name).rows()
-    return row.load().select(["theta1", "theta2"])
+    store = ResultStore(folder / name)
+    (row,) = store.rows()
+    return store.load(row.run_id).select(["theta1", "theta2"])
 
 
 @pytest.mark.slow
