@@ -21,10 +21,11 @@ __all__ = ["JobClock", "PAPER", "LAB", "PAPER_COLD_START", "PAPER_DISK_MB", "RES
 RESUMED = 0.1
 
 #: ``flexarm reproduce-paper``'s phases and their wall times [s] on the reference machine
-#: (2 cores, quiet, two workers; bench/bench_paper.py of 2026-11-28), kernels compiled
+#: (2 cores, quiet, two workers; this tree alone through bench/bench_paper.py's
+#: ``reproduce``, 2026-12-05: 177 s in all from an empty numba cache), kernels compiled
 #: already (the compile says its own estimate).
-PAPER = (("the paper's runs", 80.0), ("the stability map", 109.0), ("the mesh checks", 37.0),
-         ("the claims", 2.0), ("the report", 13.0))
+PAPER = (("the paper's runs", 44.0), ("the stability map", 58.0), ("the mesh checks", 26.0),
+         ("the claims", 2.0), ("the report", 9.0))
 
 #: ``flexarm reproduce-paper --lab``'s phases, the same but for its runs (8, on the lab
 #: arm): the mean of two runs on a quiet 2-core machine, kernels compiled
@@ -34,7 +35,7 @@ LAB = (("the lab arm's runs", 12.0), ("the stability map", 14.0), ("the mesh che
 
 #: The paper's job's start-up and first compile of the kernels [s] (a fresh checkout), and
 #: the disk its results folder took [MB]: what the README states.
-PAPER_COLD_START = 48.0
+PAPER_COLD_START = 38.0
 PAPER_DISK_MB = 77.0
 
 
