@@ -235,23 +235,29 @@ class ExactHold:
         self._sticking = len(sticks) > 0
         self._no_data = np.empty(0)
         self.sd = sd
+        #: The configurations `apply` writes (start_of_step False, True).
+        self._written = ((cfg.Current,), (cfg.Current, cfg.StartOfStep))
 
-    def apply(self, change) -> None:
+    def apply(self, change, *, start_of_step: bool = False) -> None:
         """Restart the next step with the accelerations of the loads changed by ``change``
-        (one value per input): moves Exudyn's current q, q̇, q̈ (module docstring)."""
+        (one value per input): moves Exudyn's current q, q̇, q̈ (module docstring).
+        ``start_of_step``: called from a pre-step function, where Exudyn has already taken
+        the step's start (what it repeats a step from, what a friction switch goes back
+        to) from the current state: moves that too."""
         sd, cur = self.sd, exu.ConfigurationType.Current
         q, v, a = (sd.GetODE2Coordinates(cur), sd.GetODE2Coordinates_t(cur),
                    sd.GetODE2Coordinates_tt(cur))
         self._change[:] = change
-        if self._sticking:
-            data = sd.GetDataCoordinates(cur)
-            restart(self.data, q, v, a, data)
-            sd.SetDataCoordinates(data, cur)
-        else:
-            restart(self.data, q, v, a, self._no_data)
-        sd.SetODE2Coordinates(q, cur)
-        sd.SetODE2Coordinates_t(v, cur)
-        sd.SetODE2Coordinates_tt(a, cur)
+        data = sd.GetDataCoordinates(cur) if self._sticking else self._no_data
+        restart(self.data, q, v, a, data)
+        # as lists: Exudyn reads a list about twice as fast as an array (element by element)
+        data, q, v, a = data.tolist(), q.tolist(), v.tolist(), a.tolist()
+        for cfg in self._written[start_of_step]:
+            if self._sticking:
+                sd.SetDataCoordinates(data, cfg)
+            sd.SetODE2Coordinates(q, cfg)
+            sd.SetODE2Coordinates_t(v, cfg)
+            sd.SetODE2Coordinates_tt(a, cfg)
 
     def response(self, q: np.ndarray, change) -> np.ndarray:
         """Δq̈ = W B(q) ``change``: the constrained acceleration response to a change of

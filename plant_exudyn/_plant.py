@@ -1,6 +1,7 @@
 """The truth plant: the arm's Exudyn model stepped one control period at a time."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,6 +20,11 @@ __all__ = ["ExudynPlant", "linear_model"]
 #: Element-count ratio of the geometrically exact beam to ANCF in a check: it converges
 #: slower (open-loop 4th-mode error: GE 16 el/link 0.6 %, ANCF 4 0.04 %).
 _GE_PER_ANCF = 8
+#: A number of steps no period reaches: a reduced step is not grown back (`_pre_step`).
+_NEVER = 2**31 - 1
+#: How far (in steps) Exudyn's time may pass a step boundary by round-off and still end
+#: the step before it (`_pre_step`).
+_ENDS = 1e-6
 
 
 def _plain(elements_per_link):
@@ -197,6 +203,13 @@ class ExudynPlant(Plant):
         self._lag = np.array([j.torque_time_constant for j in p.joints])
         self._lagging = bool(self._lag.any())
         self._lagged = np.zeros(N)
+        if self._lagging:  # the current loops' torques change every step: `_advance`
+            #: Per step of the period being solved, the torques held (τ1 … τN).
+            self._schedule = np.zeros((self.steps, N))
+            self._held = 0  # the step of the period whose torques are held
+            self._force = (0.0, 0.0)  # the period's payload force
+            self.settings.timeIntegration.adaptiveStepRecoverySteps = _NEVER
+            self.system.mbs.SetPreStepUserFunction(self._pre_step)
         self._read_motors = self.system.joints.motor_reader(self.system.mbs)
         self._readout = new_readout(self.system.element == "ancf", *readout_arrays(self.system),
                                     link_arrays(f for f in self.fields if f is not None))
@@ -252,13 +265,30 @@ class ExudynPlant(Plant):
             self.hold_loads([float(t) for t in tau], fx, fy)
             self._solve_to(self._steps + steps)
             return
-        lagged, lag, h = self._lagged, self._lag, self.h
-        held = [0.0] * len(lagged)
+        lagged, lag, h, schedule = self._lagged, self._lag, self.h, self._schedule
+        N = len(lagged)
         for k in range(steps):  # the current loops' mean torque step by step
-            for i in range(len(lagged)):
-                held[i], lagged[i] = lag_step(float(tau[i]), lagged[i], lag[i], h)
-            self.hold_loads(held, fx, fy)
-            self._solve_to(self._steps + k + 1)
+            for i in range(N):
+                schedule[k, i], lagged[i] = lag_step(float(tau[i]), lagged[i], lag[i], h)
+        self._held, self._force = 0, (fx, fy)
+        self.hold_loads(schedule[0].tolist(), fx, fy)
+        self._solve_to(self._steps + steps)  # `_pre_step` holds the later steps' torques
+
+    def _pre_step(self, mbs, t: float) -> bool:
+        """Exudyn's pre-step function with current loops: at the start of a control
+        period's later steps, hold that step's torques (`_advance`) from the step's start,
+        in the state Exudyn repeats a step from as well as in the current one.
+
+        One `SolveSteps` per control period, as with ideal joints, rather than one per step:
+        each call makes Exudyn's modified Newton compute and factorise a new Jacobian.  A
+        reduced step (its end ``t`` within step k) never grows back within the period
+        (``adaptiveStepRecoverySteps``), so no step straddles the boundary where the
+        torques change."""
+        k = min(math.ceil(t / self.h - self._steps - _ENDS), self.steps) - 1
+        if k > self._held:
+            self._held = k
+            self.hold_loads(self._schedule[k].tolist(), *self._force, start_of_step=True)
+        return True
 
     def _solve_to(self, step: int) -> None:
         """Advance Exudyn's solver to the end of internal step ``step``."""
@@ -268,14 +298,16 @@ class ExudynPlant(Plant):
             raise PlantFailure(f"Exudyn solver failed at t = {self._iteration.currentTime:.6g} "
                                f"s: {msg.strip()}")
 
-    def hold_loads(self, torques, fx: float = 0.0, fy: float = 0.0) -> None:
+    def hold_loads(self, torques, fx: float = 0.0, fy: float = 0.0, *,
+                   start_of_step: bool = False) -> None:
         """Hold joint torques ``torques`` (N values) [N m] and the payload force (``fx``,
         ``fy``) [N] from now on: set the loads that changed and, with the exact hold,
-        restart the next step from the accelerations they give (`ExactHold`)."""
+        restart the next step from the accelerations they give (`ExactHold`).
+        ``start_of_step``: called inside a solve, at a step's start (`ExactHold.apply`)."""
         new = [*torques, fx, fy]
         applied = self._applied
         if self.hold is not None and any(a != b for a, b in zip(new, applied)):
-            self.hold.apply([a - b for a, b in zip(new, applied)])
+            self.hold.apply([a - b for a, b in zip(new, applied)], start_of_step=start_of_step)
         self.set_loads(new)
 
     def set_loads(self, new) -> None:
