@@ -40,7 +40,13 @@ found another minimum (the reduced plant with an unmodelled drive of 3e3 N m/rad
 0.05 kg m², backlash 2e-4 rad: backlash 0, damping 47), where the drive alone came to
 2850 N m/rad, 0.046 kg m².  Each is judged with the same tests and the tried ones ranked
 by AIC; the verdict names the adequate one, or says that none of those tried makes the
-model adequate.
+model adequate.  A fit reaches only the minimum of the piece of the cost its start lies
+on: where a velocity reversal's stick moves by a whole internal step, the outputs after
+it jump, and a descent does not cross the jump.  A Stribeck effect far from the probes'
+values is then fitted to an inadequate minimum (measured on the reduced plant, 2 s with
+velocity reversals, Coulomb level 0.25: a breakaway of 0.4, 1.6 times it, fitted as
+0.343 from the probe 0.353; a breakaway of 0.375 with a Stribeck velocity of 0.005 or
+0.02 rad/s, fitted as 0.0099 and 0.0106 from the probes' 0.01).
 """
 from __future__ import annotations
 

@@ -7,16 +7,17 @@ model, most significant first, until one is adequate or `extensions.FITTED` have
 tried, and ranked by AIC = 2 cost + 2p.  The adequate one is written beside the fit
 (``OUT/extended/``: its calibration, ``calibrated.toml`` and, if every parameter of it
 is identifiable, ``uncertainty.toml``: with one that is not, the others' intervals hold
-only at its estimate — the reduced plant with a Stribeck effect left out, its velocity
-0.01 rad/s barely seen by the data and fitted as 0.0118: EI1, EI2, Mp 3-6 standard
-errors off; a drive with backlash left out, the backlash 2.04e-4 (2e-4) not
-identifiable: the gear's stiffness 3006 ± 1.1 N m/rad (3000), its damping 4.8 standard
-errors off).  An inadequate model's intervals are of effective parameters and need not
-hold the physical arm (the drive with backlash left out: the payload 38 % high), so its
-``uncertainty.toml`` — the set ``flexarm verify`` draws the arm from — is not written
-unless asked for (``export_inadequate``, ``--export-inadequate``), and then with a
-warning in it.  An extension whose fit cannot be computed (`FitFailed`: its simulations
-failed) is named in the search's record and verdict, and the next one is tried.
+only at its estimate — the reduced plant with a Stribeck effect left out (breakaway
+0.375), its velocity 0.01 rad/s barely seen by the data and fitted as 0.0102: EI1, EI2,
+Mp 2.2-2.5 standard errors off; a drive with backlash left out, the backlash 2.04e-4
+(2e-4) not identifiable: the gear's stiffness 3006 ± 1.1 N m/rad (3000), its damping 4.8
+standard errors off).  An inadequate model's intervals are of effective parameters and
+need not hold the physical arm (the drive with backlash left out: the payload 38 %
+high), so its ``uncertainty.toml`` — the set ``flexarm verify`` draws the arm from — is
+not written unless asked for (``export_inadequate``, ``--export-inadequate``), and then
+with a warning in it.  An extension whose fit cannot be computed (`FitFailed`: its
+simulations failed) is named in the search's record and verdict, and the next one is
+tried.
 
 A calibration whose own fit cannot be computed — every simulation failed, or those its
 estimate or intervals rest on did — raises `FitFailed` and writes no result files (the
