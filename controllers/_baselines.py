@@ -91,7 +91,7 @@ def rigid_inverse_dynamics(d, ws, theta, dtheta, ddtheta, Qs, tau):
         Qd[i] = dtheta[i]
     for i in range(N, n):
         Qd[i] = 0.0
-    mass_bias_into(d, Q, Qd, ws.M, ws.f, ws, True, False)
+    mass_bias_into(d, Q, Qd, ws.M, ws.f, ws, False)
     for i in range(N):
         acc = ws.f[i]
         for j in range(N):

@@ -172,7 +172,7 @@ def _static_deflection(d, ws, theta_d, chol, q, Qs, exact):
         zero = Qs[n:2 * n]
         for i in range(n):
             zero[i] = 0.0
-        mass_bias_into(d, Qs[:n], zero, ws.M, ws.f, ws, True, exact)
+        mass_bias_into(d, Qs[:n], zero, ws.M, ws.f, ws, exact)
         for i in range(nf):  # forward and back substitution, −g_f as the right-hand side
             acc = -ws.f[N + i]
             for k in range(i):
@@ -227,7 +227,7 @@ def _pbc_torque(ints, reals, wc, wr, M, C, scratch, x_hat, ref, lam, kv, with_da
         zero = qs[n:]
         for j in range(n):
             zero[j] = 0.0
-        mass_bias_into(d, Q, zero, ws.M, ws.f, ws, True, exact)
+        mass_bias_into(d, Q, zero, ws.M, ws.f, ws, exact)
         for i in range(n):
             tau[i] += ws.f[i]
 

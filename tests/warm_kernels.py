@@ -23,48 +23,53 @@ SCENARIOS = [
      "observer": {"kind": "smo-paper"}},
     {"plant": {"kind": "exudyn"}, "observer": {"kind": "smo-paper"}},
 ]
-#: The second process's groups (by label): those of the joints and the exact kinematics,
-#: the larger half by `validation.batch.compiling.REFERENCE_SECONDS`; the first process
-#: compiles the rest, the FE plant's loop included.
-SECOND = ("joints", "exact kinematics")
+#: The second process's groups (by label): those of the exact kinematics, which share
+#: their kinematics kernels with the exact model's own methods compiled there too, and two
+#: baselines; the first process compiles the rest, the joints and the FE plant's loop
+#: included (measured, quiet: about 45 s of compile each).
+SECOND = ("exact kinematics", "controller lqr", "controller pd")
 
 
-def model_methods() -> None:
+def model_methods(kinematics: str) -> None:
     """What the physics tests call outside any run: the reduced model's own methods on
-    both kinematics and the EKF's Jacobian (their kernels: `reduced_model.dynamics.entries`,
-    `controllers._ekf`)."""
+    ``kinematics`` (their kernels: `reduced_model.dynamics.entries`), and on the linear
+    kinematics the EKF's Jacobian (`controllers._ekf`)."""
     import numpy as np
 
     from controllers import ExtendedKalmanFilter
     from reduced_model import ArmParameters
     from validation.run.laws import nominal_model
-    for kinematics in ("linear", "exact"):
-        model = nominal_model(ArmParameters(), None, kinematics)
-        Q, Qd = np.full(model.n, 1e-3), np.zeros(model.n)
-        model.mass_matrix(Q)
-        model.coriolis_matrix(Q, Qd)
-        model.acceleration(Q, Qd, np.zeros(model.n_joints))
-        model.elastic_force(Q, Qd)
-        model.gravity_force(Q)
-        model.tip_position(Q)
-        model.tip_jacobian(Q)
-        if kinematics == "linear":
-            ekf = ExtendedKalmanFilter(model, Ts=1e-3)
-            ekf.jacobian(np.zeros(2 * model.n), np.zeros(model.n_joints))
+    model = nominal_model(ArmParameters(), None, kinematics)
+    Q, Qd = np.full(model.n, 1e-3), np.zeros(model.n)
+    model.mass_matrix(Q)
+    model.coriolis_matrix(Q, Qd)
+    model.acceleration(Q, Qd, np.zeros(model.n_joints))
+    model.elastic_force(Q, Qd)
+    model.gravity_force(Q)
+    model.tip_position(Q)
+    model.tip_jacobian(Q)
+    if kinematics == "linear":
+        ekf = ExtendedKalmanFilter(model, Ts=1e-3)
+        ekf.jacobian(np.zeros(2 * model.n), np.zeros(model.n_joints))
 
 
-def parts():
-    """The kernel groups of `SCENARIOS`, split in two ([first, second]); the first also
-    compiles `model_methods` (the smaller half, by the compile times measured)."""
+def warm(part: int) -> None:
+    """Compile part ``part`` (0 or 1): the kernel groups of `SCENARIOS` outside `SECOND`
+    and the linear model's methods, or the exact model's methods and then the groups in
+    `SECOND`.  The exact methods come first: they need none of the linear-kinematics
+    kernels that checking the scenarios compiles, and the first process compiles those
+    meanwhile."""
     from validation.batch.worker import kernel_groups
     from validation.run.scenario import scenario_from_mapping
-    groups = kernel_groups([scenario_from_mapping(s) for s in SCENARIOS])
-    second = [g for g in groups if any(word in g[0] for word in SECOND)]
-    return [[g for g in groups if g not in second] + [("model methods", model_methods)],
-            second]
+    if part == 1:
+        model_methods("exact")
+    for label, build in kernel_groups([scenario_from_mapping(s) for s in SCENARIOS]):
+        if any(word in label for word in SECOND) == bool(part):
+            build()
+    if part == 0:
+        model_methods("linear")
 
 
 if __name__ == "__main__":
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    for _, build in parts()[int(sys.argv[1])]:
-        build()
+    warm(int(sys.argv[1]))

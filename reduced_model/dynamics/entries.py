@@ -66,13 +66,13 @@ def acceleration_exact(ints, reals, wc, wr, Q, Qd, tau, out):
 @njit(cache=True)
 def bias_linear(ints, reals, wc, wr, Q, Qd, M, h):
     mass_bias_into(unpack_model(ints, reals), Q, Qd, M, h, unpack_workspace(ints, wc, wr),
-                   True, False)
+                   False)
 
 
 @njit(cache=True)
 def bias_exact(ints, reals, wc, wr, Q, Qd, M, h):
     mass_bias_into(unpack_model(ints, reals), Q, Qd, M, h, unpack_workspace(ints, wc, wr),
-                   True, True)
+                   True)
 
 
 @njit(cache=True)

@@ -52,7 +52,7 @@ __all__ = ["exact_mass_bias", "exact_coriolis", "exact_elastic", "exact_tips",
 
 
 @njit(cache=True, forceinline=True, fastmath={"contract"})
-def _link_terms(link, N, ld, Q, Qd, M, h, ws, with_bias, gravity, alphad, alpha_vp, root,
+def _link_terms(link, N, ld, Q, Qd, M, h, ws, gravity, alphad, alpha_vp, root,
                 g_hat):
     """Add link ``link``'s part of M and h (module docstring), its hub's and tip's
     rotors' J a aᵀ included, from its own rows only: ζ = i a into ws.A[0] and its modes'
@@ -78,8 +78,7 @@ def _link_terms(link, N, ld, Q, Qd, M, h, ws, with_bias, gravity, alphad, alpha_
     position_row(A, 0, o, ld, Q, ws)
     mode_rows(A, 1, o, ld, ws)
     gram_rows(G, A, GA, 0, 1 + n_own, nb, o)
-    if with_bias:
-        velocity_products(o, ld, Q, Qd, ws, alphad, alpha_vp, root)
+    velocity_products(o, ld, Q, Qd, ws, alphad, alpha_vp, root)
     # Re(ζᴴ y), conj(ζ)·G[:, 0] (= conj(y_0) for symmetric G), Re(yᴴ v) and (G v)_0
     Z = ag0r = ag0i = vy = vg0r = vg0i = 0.0
     for b in range(nb):
@@ -87,19 +86,16 @@ def _link_terms(link, N, ld, Q, Qd, M, h, ws, with_bias, gravity, alphad, alpha_
         Z += ar * yr + ai * yi
         ag0r += ar * g
         ag0i -= ai * g
-        if with_bias:
-            vy += yr * v[b].real + yi * v[b].imag
-            vg0r += g * v[b].real
-            vg0i += g * v[b].imag
+        vy += yr * v[b].real + yi * v[b].imag
+        vg0r += g * v[b].real
+        vg0i += g * v[b].imag
     y0r, y0i, G00 = GA[0, 0].real, GA[0, 0].imag, G[0, 0]
     Z += ld.J_hub + J_tip  # both rotors' rows are da on the upstream coordinates
-    if with_bias:
-        vy += ld.J_hub * ws.vp[2 * link] + J_tip * ws.vp[2 * link + 1]
+    vy += ld.J_hub * ws.vp[2 * link] + J_tip * ws.vp[2 * link + 1]
     for r in range(up):
         i = row_of(link, N, r)
         da_i, tr_i, ti_i = hub[i], t[i].real, t[i].imag
-        if with_bias:
-            h[i] += da_i * vy + (tr_i * vg0r + ti_i * vg0i)
+        h[i] += da_i * vy + (tr_i * vg0r + ti_i * vg0i)
         e_i = tr_i * y0r + ti_i * y0i  # Re(conj(t_i) y_0)
         for s in range(r, up):
             j = row_of(link, N, s)
@@ -115,8 +111,7 @@ def _link_terms(link, N, ld, Q, Qd, M, h, ws, with_bias, gravity, alphad, alpha_
             M[i, c + k] += hub[i] * zk + (t[i].real * yr + t[i].imag * yi)
         for l in range(k, n_own):
             M[c + k, c + l] += re_dot(A[1 + k], GA[1 + l], f + k, nb) + a_k * tip_row[c + l]
-        if with_bias:
-            h[c + k] += re_dot(GA[1 + k], v, 0, nb) + a_k * ws.vp[2 * link + 1]
+        h[c + k] += re_dot(GA[1 + k], v, 0, nb) + a_k * ws.vp[2 * link + 1]
     if gravity:  # ∂V/∂Q_j = −Re(conj(ĝ) A_j·μ), μ the first moments
         gc = g_hat.conjugate()
         zeta_mu = moment_dot(A, 0, o, nb, G, ld.moment, o == 1)
@@ -134,19 +129,19 @@ def _link_terms(link, N, ld, Q, Qd, M, h, ws, with_bias, gravity, alphad, alpha_
         t[j] = complex(t[j].real + hub[j] * tip.real, t[j].imag + hub[j] * tip.imag)
     for k in range(n_own):
         t[c + k] = tip_value(A[1 + k], o, ld)
-    return tip_value(v, o, ld) if with_bias else 0j
+    return tip_value(v, o, ld)
 
 
 @njit(cache=True, fastmath={"contract"})
-def exact_mass_bias(ints, reals, wc, wr, Q, Qd, M, h, with_bias):
-    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇) Q̇ + ∂V_gravity/∂Q into ``h``:
+def exact_mass_bias(ints, reals, wc, wr, Q, Qd, M, h):
+    """M(Q) into ``M`` and h = C(Q, Q̇) Q̇ + ∂V_gravity/∂Q into ``h``:
     link by link (`_link_terms`)."""
     # Borrowed (`reduced_model.dynamics.linalg`): the workspace then holds no reference
     # that each helper it is passed to would count up and down, atomically.
     wc, wr = vector_view(wc, 0, wc.shape[0]), vector_view(wr, 0, wr.shape[0])
     d, ws = unpack_model(ints, reals), unpack_workspace(ints, wc, wr)
     N, n = d.links, d.n
-    gravity = with_bias and (d.gx != 0.0 or d.gy != 0.0)
+    gravity = d.gx != 0.0 or d.gy != 0.0
     for i in range(n):
         h[i] = 0.0
         ws.c_hat[i] = 0j
@@ -171,7 +166,7 @@ def exact_mass_bias(ints, reals, wc, wr, Q, Qd, M, h, with_bias):
                 j = row_of(link, N, r)
                 ws.c_hat[j] = eg * ws.c_hat[j]
         pe, b, ped, vp = tip_turn(ld, link, Q, Qd, ws, False)
-        root = _link_terms(link, N, ld, Q, Qd, M, h, ws, with_bias, gravity, alphad,
+        root = _link_terms(link, N, ld, Q, Qd, M, h, ws, gravity, alphad,
                            alpha_vp, root, g_hat)
     for i in range(n):
         for j in range(i):

@@ -81,13 +81,13 @@ def _gram_vector(G, v, Gv, nb):
 
 
 @njit(cache=True, forceinline=True)
-def linear_mass_bias(ints, reals, wc, wr, Q, Qd, M, h, with_bias):
-    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇) Q̇ + ∂V_gravity/∂Q into ``h``
+def linear_mass_bias(ints, reals, wc, wr, Q, Qd, M, h):
+    """M(Q) into ``M`` and h = C(Q, Q̇) Q̇ + ∂V_gravity/∂Q into ``h``
     (module docstring: structured, link by link)."""
     d, ws = unpack_model(ints, reals), unpack_workspace(ints, wc, wr)
     N, n = d.links, d.n
     v, Gv, c_hat, arow = ws.v, ws.Gv, ws.c_hat, ws.arow
-    gravity = with_bias and (d.gx != 0.0 or d.gy != 0.0)
+    gravity = d.gx != 0.0 or d.gy != 0.0
     for i in range(n):
         h[i] = 0.0
         c_hat[i] = 0.0
@@ -105,15 +105,14 @@ def linear_mass_bias(ints, reals, wc, wr, Q, Qd, M, h, with_bias):
         for l in range(n1):
             M[c1 + k, c1 + l] += G1[1 + k, 1 + l]
             M[0, 0] += Q[c1 + k] * G1[1 + k, 1 + l] * Q[c1 + l]
-    if with_bias:
-        v[0] = -th1d * th1d
-        for k in range(n1):
-            v[1 + k] = -1j * th1d * th1d * Q[c1 + k] - 2.0 * th1d * Qd[c1 + k]
-        _gram_vector(G1, v, Gv, 1 + n1)
-        h[0] += Gv[0].imag
-        for k in range(n1):
-            h[0] -= Q[c1 + k] * Gv[1 + k].real
-            h[c1 + k] += Gv[1 + k].imag
+    v[0] = -th1d * th1d
+    for k in range(n1):
+        v[1 + k] = -1j * th1d * th1d * Q[c1 + k] - 2.0 * th1d * Qd[c1 + k]
+    _gram_vector(G1, v, Gv, 1 + n1)
+    h[0] += Gv[0].imag
+    for k in range(n1):
+        h[0] -= Q[c1 + k] * Gv[1 + k].real
+        h[c1 + k] += Gv[1 + k].imag
     g_hat = 0j  # gravity in the current link's frame
     if gravity:
         g_hat = (np.cos(Q[0]) - 1j * np.sin(Q[0])) * (d.gx + 1j * d.gy)
@@ -167,23 +166,23 @@ def linear_mass_bias(ints, reals, wc, wr, Q, Qd, M, h, with_bias):
                     + ai * aj * Z
             for k in range(n2):
                 M[i, c2 + k] += ci.imag * G2[0, 2 + k] + ai * G2[1, 2 + k]
-        if with_bias:  # velocity-product accelerations: the root, and the link's own
-            acc_root = eg * (acc_root + (-alphad * alphad * (prev.L + 1j * we)
-                                         - 2.0 * alphad * wed))
-            alphad = alphad + Qd[link] + sed
-            v[0] = acc_root
-            v[1] = -alphad * alphad
-            for k in range(n2):
-                v[2 + k] = -1j * alphad * alphad * Q[c2 + k] - 2.0 * alphad * Qd[c2 + k]
-            _gram_vector(G2, v, Gv, 2 + n2)
-            zeta_gv = Gv[1].imag  # Re(ζᴴ G v)
-            for k in range(n2):
-                zeta_gv -= Q[c2 + k] * Gv[2 + k].real
-                h[c2 + k] += Gv[2 + k].imag
-            for r in range(up):
-                i = row_of(link, N, r)
-                ci = c_hat[i]
-                h[i] += ci.real * Gv[0].real + ci.imag * Gv[0].imag + arow[i] * zeta_gv
+        # velocity-product accelerations: the root, and the link's own
+        acc_root = eg * (acc_root + (-alphad * alphad * (prev.L + 1j * we)
+                                     - 2.0 * alphad * wed))
+        alphad = alphad + Qd[link] + sed
+        v[0] = acc_root
+        v[1] = -alphad * alphad
+        for k in range(n2):
+            v[2 + k] = -1j * alphad * alphad * Q[c2 + k] - 2.0 * alphad * Qd[c2 + k]
+        _gram_vector(G2, v, Gv, 2 + n2)
+        zeta_gv = Gv[1].imag  # Re(ζᴴ G v)
+        for k in range(n2):
+            zeta_gv -= Q[c2 + k] * Gv[2 + k].real
+            h[c2 + k] += Gv[2 + k].imag
+        for r in range(up):
+            i = row_of(link, N, r)
+            ci = c_hat[i]
+            h[i] += ci.real * Gv[0].real + ci.imag * Gv[0].imag + arow[i] * zeta_gv
         if gravity:
             g_hat = eg * g_hat
             gc = g_hat.conjugate()

@@ -26,18 +26,19 @@ __all__ = ["mass_bias_into", "mass_matrix_into", "coriolis_matrix_into", "elasti
 
 
 @njit(cache=True, inline="always")
-def mass_bias_into(d, Q, Qd, M, h, ws, with_bias, exact):
-    """M(Q) into ``M`` and, ``with_bias``, h = C(Q, Q̇) Q̇ + ∂V_g/∂Q into ``h``."""
+def mass_bias_into(d, Q, Qd, M, h, ws, exact):
+    """M(Q) into ``M`` and h = C(Q, Q̇) Q̇ + ∂V_g/∂Q into ``h``."""
     if exact:
-        exact_mass_bias(d.ints, d.reals, ws.wc, ws.wr, Q, Qd, M, h, with_bias)
+        exact_mass_bias(d.ints, d.reals, ws.wc, ws.wr, Q, Qd, M, h)
     else:
-        linear_mass_bias(d.ints, d.reals, ws.wc, ws.wr, Q, Qd, M, h, with_bias)
+        linear_mass_bias(d.ints, d.reals, ws.wc, ws.wr, Q, Qd, M, h)
 
 
 @njit(cache=True, inline="always")
 def mass_matrix_into(d, Q, M, ws, exact):
-    """M(Q) into ``M`` (n, n)."""
-    mass_bias_into(d, Q, Q, M, ws.f, ws, False, exact)
+    """M(Q) into ``M`` (n, n); h, computed with it, is left in the scratch ws.f: one
+    compiled kinematics kernel serves both (each variant compiles for seconds)."""
+    mass_bias_into(d, Q, Q, M, ws.f, ws, exact)
 
 
 @njit(cache=True, inline="always")
@@ -66,7 +67,7 @@ def elastic_into(d, Q, Qd, f, with_damping, exact):
 @njit(cache=True, inline="always")
 def bias_forces_into(d, Q, Qd, h, ws, exact):
     """h = C(Q,Q̇) Q̇ + D Q̇ + K Q + ∂V_g/∂Q into ``h``, and M(Q) into ws.M."""
-    mass_bias_into(d, Q, Qd, ws.M, h, ws, True, exact)
+    mass_bias_into(d, Q, Qd, ws.M, h, ws, exact)
     elastic_into(d, Q, Qd, h, True, exact)
 
 
