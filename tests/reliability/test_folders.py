@@ -3,10 +3,12 @@ written or read through links inside it, damaged rows and files are repaired or 
 by name (never hung on, never a traceback), and an intact run file is never thrown away.
 Every case was reproduced against the landed tree first (issue 32, groups 5 and 6)."""
 import os
+import shutil
 import sqlite3
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -27,13 +29,22 @@ def flexarm(cwd, *args, timeout=300):
                           capture_output=True, text=True, timeout=timeout)
 
 
-@pytest.fixture()
-def folder(tmp_path):
-    """A folder of 4 stored runs (reduced plant, 0.2 s)."""
-    (tmp_path / "f.toml").write_text(CAMPAIGN)
-    proc = flexarm(tmp_path, "campaign", "f.toml", "--out", "out", "--no-progress")
+@pytest.fixture(scope="module")
+def stored(tmp_path_factory):
+    """A folder of 4 stored runs (reduced plant, 0.2 s), made once per module."""
+    where = tmp_path_factory.mktemp("stored")
+    (where / "f.toml").write_text(CAMPAIGN)
+    proc = flexarm(where, "campaign", "f.toml", "--out", "out", "--no-progress")
     assert proc.returncode == 0, proc.stderr
-    return tmp_path / "out"
+    return where / "out"
+
+
+@pytest.fixture()
+def folder(stored, tmp_path):
+    """A copy of `stored` in the test's own folder (``tmp_path / "out"``): each test
+    damages its own."""
+    (tmp_path / "f.toml").write_text(CAMPAIGN)
+    return Path(shutil.copytree(stored, tmp_path / "out", symlinks=True))
 
 
 def one_line_error(proc, *words):
