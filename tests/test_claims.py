@@ -272,7 +272,7 @@ def mesh_store(tmp_path_factory):
 @pytest.mark.slow  # eight Exudyn runs, GE 32 el/link at Ts = 0.2 ms among them: ~30 s
 def test_mesh_check_marks_table1_not_converged_and_the_default_arm_converged(mesh_store):
     rows = mesh_store.rows()
-    signals = lambda row: every_signal(mesh_store, row)  # noqa: E731
+    signals = lambda row, names: every_signal(mesh_store, row, names)  # noqa: E731
     columns = {c.arm: c for c in claim_columns(rows, signals)}
     assert len(columns) == 2  # the check runs are checks, not columns of their own
     table1, default = columns["table1"], columns["default"]
