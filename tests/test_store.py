@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml
+from cli_testing import flexarm
 from validation.batch.campaign import campaign_from_mapping
 from validation.batch.queue import run_campaign
 from validation.cli import main
@@ -345,11 +346,6 @@ def folder(healthy, tmp_path):
     return tmp_path / "results", c, metrics
 
 
-def flexarm(*args, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "validation.cli", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd)
-
-
 def one_line_error(done, status: int, *texts) -> None:
     assert done.returncode == status, done
     lines = done.stderr.strip().splitlines()
@@ -364,7 +360,7 @@ def test_repair_adopts_a_run_file_only_under_its_own_id(folder):
     a, b = (out / "runs" / f"{ids[name]}.npz" for name in ("h/a", "h/b"))
     b.write_bytes(a.read_bytes())  # one run's file copied over another's
     (out / "index.sqlite").unlink()
-    done = flexarm("repair", out)
+    done = flexarm(None, "repair", out)
     assert done.returncode == 0, done.stderr
     assert f"unreadable: 1 ({b.stem} (its scenario does not hash to its name" in done.stdout
     rows = {r.run_id: r for r in ResultStore(out).rows()}
@@ -404,9 +400,9 @@ def test_a_damaged_index_is_named_and_rebuilt_whatever_the_damage(folder, damage
                                                              "transient": 0.1}}))
     for args in (["export", out], ["report", out, "--no-progress"],
                  ["campaign", cfg, "--out", out, "--workers", "1", "--dry-run"]):
-        one_line_error(flexarm(*args), 2, "index", f"flexarm repair {out}")
+        one_line_error(flexarm(None, *args), 2, "index", f"flexarm repair {out}")
     assert (out / "metrics.csv").read_text() == exported  # never overwritten with less
-    done = flexarm("repair", out)
+    done = flexarm(None, "repair", out)
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
     assert "rebuilt: 1 (index.sqlite (unreadable; kept as index.sqlite.damaged))" in done.stdout
     after = ResultStore(out)
@@ -420,12 +416,13 @@ def test_export_never_writes_fewer_runs_than_the_last_export_without_saying_so(f
     victim = sorted(metrics)[0]
     with sqlite3.connect(out / "index.sqlite") as db:  # a row lost from the index
         db.execute("DELETE FROM runs WHERE run_id = ?", (victim,))
-    one_line_error(flexarm("export", out), 2, f"lacks 1 of the runs the last export listed "
-                                              f"(e.g. {victim})", "flexarm repair")
+    one_line_error(flexarm(None, "export", out), 2,
+                   f"lacks 1 of the runs the last export listed (e.g. {victim})",
+                   "flexarm repair")
     assert (out / "metrics.csv").read_text() == exported
-    done = flexarm("repair", out)  # adopts the run's file again
+    done = flexarm(None, "repair", out)  # adopts the run's file again
     assert done.returncode == 0 and f"adopted: 1 ({victim})" in done.stdout, done
-    assert flexarm("export", out).returncode == 0
+    assert flexarm(None, "export", out).returncode == 0
 
 
 def test_an_export_written_in_slices_is_the_export_written_whole(folder, monkeypatch):
@@ -450,7 +447,7 @@ def test_repair_skips_directories_named_like_run_files(folder):
     (out / "runs" / "0123456789ab.npz").mkdir()  # named like a run file
     (out / "runs" / "not-an-id.npz").mkdir()
     (out / "index.sqlite").unlink()
-    done = flexarm("repair", out)
+    done = flexarm(None, "repair", out)
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
     assert "skipped: 2 (runs/0123456789ab.npz (not a run file), runs/not-an-id.npz " \
            "(not a run file))" in done.stdout
@@ -467,9 +464,9 @@ def test_run_ids_read_from_the_index_never_name_a_path(folder):
         db.execute("UPDATE runs SET run_id = ?, file = ? WHERE run_id = ?",
                    (crafted, f"runs/{crafted}.npz", sorted(metrics)[0]))
     for args in (["export", out], ["report", out, "--no-progress"]):
-        one_line_error(flexarm(*args), 2, repr(crafted), "is not a stored run",
+        one_line_error(flexarm(None, *args), 2, repr(crafted), "is not a stored run",
                        "flexarm repair")
-    done = flexarm("repair", out)
+    done = flexarm(None, "repair", out)
     assert done.returncode == 0, done.stderr
     assert f"dropped: 1 ({crafted!r} (not a stored run: its id must be 12 hex digits" \
         in done.stdout
@@ -483,7 +480,7 @@ def test_reading_a_results_folder_never_imports_a_plugin(folder):
     work = out.parent / "work"  # the plug-in's package is importable from here
     for args in (["report", out, "--no-progress", "--no-animation"], ["export", out],
                  ["repair", out]):
-        done = flexarm(*args, cwd=work)
+        done = flexarm(work, *args)
         assert done.returncode == 0, done.stderr
         assert not (work / "evilpkg" / "IMPORTED").exists(), args
 
@@ -523,9 +520,9 @@ def test_a_full_disk_is_no_space_left_exit_1(folder, tmp_path):
                      ["campaign", cfg, "--out", point / "new", "--workers", "1", "--no-progress"],
                      ["run", "--duration", "0.5", "--set", "transient=0.1", "--out", full],
                      ["export", full]):
-            one_line_error(flexarm(*args), 1, "no space left on the device")
+            one_line_error(flexarm(None, *args), 1, "no space left on the device")
         # What is stored can still be read: the dry run lists it.
-        done = flexarm("campaign", cfg, "--out", full, "--dry-run")
+        done = flexarm(None, "campaign", cfg, "--out", full, "--dry-run")
         assert done.returncode == 0 and "2 runs planned: 2 to run" in done.stdout, done
         store = ResultStore(full)
         assert {r.run_id for r in store.rows()} == set(metrics)
@@ -544,12 +541,12 @@ def test_a_read_only_folder_is_read_not_advised_to_repair(folder, tmp_path):
                                                                  "transient": 0.1},
                                       "sweep": [{"zip": {"name": ["a", "b"],
                                                          "seed": [0, 1]}}]}))
-        done = flexarm("campaign", cfg, "--out", point, "--dry-run")
+        done = flexarm(None, "campaign", cfg, "--out", point, "--dry-run")
         assert done.returncode == 0, done.stderr
         assert "2 runs planned: 0 to run, 2 already stored" in done.stdout
         for args in (["export", point], ["repair", point],
                      ["campaign", cfg, "--out", point, "--workers", "1", "--retry-failed"]):
-            done = flexarm(*args)
+            done = flexarm(None, *args)
             one_line_error(done, 2, "read-only")
             assert "repair " + str(point) not in done.stderr  # not the cure here
         store = ResultStore(point)

@@ -5,13 +5,12 @@ Every case was reproduced against the landed tree first (issue 32, groups 5 and 
 import os
 import shutil
 import sqlite3
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
 import pytest
 
+from cli_testing import flexarm
 from validation.batch.store.folder import ResultStore
 
 CAMPAIGN = textwrap.dedent('''
@@ -22,11 +21,6 @@ CAMPAIGN = textwrap.dedent('''
     [[sweep]]
     grid.seed = [0, 1, 2, 3]
 ''')
-
-
-def flexarm(cwd, *args, timeout=300):
-    return subprocess.run([sys.executable, "-m", "validation.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout)
 
 
 @pytest.fixture(scope="module")
