@@ -5,7 +5,6 @@ arm FMU written here (pythonfmu, its equations below) runs as the truth plant an
 an independent integration; bad FMUs and tables are one-line refusals; an FMU that fails
 in a step fails that run; a campaign on an FMU plant completes and resumes."""
 import functools
-import subprocess
 import sys
 import textwrap
 import zipfile
@@ -20,6 +19,7 @@ pytest.importorskip("pythonfmu")
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
+from cli_testing import flexarm  # noqa: E402
 from validation import run_scenario, scenario_from_mapping  # noqa: E402
 from validation.batch.fingerprint import run_fingerprint  # noqa: E402
 from validation.batch.store.folder import ResultStore  # noqa: E402
@@ -140,11 +140,6 @@ def lab(tmp_path_factory):
 def here(lab, monkeypatch):
     monkeypatch.chdir(lab)
     return lab
-
-
-def flexarm(cwd, *args):
-    return subprocess.run([sys.executable, "-m", "validation.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
 
 
 def round_trip(lab, duration, **extra):

@@ -3,12 +3,11 @@ a `reduced_model.Plant` subclass named by ``plant.kind = "package.module:Class"`
 ``run``, ``campaign``, ``verify`` and the report as a truth plant, its role asked, never
 its name; bad plug-in plants are one-line errors naming the key."""
 import json
-import subprocess
-import sys
 import textwrap
 
 import pytest
 
+from cli_testing import flexarm
 from conftest import FINE_ARM_PLANT, write_files
 from validation.batch.store.folder import ResultStore
 
@@ -35,11 +34,6 @@ STUDY = textwrap.dedent('''
     [uncertainty]
     "true_params.Mp" = { uniform = [0.0, 0.2] }
 ''')
-
-
-def flexarm(cwd, *args):
-    return subprocess.run([sys.executable, "-m", "validation.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
 
 
 @pytest.fixture(scope="module")

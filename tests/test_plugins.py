@@ -1,12 +1,11 @@
 """Bring your own controller and observer: plug-ins defined outside the package run
 everywhere the built-ins run, and their failures are results or one-line errors."""
 import json
-import subprocess
-import sys
 import textwrap
 
 import pytest
 
+from cli_testing import flexarm
 from validation.batch.worker import execute_run
 from validation.run.scenario import scenario_from_mapping, scenario_to_mapping
 from validation.batch.store.folder import ResultStore
@@ -75,11 +74,6 @@ PLUGIN = textwrap.dedent('''
 @pytest.fixture()
 def plugin_dir(plugin_lab):
     return plugin_lab({"mylab_plugins.py": PLUGIN})
-
-
-def flexarm(cwd, *args):
-    return subprocess.run([sys.executable, "-m", "validation.cli", *args], cwd=cwd,
-                          capture_output=True, text=True)
 
 
 @pytest.mark.parametrize("plant", ["reduced", "exudyn"])

@@ -4,31 +4,22 @@ inflated; a re-simulation that cannot run says why, naming the file; bad input i
 line naming the flag, exit 2, nothing written."""
 import io
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from cli_testing import flexarm
 from validation.batch.campaign import campaign_from_mapping
 from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
 from validation.batch.store.index import transaction
 from validation.batch.store.folder import ResultStore
 
-ROOT = Path(__file__).resolve().parents[2]
 #: One short metrics-only run (its signals are re-simulated on demand).
 METRICS_ONLY = {"name": "m", "scenario": {"duration": 0.3, "transient": 0.1,
                                           "observer": {"kind": "smo-paper"}},
                 "keep": {"signals": "none"}}
-
-
-def flexarm(cwd, *args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "validation.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
 
 
 def one_line(done, status: int, *words) -> None:
