@@ -2,11 +2,10 @@
 and the command line (each property would fail on a wrong implementation)."""
 import itertools
 import math
-import subprocess
-import sys
 
 import pytest
 
+from cli_testing import flexarm
 from validation.report.verdict_tables import write_attribution
 from validation.verdicts import attribution as att
 from validation.run.config import ConfigError
@@ -125,8 +124,7 @@ def test_bad_factors_are_one_line_errors_and_nothing_is_written(tmp_path, args, 
     cfg = tmp_path / "s.toml"
     cfg.write_text("duration = 3.0\n")
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "validation.cli", "attribute", str(cfg),
-                           "--out", str(out), *args], capture_output=True, text=True)
+    proc = flexarm(None, "attribute", cfg, "--out", out, *args)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and text in lines[0], proc.stderr

@@ -1,11 +1,10 @@
 """Error-bound regression: one test per check of baselines.toml (the full tier is `slow`),
 and proof that the bounds bite."""
 import dataclasses
-import subprocess
-import sys
 
 import pytest
 
+from cli_testing import flexarm
 from validation.verdicts.baselines import DEFAULT_FILE, _Runner, load_baselines, measure, write_baselines
 
 BASELINES = load_baselines(DEFAULT_FILE)
@@ -57,9 +56,8 @@ def test_tightened_bounds_fail(runner, tmp_path):
     local = load_baselines(file)
     write_baselines(local, [dataclasses.replace(c, bound=0.5 * value) if c.name == check.name
                             else c for c in local.checks])
-    proc = subprocess.run([sys.executable, "-m", "validation.cli", "baseline", "check",
-                           "--file", str(file), "--only", check.name, "--out",
-                           str(tmp_path / "runs")], capture_output=True, text=True)
+    proc = flexarm(None, "baseline", "check", "--file", file, "--only", check.name, "--out",
+                   tmp_path / "runs")
     assert proc.returncode == 1
     assert f"FAIL {check.name}" in proc.stderr and str(tmp_path / "runs") in proc.stderr
     assert "0 of 1 checks hold" in proc.stdout
@@ -72,12 +70,11 @@ def test_update_refuses_to_loosen(tmp_path):
     name = "frequency-gap-locked-mode1-theta2-0.00"
     write_baselines(local, [dataclasses.replace(c, bound=1e-9) if c.name == name else c
                             for c in local.checks])
-    cmd = [sys.executable, "-m", "validation.cli", "baseline", "update", "--file", str(file),
-           "--only", name, "--out", str(tmp_path / "runs")]
-    refused = subprocess.run(cmd, capture_output=True, text=True)
+    cmd = ["baseline", "update", "--file", file, "--only", name, "--out", tmp_path / "runs"]
+    refused = flexarm(None, *cmd)
     assert refused.returncode == 1 and "refusing to loosen" in refused.stderr
     assert load_baselines(file).checks[[c.name for c in local.checks].index(name)].bound == 1e-9
-    allowed = subprocess.run(cmd + ["--allow-loosen"], capture_output=True, text=True)
+    allowed = flexarm(None, *cmd, "--allow-loosen")
     assert allowed.returncode == 0, allowed.stderr
     updated = {c.name: c for c in load_baselines(file).checks}
     assert updated[name].bound > 1e-9 and updated[name].measured is not None
@@ -91,18 +88,16 @@ def test_update_on_a_clean_checkout_changes_nothing(tmp_path):
     to refuse to "loosen" 21 bounds that differed only in rounding)."""
     file = tmp_path / "baselines.toml"
     file.write_text(DEFAULT_FILE.read_text())
-    cmd = [sys.executable, "-m", "validation.cli", "baseline", "update", "--file", str(file),
-           "--only", "frequency-gap-*", "--tier", "all", "--out", str(tmp_path / "runs")]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = flexarm(None, "baseline", "update", "--file", file, "--only", "frequency-gap-*",
+                   "--tier", "all", "--out", tmp_path / "runs")
     assert proc.returncode == 0, proc.stderr
     assert "no change" in proc.stdout and "LOOSER" not in proc.stdout
     assert file.read_text() == DEFAULT_FILE.read_text()
 
 
 def test_results_that_are_not_a_results_folder_are_refused(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "validation.cli", "baseline", "check",
-                           "--results", str(tmp_path / "nowhere"), "--only", "pbc-*"],
-                          capture_output=True, text=True)
+    proc = flexarm(None, "baseline", "check", "--results", tmp_path / "nowhere", "--only",
+                   "pbc-*")
     assert proc.returncode == 2 and "--results" in proc.stderr and "not a results folder" in proc.stderr
 
 

@@ -1,9 +1,8 @@
 """The ``flexarm`` command line: output and one-line errors with exit status 2."""
-import subprocess
-import sys
 
 import pytest
 
+from cli_testing import program
 from validation.cli import main
 
 
@@ -74,8 +73,7 @@ def test_bad_input_one_line_exit_2(tmp_path, args, text):
     for key, content in files.items():
         (tmp_path / f"{key}.toml").write_text(content)
     args = [a.format(**{k: str(tmp_path / f"{k}.toml") for k in files}) for a in args]
-    proc = subprocess.run([sys.executable, "-m", "validation.cli", *args],
-                          capture_output=True, text=True)
+    proc = program(None, *args)
     assert proc.returncode == 2
     assert proc.stdout == ""
     lines = proc.stderr.strip().splitlines()

@@ -3,7 +3,6 @@ definition, computed independently; the falsifier's counterexample run again by 
 run`; a law's output that is no torque refused; an STL `until` computed exactly and fast."""
 import json
 import math
-import subprocess
 import sys
 import textwrap
 
@@ -12,6 +11,7 @@ import numpy as np
 import pytest
 import scipy.optimize
 
+from cli_testing import flexarm
 from conftest import FINE_ARM_PLANT, write_files
 from validation.batch.store.folder import ResultStore
 from validation.cli import main
@@ -153,11 +153,6 @@ ROBUST = textwrap.dedent('''
     "true_params.Mp" = { uniform = [0.0, 1.0] }
     "disturbances[0].amplitude" = { uniform = [0.0, 4.0] }
 ''')
-
-
-def flexarm(cwd, *args):
-    return subprocess.run([sys.executable, "-m", "validation.cli", *args], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
 
 
 # slow (16 s: test_verify.py's test_a_counterexample_replays_to_the_same_robustness replays one
