@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_testing import flexarm
 from validation import cli, run_scenario, scenario_from_mapping
 from validation.batch.executor import SerialRunner
 from validation.run.config import ConfigError
@@ -394,8 +395,6 @@ class Raising:
 def calibrate_failing(tmp_path, plugin_lab, table: str, start: float) -> tuple:
     """``flexarm calibrate`` of EI1 from ``start`` on 0.3 s of the default arm's data with
     the scenario's ``table`` (a failing plug-in); (status, stdout, stderr, out)."""
-    import subprocess
-    import sys
     plugin_lab(FAILING)
     data = experiment("reduced", duration=0.3, noise=NOISE)
     with (tmp_path / "e1.csv").open("w") as fh:
@@ -405,10 +404,8 @@ def calibrate_failing(tmp_path, plugin_lab, table: str, start: float) -> tuple:
                                      f"{start}\n[calibrate]\nfit = [\"true_params.EI1\"]\n"
                                      + ("inputs = \"closed-loop\"\n" if "controller" in table
                                         else ""))
-    proc = subprocess.run([sys.executable, "-m", "validation.cli", "calibrate", "e1.csv",
-                           "--config", "m.toml", "--out", "out", "--workers", "1",
-                           "--no-progress"], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=600)
+    proc = flexarm(tmp_path, "calibrate", "e1.csv", "--config", "m.toml", "--out", "out",
+                   "--workers", "1", "--no-progress")
     return proc.returncode, proc.stdout, proc.stderr, tmp_path / "out"
 
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml, dask_cluster, metrics_table, stored_count
+from cli_testing import flexarm
 from validation.run.config import ConfigError
 from validation.batch.campaign import campaign_from_mapping, expand, load_campaign
 from validation.batch.queue import run_campaign
@@ -218,7 +219,7 @@ def test_resume_after_a_kill(tmp_path):
     # (validation.batch.store.committing): intact runs, adopted by the resume, not run again.
     kept = len(partial) + len(ResultStore(out).unindexed_files())
     assert 3 <= len(partial) <= kept < 20, "the kill must land mid-campaign"
-    summary = subprocess.run(cmd, capture_output=True, text=True)
+    summary = flexarm(None, *cmd[3:])
     assert summary.returncode == 0, summary.stderr
     assert (f"resume: 20 runs; {kept} already stored; ran {20 - kept}: "
             f"{20 - kept} ok, 0 diverged, 0 failed -> {out}") in summary.stdout
@@ -232,7 +233,7 @@ def test_resume_after_a_kill(tmp_path):
             store.close()
 
     before = files()
-    again = subprocess.run(cmd, capture_output=True, text=True)
+    again = flexarm(None, *cmd[3:])
     assert again.returncode == 0
     assert "resume: 20 runs; 20 already stored" in again.stdout
     assert files() == before  # nothing was run again

@@ -23,6 +23,7 @@ from validation.verdicts.statistics import SequentialTest, clopper_pearson, sprt
 from validation.verdicts.uncertainty import load_systems
 
 from campaign_testing import stored_count
+from cli_testing import flexarm
 
 
 # --- statistics -------------------------------------------------------------------------------
@@ -156,19 +157,15 @@ def test_a_bad_uncertainty_set_is_refused_naming_it(tmp_path, lines, words):
 def test_the_cli_refuses_a_bad_set_in_one_line_writing_nothing(tmp_path):
     path = _bad_system(tmp_path, 'Ts = { choices = [1e-3, 1.5e-3] }')
     out = tmp_path / "out"
-    done = subprocess.run([sys.executable, "-m", "validation.cli", "verify", str(path),
-                           "--mode", "estimate", "--out", str(out), "--workers", "1"],
-                          capture_output=True, text=True)
+    done = flexarm(None, "verify", path, "--mode", "estimate", "--out", out, "--workers", "1")
     assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
     assert "Ts = 0.0015" in done.stderr
     assert not out.exists()
 
 
 # --- falsification end to end ---------------------------------------------------------------------
-def _verify(path, out, *extra, **kwargs):
-    return subprocess.run([sys.executable, "-m", "validation.cli", "verify", str(path), *extra,
-                           "--out", str(out), "--no-progress"], capture_output=True, text=True,
-                          **kwargs)
+def _verify(path, out, *extra):
+    return flexarm(None, "verify", path, *extra, "--out", out, "--no-progress")
 
 
 def test_a_counterexample_replays_to_the_same_robustness(tmp_path):

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from campaign_testing import campaign_toml, metrics_table, stored_count
+from cli_testing import flexarm
 from validation.batch.campaign import campaign_from_mapping
 from validation.batch.queue import run_campaign
 from validation.batch.executor import SerialRunner
@@ -114,7 +115,7 @@ def test_sigkill_at_random_moments_then_resume(seed, tmp_path):
             for row in store.rows():
                 store.load(row.run_id)  # never a truncated .npz
             store.close()
-    final = subprocess.run(cmd, capture_output=True, text=True)
+    final = flexarm(None, *cmd[3:])
     assert final.returncode == 0, final.stderr
     # Same numbers, no duplicate or missing rows.
     assert metrics_table(out) == metrics_table(reference)
@@ -154,9 +155,8 @@ def test_exudyn_solver_failure_is_recorded_and_nothing_stray_is_written(tmp_path
                    'zip.plant.newton_tolerance = [1e-16, 1e-6]\n')
     work = tmp_path / "cwd"
     work.mkdir()
-    proc = subprocess.run([sys.executable, "-m", "validation.cli", "campaign", str(cfg),
-                           "--out", str(tmp_path / "out"), "--workers", "1", "--no-progress"],
-                          capture_output=True, text=True, cwd=work)
+    proc = flexarm(work, "campaign", cfg, "--out", tmp_path / "out", "--workers", "1",
+                   "--no-progress")
     assert proc.returncode == 1  # a run failed to execute
     assert "1 ok, 0 diverged, 1 failed" in proc.stdout
     rows = ResultStore(tmp_path / "out").rows()
@@ -169,10 +169,9 @@ def test_exudyn_solver_failure_is_recorded_and_nothing_stray_is_written(tmp_path
 def test_a_diverged_run_prints_no_numpy_warnings(tmp_path):
     """Gains of 1e300 overflow the metrics' squares and the float32 store: the run is
     "diverged", its metrics inf or nan, and nothing but the report is printed."""
-    done = subprocess.run([sys.executable, "-m", "validation.cli", "run", "--controller", "pd",
-                           "--set", "controller.options.kp=[1e300, 1e300]", "--duration", "1",
-                           "--set", "transient=0.5", "--out", str(tmp_path / "out")],
-                          capture_output=True, text=True)
+    done = flexarm(None, "run", "--controller", "pd", "--set",
+                   "controller.options.kp=[1e300, 1e300]", "--duration", "1", "--set",
+                   "transient=0.5", "--out", tmp_path / "out")
     assert done.returncode == 0, done.stderr
     assert "diverged: " in done.stdout
     assert "Warning" not in done.stderr + done.stdout, done.stderr
