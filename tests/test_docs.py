@@ -19,6 +19,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 sys.path.insert(0, str(DOCS / "_ext"))
+from cli_testing import flexarm  # noqa: E402
 from flexarm_docs.docstrings import entries, sections  # noqa: E402
 
 PACKAGES = ("validation", "reduced_model", "plant_exudyn", "controllers")
@@ -139,8 +140,7 @@ def test_bring_your_own_example_runs_as_written(tmp_path):
         if args[0] == "touch":
             (tmp_path / args[1]).touch()
             continue
-        proc = subprocess.run([sys.executable, "-m", "validation.cli", *args[1:]],
-                              cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        proc = flexarm(tmp_path, *args[1:])
         assert proc.returncode == 0, proc.stderr[-2000:]
 
 

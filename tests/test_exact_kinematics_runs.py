@@ -1,12 +1,11 @@
 """Exact kinematics in runs: the plant setting, laws built on the exact model, the
 'kinematics' attribution factor, and the issue's open-loop check from the command line."""
 import hashlib
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
+from cli_testing import flexarm
 from controllers import IdealisedPBC
 from reduced_model import ArmModel, ReducedPlant
 from validation.batch.store.folder import ResultStore
@@ -110,9 +109,8 @@ def test_attribute_kinematics_from_the_command_line(tmp_path):
     cfg = tmp_path / "s.toml"
     cfg.write_text('duration = 1.0\ninitial_state = "reference"\nplant.kind = "exudyn"\n')
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "validation.cli", "attribute", str(cfg),
-                           "--factors", "kinematics,plant", "--out", str(out), "--no-progress"],
-                          capture_output=True, text=True)
+    proc = flexarm(None, "attribute", cfg, "--factors", "kinematics,plant", "--out", out,
+                   "--no-progress")
     assert proc.returncode == 0, proc.stderr
     rows = ResultStore(out).rows()
     assert len(rows) == 4 and all(r.status == "ok" for r in rows)
@@ -130,12 +128,10 @@ def test_attribute_kinematics_from_the_command_line(tmp_path):
 # --- the issue's check, from the command line ----------------------------------------------------
 def _flexarm_run(folder, name, *settings):
     """`flexarm run` of the issue's pulses (the replay controller) for 1 s; its θ (2, samples)."""
-    proc = subprocess.run(
-        [sys.executable, "-m", "validation.cli", "run", "--controller", "replay",
-         "--set", "controller.options.file=pulses.npy",
-         "--set", f"controller.options.sha256={(folder / 'sha').read_text()}",
-         "--duration", "1", "--out", name, *settings],
-        cwd=folder, capture_output=True, text=True)
+    proc = flexarm(folder, "run", "--controller", "replay",
+                   "--set", "controller.options.file=pulses.npy",
+                   "--set", f"controller.options.sha256={(folder / 'sha').read_text()}",
+                   "--duration", "1", "--out", name, *settings)
     assert proc.returncode == 0, proc.stderr
     store = ResultStore(folder / name)
     (row,) = store.rows()

@@ -3,12 +3,11 @@ RTAMT's robustness; every stored run carries ``rho_<name>``; bad requirements ar
 refused before anything runs."""
 import dataclasses
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
+from cli_testing import flexarm
 from validation.batch.store.folder import ResultStore
 from validation.batch.worker import execute_run
 from validation.run.config import ConfigError
@@ -170,8 +169,7 @@ def test_the_cli_refuses_an_unknown_signal_in_one_line_writing_nothing(tmp_path)
     config.write_text('duration = 3.0\n[[requirement]]\nname = "r"\n'
                       'formula = "always(abs(tau3) <= 1)"\n')
     out = tmp_path / "out"
-    done = subprocess.run([sys.executable, "-m", "validation.cli", "run", "--config",
-                           str(config), "--out", str(out)], capture_output=True, text=True)
+    done = flexarm(None, "run", "--config", config, "--out", out)
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1 and "requirement[0].formula" in done.stderr
     assert "'tau3'" in done.stderr
