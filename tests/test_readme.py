@@ -17,6 +17,7 @@ ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text()
 BLOCKS = re.findall(r"```(\w+)\n(.*?)```", README, flags=re.S)
 sys.path.insert(0, str(ROOT / "tests"))
+from cli_testing import flexarm  # noqa: E402
 from test_docs import code_blocks  # noqa: E402
 
 SNIPPETS = [body for lang, body in BLOCKS if lang == "python"
@@ -80,17 +81,10 @@ def root_like(tmp_path_factory):
     return folder
 
 
-def flexarm() -> list[str]:
-    """The ``flexarm`` command of this environment (its console script)."""
-    script = Path(sys.executable).with_name("flexarm")
-    return [str(script)] if script.is_file() else [sys.executable, "-m", "validation.cli"]
-
-
 @pytest.mark.parametrize("line", [pytest.param(line, marks=[pytest.mark.slow] * (line in SLOW))
                                   for line in COMMANDS])
 def test_the_commands_shown_run_as_written(line, root_like):
-    proc = subprocess.run(flexarm() + shlex.split(line)[1:], cwd=root_like,
-                          capture_output=True, text=True, timeout=3600)
+    proc = flexarm(root_like, *shlex.split(line)[1:], timeout=3600)
     assert proc.returncode == 0, f"{line}: exit {proc.returncode}\n{proc.stderr[-3000:]}"
 
 
