@@ -1,6 +1,9 @@
 """What the tests share: a folder of plug-in modules importable by this process (and by
 the `flexarm` commands the tests start there), a small results folder with its report,
 and the kernels compiled once before the test processes start."""
+import fcntl
+import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -99,11 +102,21 @@ REPORT_SPEC = {
 @pytest.fixture(scope="session")
 def reported(tmp_path_factory) -> Path:
     """A results folder of `REPORT_SPEC` with its report (the report's tests and the docs'
-    findings page read it)."""
+    findings page read it): made once per test session, by whichever test process needs
+    it first, and copied into each process's own folder (its tests may write there)."""
     from validation.batch.campaign import campaign_from_mapping
     from validation.batch.queue import run_campaign
     from validation.report.report import write_report
+    session = tmp_path_factory.getbasetemp()  # under pytest-xdist: this process's part
+    shared = (session.parent if "PYTEST_XDIST_WORKER" in os.environ else session) / "reported"
+    with open(f"{shared}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # the other process waits for it to be made
+        if not shared.exists():
+            making = shared.with_name("reported-making")
+            shutil.rmtree(making, ignore_errors=True)
+            run_campaign(campaign_from_mapping(REPORT_SPEC), making, progress=False)
+            write_report(making, progress=False)
+            making.rename(shared)
     out = tmp_path_factory.mktemp("report")
-    run_campaign(campaign_from_mapping(REPORT_SPEC), out, progress=False)
-    write_report(out, progress=False)
+    shutil.copytree(shared, out, dirs_exist_ok=True)
     return out
