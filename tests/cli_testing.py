@@ -29,17 +29,16 @@ import warnings
 __all__ = ["flexarm", "program"]
 
 
-def program(cwd, *args, timeout: float = 600, **kw) -> subprocess.CompletedProcess:
-    """``python -m validation.cli *args`` in ``cwd``, run to its end (`subprocess.run`'s
-    keywords ``kw``: ``env`` …)."""
+def program(cwd, *args, timeout: float = 600) -> subprocess.CompletedProcess:
+    """``python -m validation.cli *args`` in ``cwd``, run to its end."""
     return subprocess.run([sys.executable, "-m", "validation.cli", *map(str, args)],
-                          cwd=cwd, capture_output=True, text=True, timeout=timeout, **kw)
+                          cwd=cwd, capture_output=True, text=True, timeout=timeout)
 
 
 def flexarm(cwd, *args, timeout: float = 600) -> subprocess.CompletedProcess:
-    """``flexarm *args`` in ``cwd`` (None: this process's), in a child forked from this process, run to its end:
-    its exit status (negative: the signal that ended it), stdout and stderr, as
-    `subprocess.run` gives them.  Past ``timeout`` seconds the child is killed and
+    """``flexarm *args`` in ``cwd`` (None: this process's), in a child forked from this
+    process, run to its end: its exit status (negative: the signal that ended it), stdout
+    and stderr, as `subprocess.run` gives them.  Past ``timeout`` seconds the child is killed and
     `subprocess.TimeoutExpired` raised."""
     _load()
     args = [str(a) for a in args]

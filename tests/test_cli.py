@@ -2,7 +2,7 @@
 
 import pytest
 
-from cli_testing import program
+from cli_testing import flexarm, program
 from validation.cli import main
 
 
@@ -291,3 +291,35 @@ def test_a_missing_results_folder_is_not_sent_to_repair(tmp_path, capsys):
     assert main(["report", str(tmp_path / "bare")]) == 2
     assert f"'flexarm repair {tmp_path / 'bare'}' rebuilds it" in capsys.readouterr().err
     assert main(["repair", str(tmp_path / "bare")]) == 0  # the cure named works
+
+
+WARNING_LAW = '''
+import warnings
+
+import numpy as np
+
+
+class Law:
+    def __init__(self, model, *, Ts):
+        pass
+
+    def __call__(self, t, x, ref):
+        warnings.warn("a plug-in's warning", RuntimeWarning)
+        return np.zeros(2)
+'''
+
+
+@pytest.mark.parametrize("args, status", [
+    (["run", "--controller", "warnlaw:Law", "--duration", "0.01", "--out", "o"], 0),
+    (["run", "--set", "true_params.EI1=-1.0", "--out", "bad"], 2),
+])
+def test_a_forked_command_prints_what_the_program_prints(tmp_path, args, status):
+    """The tests' `cli_testing.flexarm` (a child forked from the test process) gives the
+    program's exit status and stderr, warnings included.  Known bad: a child that kept the
+    test process's warning capture (pytest's) would print no warning, and the tests that
+    check a command prints none could not fail."""
+    (tmp_path / "warnlaw.py").write_text(WARNING_LAW)
+    forked, started = flexarm(tmp_path, *args), program(tmp_path, *args)
+    assert forked.returncode == started.returncode == status, (forked.stderr, started.stderr)
+    assert forked.stderr == started.stderr != ""
+    assert ("RuntimeWarning: a plug-in's warning" in forked.stderr) == (status == 0)
