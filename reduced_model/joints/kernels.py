@@ -372,15 +372,26 @@ def advance_joints(d, x, tau, ext, h, nsteps, ws, jp, js, jw, exact):
         _stop(d, x, rot, jp, js, jw, ws, exact)
 
 
+@njit(cache=True, inline="always")
+def _borrow(a):
+    """``a`` borrowed (`reduced_model.dynamics.vector_view`): it holds no reference."""
+    return vector_view(a, 0, a.shape[0])
+
+
 @njit(cache=True)
 def advance_joints_linear(ints, reals, wc, wr, x, tau, ext, h, nsteps, jp, js, jw):
-    """`advance_joints` on packed buffers (the paper's kinematics)."""
-    advance_joints(unpack_model(ints, reals), x, tau, ext, h, nsteps,
-                   unpack_workspace(ints, wc, wr), jp, js, jw, False)
+    """`advance_joints` on packed buffers (the paper's kinematics), every one borrowed:
+    numba counts a reference to each array argument of each function it inlines, an
+    atomic increment and decrement per argument, call and stage (a borrowed view has no
+    count to change)."""
+    b = _borrow
+    advance_joints(unpack_model(b(ints), b(reals)), b(x), b(tau), b(ext), h, nsteps,
+                   unpack_workspace(b(ints), b(wc), b(wr)), b(jp), b(js), b(jw), False)
 
 
 @njit(cache=True)
 def advance_joints_exact(ints, reals, wc, wr, x, tau, ext, h, nsteps, jp, js, jw):
-    """`advance_joints` on packed buffers (exact kinematics)."""
-    advance_joints(unpack_model(ints, reals), x, tau, ext, h, nsteps,
-                   unpack_workspace(ints, wc, wr), jp, js, jw, True)
+    """`advance_joints` on packed buffers (exact kinematics), every one borrowed."""
+    b = _borrow
+    advance_joints(unpack_model(b(ints), b(reals)), b(x), b(tau), b(ext), h, nsteps,
+                   unpack_workspace(b(ints), b(wc), b(wr)), b(jp), b(js), b(jw), True)
