@@ -100,10 +100,9 @@ def _child(cwd, args: list[str], out: int, err: int) -> None:
         sys.stderr = io.TextIOWrapper(io.FileIO(2, "w", closefd=False), write_through=True,
                                       errors="backslashreplace")
         warnings.resetwarnings()  # a new interpreter's filters, printed to stderr
-        for action, category in (("ignore", DeprecationWarning),
-                                 ("ignore", PendingDeprecationWarning),
-                                 ("ignore", ImportWarning), ("ignore", ResourceWarning)):
-            warnings.simplefilter(action, category)
+        for category in (DeprecationWarning, PendingDeprecationWarning, ImportWarning,
+                         ResourceWarning):
+            warnings.simplefilter("ignore", category)
         warnings.filterwarnings("default", category=DeprecationWarning, module="__main__")
         warnings.showwarning = _print_warning
         if cwd is not None:
@@ -112,8 +111,10 @@ def _child(cwd, args: list[str], out: int, err: int) -> None:
         from validation.cli import main
         status = main(args)
         atexit._run_exitfuncs()
-    except SystemExit as exc:  # as the interpreter exits with it
-        status = exc.code if isinstance(exc.code, int) else (exc.code is not None)
+    except SystemExit as exc:  # as the interpreter exits with it (a message: printed, 1)
+        if exc.code is not None and not isinstance(exc.code, int):
+            print(exc.code, file=sys.stderr)
+        status = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
     except BaseException:  # an uncaught exception: its traceback, status 1
         traceback.print_exc()
         status = 1
